@@ -1,0 +1,116 @@
+// raycut check: every chosen method against the brute-force oracle on generated families or a
+// file: neighbour sets, counts and smooth-kernel sums. Exit 1 on any mismatch.
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+
+#include "commands.hpp"
+#include "raycut/compare.hpp"
+#include "raycut/engine.hpp"
+#include "raycut/generators.hpp"
+#include "raycut/io.hpp"
+
+namespace raycut::cli {
+namespace {
+
+struct CheckOptions {
+  std::vector<std::string> methods = {"default"};
+  std::vector<std::string> families = {"all"};
+  std::vector<std::size_t> sizes = {2000};
+  float cutoff = 1.0f;
+  std::uint64_t seed = 1;
+  std::string input;
+  std::string oracle = "auto";
+};
+
+// Largest |smooth energy - oracle| over targets, relative to the largest possible term sum
+// (count * C^4), so it is comparable across inputs; round-off is ~1e-7.
+double smooth_error(const Results& got, const Results& want, const std::vector<std::uint32_t>& count,
+                    float cutoff) {
+  const double c4 = std::pow(static_cast<double>(cutoff), 4);
+  double worst = 0;
+  for (std::size_t i = 0; i < want.energy.size(); ++i) {
+    const double scale = std::max<double>(count[i], 1) * c4;
+    worst = std::max(worst, std::fabs(static_cast<double>(got.energy[i]) - want.energy[i]) / scale);
+  }
+  return worst;
+}
+
+int run_check(const CheckOptions& o) {
+  const auto methods = resolve_methods(o.methods);
+  std::vector<PointCloud> inputs;
+  if (!o.input.empty()) {
+    PointCloud cloud = read_positions(o.input);
+    cloud.cutoff = o.cutoff;
+    inputs.push_back(std::move(cloud));
+  } else {
+    std::vector<std::string> families = o.families;
+    if (std::find(families.begin(), families.end(), "all") != families.end())
+      families = family_names();
+    for (const auto& f : families)
+      for (std::size_t n : o.sizes) inputs.push_back(make_family(f, n, o.cutoff, o.seed));
+  }
+
+  std::printf("%-18s %8s %7s  %-16s %12s %10s %10s  %s\n", "input", "N", "cutoff", "method",
+              "pairs", "bad-tgts", "smooth-err", "status");
+  int failures = 0;
+  for (const auto& cloud : inputs) {
+    const std::string oracle_name =
+        o.oracle != "auto" ? o.oracle
+        : (cuda_device_available() && cloud.size() > 20000) ? "brute-force-gpu"
+                                                            : "brute-force";
+    Engine oracle(oracle_name);
+    const PositionsView view{cloud.xyz.data(), cloud.size(), MemorySpace::host};
+    oracle.build(view, cloud.cutoff);
+    const NeighbourList want_list = oracle.neighbours();
+    const Results want_count = oracle.compute(Kernel::count);
+    const Results want_smooth = oracle.compute(Kernel::smooth);
+    for (const auto& method : methods) {
+      Engine engine(method);
+      engine.build(view, cloud.cutoff);
+      const auto diff = compare_neighbours(engine.neighbours(), want_list);
+      const bool counts_ok = engine.compute(Kernel::count).count == want_count.count;
+      const double err =
+          smooth_error(engine.compute(Kernel::smooth), want_smooth, want_count.count, cloud.cutoff);
+      const bool ok = diff.equal() && counts_ok && err <= 1e-5;
+      failures += !ok;
+      std::printf("%-18s %8zu %7g  %-16s %12llu %10zu %10.2e  %s\n", cloud.name.c_str(),
+                  cloud.size(), cloud.cutoff, method.c_str(),
+                  static_cast<unsigned long long>(diff.pairs), diff.differing_targets, err,
+                  ok ? "ok" : "MISMATCH");
+      if (!diff.equal()) std::printf("    first difference: %s\n", diff.first_difference.c_str());
+      if (!counts_ok) std::printf("    the count kernel differs from the oracle\n");
+      std::fflush(stdout);
+    }
+  }
+  std::printf("%s: %d mismatch(es) over %zu input(s) x %zu method(s)\n",
+              failures ? "FAILED" : "passed", failures, inputs.size(), methods.size());
+  return failures ? 1 : 0;
+}
+
+}  // namespace
+
+Command add_check(CLI::App& app) {
+  auto* cmd = app.add_subcommand(
+      "check", "Compare methods with the brute-force oracle on test families or a file");
+  auto o = std::make_shared<CheckOptions>();
+  std::string family_help = "Input families, or all:";
+  for (const auto& f : family_names()) family_help += " " + f;
+  cmd->add_option("-m,--methods", o->methods,
+                  "Methods to check (names from `raycut methods`, default = all available but "
+                  "the oracles, all = every available one)")
+      ->delimiter(',');
+  cmd->add_option("-f,--family", o->families, family_help)->delimiter(',');
+  cmd->add_option("-n,--n", o->sizes, "Particle counts (comma-separated)")->delimiter(',');
+  cmd->add_option("-c,--cutoff", o->cutoff, "Cutoff radius")->check(CLI::PositiveNumber);
+  cmd->add_option("--seed", o->seed, "Random seed of the families");
+  cmd->add_option("-i,--input", o->input, "Positions file (.csv, .xyz) instead of families")
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--oracle", o->oracle,
+                  "auto (GPU brute force above 20,000 particles when there is a GPU), "
+                  "brute-force or brute-force-gpu");
+  return [o] { return run_check(*o); };
+}
+
+}  // namespace raycut::cli

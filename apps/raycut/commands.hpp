@@ -1,0 +1,21 @@
+// The subcommands of the raycut tool. Each registers its options on a CLI11 subcommand and
+// returns the process exit code when run: 0 success, 1 a check failed, 2 bad usage or input.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace raycut::cli {
+
+using Command = std::function<int()>;
+
+Command add_check(CLI::App& app);
+Command add_bench(CLI::App& app);
+
+// Expands "all" / "default" and checks the names; throws raycut::Error for unknown ones.
+std::vector<std::string> resolve_methods(const std::vector<std::string>& names);
+
+}  // namespace raycut::cli

@@ -1,0 +1,139 @@
+// The raycut engine: choose a method, build it over positions, then compute a fused pair kernel
+// or a neighbour list. Host-only header: no CUDA or OptiX types.
+//
+//   raycut::Engine engine("auto");
+//   engine.build({xyz.data(), n, raycut::MemorySpace::host}, cutoff);
+//   raycut::Results r = engine.compute(raycut::Kernel::count);
+//   raycut::NeighbourList list = engine.neighbours();
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "raycut/error.hpp"
+#include "raycut/kernels.hpp"
+
+namespace raycut {
+
+enum class MemorySpace { host, device };
+
+// (N,3) float32 positions, row-major (x0 y0 z0 x1 y1 z1 ...), on the host or the CUDA device.
+// The engine does not keep the pointer beyond build().
+struct PositionsView {
+  const float* xyz = nullptr;
+  std::size_t size = 0;  // N, the number of particles
+  MemorySpace space = MemorySpace::host;
+};
+
+// Per-target results on the host; a vector is empty when the kernel does not produce it.
+struct Results {
+  std::vector<std::uint32_t> count;  // count kernel
+  std::vector<float> energy;         // lj, smooth
+  std::vector<float> force;          // smooth: 3 per target (fx fy fz)
+};
+
+// Full neighbour list in CSR form: the in-range sources of target i are
+// indices[offsets[i] .. offsets[i+1]); their order within a row is unspecified.
+struct NeighbourList {
+  std::vector<std::uint64_t> offsets;  // N + 1 entries
+  std::vector<std::uint32_t> indices;
+};
+
+// Wall-clock milliseconds of the last build()/run(), each phase synchronised. device_* are the
+// CUDA-event times of the same phases for GPU methods, negative for CPU methods.
+struct Timings {
+  double build_ms = 0, compute_ms = 0;
+  double device_build_ms = -1, device_compute_ms = -1;
+};
+
+struct MethodDescription {
+  std::string name;
+  std::string summary;
+  bool available = false;  // built in, and its hardware is present
+  std::string why_unavailable;
+};
+
+// A copy of host positions in CUDA device memory, for callers without CUDA code of their own
+// (the benchmark, where positions start on the device). Throws Error(unsupported) without CUDA
+// and Error(out_of_memory) when it does not fit.
+class DevicePositions {
+ public:
+  explicit DevicePositions(const std::vector<float>& xyz);
+  ~DevicePositions();
+  DevicePositions(DevicePositions&&) noexcept;
+  DevicePositions& operator=(DevicePositions&&) noexcept;
+  PositionsView view() const { return {data_, size_, MemorySpace::device}; }
+
+ private:
+  float* data_ = nullptr;
+  std::size_t size_ = 0;
+};
+
+// What the results were measured on: for benchmark rows.
+struct SystemInfo {
+  std::string gpu;     // device name, or "none"
+  std::string driver;  // NVIDIA driver version, or "none"
+  std::string cuda;    // CUDA runtime version, e.g. "13.0", or "none"
+  std::string optix;   // OptiX headers version built against, or "none"
+  std::string cpu;     // CPU model and thread count
+};
+SystemInfo system_info();
+
+// Every method raycut knows, available or not, in a stable order.
+std::vector<MethodDescription> list_methods();
+// What "auto" picks on this machine.
+std::string auto_method();
+// True when a CUDA device is usable in this process.
+bool cuda_device_available();
+
+namespace detail {
+class Method;
+}
+
+class Engine {
+ public:
+  // `method` is a name from list_methods() or "auto". Throws Error(invalid_argument) for an
+  // unknown name, Error(unsupported) for a method not available here.
+  explicit Engine(std::string_view method = "auto");
+  ~Engine();
+  Engine(Engine&&) noexcept;
+  Engine& operator=(Engine&&) noexcept;
+
+  const std::string& method() const { return method_; }
+  // Where the method works: positions given there avoid a copy (and an untimed transfer).
+  MemorySpace space() const;
+
+  // Validates (finite coordinates, cutoff finite and > 0) and builds the method's structure.
+  // Throws Error with the first bad index or the bad value, before any device work.
+  void build(PositionsView positions, float cutoff);
+
+  // Computes `kernel` for every target and keeps the results in the method's memory.
+  void run(Kernel kernel, const KernelOptions& options = {});
+  // Copies the results of the last run() to the host.
+  Results results() const;
+  // run() then results().
+  Results compute(Kernel kernel, const KernelOptions& options = {});
+
+  // The full CSR neighbour list of the built positions.
+  NeighbourList neighbours();
+
+  const Timings& last_timings() const { return timings_; }
+  std::size_t size() const { return size_; }
+  float cutoff() const { return cutoff_; }
+
+ private:
+  std::string method_;
+  std::unique_ptr<detail::Method> impl_;
+  std::size_t size_ = 0;
+  float cutoff_ = 0;
+  bool built_ = false;
+  Kernel last_kernel_ = Kernel::count;
+  bool has_run_ = false;
+  Timings timings_;
+};
+
+}  // namespace raycut

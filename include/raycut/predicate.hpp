@@ -1,0 +1,40 @@
+// THE in-range predicate (spec/METHODS.md, contract 1). Every method, on host and device, decides
+// "is source j a neighbour of target i" with these two functions and nothing else, so that all
+// methods agree bit for bit, even for pairs exactly at the cutoff.
+#pragma once
+
+#if defined(__CUDACC__)
+#define RAYCUT_HD __host__ __device__ __forceinline__
+#else
+#define RAYCUT_HD inline
+#endif
+
+namespace raycut {
+
+// |d|^2 with d = x_source - x_target, rounded the same way on host and device: the device path
+// uses explicit round-to-nearest intrinsics so nvcc cannot contract it into FMAs; the host build
+// compiles with -ffp-contract=off for the same reason.
+RAYCUT_HD float squared_distance(float dx, float dy, float dz) {
+#if defined(__CUDA_ARCH__)
+  return __fadd_rn(__fadd_rn(__fmul_rn(dx, dx), __fmul_rn(dy, dy)), __fmul_rn(dz, dz));
+#else
+  return dx * dx + dy * dy + dz * dz;
+#endif
+}
+
+// A pair is in range iff i != j (the caller's business) and |d|^2 < cutoff^2. Distance 0 is in
+// range; distance exactly at the cutoff is not.
+RAYCUT_HD bool in_range(float squared_dist, float cutoff_squared) {
+  return squared_dist < cutoff_squared;
+}
+
+// The squared cutoff every method uses: computed once, in float, the same way everywhere.
+RAYCUT_HD float squared_cutoff(float cutoff) {
+#if defined(__CUDA_ARCH__)
+  return __fmul_rn(cutoff, cutoff);
+#else
+  return cutoff * cutoff;
+#endif
+}
+
+}  // namespace raycut

@@ -1,0 +1,54 @@
+// The internal interface every interaction method implements: a build and a query. Everything
+// else (validation, timing, N = 0, host/device transfers of results) lives in the Engine.
+#pragma once
+
+#include <cstddef>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "raycut/engine.hpp"
+
+namespace raycut::detail {
+
+class Method {
+ public:
+  virtual ~Method() = default;
+
+  // Where the method wants its positions. The engine moves them there before build().
+  virtual MemorySpace space() const = 0;
+
+  // Build over n >= 1 validated positions (in space()), cutoff finite and > 0. The pointer is
+  // valid only during the call: copy what you need.
+  virtual void build(const float* xyz, std::size_t n, float cutoff) = 0;
+
+  // Compute `kernel` for every target; keep the results until the next compute()/build().
+  virtual void compute(Kernel kernel, const KernelOptions& options) = 0;
+  virtual Results results() const = 0;
+
+  virtual NeighbourList neighbours() = 0;
+
+  // Waits for the work queued by build()/compute() (GPU methods); CPU methods are synchronous.
+  virtual void synchronize() {}
+  // CUDA-event milliseconds of the last build()/compute(); negative when not measured.
+  virtual double device_build_ms() const { return -1; }
+  virtual double device_compute_ms() const { return -1; }
+};
+
+struct MethodEntry {
+  std::string name;
+  std::string summary;
+  // Empty when available; otherwise why not (not built, no GPU, no OptiX).
+  std::function<std::string()> why_unavailable;
+  std::function<std::unique_ptr<Method>()> make;
+};
+
+// All methods of this build, in the order list_methods() reports them.
+const std::vector<MethodEntry>& method_registry();
+
+// Factories, defined by each backend (only those compiled in are referenced).
+std::unique_ptr<Method> make_brute_force_cpu();
+std::unique_ptr<Method> make_cell_list_cpu();
+
+}  // namespace raycut::detail

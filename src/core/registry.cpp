@@ -1,0 +1,42 @@
+// The list of methods this build knows, in the order users see them.
+#include "core/method.hpp"
+
+#if defined(RAYCUT_HAVE_CUDA)
+#include "cuda/methods.hpp"
+#include "cuda/runtime.hpp"
+#endif
+
+namespace raycut::detail {
+namespace {
+
+std::string always_available() { return {}; }
+
+std::string cuda_status() {
+#if defined(RAYCUT_HAVE_CUDA)
+  return cuda::device_available() ? std::string() : "no CUDA device found";
+#else
+  return "raycut was built without CUDA (nvcc not found at configure time)";
+#endif
+}
+
+#if defined(RAYCUT_HAVE_CUDA)
+#define RAYCUT_CUDA_FACTORY(f) f
+#else
+#define RAYCUT_CUDA_FACTORY(f) nullptr
+#endif
+
+}  // namespace
+
+const std::vector<MethodEntry>& method_registry() {
+  static const std::vector<MethodEntry> registry = {
+      {"brute-force", "CPU, all pairs: the reference oracle", always_available,
+       make_brute_force_cpu},
+      {"cell-list", "CPU, compact cell list (OpenMP), memory O(N)", always_available,
+       make_cell_list_cpu},
+      {"brute-force-gpu", "CUDA, all pairs: the oracle on the GPU", cuda_status,
+       RAYCUT_CUDA_FACTORY(cuda::make_brute_force)},
+  };
+  return registry;
+}
+
+}  // namespace raycut::detail

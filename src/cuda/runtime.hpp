@@ -1,0 +1,31 @@
+// The few CUDA runtime services the host-only engine needs, behind a plain C++ interface.
+// Defined in runtime.cu; only compiled in (and only called) when RAYCUT_HAVE_CUDA is defined.
+#pragma once
+
+#include <cstddef>
+#include <memory>
+#include <string>
+
+namespace raycut::detail::cuda {
+
+// True when at least one CUDA device is usable by this process.
+bool device_available();
+
+// Index of the first particle with a non-finite coordinate in device memory, or n if none.
+std::size_t first_non_finite(const float* device_xyz, std::size_t n);
+
+struct DeviceFree {
+  void operator()(void* p) const noexcept;
+};
+using DeviceMemory = std::unique_ptr<void, DeviceFree>;
+
+// Allocates and copies host -> device, synchronously; throws Error(out_of_memory) when it does
+// not fit, saying how much was asked and how much is free.
+DeviceMemory upload(const void* host, std::size_t bytes);
+void download(void* host, const void* device, std::size_t bytes);
+
+// Name of the current device and the CUDA runtime version ("13.0").
+std::string device_name();
+std::string runtime_version();
+
+}  // namespace raycut::detail::cuda

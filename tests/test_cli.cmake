@@ -1,0 +1,61 @@
+# CLI contract: --help everywhere, one-line errors with exit code 2, check passes and fails
+# as it should, bench writes the CSV header of spec/BENCHMARKS.md.
+file(REMOVE_RECURSE ${WORK})
+file(MAKE_DIRECTORY ${WORK})
+
+function(expect_exit code)
+  execute_process(COMMAND ${RAYCUT} ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL code)
+    message(FATAL_ERROR "raycut ${ARGN}: exit ${rc}, expected ${code}\nstdout:\n${out}\nstderr:\n${err}")
+  endif()
+  set(last_out "${out}" PARENT_SCOPE)
+  set(last_err "${err}" PARENT_SCOPE)
+endfunction()
+
+function(expect_match text regex)
+  if(NOT "${text}" MATCHES "${regex}")
+    message(FATAL_ERROR "expected output matching '${regex}', got:\n${text}")
+  endif()
+endfunction()
+
+foreach(sub "" methods check bench generate)
+  expect_exit(0 ${sub} --help)
+  expect_match("${last_out}" "Usage")
+endforeach()
+
+expect_exit(0 methods)
+expect_match("${last_out}" "cell-list +available")
+
+# Bad usage: one line, exit 2.
+expect_exit(2 check --methods no-such-method)
+expect_match("${last_err}" "unknown method 'no-such-method'")
+expect_exit(2 check --family no-such-family)
+expect_match("${last_err}" "unknown input family")
+expect_exit(2 check -n many)
+expect_exit(2 bench --kernel gravity)
+expect_exit(2 check --input ${WORK}/missing.csv)
+expect_exit(2)
+
+# A malformed file names its line.
+file(WRITE ${WORK}/bad.csv "x,y,z\n0,0,0\n1,2\n")
+expect_exit(2 check --input ${WORK}/bad.csv --cutoff 1)
+expect_match("${last_err}" "bad.csv:3")
+
+# A NaN in a file names the particle index.
+file(WRITE ${WORK}/nan.csv "0,0,0\n0.5,0.5,0.5\n1,nan,1\n")
+expect_exit(2 check --input ${WORK}/nan.csv --cutoff 1 --methods cell-list)
+expect_match("${last_err}" "index 2")
+
+# check passes on families and on a generated file.
+expect_exit(0 check --methods cell-list --family lattice-k1,coincident,diagonal -n 0,1,300)
+expect_match("${last_out}" "passed: 0 mismatch")
+expect_exit(0 generate --family uniform -n 500 --out ${WORK}/cloud.xyz)
+expect_exit(0 check --methods cell-list --input ${WORK}/cloud.xyz --cutoff 1)
+expect_match("${last_out}" "cloud.xyz|ok")
+
+# bench writes the protocol's CSV.
+expect_exit(0 bench --suite uniform --methods cell-list --param 4 --p 1,2 --reps 2 --out ${WORK}/b.csv)
+file(READ ${WORK}/b.csv csv)
+expect_match("${csv}" "^suite,method,param,p,N,cutoff,pairs,build_ms,compute_ms,total_ms,total_ms_min,total_ms_max,reps,timer,gpu,driver,cuda,optix\n")
+expect_match("${csv}" "uniform,cell-list,4,2,128,")
+message(STATUS "cli: all checks passed")

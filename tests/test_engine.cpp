@@ -1,0 +1,154 @@
+// The engine's contract at its edges: bad input is refused with what and where; N = 0, 1 and
+// coincident particles are valid.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "raycut/engine.hpp"
+
+namespace {
+
+using raycut::Engine;
+using raycut::Error;
+using raycut::ErrorCode;
+using raycut::Kernel;
+using raycut::MemorySpace;
+
+// Runs `f`, expects raycut::Error with `code` and a message containing `needle`.
+template <class F>
+void expect_error(F&& f, ErrorCode code, const std::string& needle) {
+  try {
+    f();
+    FAIL() << "no error thrown; expected one containing '" << needle << "'";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), code) << e.what();
+    EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+  }
+}
+
+std::vector<std::string> available_methods() {
+  std::vector<std::string> names;
+  for (const auto& m : raycut::list_methods())
+    if (m.available) names.push_back(m.name);
+  return names;
+}
+
+TEST(Engine, UnknownMethodIsRefusedWithTheKnownNames) {
+  expect_error([] { Engine e("no-such-method"); }, ErrorCode::invalid_argument,
+               "unknown method 'no-such-method'");
+}
+
+TEST(Engine, AutoPicksAnAvailableMethod) {
+  Engine e("auto");
+  bool found = false;
+  for (const auto& m : raycut::list_methods()) found |= m.name == e.method() && m.available;
+  EXPECT_TRUE(found) << e.method();
+}
+
+TEST(Engine, UnknownKernelNameIsRefused) {
+  expect_error([] { raycut::parse_kernel("gravity"); }, ErrorCode::invalid_argument,
+               "unknown kernel 'gravity'");
+}
+
+class EngineEdges : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(EngineEdges, NonFiniteCoordinateNamesTheFirstBadIndex) {
+  std::vector<float> xyz(3 * 10, 0.5f);
+  xyz[3 * 7 + 1] = std::numeric_limits<float>::quiet_NaN();
+  xyz[3 * 9 + 2] = std::numeric_limits<float>::infinity();
+  Engine e(GetParam());
+  expect_error(
+      [&] {
+        e.build({xyz.data(), 10, MemorySpace::host}, 1.0f);
+      },
+      ErrorCode::invalid_input, "index 7");
+  xyz[3 * 7 + 1] = 0.5f;
+  expect_error(
+      [&] {
+        e.build({xyz.data(), 10, MemorySpace::host}, 1.0f);
+      },
+      ErrorCode::invalid_input, "index 9");
+}
+
+TEST_P(EngineEdges, BadCutoffIsRefused) {
+  std::vector<float> xyz = {0, 0, 0, 1, 1, 1};
+  Engine e(GetParam());
+  for (float c : {0.0f, -1.0f, std::numeric_limits<float>::quiet_NaN(),
+                  std::numeric_limits<float>::infinity()}) {
+    expect_error(
+        [&] {
+          e.build({xyz.data(), 2, MemorySpace::host}, c);
+        },
+        ErrorCode::invalid_argument, "cutoff");
+  }
+}
+
+TEST_P(EngineEdges, QueryBeforeBuildIsRefused) {
+  Engine e(GetParam());
+  expect_error([&] { e.run(Kernel::count); }, ErrorCode::invalid_argument, "before build");
+  expect_error([&] { e.neighbours(); }, ErrorCode::invalid_argument, "before build");
+}
+
+TEST_P(EngineEdges, EmptyInputGivesNoPairs) {
+  Engine e(GetParam());
+  e.build({nullptr, 0, MemorySpace::host}, 1.0f);
+  const auto r = e.compute(Kernel::count);
+  EXPECT_TRUE(r.count.empty());
+  const auto list = e.neighbours();
+  ASSERT_EQ(list.offsets.size(), 1u);
+  EXPECT_EQ(list.offsets[0], 0u);
+  EXPECT_TRUE(list.indices.empty());
+}
+
+TEST_P(EngineEdges, SingleParticleHasNoNeighbour) {
+  std::vector<float> xyz = {0.25f, -3.0f, 7.0f};
+  Engine e(GetParam());
+  e.build({xyz.data(), 1, MemorySpace::host}, 2.0f);
+  const auto r = e.compute(Kernel::count);
+  ASSERT_EQ(r.count.size(), 1u);
+  EXPECT_EQ(r.count[0], 0u);
+  const auto list = e.neighbours();
+  EXPECT_EQ(list.offsets, (std::vector<std::uint64_t>{0, 0}));
+}
+
+TEST_P(EngineEdges, CoincidentParticlesAreNeighbours) {
+  std::vector<float> xyz = {1, 2, 3, 1, 2, 3, 1, 2, 3};
+  Engine e(GetParam());
+  e.build({xyz.data(), 3, MemorySpace::host}, 0.5f);
+  const auto r = e.compute(Kernel::count);
+  EXPECT_EQ(r.count, (std::vector<std::uint32_t>{2, 2, 2}));
+  const auto s = e.compute(Kernel::smooth);
+  for (float energy : s.energy) EXPECT_FLOAT_EQ(energy, 2 * 0.25f * 0.25f);
+}
+
+TEST_P(EngineEdges, PairExactlyAtTheCutoffIsOutOfRange) {
+  std::vector<float> xyz = {0, 0, 0, 0.5f, 0, 0, 0, 0.25f, 0};
+  Engine e(GetParam());
+  e.build({xyz.data(), 3, MemorySpace::host}, 0.5f);
+  const auto r = e.compute(Kernel::count);
+  EXPECT_EQ(r.count, (std::vector<std::uint32_t>{1, 0, 1}));
+}
+
+TEST_P(EngineEdges, LennardJonesOfOnePairMatchesTheFormula) {
+  std::vector<float> xyz = {0, 0, 0, 1.5f, 0, 0};
+  Engine e(GetParam());
+  e.build({xyz.data(), 2, MemorySpace::host}, 2.0f);
+  const auto r = e.compute(Kernel::lj);
+  const double s6 = std::pow(1.0 / 1.5, 6);
+  ASSERT_EQ(r.energy.size(), 2u);
+  EXPECT_NEAR(r.energy[0], 4 * (s6 * s6 - s6), 1e-6);
+  EXPECT_NEAR(r.energy[1], 4 * (s6 * s6 - s6), 1e-6);
+}
+
+INSTANTIATE_TEST_SUITE_P(AllAvailable, EngineEdges, ::testing::ValuesIn(available_methods()),
+                         [](const auto& info) {
+                           std::string n = info.param;
+                           for (char& c : n)
+                             if (c == '-') c = '_';
+                           return n;
+                         });
+
+}  // namespace
