@@ -126,7 +126,7 @@ Command add_bench(CLI::App& app) {
   cmd->add_option("-s,--suite", o->suite, "uniform or surface")
       ->check(CLI::IsMember({"uniform", "surface"}));
   cmd->add_option("-m,--methods", o->methods,
-                  "Methods (default = every available one but the brute-force oracles)")
+                  "Methods (default = the available non-oracle methods, GPU ones only when there is a GPU)")
       ->delimiter(',');
   cmd->add_option("--param", o->params,
                   "beta (uniform; default 2,4,8,16,32) or alpha (surface; default 2..128)")

@@ -98,8 +98,8 @@ Command add_check(CLI::App& app) {
   std::string family_help = "Input families, or all:";
   for (const auto& f : family_names()) family_help += " " + f;
   cmd->add_option("-m,--methods", o->methods,
-                  "Methods to check (names from `raycut methods`, default = all available but "
-                  "the oracles, all = every available one)")
+                  "Methods to check (names from `raycut methods`; default = the available "
+                  "non-oracle methods, GPU ones only when there is a GPU; all = every available one)")
       ->delimiter(',');
   cmd->add_option("-f,--family", o->families, family_help)->delimiter(',');
   cmd->add_option("-n,--n", o->sizes, "Particle counts (comma-separated)")->delimiter(',');

@@ -16,10 +16,15 @@ std::vector<std::string> resolve_methods(const std::vector<std::string>& names) 
   std::vector<std::string> out;
   for (const auto& name : names) {
     if (name == "all" || name == "default") {
-      // default: what a user wants compared, the oracles left out.
-      for (const auto& m : all)
-        if (m.available && (name == "all" || m.name.rfind("brute-force", 0) != 0))
-          out.push_back(m.name);
+      // default: the oracles left out, and the CPU methods too when there is a GPU.
+      const bool gpu = cuda_device_available();
+      for (const auto& m : all) {
+        if (!m.available) continue;
+        if (name == "default" && (m.name.rfind("brute-force", 0) == 0 ||
+                                  (gpu && Engine(m.name).space() != MemorySpace::device)))
+          continue;
+        out.push_back(m.name);
+      }
       continue;
     }
     Engine probe(name == "auto" ? auto_method() : name);  // throws for unknown/unavailable

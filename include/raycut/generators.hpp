@@ -36,7 +36,7 @@ std::vector<std::string> family_names();
 // C. Exactly n points except for lattices, which have m^3 points, m = max(1, round(cbrt(n)))
 // (so n = 2 gives 1 point); n = 0 always gives an empty cloud. Random families aim at 10-40
 // in-range neighbours per point; lattices have what their spacing gives (k1: none, all at or
-// beyond C; k2: 26; k3: ~90; k4: ~250 inside the block). The families:
+// beyond C; k2: 26; k3: 92; k4: 250 for an interior point). The families:
 //   uniform             uniform in a cube of side max(C, C cbrt(n (4/3) pi / 25)): ~25 neighbours.
 //   sphere-surface      uniform on a sphere of radius max(C, C sqrt(n / 80)): ~20 neighbours.
 //   lattice-kK          simple cubic, spacing s = C/K in float, coordinates float(i) * s
