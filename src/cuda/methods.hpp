@@ -9,4 +9,17 @@ namespace raycut::detail::cuda {
 
 std::unique_ptr<Method> make_brute_force();
 
+// The seed paper's dense grid (cells of width C over the whole box), for comparison.
+std::unique_ptr<Method> make_grid_paper();
+
+// The production grid; its knobs are fixed by measurement (docs/grid.md). GridOptions exists so
+// that bench/grid_tune.cpp can measure the alternatives; users get the defaults.
+struct GridOptions {
+  int cells_per_cutoff = 0;  // cells of width C / k, searched `k` cells around; 0: automatic
+  bool cull = true;          // per-target: skip rows of cells out of reach, trim each row in x
+  int layout = 0;            // 0: automatic, 1: dense cell table, 2: compact (hashed rows)
+};
+std::unique_ptr<Method> make_grid_with(const GridOptions& options);
+std::unique_ptr<Method> make_grid();
+
 }  // namespace raycut::detail::cuda

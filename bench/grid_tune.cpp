@@ -1,0 +1,105 @@
+// Measures the alternatives of the `grid` method (src/cuda/grid.cu, GridOptions) side by side,
+// through the internal Method interface: the numbers behind the defaults in docs/grid.md.
+//
+//   grid_tune --suite uniform --params 32 --ps 1,8,32 --variants k1,k2,k3,k2-nocull,k2-compact
+//
+// A variant is k<cells per cutoff>, optionally followed by -nocull (scan whole rows),
+// -dense or -compact (force the cell table); `paper` is the grid-paper method. One CSV row per
+// (configuration, variant) on stdout, CUDA-event medians in ms; `pairs` (count kernel) must be
+// the same on every row of a configuration.
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "cuda/methods.hpp"
+#include "raycut/generators.hpp"
+
+namespace {
+
+std::vector<std::string> split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream in(s);
+  for (std::string item; std::getline(in, item, ',');)
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+std::unique_ptr<raycut::detail::Method> make_variant(const std::string& name) {
+  namespace cuda = raycut::detail::cuda;
+  if (name == "paper") return cuda::make_grid_paper();
+  cuda::GridOptions o;
+  if (name.size() < 2 || name[0] != 'k') throw std::runtime_error("bad variant " + name);
+  o.cells_per_cutoff = std::stoi(name.substr(1));
+  if (name.find("-nocull") != std::string::npos) o.cull = false;
+  if (name.find("-dense") != std::string::npos) o.layout = 1;
+  if (name.find("-compact") != std::string::npos) o.layout = 2;
+  return cuda::make_grid_with(o);
+}
+
+double median(std::vector<double> v) {
+  std::sort(v.begin(), v.end());
+  return v[v.size() / 2];
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string suite = "uniform";
+  std::vector<std::string> params = {"32"}, ps = {"32"}, variants = {"k1", "k2"};
+  int reps = 5;
+  for (int i = 1; i + 1 < argc; i += 2) {
+    const std::string a = argv[i], v = argv[i + 1];
+    if (a == "--suite") suite = v;
+    if (a == "--params") params = split(v);
+    if (a == "--ps") ps = split(v);
+    if (a == "--variants") variants = split(v);
+    if (a == "--reps") reps = std::stoi(v);
+  }
+  std::cout << "suite,param,p,N,variant,pairs,build_ms,compute_ms,total_ms\n";
+  for (const auto& param_s : params) {
+    for (const auto& p_s : ps) {
+      const int param = std::stoi(param_s), p = std::stoi(p_s);
+      const raycut::PointCloud cloud = suite == "uniform" ? raycut::uniform_suite(param, p)
+                                                          : raycut::surface_suite(param, p);
+      const std::size_t n = cloud.size();
+      float* xyz = nullptr;
+      if (cudaMalloc(&xyz, cloud.xyz.size() * sizeof(float)) != cudaSuccess) return 1;
+      cudaMemcpy(xyz, cloud.xyz.data(), cloud.xyz.size() * sizeof(float),
+                 cudaMemcpyHostToDevice);
+      for (const auto& variant : variants) {
+        try {
+          auto m = make_variant(variant);
+          m->build(xyz, n, cloud.cutoff);
+          m->compute(raycut::Kernel::count, {});
+          m->synchronize();
+          unsigned long long pairs = 0;
+          for (auto c : m->results().count) pairs += c;
+          std::vector<double> b, c, t;
+          for (int r = 0; r < reps; ++r) {
+            m->build(xyz, n, cloud.cutoff);
+            m->synchronize();
+            b.push_back(m->device_build_ms());
+            m->compute(raycut::Kernel::lj, {});
+            m->synchronize();
+            c.push_back(m->device_compute_ms());
+            t.push_back(b.back() + c.back());
+          }
+          std::printf("%s,%d,%d,%zu,%s,%llu,%.4f,%.4f,%.4f\n", suite.c_str(), param, p, n,
+                      variant.c_str(), pairs, median(b), median(c), median(t));
+          std::fflush(stdout);
+        } catch (const std::exception& e) {
+          std::printf("%s,%d,%d,%zu,%s,error: %s\n", suite.c_str(), param, p, n,
+                      variant.c_str(), e.what());
+        }
+      }
+      cudaFree(xyz);
+    }
+  }
+  return 0;
+}

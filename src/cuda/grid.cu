@@ -1,0 +1,525 @@
+// grid: the production CUDA grid. Memory O(N) whatever the distribution, exact full semantics.
+//
+// Build: bounding box (one read back), cell key per particle (row-major, so the cells of one x
+// row are consecutive keys), a stable radix sort of (key, index) on only the key bits in use,
+// the positions gathered into cell order as float4 (w = original index), then a cell table:
+//   dense   when the box has at most 8N cells: start[c] for every cell c (+1 entry), so the
+//           particles of cells [a, b] of a row are slots [start[a], start[b + 1]);
+//   compact otherwise (a far outlier, a sphere surface at fine cells): the sorted unique cell
+//           keys with their first slots, and a hash table from row (y, z) to that row's run of
+//           unique cells; a row's [a, b] is then two binary searches in its run.
+// Compute: one thread per target, in sorted order (a warp shares cells). Cells are C/k wide
+// (k = reach); the target visits the (2k+1)^2 rows around it, skips those out of reach of its
+// actual position and trims each row to the cells its sphere can touch, so one contiguous range
+// of float4 per row remains. Culling is conservative by construction (slack far above float
+// round-off); the shared predicate decides every pair; self is excluded by slot.
+#include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_select.cuh>
+#include <thrust/iterator/counting_iterator.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <string>
+
+#include "core/cell_grid.hpp"
+#include "cuda/device_results.cuh"
+#include "cuda/grid_common.cuh"
+#include "cuda/methods.hpp"
+#include "raycut/predicate.hpp"
+
+namespace raycut::detail::cuda {
+namespace {
+
+using Slot = std::uint32_t;
+constexpr int block_size = 128;
+constexpr std::uint64_t empty_row = ~std::uint64_t{0};
+
+// Cells per cutoff when the caller does not choose (docs/grid.md has the measurements).
+constexpr int default_cells_per_cutoff = 2;
+
+// What every query kernel needs to know about the grid.
+struct GridView {
+  CellGrid grid;
+  float reach_cells;  // the cutoff in cell units, inflated so that culling stays conservative
+  bool cull;
+};
+
+// The particles of cells [xa, xb] of row `row` (row = iz * dims[1] + iy) are slots [s0, s1).
+struct DenseTable {
+  const Slot* start;  // cell_count + 1 entries
+  __device__ __forceinline__ bool range(std::uint64_t row, std::uint32_t dims0, std::uint32_t xa,
+                                        std::uint32_t xb, Slot& s0, Slot& s1) const {
+    const std::uint64_t base = row * dims0;
+    s0 = start[base + xa];
+    s1 = start[base + xb + 1];
+    return s0 < s1;
+  }
+};
+
+__device__ __forceinline__ std::uint64_t row_hash(std::uint64_t row, int shift) {
+  return (row * 0x9E3779B97F4A7C15ull) >> shift;
+}
+
+struct CompactTable {
+  const std::uint64_t* cell_keys;  // non-empty cells, ascending
+  const Slot* cell_start;          // runs + 1 entries
+  const std::uint64_t* row_keys;   // hash table: row id, or empty_row
+  const uint2* row_cells;          // hash table: the row's unique cells [x, y)
+  std::uint64_t mask;
+  int shift;
+
+  __device__ __forceinline__ bool range(std::uint64_t row, std::uint32_t dims0, std::uint32_t xa,
+                                        std::uint32_t xb, Slot& s0, Slot& s1) const {
+    std::uint64_t h = row_hash(row, shift);
+    uint2 cells;
+    for (;;) {
+      const std::uint64_t k = row_keys[h];
+      if (k == row) {
+        cells = row_cells[h];
+        break;
+      }
+      if (k == empty_row) return false;
+      h = (h + 1) & mask;
+    }
+    const std::uint64_t base = row * dims0;
+    const std::uint32_t lo = lower_bound(cells.x, cells.y, base + xa);
+    const std::uint32_t hi = lower_bound(lo, cells.y, base + xb + 1);
+    if (lo == hi) return false;
+    s0 = cell_start[lo];
+    s1 = cell_start[hi];
+    return true;
+  }
+
+  __device__ __forceinline__ std::uint32_t lower_bound(std::uint32_t first, std::uint32_t last,
+                                                       std::uint64_t key) const {
+    while (first < last) {
+      const std::uint32_t mid = first + (last - first) / 2;
+      if (cell_keys[mid] < key)
+        first = mid + 1;
+      else
+        last = mid;
+    }
+    return first;
+  }
+};
+
+// Distance, in cell units, from a target at fraction f of its cell to the slab d cells away.
+__device__ __forceinline__ float slab_distance(int d, float f) {
+  return d > 0 ? static_cast<float>(d) - f : (d < 0 ? f - static_cast<float>(d + 1) : 0.0f);
+}
+
+// Calls on_pair(q, dx, dy, dz, r2) for every in-range source q (a float4, w = original index)
+// of the target p in slot t.
+template <class Table, class OnPair>
+__device__ __forceinline__ void for_each_pair(const float4* __restrict__ pos, Slot t,
+                                              const float4& p, const GridView& view,
+                                              const Table& table, float cutoff_squared,
+                                              OnPair&& on_pair) {
+  const CellGrid& g = view.grid;
+  const float pc[3] = {p.x, p.y, p.z};
+  int cell[3];
+  float frac[3];
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    cell[a] = static_cast<int>(g.coord(pc[a], a));
+    frac[a] = static_cast<float>((static_cast<double>(pc[a]) - g.origin[a]) * g.inverse_width -
+                                 cell[a]);
+  }
+  const int reach = g.reach;
+  const float rc = view.reach_cells, rc2 = rc * rc;
+  const int dims0 = static_cast<int>(g.dims[0]), dims1 = static_cast<int>(g.dims[1]),
+            dims2 = static_cast<int>(g.dims[2]);
+  for (int dz = -reach; dz <= reach; ++dz) {
+    const int jz = cell[2] + dz;
+    if (jz < 0 || jz >= dims2) continue;
+    const float ez = view.cull ? slab_distance(dz, frac[2]) : 0.0f;
+    if (ez >= rc) continue;
+    for (int dy = -reach; dy <= reach; ++dy) {
+      const int jy = cell[1] + dy;
+      if (jy < 0 || jy >= dims1) continue;
+      const float ey = view.cull ? slab_distance(dy, frac[1]) : 0.0f;
+      const float e2 = ez * ez + ey * ey;
+      if (e2 >= rc2) continue;
+      int xa = cell[0] - reach, xb = cell[0] + reach;
+      if (view.cull) {
+        const float rx = sqrtf(rc2 - e2);
+        xa = max(xa, cell[0] + static_cast<int>(floorf(frac[0] - rx)));
+        xb = min(xb, cell[0] + static_cast<int>(floorf(frac[0] + rx)));
+      }
+      xa = max(xa, 0);
+      xb = min(xb, dims0 - 1);
+      if (xa > xb) continue;
+      Slot s0, s1;
+      const std::uint64_t row = static_cast<std::uint64_t>(jz) * dims1 + jy;
+      if (!table.range(row, g.dims[0], xa, xb, s0, s1)) continue;
+#pragma unroll 4
+      for (Slot s = s0; s < s1; ++s) {
+        const float4 q = pos[s];
+        const float dx = q.x - p.x, dy_ = q.y - p.y, dz_ = q.z - p.z;
+        const float r2 = squared_distance(dx, dy_, dz_);
+        if (in_range(r2, cutoff_squared) && s != t) on_pair(q, dx, dy_, dz_, r2);
+      }
+    }
+  }
+}
+
+__device__ __forceinline__ std::uint32_t original_index(const float4& q) {
+  return __float_as_uint(q.w);
+}
+
+template <class K, class Table>
+__global__ void __launch_bounds__(block_size)
+    compute_kernel(const float4* __restrict__ pos, Slot n, GridView view, Table table,
+                   float cutoff_squared, K kernel, OutputView out) {
+  const Slot t = blockIdx.x * block_size + threadIdx.x;
+  if (t >= n) return;
+  const float4 p = pos[t];
+  Accumulator acc;
+  for_each_pair(pos, t, p, view, table, cutoff_squared,
+                [&](const float4&, float dx, float dy, float dz, float r2) {
+                  kernel(acc, dx, dy, dz, r2);
+                });
+  out.store<K>(original_index(p), acc);
+}
+
+template <class Table>
+__global__ void __launch_bounds__(block_size)
+    count_kernel(const float4* __restrict__ pos, Slot n, GridView view, Table table,
+                 float cutoff_squared, std::uint32_t* counts) {
+  const Slot t = blockIdx.x * block_size + threadIdx.x;
+  if (t >= n) return;
+  const float4 p = pos[t];
+  std::uint32_t c = 0;
+  for_each_pair(pos, t, p, view, table, cutoff_squared,
+                [&](const float4&, float, float, float, float) { ++c; });
+  counts[original_index(p)] = c;
+}
+
+template <class Table>
+__global__ void __launch_bounds__(block_size)
+    fill_kernel(const float4* __restrict__ pos, Slot n, GridView view, Table table,
+                float cutoff_squared, const std::uint64_t* offsets, std::uint32_t* indices) {
+  const Slot t = blockIdx.x * block_size + threadIdx.x;
+  if (t >= n) return;
+  const float4 p = pos[t];
+  std::uint64_t slot = offsets[original_index(p)];
+  for_each_pair(pos, t, p, view, table, cutoff_squared,
+                [&](const float4& q, float, float, float, float) {
+                  indices[slot++] = original_index(q);
+                });
+}
+
+// ---- build kernels ------------------------------------------------------------------------------
+
+template <class Key>
+__global__ void keys_kernel(const float* __restrict__ xyz, Slot n, CellGrid grid, Key* keys,
+                            Slot* index) {
+  const Slot i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  keys[i] = static_cast<Key>(grid.key_of(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]));
+  index[i] = i;
+}
+
+__device__ __forceinline__ void gather_one(const float* __restrict__ xyz, const Slot* order,
+                                           Slot s, float4* pos) {
+  const Slot i = order[s];
+  pos[s] = make_float4(xyz[3 * std::size_t{i}], xyz[3 * std::size_t{i} + 1],
+                       xyz[3 * std::size_t{i} + 2], __uint_as_float(i));
+}
+
+// Dense: start[c] = first slot whose key is >= c, for c in [0, cells]; and the gather.
+__global__ void dense_table_kernel(const float* __restrict__ xyz, const std::uint32_t* keys,
+                                   const Slot* order, Slot n, std::uint32_t cells, Slot* start,
+                                   float4* pos) {
+  const std::uint64_t i = blockIdx.x * std::uint64_t{blockDim.x} + threadIdx.x;
+  if (i <= cells) {
+    Slot first = 0, last = n;
+    while (first < last) {
+      const Slot mid = first + (last - first) / 2;
+      if (keys[mid] < i)
+        first = mid + 1;
+      else
+        last = mid;
+    }
+    start[i] = first;
+  }
+  if (i < n) gather_one(xyz, order, static_cast<Slot>(i), pos);
+}
+
+__global__ void gather_kernel(const float* __restrict__ xyz, const Slot* order, Slot n,
+                              float4* pos) {
+  const Slot s = blockIdx.x * blockDim.x + threadIdx.x;
+  if (s < n) gather_one(xyz, order, s, pos);
+}
+
+struct IsCellHead {
+  const std::uint64_t* keys;
+  __host__ __device__ bool operator()(Slot s) const { return s == 0 || keys[s] != keys[s - 1]; }
+};
+
+// Compact, pass 1: unique keys, the final start entry, and each row's first unique cell.
+__global__ void insert_rows_kernel(const std::uint64_t* keys, const Slot* run_start,
+                                   const std::uint32_t* runs_ptr, Slot n, std::uint32_t dims0,
+                                   std::uint64_t* cell_keys, Slot* cell_start,
+                                   std::uint64_t* row_keys, uint2* row_cells, std::uint64_t mask,
+                                   int shift) {
+  const std::uint32_t runs = *runs_ptr;
+  const std::uint32_t u = blockIdx.x * blockDim.x + threadIdx.x;
+  if (u >= runs) return;
+  const std::uint64_t key = keys[run_start[u]];
+  cell_keys[u] = key;
+  cell_start[u] = run_start[u];
+  if (u == runs - 1) cell_start[runs] = n;
+  const std::uint64_t row = key / dims0;
+  if (u > 0 && keys[run_start[u - 1]] / dims0 == row) return;
+  std::uint64_t h = row_hash(row, shift);
+  for (;;) {
+    const unsigned long long old =
+        atomicCAS(reinterpret_cast<unsigned long long*>(&row_keys[h]),
+                  static_cast<unsigned long long>(empty_row), static_cast<unsigned long long>(row));
+    if (old == empty_row) {
+      row_cells[h].x = u;
+      return;
+    }
+    h = (h + 1) & mask;
+  }
+}
+
+// Compact, pass 2: each row's end, written by the row's last unique cell.
+__global__ void close_rows_kernel(const std::uint64_t* cell_keys, const std::uint32_t* runs_ptr,
+                                  std::uint32_t dims0, const std::uint64_t* row_keys,
+                                  uint2* row_cells, std::uint64_t mask, int shift) {
+  const std::uint32_t runs = *runs_ptr;
+  const std::uint32_t u = blockIdx.x * blockDim.x + threadIdx.x;
+  if (u >= runs) return;
+  const std::uint64_t row = cell_keys[u] / dims0;
+  if (u + 1 < runs && cell_keys[u + 1] / dims0 == row) return;
+  std::uint64_t h = row_hash(row, shift);
+  while (row_keys[h] != row) h = (h + 1) & mask;
+  row_cells[h].y = u + 1;
+}
+
+// Bits needed to hold every value below `count` (at least 1), and powers of two (no C++20 <bit>
+// in CUDA translation units, which compile as C++17).
+int key_bits(std::uint64_t count) {
+  int bits = 1;
+  while (bits < 64 && (count - 1) >> bits) ++bits;
+  return bits;
+}
+std::uint64_t power_of_two_at_least(std::uint64_t v) {
+  std::uint64_t p = 1;
+  while (p < v) p <<= 1;
+  return p;
+}
+int log2_of_power_of_two(std::uint64_t p) {
+  int l = 0;
+  while ((std::uint64_t{1} << l) < p) ++l;
+  return l;
+}
+
+unsigned blocks_for(std::uint64_t count, int threads = block_size) {
+  return static_cast<unsigned>((count + threads - 1) / threads);
+}
+
+// ---- the method -----------------------------------------------------------------------------------
+
+class Grid final : public Method {
+ public:
+  explicit Grid(const GridOptions& options) : options_(options) {}
+  ~Grid() override {
+    if (runs_host_) cudaFreeHost(runs_host_);
+  }
+
+  MemorySpace space() const override { return MemorySpace::device; }
+
+  void build(const float* xyz, std::size_t n, float cutoff) override {
+    if (n >= UINT32_MAX)
+      throw Error(ErrorCode::invalid_argument,
+                  "grid handles at most 2^32 - 2 particles, got " + std::to_string(n));
+    n_ = static_cast<Slot>(n);
+    cutoff_squared_ = squared_cutoff(cutoff);
+    build_timer_.start();
+    float lo[3], hi[3];
+    box_.compute(xyz, n, lo, hi);
+    choose_grid(lo, hi, cutoff);
+    if (dense_)
+      build_dense(xyz);
+    else
+      build_compact(xyz);
+    build_timer_.stop();
+  }
+
+  void compute(Kernel kernel, const KernelOptions& options) override {
+    const OutputView out = results_.prepare(kernel, n_);
+    compute_timer_.start();
+    with_kernel(kernel, options, cutoff_squared_, [&](auto k) {
+      with_table([&](const auto& table) {
+        compute_kernel<<<blocks_for(n_), block_size>>>(pos_.data(), n_, view_, table,
+                                                       cutoff_squared_, k, out);
+      });
+    });
+    RAYCUT_CUDA_CHECK_LAUNCH();
+    compute_timer_.stop();
+  }
+
+  Results results() const override { return results_.to_host(); }
+
+  NeighbourList neighbours() override {
+    return build_neighbour_list(
+        n_,
+        [&](std::uint32_t* counts) {
+          with_table([&](const auto& table) {
+            count_kernel<<<blocks_for(n_), block_size>>>(pos_.data(), n_, view_, table,
+                                                         cutoff_squared_, counts);
+          });
+          RAYCUT_CUDA_CHECK_LAUNCH();
+        },
+        [&](const std::uint64_t* offsets, std::uint32_t* indices) {
+          with_table([&](const auto& table) {
+            fill_kernel<<<blocks_for(n_), block_size>>>(pos_.data(), n_, view_, table,
+                                                        cutoff_squared_, offsets, indices);
+          });
+          RAYCUT_CUDA_CHECK_LAUNCH();
+        });
+  }
+
+  void synchronize() override { RAYCUT_CUDA_CHECK(cudaDeviceSynchronize()); }
+  double device_build_ms() const override { return build_timer_.elapsed_ms(); }
+  double device_compute_ms() const override { return compute_timer_.elapsed_ms(); }
+
+ private:
+  template <class F>
+  void with_table(F&& f) const {
+    if (dense_)
+      f(DenseTable{start_.data()});
+    else
+      f(CompactTable{cell_keys_.data(), start_.data(), row_keys_.data(), row_cells_.data(),
+                     row_mask_, row_shift_});
+  }
+
+  void choose_grid(const float lo[3], const float hi[3], float cutoff) {
+    const int k = options_.cells_per_cutoff > 0 ? options_.cells_per_cutoff
+                                                : default_cells_per_cutoff;
+    grid_ = make_cell_grid(lo, hi, cutoff, k);
+    const std::uint64_t cells = grid_.cell_count();
+    const std::uint64_t dense_limit = std::min<std::uint64_t>(8ull * n_ + 4096, 1ull << 31);
+    dense_ = options_.layout == 1 ? cells <= (1ull << 31)
+                                  : (options_.layout == 2 ? false : cells <= dense_limit);
+    view_.grid = grid_;
+    // Slack: relative 1e-5 and absolute 1e-5 cell, far above the float round-off of the
+    // predicate (~2e-7 relative) and of the cell fractions (~1e-7 cell).
+    view_.reach_cells = static_cast<float>(cutoff * grid_.inverse_width * (1.0 + 1e-5) + 1e-5);
+    view_.cull = options_.cull;
+  }
+
+  // Radix sort of (key, index) on the bits the keys use; returns the sorted buffers.
+  template <class Key>
+  void sort(DeviceBuffer<Key>& keys, DeviceBuffer<Key>& keys_alt, int bits, Key*& sorted_keys) {
+    cub::DoubleBuffer<Key> k(keys.data(), keys_alt.data());
+    cub::DoubleBuffer<Slot> v(index_.data(), index_alt_.data());
+    std::size_t temp_bytes = 0;
+    RAYCUT_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, k, v, n_, 0, bits));
+    temp_.resize(std::max<std::size_t>(temp_bytes, 1));
+    RAYCUT_CUDA_CHECK(
+        cub::DeviceRadixSort::SortPairs(temp_.data(), temp_bytes, k, v, n_, 0, bits));
+    sorted_keys = k.Current();
+    order_ = v.Current();
+  }
+
+  void build_dense(const float* xyz) {
+    const std::uint64_t cells = grid_.cell_count();
+    keys32_.resize(n_);
+    keys32_alt_.resize(n_);
+    index_.resize(n_);
+    index_alt_.resize(n_);
+    pos_.resize(n_);
+    start_.resize(cells + 1);
+    keys_kernel<<<blocks_for(n_, 256), 256>>>(xyz, n_, grid_, keys32_.data(), index_.data());
+    RAYCUT_CUDA_CHECK_LAUNCH();
+    std::uint32_t* sorted = nullptr;
+    sort(keys32_, keys32_alt_, key_bits(cells), sorted);
+    dense_table_kernel<<<blocks_for(std::max<std::uint64_t>(n_, cells + 1), 256), 256>>>(
+        xyz, sorted, order_, n_, static_cast<std::uint32_t>(cells), start_.data(), pos_.data());
+    RAYCUT_CUDA_CHECK_LAUNCH();
+  }
+
+  void build_compact(const float* xyz) {
+    keys64_.resize(n_);
+    keys64_alt_.resize(n_);
+    index_.resize(n_);
+    index_alt_.resize(n_);
+    pos_.resize(n_);
+    run_start_.resize(n_);
+    keys_kernel<<<blocks_for(n_, 256), 256>>>(xyz, n_, grid_, keys64_.data(), index_.data());
+    RAYCUT_CUDA_CHECK_LAUNCH();
+    std::uint64_t* sorted = nullptr;
+    sort(keys64_, keys64_alt_, key_bits(grid_.cell_count()), sorted);
+    gather_kernel<<<blocks_for(n_, 256), 256>>>(xyz, order_, n_, pos_.data());
+    RAYCUT_CUDA_CHECK_LAUNCH();
+
+    // First slot of every non-empty cell; the number of cells comes back to size the tables.
+    if (!runs_host_)
+      RAYCUT_CUDA_CHECK(cudaHostAlloc(reinterpret_cast<void**>(&runs_host_),
+                                      sizeof(std::uint32_t), cudaHostAllocMapped));
+    std::uint32_t* runs_device = nullptr;
+    RAYCUT_CUDA_CHECK(
+        cudaHostGetDevicePointer(reinterpret_cast<void**>(&runs_device), runs_host_, 0));
+    const thrust::counting_iterator<Slot> slots(0);
+    std::size_t temp_bytes = 0;
+    RAYCUT_CUDA_CHECK(cub::DeviceSelect::If(nullptr, temp_bytes, slots, run_start_.data(),
+                                            runs_device, n_, IsCellHead{sorted}));
+    temp_.resize(std::max<std::size_t>(temp_bytes, 1));
+    RAYCUT_CUDA_CHECK(cub::DeviceSelect::If(temp_.data(), temp_bytes, slots, run_start_.data(),
+                                            runs_device, n_, IsCellHead{sorted}));
+    RAYCUT_CUDA_CHECK(cudaStreamSynchronize(nullptr));
+    const std::uint32_t runs = *runs_host_;
+
+    cell_keys_.resize(runs);
+    start_.resize(runs + 1);
+    const std::uint64_t capacity = power_of_two_at_least(std::max<std::uint64_t>(2ull * runs, 1024));
+    row_keys_.resize(capacity);
+    row_cells_.resize(capacity);
+    row_mask_ = capacity - 1;
+    row_shift_ = 64 - log2_of_power_of_two(capacity);
+    RAYCUT_CUDA_CHECK(cudaMemsetAsync(row_keys_.data(), 0xFF, capacity * sizeof(std::uint64_t)));
+    insert_rows_kernel<<<blocks_for(runs, 256), 256>>>(
+        sorted, run_start_.data(), runs_device, n_, grid_.dims[0], cell_keys_.data(),
+        start_.data(), row_keys_.data(), row_cells_.data(), row_mask_, row_shift_);
+    RAYCUT_CUDA_CHECK_LAUNCH();
+    close_rows_kernel<<<blocks_for(runs, 256), 256>>>(cell_keys_.data(), runs_device,
+                                                      grid_.dims[0], row_keys_.data(),
+                                                      row_cells_.data(), row_mask_, row_shift_);
+    RAYCUT_CUDA_CHECK_LAUNCH();
+  }
+
+  GridOptions options_;
+  Slot n_ = 0;
+  float cutoff_squared_ = 0;
+  CellGrid grid_;
+  GridView view_{};
+  bool dense_ = true;
+  BoundingBox box_;
+  DeviceBuffer<std::uint32_t> keys32_, keys32_alt_;
+  DeviceBuffer<std::uint64_t> keys64_, keys64_alt_;
+  DeviceBuffer<Slot> index_, index_alt_, run_start_;
+  Slot* order_ = nullptr;  // index_ or index_alt_: sorted slot -> original index
+  DeviceBuffer<float4> pos_;
+  DeviceBuffer<Slot> start_;  // dense: per cell; compact: per non-empty cell
+  DeviceBuffer<std::uint64_t> cell_keys_, row_keys_;
+  DeviceBuffer<uint2> row_cells_;
+  std::uint64_t row_mask_ = 0;
+  int row_shift_ = 0;
+  std::uint32_t* runs_host_ = nullptr;
+  DeviceBuffer<unsigned char> temp_;
+  DeviceResults results_;
+  EventTimer build_timer_, compute_timer_;
+};
+
+}  // namespace
+
+std::unique_ptr<Method> make_grid_with(const GridOptions& options) {
+  return std::make_unique<Grid>(options);
+}
+std::unique_ptr<Method> make_grid() { return make_grid_with(GridOptions{}); }
+
+}  // namespace raycut::detail::cuda
