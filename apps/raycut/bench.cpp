@@ -56,8 +56,8 @@ int run_bench(const BenchOptions& o) {
   if (!csv) throw Error(ErrorCode::io, o.out + ": cannot open for writing");
   csv << "suite,method,param,p,N,cutoff,pairs,build_ms,compute_ms,total_ms,total_ms_min,"
          "total_ms_max,reps,timer,gpu,driver,cuda,optix\n";
-  std::fprintf(stderr, "raycut bench: %s suite, kernel %s, %d reps, on %s -> %s\n",
-               o.suite.c_str(), o.kernel.c_str(), o.reps, gpu.c_str(), o.out.c_str());
+  std::fprintf(stderr, "raycut bench: %s suite, kernel %s, %d reps, on %s -> %s\n", o.suite.c_str(),
+               o.kernel.c_str(), o.reps, gpu.c_str(), o.out.c_str());
 
   std::size_t configs = 0, done = 0;
   for (int param : params)
@@ -97,9 +97,8 @@ int run_bench(const BenchOptions& o) {
           std::snprintf(line, sizeof line,
                         "%s,%s,%d,%d,%zu,%.9g,%llu,%.4f,%.4f,%.4f,%.4f,%.4f,%d,%s,%s,%s,%s,%s\n",
                         o.suite.c_str(), method.c_str(), param, p, cloud.size(), cloud.cutoff,
-                        static_cast<unsigned long long>(pairs), median(s.build),
-                        median(s.compute), median(s.total),
-                        *std::min_element(s.total.begin(), s.total.end()),
+                        static_cast<unsigned long long>(pairs), median(s.build), median(s.compute),
+                        median(s.total), *std::min_element(s.total.begin(), s.total.end()),
                         *std::max_element(s.total.begin(), s.total.end()), o.reps, timer,
                         gpu.c_str(), sys.driver.c_str(), sys.cuda.c_str(), sys.optix.c_str());
           csv << line;
@@ -125,8 +124,9 @@ Command add_bench(CLI::App& app) {
   auto o = std::make_shared<BenchOptions>();
   cmd->add_option("-s,--suite", o->suite, "uniform or surface")
       ->check(CLI::IsMember({"uniform", "surface"}));
-  cmd->add_option("-m,--methods", o->methods,
-                  "Methods (default = the available non-oracle methods, GPU ones only when there is a GPU)")
+  cmd->add_option(
+         "-m,--methods", o->methods,
+         "Methods (default = the available non-oracle methods, GPU ones only when there is a GPU)")
       ->delimiter(',');
   cmd->add_option("--param", o->params,
                   "beta (uniform; default 2,4,8,16,32) or alpha (surface; default 2..128)")

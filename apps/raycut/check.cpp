@@ -26,8 +26,8 @@ struct CheckOptions {
 
 // Largest |smooth energy - oracle| over targets, relative to the largest possible term sum
 // (count * C^4), so it is comparable across inputs; round-off is ~1e-7.
-double smooth_error(const Results& got, const Results& want, const std::vector<std::uint32_t>& count,
-                    float cutoff) {
+double smooth_error(const Results& got, const Results& want,
+                    const std::vector<std::uint32_t>& count, float cutoff) {
   const double c4 = std::pow(static_cast<double>(cutoff), 4);
   double worst = 0;
   for (std::size_t i = 0; i < want.energy.size(); ++i) {
@@ -56,10 +56,10 @@ int run_check(const CheckOptions& o) {
               "pairs", "bad-tgts", "smooth-err", "status");
   int failures = 0;
   for (const auto& cloud : inputs) {
-    const std::string oracle_name =
-        o.oracle != "auto" ? o.oracle
-        : (cuda_device_available() && cloud.size() > 20000) ? "brute-force-gpu"
-                                                            : "brute-force";
+    const std::string oracle_name = o.oracle != "auto" ? o.oracle
+                                    : (cuda_device_available() && cloud.size() > 20000)
+                                        ? "brute-force-gpu"
+                                        : "brute-force";
     Engine oracle(oracle_name);
     const PositionsView view{cloud.xyz.data(), cloud.size(), MemorySpace::host};
     oracle.build(view, cloud.cutoff);
@@ -97,9 +97,10 @@ Command add_check(CLI::App& app) {
   auto o = std::make_shared<CheckOptions>();
   std::string family_help = "Input families, or all:";
   for (const auto& f : family_names()) family_help += " " + f;
-  cmd->add_option("-m,--methods", o->methods,
-                  "Methods to check (names from `raycut methods`; default = the available "
-                  "non-oracle methods, GPU ones only when there is a GPU; all = every available one)")
+  cmd->add_option(
+         "-m,--methods", o->methods,
+         "Methods to check (names from `raycut methods`; default = the available "
+         "non-oracle methods, GPU ones only when there is a GPU; all = every available one)")
       ->delimiter(',');
   cmd->add_option("-f,--family", o->families, family_help)->delimiter(',');
   cmd->add_option("-n,--n", o->sizes, "Particle counts (comma-separated)")->delimiter(',');

@@ -39,9 +39,8 @@ Command add_methods(CLI::App& app) {
   app.add_subcommand("methods", "List the interaction methods and whether they run here");
   return [] {
     for (const auto& m : list_methods())
-      std::printf("%-16s %-11s %s%s%s\n", m.name.c_str(),
-                  m.available ? "available" : "unavailable", m.summary.c_str(),
-                  m.available ? "" : " -- ", m.why_unavailable.c_str());
+      std::printf("%-16s %-11s %s%s%s\n", m.name.c_str(), m.available ? "available" : "unavailable",
+                  m.summary.c_str(), m.available ? "" : " -- ", m.why_unavailable.c_str());
     std::printf("auto -> %s\n", auto_method().c_str());
     return 0;
   };
@@ -67,9 +66,10 @@ Command add_generate(CLI::App& app) {
   cmd->add_option("--seed", o->seed, "Random seed");
   cmd->add_option("-o,--out", o->out, "Output file (.csv or .xyz)")->required();
   return [o] {
-    const PointCloud cloud = o->suite == "uniform"   ? uniform_suite(o->param, o->p, o->seed)
-                             : o->suite == "surface" ? surface_suite(o->param, o->p, o->seed)
-                                                     : make_family(o->family, o->n, o->cutoff, o->seed);
+    const PointCloud cloud = o->suite == "uniform" ? uniform_suite(o->param, o->p, o->seed)
+                             : o->suite == "surface"
+                                 ? surface_suite(o->param, o->p, o->seed)
+                                 : make_family(o->family, o->n, o->cutoff, o->seed);
     const bool csv = o->out.size() >= 4 && o->out.compare(o->out.size() - 4, 4, ".csv") == 0;
     csv ? write_csv(o->out, cloud) : write_xyz(o->out, cloud);
     std::printf("wrote %zu particles (cutoff %g) to %s\n", cloud.size(), cloud.cutoff,

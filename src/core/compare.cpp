@@ -20,13 +20,11 @@ std::string describe(std::size_t i, const std::vector<std::uint32_t>& got,
   std::vector<std::uint32_t> missing, extra;
   std::set_difference(want.begin(), want.end(), got.begin(), got.end(),
                       std::back_inserter(missing));
-  std::set_difference(got.begin(), got.end(), want.begin(), want.end(),
-                      std::back_inserter(extra));
+  std::set_difference(got.begin(), got.end(), want.begin(), want.end(), std::back_inserter(extra));
   std::ostringstream s;
   s << "target " << i << ": " << got.size() << " neighbours, expected " << want.size()
     << "; missing";
-  for (std::size_t k = 0; k < std::min<std::size_t>(missing.size(), 5); ++k)
-    s << ' ' << missing[k];
+  for (std::size_t k = 0; k < std::min<std::size_t>(missing.size(), 5); ++k) s << ' ' << missing[k];
   s << "; extra or repeated";
   for (std::size_t k = 0; k < std::min<std::size_t>(extra.size(), 5); ++k) s << ' ' << extra[k];
   return s.str();

@@ -88,7 +88,9 @@ Engine::Engine(std::string_view method) {
 }
 
 Engine::~Engine() = default;
-MemorySpace Engine::space() const { return impl_->space(); }
+MemorySpace Engine::space() const {
+  return impl_->space();
+}
 Engine::Engine(Engine&&) noexcept = default;
 Engine& Engine::operator=(Engine&&) noexcept = default;
 

@@ -9,7 +9,9 @@
 namespace raycut::detail {
 namespace {
 
-std::string always_available() { return {}; }
+std::string always_available() {
+  return {};
+}
 
 std::string cuda_status() {
 #if defined(RAYCUT_HAVE_CUDA)
@@ -35,8 +37,8 @@ const std::vector<MethodEntry>& method_registry() {
        make_cell_list_cpu},
       {"brute-force-gpu", "CUDA, all pairs: the oracle on the GPU", cuda_status,
        RAYCUT_CUDA_FACTORY(cuda::make_brute_force)},
-      {"grid", "CUDA, sorted grid of cells, memory O(N): the fastest general method",
-       cuda_status, RAYCUT_CUDA_FACTORY(cuda::make_grid)},
+      {"grid", "CUDA, sorted grid of cells, memory O(N): the fastest general method", cuda_status,
+       RAYCUT_CUDA_FACTORY(cuda::make_grid)},
       {"grid-paper", "CUDA, the paper's dense grid, for comparison (memory grows with the box)",
        cuda_status, RAYCUT_CUDA_FACTORY(cuda::make_grid_paper)},
   };

@@ -15,7 +15,8 @@ namespace raycut {
 DevicePositions::DevicePositions(const std::vector<float>& xyz) : size_(xyz.size() / 3) {
 #if defined(RAYCUT_HAVE_CUDA)
   if (size_ > 0)
-    data_ = static_cast<float*>(detail::cuda::upload(xyz.data(), xyz.size() * sizeof(float)).release());
+    data_ =
+        static_cast<float*>(detail::cuda::upload(xyz.data(), xyz.size() * sizeof(float)).release());
 #else
   throw Error(ErrorCode::unsupported, "device positions need CUDA; raycut was built without it");
 #endif

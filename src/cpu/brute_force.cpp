@@ -40,6 +40,8 @@ class BruteForceCpu final : public Method {
 
 }  // namespace
 
-std::unique_ptr<Method> make_brute_force_cpu() { return std::make_unique<BruteForceCpu>(); }
+std::unique_ptr<Method> make_brute_force_cpu() {
+  return std::make_unique<BruteForceCpu>();
+}
 
 }  // namespace raycut::detail

@@ -71,13 +71,17 @@ class CellListCpu final : public Method {
   void compute(Kernel kernel, const KernelOptions& options) override {
     results_ = host_compute(size(), xyz_.data(), cutoff_, kernel, options, candidates());
   }
-  Results results() const override { return results_; }
+  Results results() const override {
+    return results_;
+  }
   NeighbourList neighbours() override {
     return host_neighbours(size(), xyz_.data(), cutoff_, candidates());
   }
 
  private:
-  std::size_t size() const { return order_.size(); }
+  std::size_t size() const {
+    return order_.size();
+  }
 
   void bounding_box(float lo[3], float hi[3]) const {
     for (int a = 0; a < 3; ++a) lo[a] = hi[a] = xyz_[a];
@@ -135,6 +139,8 @@ class CellListCpu final : public Method {
 
 }  // namespace
 
-std::unique_ptr<Method> make_cell_list_cpu() { return std::make_unique<CellListCpu>(); }
+std::unique_ptr<Method> make_cell_list_cpu() {
+  return std::make_unique<CellListCpu>();
+}
 
 }  // namespace raycut::detail

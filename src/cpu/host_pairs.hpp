@@ -40,8 +40,9 @@ Results host_compute(std::size_t n, const float* xyz, float cutoff, Kernel kerne
 #pragma omp parallel for schedule(dynamic, 256)
     for (std::size_t i = 0; i < n; ++i) {
       Accumulator acc;
-      for_each_in_range(i, xyz, c2, visit, [&](std::size_t, float dx, float dy, float dz,
-                                               float r2) { k(acc, dx, dy, dz, r2); });
+      for_each_in_range(
+          i, xyz, c2, visit,
+          [&](std::size_t, float dx, float dy, float dz, float r2) { k(acc, dx, dy, dz, r2); });
       if constexpr (K::has_count) out.count[i] = acc.count;
       if constexpr (K::has_energy) out.energy[i] = acc.energy;
       if constexpr (K::has_force) {

@@ -11,8 +11,8 @@ constexpr int block_size = 256;
 
 // Calls on_pair(j, dx, dy, dz, r2) for every in-range source j of the thread's target.
 template <class OnPair>
-__device__ void for_each_pair(const float* xyz, std::size_t n, float cutoff_squared,
-                              std::size_t i, OnPair&& on_pair) {
+__device__ void for_each_pair(const float* xyz, std::size_t n, float cutoff_squared, std::size_t i,
+                              OnPair&& on_pair) {
   __shared__ float tile[3 * block_size];
   const bool active = i < n;
   const float xi = active ? xyz[3 * i] : 0, yi = active ? xyz[3 * i + 1] : 0,
@@ -43,10 +43,9 @@ __global__ void compute_kernel(const float* xyz, std::size_t n, float cutoff_squ
                                OutputView out) {
   const std::size_t i = blockIdx.x * std::size_t{block_size} + threadIdx.x;
   Accumulator acc;
-  for_each_pair(xyz, n, cutoff_squared, i,
-                [&](std::size_t, float dx, float dy, float dz, float r2) {
-                  kernel(acc, dx, dy, dz, r2);
-                });
+  for_each_pair(
+      xyz, n, cutoff_squared, i,
+      [&](std::size_t, float dx, float dy, float dz, float r2) { kernel(acc, dx, dy, dz, r2); });
   if (i < n) out.store<K>(i, acc);
 }
 
@@ -54,8 +53,7 @@ __global__ void count_kernel(const float* xyz, std::size_t n, float cutoff_squar
                              std::uint32_t* counts) {
   const std::size_t i = blockIdx.x * std::size_t{block_size} + threadIdx.x;
   std::uint32_t c = 0;
-  for_each_pair(xyz, n, cutoff_squared, i,
-                [&](std::size_t, float, float, float, float) { ++c; });
+  for_each_pair(xyz, n, cutoff_squared, i, [&](std::size_t, float, float, float, float) { ++c; });
   if (i < n) counts[i] = c;
 }
 
@@ -102,8 +100,7 @@ class BruteForceGpu final : public Method {
           RAYCUT_CUDA_CHECK_LAUNCH();
         },
         [&](const std::uint64_t* offsets, std::uint32_t* indices) {
-          fill_kernel<<<blocks(), block_size>>>(xyz_.data(), n_, cutoff_squared_, offsets,
-                                                indices);
+          fill_kernel<<<blocks(), block_size>>>(xyz_.data(), n_, cutoff_squared_, offsets, indices);
           RAYCUT_CUDA_CHECK_LAUNCH();
         });
   }
@@ -124,6 +121,8 @@ class BruteForceGpu final : public Method {
 
 }  // namespace
 
-std::unique_ptr<Method> make_brute_force() { return std::make_unique<BruteForceGpu>(); }
+std::unique_ptr<Method> make_brute_force() {
+  return std::make_unique<BruteForceGpu>();
+}
 
 }  // namespace raycut::detail::cuda

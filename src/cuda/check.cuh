@@ -19,10 +19,10 @@ namespace raycut::detail::cuda {
 
 }  // namespace raycut::detail::cuda
 
-#define RAYCUT_CUDA_CHECK(call)                                                     \
-  do {                                                                              \
-    const cudaError_t raycut_status_ = (call);                                      \
-    if (raycut_status_ != cudaSuccess)                                              \
+#define RAYCUT_CUDA_CHECK(call)                                                      \
+  do {                                                                               \
+    const cudaError_t raycut_status_ = (call);                                       \
+    if (raycut_status_ != cudaSuccess)                                               \
       ::raycut::detail::cuda::throw_cuda(raycut_status_, #call, __FILE__, __LINE__); \
   } while (0)
 

@@ -33,8 +33,8 @@ Results DeviceResults::to_host() const {
   Results out;
   auto copy = [](auto& host, const auto& device, std::size_t count) {
     host.resize(count);
-    RAYCUT_CUDA_CHECK(cudaMemcpy(host.data(), device.data(), count * sizeof(host[0]),
-                                 cudaMemcpyDeviceToHost));
+    RAYCUT_CUDA_CHECK(
+        cudaMemcpy(host.data(), device.data(), count * sizeof(host[0]), cudaMemcpyDeviceToHost));
   };
   with_kernel(kernel_, KernelOptions{}, 0.0f, [&](auto k) {
     using K = decltype(k);
@@ -60,7 +60,9 @@ void EventTimer::start(cudaStream_t stream) {
   started_ = true;
 }
 
-void EventTimer::stop(cudaStream_t stream) { RAYCUT_CUDA_CHECK(cudaEventRecord(stop_, stream)); }
+void EventTimer::stop(cudaStream_t stream) {
+  RAYCUT_CUDA_CHECK(cudaEventRecord(stop_, stream));
+}
 
 double EventTimer::elapsed_ms() const {
   if (!started_) return -1;
@@ -87,8 +89,7 @@ void exclusive_scan(const std::uint32_t* counts, std::uint64_t* offsets, std::si
   std::size_t temp_bytes = 0;
   RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, input, offsets, n + 1));
   DeviceBuffer<unsigned char> temp(temp_bytes);
-  RAYCUT_CUDA_CHECK(
-      cub::DeviceScan::ExclusiveSum(temp.data(), temp_bytes, input, offsets, n + 1));
+  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(temp.data(), temp_bytes, input, offsets, n + 1));
 }
 
 }  // namespace raycut::detail::cuda

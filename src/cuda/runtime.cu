@@ -57,7 +57,9 @@ std::size_t first_non_finite(const float* device_xyz, std::size_t n) {
   return static_cast<std::size_t>(result);
 }
 
-void DeviceFree::operator()(void* p) const noexcept { cudaFree(p); }
+void DeviceFree::operator()(void* p) const noexcept {
+  cudaFree(p);
+}
 
 DeviceMemory upload(const void* host, std::size_t bytes) {
   require_device_memory(bytes, "the positions");
