@@ -5,6 +5,9 @@
 #include "cuda/methods.hpp"
 #include "cuda/runtime.hpp"
 #endif
+#if defined(RAYCUT_HAVE_OPTIX)
+#include "optix/methods.hpp"
+#endif
 
 namespace raycut::detail {
 namespace {
@@ -21,10 +24,24 @@ std::string cuda_status() {
 #endif
 }
 
+std::string optix_status() {
+#if defined(RAYCUT_HAVE_OPTIX)
+  if (std::string why = cuda_status(); !why.empty()) return why;
+  return optix::unavailable_reason();
+#else
+  return "raycut was built without OptiX (set OptiX_ROOT to the OptiX SDK headers)";
+#endif
+}
+
 #if defined(RAYCUT_HAVE_CUDA)
 #define RAYCUT_CUDA_FACTORY(f) f
 #else
 #define RAYCUT_CUDA_FACTORY(f) nullptr
+#endif
+#if defined(RAYCUT_HAVE_OPTIX)
+#define RAYCUT_OPTIX_FACTORY(f) f
+#else
+#define RAYCUT_OPTIX_FACTORY(f) nullptr
 #endif
 
 }  // namespace
@@ -37,6 +54,10 @@ const std::vector<MethodEntry>& method_registry() {
        make_cell_list_cpu},
       {"brute-force-gpu", "CUDA, all pairs: the oracle on the GPU", cuda_status,
        RAYCUT_CUDA_FACTORY(cuda::make_brute_force)},
+      {"optix-aabb", "OptiX, custom AABBs + zero-length rays (the paper's method 4)", optix_status,
+       RAYCUT_OPTIX_FACTORY([] { return optix::make_aabb(false); })},
+      {"optix-aabb-sorted", "OptiX, custom AABBs on Morton-sorted particles", optix_status,
+       RAYCUT_OPTIX_FACTORY([] { return optix::make_aabb(true); })},
       {"grid", "CUDA, sorted grid of cells, memory O(N): the fastest general method", cuda_status,
        RAYCUT_CUDA_FACTORY(cuda::make_grid)},
       {"grid-paper", "CUDA, the paper's dense grid, for comparison (memory grows with the box)",

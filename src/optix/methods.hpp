@@ -1,0 +1,17 @@
+// Factories of the OptiX methods (host-only declarations).
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "core/method.hpp"
+
+namespace raycut::detail::optix {
+
+// Empty when OptiX runs here; otherwise why not.
+std::string unavailable_reason();
+
+// Custom AABBs with zero-length rays; `sorted` adds the Morton-order spatial sort.
+std::unique_ptr<Method> make_aabb(bool sorted);
+
+}  // namespace raycut::detail::optix
