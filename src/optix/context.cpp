@@ -78,7 +78,13 @@ Pipeline::Pipeline(const PipelineSpec& spec) {
   desc[1].kind = OPTIX_PROGRAM_GROUP_KIND_MISS;  // null program: the fastest miss
   desc[2].kind = OPTIX_PROGRAM_GROUP_KIND_HITGROUP;
   auto stage = [&](const char* name) { return name && *name ? name : nullptr; };
-  if (stage(spec.programs.intersection)) {
+  if (spec.builtin_intersection != 0) {
+    OptixBuiltinISOptions builtin{};
+    builtin.builtinISModuleType = static_cast<OptixPrimitiveType>(spec.builtin_intersection);
+    RAYCUT_OPTIX_CHECK(optixBuiltinISModuleGet(ctx, &module_options, &pipeline_options, &builtin,
+                                               &builtin_module_));
+    desc[2].hitgroup.moduleIS = builtin_module_;
+  } else if (stage(spec.programs.intersection)) {
     desc[2].hitgroup.moduleIS = module_;
     desc[2].hitgroup.entryFunctionNameIS = spec.programs.intersection;
   }
@@ -138,6 +144,7 @@ Pipeline::~Pipeline() {
   for (OptixProgramGroup g : {raygen_, miss_, hit_})
     if (g) optixProgramGroupDestroy(g);
   if (module_) optixModuleDestroy(module_);
+  if (builtin_module_) optixModuleDestroy(builtin_module_);
 }
 
 void Pipeline::launch(const void* params, std::size_t size, unsigned width, cudaStream_t stream) {

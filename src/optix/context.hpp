@@ -35,6 +35,8 @@ struct PipelineSpec {
   int attribute_values;
   unsigned primitive_types;  // OptixPrimitiveTypeFlags
   const char* params_name;   // the __constant__ launch-parameter variable
+  // A built-in intersection (e.g. OPTIX_PRIMITIVE_TYPE_SPHERE), or 0 for triangles / custom.
+  unsigned builtin_intersection = 0;
 };
 
 // A ready-to-launch pipeline with a one-record-per-stage SBT (no per-record data).
@@ -45,11 +47,11 @@ class Pipeline {
   Pipeline(const Pipeline&) = delete;
   Pipeline& operator=(const Pipeline&) = delete;
 
-  // Launches width x 1 x 1 rays with `params` (size bytes) copied to the device first.
+  // Launches width x 1 x 1 raygen threads with `params` (size bytes) copied to the device first.
   void launch(const void* params, std::size_t size, unsigned width, cudaStream_t stream = nullptr);
 
  private:
-  OptixModule module_ = nullptr;
+  OptixModule module_ = nullptr, builtin_module_ = nullptr;
   OptixProgramGroup raygen_ = nullptr, miss_ = nullptr, hit_ = nullptr;
   OptixPipeline pipeline_ = nullptr;
   cuda::DeviceBuffer<unsigned char> records_;  // raygen, miss, hit: one header each

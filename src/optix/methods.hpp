@@ -13,5 +13,9 @@ std::string unavailable_reason();
 
 // Custom AABBs with zero-length rays; `sorted` adds the Morton-order spatial sort.
 std::unique_ptr<Method> make_aabb(bool sorted);
+// Built-in spheres, three axis rays per target.
+std::unique_ptr<Method> make_spheres();
+// Double squares: two face triangles per source, four corner rays per target.
+std::unique_ptr<Method> make_triangles();
 
 }  // namespace raycut::detail::optix

@@ -22,13 +22,18 @@ function(raycut_optix_programs name source)
   target_sources(raycut PRIVATE ${embedded})
 endfunction()
 
-raycut_optix_programs(aabb_programs aabb/programs.cu
-  ${CMAKE_CURRENT_LIST_DIR}/aabb/params.hpp
+set(raycut_optix_program_headers
+  ${CMAKE_CURRENT_LIST_DIR}/device_common.cuh
+  ${CMAKE_CURRENT_LIST_DIR}/launch_params.hpp
+  ${PROJECT_SOURCE_DIR}/src/geometry/ray_geometry.hpp
   ${PROJECT_SOURCE_DIR}/include/raycut/kernels.hpp
   ${PROJECT_SOURCE_DIR}/include/raycut/predicate.hpp
   ${PROJECT_SOURCE_DIR}/src/cuda/device_results.cuh)
-
+foreach(method aabb spheres triangles)
+  raycut_optix_programs(${method}_programs ${method}/programs.cu ${raycut_optix_program_headers})
+  target_sources(raycut PRIVATE ${CMAKE_CURRENT_LIST_DIR}/${method}/host.cu)
+endforeach()
 target_sources(raycut PRIVATE ${CMAKE_CURRENT_LIST_DIR}/context.cpp
-  ${CMAKE_CURRENT_LIST_DIR}/aabb/aabb_method.cu)
+  ${CMAKE_CURRENT_LIST_DIR}/ray_method.cu)
 target_include_directories(raycut PRIVATE ${OptiX_INCLUDE_DIR})
 target_link_libraries(raycut PRIVATE ${CMAKE_DL_LIBS})

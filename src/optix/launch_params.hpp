@@ -1,5 +1,5 @@
-// Launch parameters of the custom-AABB method: plain data shared by the host side
-// (aabb_method.cu) and the device programs (programs.cu).
+// Launch parameters every ray-tracing method shares (plain data, host and device). A method's
+// own parameter block starts with a LaunchParams and adds its geometry numbers.
 #pragma once
 
 #include <optix_types.h>
@@ -10,21 +10,22 @@
 
 namespace raycut::detail::optix {
 
-enum class AabbMode : int {
-  count,  // fused kernels: the Kernel value selects the functor
+enum class RayMode : int {
+  count,  // fused kernels
   lj,
   smooth,
   list_count,  // neighbour list, pass 1: neighbours per target
   list_fill,   // neighbour list, pass 2: write them at their offsets
 };
 
-struct AabbParams {
+struct LaunchParams {
   OptixTraversableHandle handle;
-  const float* xyz;             // positions, in the method's (maybe sorted) order
+  const float* xyz;             // positions in the method's (maybe sorted) order
   const std::uint32_t* origin;  // slot -> caller's particle index; null when unsorted
   std::uint32_t n;
-  float cutoff_squared;
-  AabbMode mode;
+  float cutoff, cutoff_squared;
+  float margin;  // e of src/geometry/ray_geometry.hpp
+  RayMode mode;
   float lj_four_epsilon, lj_sigma_squared;
   cuda::OutputView out;               // indexed by the caller's particle index
   std::uint32_t* list_counts;         // list_count: per caller index

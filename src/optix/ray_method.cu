@@ -1,0 +1,139 @@
+#include "optix/ray_method.hpp"
+
+#include <cub/device/device_radix_sort.cuh>
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/cell_grid.hpp"
+#include "geometry/ray_geometry.hpp"
+
+namespace raycut::detail::optix {
+namespace {
+
+// Spreads the low 21 bits of v to every third bit (Morton interleave).
+__device__ std::uint64_t spread_bits(std::uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffULL;
+  v = (v | v << 16) & 0x1f0000ff0000ffULL;
+  v = (v | v << 8) & 0x100f00f00f00f00fULL;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+  v = (v | v << 2) & 0x1249249249249249ULL;
+  return v;
+}
+
+__global__ void morton_keys(const float* xyz, std::uint32_t n, CellGrid grid, std::uint64_t* keys,
+                            std::uint32_t* ids) {
+  const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  const float x = xyz[3 * i], y = xyz[3 * i + 1], z = xyz[3 * i + 2];
+  keys[i] = spread_bits(grid.coord(x, 0)) | spread_bits(grid.coord(y, 1)) << 1 |
+            spread_bits(grid.coord(z, 2)) << 2;
+  ids[i] = i;
+}
+
+__global__ void gather_positions(const float* xyz, const std::uint32_t* ids, std::uint32_t n,
+                                 float* sorted) {
+  const std::uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
+  if (s >= n) return;
+  const std::uint32_t i = ids[s];
+  sorted[3 * s] = xyz[3 * i];
+  sorted[3 * s + 1] = xyz[3 * i + 1];
+  sorted[3 * s + 2] = xyz[3 * i + 2];
+}
+
+}  // namespace
+
+RayTracingMethod::RayTracingMethod(bool sorted, const PipelineSpec& programs)
+    : sorted_(sorted), pipeline_(programs) {}
+
+void RayTracingMethod::build(const float* xyz, std::size_t n, float cutoff) {
+  if (n > 0x7fffffffu)
+    throw Error(ErrorCode::invalid_argument,
+                "ray-tracing methods take at most 2^31-1 particles, got " + std::to_string(n));
+  n_ = static_cast<std::uint32_t>(n);
+  cutoff_ = cutoff;
+  build_timer_.start();
+  // The margin needs the largest coordinate magnitude; the sort needs the box too.
+  float lo[3], hi[3];
+  bbox_.compute(xyz, n, lo, hi);
+  float largest = 0;
+  for (int a = 0; a < 3; ++a) largest = std::max({largest, std::fabs(lo[a]), std::fabs(hi[a])});
+  margin_ = geometry::margin(cutoff, largest);
+
+  xyz_.resize(3 * n);
+  if (sorted_) {
+    const CellGrid grid = make_cell_grid(lo, hi, cutoff);
+    keys_.resize(2 * n);
+    ids_.resize(2 * n);
+    morton_keys<<<blocks_for(n), block_size>>>(xyz, n_, grid, keys_.data(), ids_.data());
+    RAYCUT_CUDA_CHECK_LAUNCH();
+    cub::DoubleBuffer<std::uint64_t> keys(keys_.data(), keys_.data() + n);
+    cub::DoubleBuffer<std::uint32_t> ids(ids_.data(), ids_.data() + n);
+    std::size_t temp_bytes = 0;
+    RAYCUT_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, keys, ids, n_, 0, 63));
+    sort_temp_.resize(temp_bytes);
+    RAYCUT_CUDA_CHECK(
+        cub::DeviceRadixSort::SortPairs(sort_temp_.data(), temp_bytes, keys, ids, n_, 0, 63));
+    if (ids.Current() != ids_.data())  // the sorted ids live at the front of the buffer
+      RAYCUT_CUDA_CHECK(cudaMemcpyAsync(ids_.data(), ids.Current(), n * sizeof(std::uint32_t),
+                                        cudaMemcpyDeviceToDevice));
+    gather_positions<<<blocks_for(n), block_size>>>(xyz, ids_.data(), n_, xyz_.data());
+    RAYCUT_CUDA_CHECK_LAUNCH();
+  } else {
+    RAYCUT_CUDA_CHECK(
+        cudaMemcpyAsync(xyz_.data(), xyz, 3 * n * sizeof(float), cudaMemcpyDeviceToDevice));
+  }
+  const OptixBuildInput input = primitives(xyz_.data(), n_, cutoff, margin_);
+  handle_ = accel_.build(input, OPTIX_BUILD_FLAG_PREFER_FAST_TRACE);
+  build_timer_.stop();
+}
+
+LaunchParams RayTracingMethod::base_params() const {
+  LaunchParams p{};
+  p.handle = handle_;
+  p.xyz = xyz_.data();
+  p.origin = sorted_ ? ids_.data() : nullptr;
+  p.n = n_;
+  p.cutoff = cutoff_;
+  p.cutoff_squared = squared_cutoff(cutoff_);
+  p.margin = margin_;
+  return p;
+}
+
+void RayTracingMethod::compute(Kernel kernel, const KernelOptions& options) {
+  LaunchParams p = base_params();
+  p.mode = kernel == Kernel::count ? RayMode::count
+           : kernel == Kernel::lj  ? RayMode::lj
+                                   : RayMode::smooth;
+  p.lj_four_epsilon = 4.0f * options.lj_epsilon;
+  p.lj_sigma_squared = options.lj_sigma * options.lj_sigma;
+  p.out = results_.prepare(kernel, n_);
+  compute_timer_.start();
+  pipeline_.launch(&p, sizeof p, n_);
+  compute_timer_.stop();
+}
+
+NeighbourList RayTracingMethod::neighbours() {
+  return cuda::build_neighbour_list(
+      n_,
+      [&](std::uint32_t* counts) {
+        LaunchParams p = base_params();
+        p.mode = RayMode::list_count;
+        p.list_counts = counts;
+        pipeline_.launch(&p, sizeof p, n_);
+      },
+      [&](const std::uint64_t* offsets, std::uint32_t* indices) {
+        LaunchParams p = base_params();
+        p.mode = RayMode::list_fill;
+        p.list_offsets = offsets;
+        p.list_indices = indices;
+        pipeline_.launch(&p, sizeof p, n_);
+      });
+}
+
+void RayTracingMethod::synchronize() {
+  RAYCUT_CUDA_CHECK(cudaDeviceSynchronize());
+}
+
+}  // namespace raycut::detail::optix

@@ -1,0 +1,62 @@
+// The host side every ray-tracing method shares: optional Morton sort, the margin, the
+// acceleration structure, the fused launches and the neighbour list. A method adds only its
+// primitives (build input) and its programs.
+#pragma once
+
+#include <optix.h>
+
+#include <cstdint>
+
+#include "core/method.hpp"
+#include "cuda/device_results.cuh"
+#include "cuda/grid_common.cuh"
+#include "optix/context.hpp"
+#include "optix/launch_params.hpp"
+
+namespace raycut::detail::optix {
+
+class RayTracingMethod : public Method {
+ public:
+  MemorySpace space() const override { return MemorySpace::device; }
+  void build(const float* xyz, std::size_t n, float cutoff) override;
+  void compute(Kernel kernel, const KernelOptions& options) override;
+  Results results() const override { return results_.to_host(); }
+  NeighbourList neighbours() override;
+  void synchronize() override;
+  double device_build_ms() const override { return build_timer_.elapsed_ms(); }
+  double device_compute_ms() const override { return compute_timer_.elapsed_ms(); }
+
+ protected:
+  RayTracingMethod(bool sorted, const PipelineSpec& programs);
+
+  // Fills the method's primitive buffers from the (maybe sorted) positions and describes them.
+  // The build input's pointers must stay valid until the next call.
+  virtual OptixBuildInput primitives(const float* xyz, std::uint32_t n, float cutoff,
+                                     float margin) = 0;
+
+ private:
+  LaunchParams base_params() const;
+  void sort_spatially(const float* xyz);
+
+  bool sorted_;
+  Pipeline pipeline_;
+  Accel accel_;
+  OptixTraversableHandle handle_ = 0;
+  std::uint32_t n_ = 0;
+  float cutoff_ = 0, margin_ = 0;
+  cuda::DeviceBuffer<float> xyz_;
+  cuda::DeviceBuffer<std::uint64_t> keys_;
+  cuda::DeviceBuffer<std::uint32_t> ids_;
+  cuda::DeviceBuffer<unsigned char> sort_temp_;
+  cuda::BoundingBox bbox_;
+  cuda::DeviceResults results_;
+  cuda::EventTimer build_timer_, compute_timer_;
+};
+
+// Launch configuration for one thread per element.
+constexpr unsigned block_size = 256;
+inline unsigned blocks_for(std::size_t n) {
+  return static_cast<unsigned>((n + block_size - 1) / block_size);
+}
+
+}  // namespace raycut::detail::optix
