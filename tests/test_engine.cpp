@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "core/validation.hpp"
 #include "raycut/engine.hpp"
 
 namespace {
@@ -141,6 +142,12 @@ TEST_P(EngineEdges, LennardJonesOfOnePairMatchesTheFormula) {
   ASSERT_EQ(r.energy.size(), 2u);
   EXPECT_NEAR(r.energy[0], 4 * (s6 * s6 - s6), 1e-6);
   EXPECT_NEAR(r.energy[1], 4 * (s6 * s6 - s6), 1e-6);
+}
+
+TEST(EngineMemory, AListLargerThanMemoryIsAClearError) {
+  raycut::NeighbourList list;
+  expect_error([&] { raycut::detail::allocate_indices(list, std::uint64_t{1} << 62); },
+               ErrorCode::out_of_memory, "pairs need");
 }
 
 INSTANTIATE_TEST_SUITE_P(AllAvailable, EngineEdges, ::testing::ValuesIn(available_methods()),

@@ -2,6 +2,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <new>
+#include <stdexcept>
 #include <string>
 
 #include "raycut/error.hpp"
@@ -31,6 +33,21 @@ void throw_non_finite(std::size_t index, const float* p) {
   std::snprintf(buf, sizeof buf, "non-finite coordinate at particle index %zu: (%g, %g, %g)", index,
                 static_cast<double>(p[0]), static_cast<double>(p[1]), static_cast<double>(p[2]));
   throw Error(ErrorCode::invalid_input, buf);
+}
+
+void allocate_indices(NeighbourList& list, std::uint64_t pairs) {
+  auto too_large = [&] {
+    return Error(ErrorCode::out_of_memory,
+                 "not enough host memory for the neighbour list: " + std::to_string(pairs) +
+                     " pairs need " + format_bytes(static_cast<double>(pairs) * 4));
+  };
+  try {
+    list.indices.resize(pairs);
+  } catch (const std::bad_alloc&) {
+    throw too_large();
+  } catch (const std::length_error&) {
+    throw too_large();
+  }
 }
 
 std::string format_bytes(double bytes) {

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/validation.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/kernels.hpp"
 #include "raycut/predicate.hpp"
@@ -68,7 +69,7 @@ NeighbourList host_neighbours(std::size_t n, const float* xyz, float cutoff, Vis
     list.offsets[i + 1] = c;
   }
   for (std::size_t i = 0; i < n; ++i) list.offsets[i + 1] += list.offsets[i];
-  list.indices.resize(list.offsets[n]);
+  allocate_indices(list, list.offsets[n]);
 #pragma omp parallel for schedule(dynamic, 256)
   for (std::size_t i = 0; i < n; ++i) {
     std::uint64_t slot = list.offsets[i];

@@ -84,7 +84,7 @@ NeighbourList build_neighbour_list(std::size_t n, Count count, Fill fill) {
   require_device_memory(total * sizeof(std::uint32_t), "the neighbour list");
   DeviceBuffer<std::uint32_t> indices(total > 0 ? total : 1);
   fill(static_cast<const std::uint64_t*>(offsets.data()), indices.data());
-  list.indices.resize(total);
+  allocate_indices(list, total);
   RAYCUT_CUDA_CHECK(cudaMemcpy(list.indices.data(), indices.data(), total * sizeof(std::uint32_t),
                                cudaMemcpyDeviceToHost));
   return list;
