@@ -8,7 +8,9 @@
 #include <vector>
 
 #include "core/validation.hpp"
+#include "raycut/compare.hpp"
 #include "raycut/engine.hpp"
+#include "raycut/generators.hpp"
 
 namespace {
 
@@ -142,6 +144,43 @@ TEST_P(EngineEdges, LennardJonesOfOnePairMatchesTheFormula) {
   ASSERT_EQ(r.energy.size(), 2u);
   EXPECT_NEAR(r.energy[0], 4 * (s6 * s6 - s6), 1e-6);
   EXPECT_NEAR(r.energy[1], 4 * (s6 * s6 - s6), 1e-6);
+}
+
+// update() gives what a fresh build on the moved positions gives: refitted (small moves within
+// the skin), rebuilt (moves beyond it), and with the default policy.
+TEST_P(EngineEdges, UpdateMatchesAFreshBuild) {
+  const raycut::PointCloud cloud = raycut::make_family("uniform", 3000, 1.0f, 5);
+  for (float skin : {0.0f, 0.5f}) {
+    for (float jitter : {0.1f, 2.0f}) {
+      std::vector<float> moved = cloud.xyz;
+      for (std::size_t k = 0; k < moved.size(); ++k)
+        moved[k] += jitter * std::sin(0.7f * static_cast<float>(k));
+      Engine engine(GetParam());
+      engine.set_update_policy({skin});
+      engine.build({cloud.xyz.data(), cloud.size(), MemorySpace::host}, 1.0f);
+      engine.update({moved.data(), cloud.size(), MemorySpace::host});
+      if (skin == 0.0f || jitter > skin / 2) {
+        EXPECT_FALSE(engine.last_timings().refit);
+      }
+      Engine oracle("brute-force");
+      oracle.build({moved.data(), cloud.size(), MemorySpace::host}, 1.0f);
+      const auto diff = raycut::compare_neighbours(engine.neighbours(), oracle.neighbours());
+      EXPECT_TRUE(diff.equal()) << "skin " << skin << " jitter " << jitter << ": "
+                                << diff.first_difference;
+      EXPECT_EQ(engine.compute(Kernel::count).count, oracle.compute(Kernel::count).count);
+    }
+  }
+}
+
+TEST_P(EngineEdges, UpdateNeedsTheSameParticleCount) {
+  std::vector<float> xyz = {0, 0, 0, 1, 1, 1};
+  Engine e(GetParam());
+  e.build({xyz.data(), 2, MemorySpace::host}, 1.0f);
+  expect_error(
+      [&] {
+        e.update({xyz.data(), 1, MemorySpace::host});
+      },
+      ErrorCode::invalid_argument, "needs the 2 particles");
 }
 
 TEST(EngineMemory, AListLargerThanMemoryIsAClearError) {

@@ -90,6 +90,7 @@ int main(int argc, char** argv) {
   std::map<std::string, Command> commands = {{"methods", add_methods(app)},
                                              {"check", add_check(app)},
                                              {"bench", add_bench(app)},
+                                             {"update-bench", add_update_bench(app)},
                                              {"generate", add_generate(app)}};
   try {
     app.parse(argc, argv);

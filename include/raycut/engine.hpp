@@ -43,11 +43,22 @@ struct NeighbourList {
   std::vector<std::uint32_t> indices;
 };
 
-// Wall-clock milliseconds of the last build()/run(), each phase synchronised. device_* are the
-// CUDA-event times of the same phases for GPU methods, negative for CPU methods.
+// Wall-clock milliseconds of the last build()/update() and run(), each phase synchronised.
+// device_* are the CUDA-event times of the same phases for GPU methods, negative for CPU
+// methods. refit: the last update() refitted the structure instead of rebuilding it.
 struct Timings {
   double build_ms = 0, compute_ms = 0;
   double device_build_ms = -1, device_compute_ms = -1;
+  bool refit = false;
+};
+
+// How update() treats moved particles. skin = 0: rebuild every time (what the paper does).
+// skin > 0: methods that can (the OptiX methods) refit their acceleration structure to the new
+// positions (always exact: the primitives move with the particles) while no particle has moved
+// more than skin / 2 since the last full build, and rebuild beyond that, when the refitted
+// tree has lost too much quality.
+struct UpdatePolicy {
+  float skin = 0;
 };
 
 struct MethodDescription {
@@ -111,6 +122,10 @@ class Engine {
   // Throws Error with the first bad index or the bad value, before any device work.
   void build(PositionsView positions, float cutoff);
 
+  // New positions of the same N particles, cutoff unchanged: refit or rebuild per the policy.
+  void update(PositionsView positions);
+  void set_update_policy(const UpdatePolicy& policy);
+
   // Computes `kernel` for every target and keeps the results in the method's memory.
   void run(Kernel kernel, const KernelOptions& options = {});
   // Copies the results of the last run() to the host.
@@ -126,6 +141,9 @@ class Engine {
   float cutoff() const { return cutoff_; }
 
  private:
+  template <class F>
+  void with_positions_in_method_space(const PositionsView& positions, F&& f);
+
   std::string method_;
   std::unique_ptr<detail::Method> impl_;
   std::size_t size_ = 0;

@@ -1,6 +1,7 @@
 #include "raycut/engine.hpp"
 
 #include <chrono>
+#include <cmath>
 #include <vector>
 
 #include "core/method.hpp"
@@ -107,7 +108,45 @@ void Engine::build(PositionsView positions, float cutoff) {
     return;
   }
 
-  // Move the positions to where the method works (not part of the timed build).
+  with_positions_in_method_space(positions, [&](const float* xyz) {
+    const auto start = Clock::now();
+    impl_->build(xyz, size_, cutoff);
+    impl_->synchronize();
+    timings_.build_ms = elapsed_ms(start);
+    timings_.device_build_ms = impl_->device_build_ms();
+  });
+  built_ = true;
+}
+
+void Engine::update(PositionsView positions) {
+  if (!built_) throw Error(ErrorCode::invalid_argument, "Engine::update() called before build()");
+  if (positions.size != size_)
+    throw Error(ErrorCode::invalid_argument, "Engine::update() needs the " + std::to_string(size_) +
+                                                 " particles of build(), got " +
+                                                 std::to_string(positions.size));
+  validate_positions(positions);
+  has_run_ = false;
+  timings_ = {};
+  if (size_ == 0) return;
+  with_positions_in_method_space(positions, [&](const float* xyz) {
+    const auto start = Clock::now();
+    timings_.refit = impl_->update(xyz, size_, cutoff_);
+    impl_->synchronize();
+    timings_.build_ms = elapsed_ms(start);
+    timings_.device_build_ms = impl_->device_build_ms();
+  });
+}
+
+void Engine::set_update_policy(const UpdatePolicy& policy) {
+  if (!(policy.skin >= 0) || !std::isfinite(policy.skin))
+    throw Error(ErrorCode::invalid_argument,
+                "update skin must be finite and >= 0, got " + std::to_string(policy.skin));
+  impl_->set_update_policy(policy);
+}
+
+template <class F>
+void Engine::with_positions_in_method_space(const PositionsView& positions, F&& f) {
+  // Move the positions to where the method works (not part of the timed phases).
   const float* xyz = positions.xyz;
   std::vector<float> host_copy;
 #if defined(RAYCUT_HAVE_CUDA)
@@ -129,13 +168,7 @@ void Engine::build(PositionsView positions, float cutoff) {
     throw Error(ErrorCode::unsupported, "raycut was built without CUDA");
 #endif
   }
-
-  const auto start = Clock::now();
-  impl_->build(xyz, size_, cutoff);
-  impl_->synchronize();
-  timings_.build_ms = elapsed_ms(start);
-  timings_.device_build_ms = impl_->device_build_ms();
-  built_ = true;
+  f(xyz);
 }
 
 void Engine::run(Kernel kernel, const KernelOptions& options) {

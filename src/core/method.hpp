@@ -23,6 +23,14 @@ class Method {
   // valid only during the call: copy what you need.
   virtual void build(const float* xyz, std::size_t n, float cutoff) = 0;
 
+  // New positions of the same n particles. Returns true when the structure was refitted;
+  // the default rebuilds.
+  virtual bool update(const float* xyz, std::size_t n, float cutoff) {
+    build(xyz, n, cutoff);
+    return false;
+  }
+  virtual void set_update_policy(const UpdatePolicy&) {}
+
   // Compute `kernel` for every target; keep the results until the next compute()/build().
   virtual void compute(Kernel kernel, const KernelOptions& options) = 0;
   virtual Results results() const = 0;

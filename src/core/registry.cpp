@@ -62,6 +62,8 @@ const std::vector<MethodEntry>& method_registry() {
        RAYCUT_OPTIX_FACTORY([] { return optix::make_aabb(false); })},
       {"optix-aabb-sorted", "OptiX, custom AABBs on Morton-sorted particles", optix_status,
        RAYCUT_OPTIX_FACTORY([] { return optix::make_aabb(true); })},
+      {"optix-aabb-fused", "OptiX, custom AABBs, work in the intersection program (as the paper)",
+       optix_status, RAYCUT_OPTIX_FACTORY([] { return optix::make_aabb(false, true); })},
       {"grid", "CUDA, sorted grid of cells, memory O(N): the fastest general method", cuda_status,
        RAYCUT_CUDA_FACTORY(cuda::make_grid)},
       {"grid-paper", "CUDA, the paper's dense grid, for comparison (memory grows with the box)",

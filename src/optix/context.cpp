@@ -4,7 +4,7 @@
 #include <optix_stack_size.h>
 #include <optix_stubs.h>
 
-#include <mutex>
+#include <algorithm>
 
 #include "optix/optix_check.hpp"
 
@@ -157,23 +157,36 @@ void Pipeline::launch(const void* params, std::size_t size, unsigned width, cuda
 
 OptixTraversableHandle Accel::build(const OptixBuildInput& input, unsigned build_flags,
                                     cudaStream_t stream) {
+  flags_ = build_flags;
+  return run(input, OPTIX_BUILD_OPERATION_BUILD, stream);
+}
+
+OptixTraversableHandle Accel::refit(const OptixBuildInput& input, cudaStream_t stream) {
+  if (!handle_ || !(flags_ & OPTIX_BUILD_FLAG_ALLOW_UPDATE))
+    throw Error(ErrorCode::internal, "refit of an acceleration structure built without updates");
+  return run(input, OPTIX_BUILD_OPERATION_UPDATE, stream);
+}
+
+OptixTraversableHandle Accel::run(const OptixBuildInput& input, OptixBuildOperation operation,
+                                  cudaStream_t stream) {
   OptixDeviceContext ctx = device_context();
   OptixAccelBuildOptions options{};
-  options.buildFlags = build_flags;
-  options.operation = OPTIX_BUILD_OPERATION_BUILD;
+  options.buildFlags = flags_;
+  options.operation = operation;
   OptixAccelBufferSizes sizes{};
   RAYCUT_OPTIX_CHECK(optixAccelComputeMemoryUsage(ctx, &options, &input, 1, &sizes));
-  cuda::require_device_memory(sizes.tempSizeInBytes + sizes.outputSizeInBytes -
-                                  std::min(temp_.bytes() + output_.bytes(),
-                                           sizes.tempSizeInBytes + sizes.outputSizeInBytes),
-                              "the acceleration structure");
-  temp_.resize(sizes.tempSizeInBytes);
-  output_.resize(sizes.outputSizeInBytes);
-  OptixTraversableHandle handle = 0;
+  const bool update = operation == OPTIX_BUILD_OPERATION_UPDATE;
+  const std::size_t temp = update ? sizes.tempUpdateSizeInBytes : sizes.tempSizeInBytes;
+  if (!update) {
+    const std::size_t need = temp + sizes.outputSizeInBytes, have = temp_.bytes() + output_.bytes();
+    if (need > have) cuda::require_device_memory(need - have, "the acceleration structure");
+    output_.resize(sizes.outputSizeInBytes);
+  }
+  temp_.resize(std::max<std::size_t>(temp, 1));
   RAYCUT_OPTIX_CHECK(optixAccelBuild(
-      ctx, stream, &options, &input, 1, reinterpret_cast<CUdeviceptr>(temp_.data()), temp_.bytes(),
-      reinterpret_cast<CUdeviceptr>(output_.data()), output_.bytes(), &handle, nullptr, 0));
-  return handle;
+      ctx, stream, &options, &input, 1, reinterpret_cast<CUdeviceptr>(temp_.data()), temp,
+      reinterpret_cast<CUdeviceptr>(output_.data()), output_.bytes(), &handle_, nullptr, 0));
+  return handle_;
 }
 
 }  // namespace raycut::detail::optix

@@ -60,14 +60,21 @@ class Pipeline {
 };
 
 // A geometry acceleration structure over one build input, rebuilt from scratch by build() (as in
-// the paper); buffers are kept and only grow.
+// the paper) or refitted in place by refit() (OptiX update: same topology, new bounds; the last
+// build must have had OPTIX_BUILD_FLAG_ALLOW_UPDATE). Buffers are kept and only grow.
 class Accel {
  public:
   OptixTraversableHandle build(const OptixBuildInput& input, unsigned build_flags,
                                cudaStream_t stream = nullptr);
+  OptixTraversableHandle refit(const OptixBuildInput& input, cudaStream_t stream = nullptr);
   std::size_t bytes() const { return output_.bytes() + temp_.bytes(); }
 
  private:
+  OptixTraversableHandle run(const OptixBuildInput& input, OptixBuildOperation operation,
+                             cudaStream_t stream);
+
+  unsigned flags_ = 0;
+  OptixTraversableHandle handle_ = 0;
   cuda::DeviceBuffer<unsigned char> temp_, output_;
 };
 

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include "core/cell_grid.hpp"
 #include "geometry/ray_geometry.hpp"
@@ -42,6 +43,16 @@ __global__ void gather_positions(const float* xyz, const std::uint32_t* ids, std
   sorted[3 * s + 2] = xyz[3 * i + 2];
 }
 
+// Squared displacements are >= 0, so their float bits order like unsigned integers.
+__global__ void max_squared_displacement(const float* now, const float* then, std::size_t n,
+                                         unsigned* result) {
+  const std::size_t i = blockIdx.x * std::size_t{blockDim.x} + threadIdx.x;
+  if (i >= n) return;
+  const float dx = now[3 * i] - then[3 * i], dy = now[3 * i + 1] - then[3 * i + 1],
+              dz = now[3 * i + 2] - then[3 * i + 2];
+  atomicMax(result, __float_as_uint(dx * dx + dy * dy + dz * dz));
+}
+
 }  // namespace
 
 RayTracingMethod::RayTracingMethod(bool sorted, const PipelineSpec& programs)
@@ -59,7 +70,8 @@ void RayTracingMethod::build(const float* xyz, std::size_t n, float cutoff) {
   bbox_.compute(xyz, n, lo, hi);
   float largest = 0;
   for (int a = 0; a < 3; ++a) largest = std::max({largest, std::fabs(lo[a]), std::fabs(hi[a])});
-  margin_ = geometry::margin(cutoff, largest);
+  // The skin widens the margin's magnitude term so refitted positions stay covered.
+  margin_ = geometry::margin(cutoff, largest + policy_.skin);
 
   xyz_.resize(3 * n);
   if (sorted_) {
@@ -81,12 +93,59 @@ void RayTracingMethod::build(const float* xyz, std::size_t n, float cutoff) {
     gather_positions<<<blocks_for(n), block_size>>>(xyz, ids_.data(), n_, xyz_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
   } else {
+    arrange(xyz);
+  }
+  const bool refits = policy_.skin > 0;
+  if (refits) {
+    built_xyz_.resize(3 * n);
     RAYCUT_CUDA_CHECK(
-        cudaMemcpyAsync(xyz_.data(), xyz, 3 * n * sizeof(float), cudaMemcpyDeviceToDevice));
+        cudaMemcpyAsync(built_xyz_.data(), xyz, 3 * n * sizeof(float), cudaMemcpyDeviceToDevice));
   }
   const OptixBuildInput input = primitives(xyz_.data(), n_, cutoff, margin_);
-  handle_ = accel_.build(input, OPTIX_BUILD_FLAG_PREFER_FAST_TRACE);
+  handle_ = accel_.build(
+      input, OPTIX_BUILD_FLAG_PREFER_FAST_TRACE | (refits ? OPTIX_BUILD_FLAG_ALLOW_UPDATE : 0));
   build_timer_.stop();
+}
+
+void RayTracingMethod::arrange(const float* xyz) {
+  if (sorted_) {
+    gather_positions<<<blocks_for(n_), block_size>>>(xyz, ids_.data(), n_, xyz_.data());
+    RAYCUT_CUDA_CHECK_LAUNCH();
+  } else {
+    RAYCUT_CUDA_CHECK(cudaMemcpyAsync(xyz_.data(), xyz, 3 * std::size_t{n_} * sizeof(float),
+                                      cudaMemcpyDeviceToDevice));
+  }
+}
+
+float RayTracingMethod::max_displacement(const float* xyz) {
+  displacement_.resize(1);
+  RAYCUT_CUDA_CHECK(cudaMemsetAsync(displacement_.data(), 0, sizeof(unsigned)));
+  max_squared_displacement<<<blocks_for(n_), block_size>>>(xyz, built_xyz_.data(), n_,
+                                                           displacement_.data());
+  RAYCUT_CUDA_CHECK_LAUNCH();
+  unsigned bits = 0;
+  RAYCUT_CUDA_CHECK(cudaMemcpy(&bits, displacement_.data(), sizeof bits, cudaMemcpyDeviceToHost));
+  float squared;
+  std::memcpy(&squared, &bits, sizeof squared);
+  return std::sqrt(squared);
+}
+
+bool RayTracingMethod::update(const float* xyz, std::size_t n, float cutoff) {
+  // Refit keeps the tree of the last build and moves its boxes with the particles: exact, but
+  // the tree degrades as particles wander, hence the rebuild beyond half the skin. The margin of
+  // the last build stays (it covers round-off up to the coordinates seen then, plus the skin).
+  const bool can_refit = policy_.skin > 0 && n == n_ && cutoff == cutoff_ && handle_ != 0 &&
+                         built_xyz_.size() == 3 * n;
+  if (!can_refit || max_displacement(xyz) > 0.5f * policy_.skin) {
+    build(xyz, n, cutoff);
+    return false;
+  }
+  build_timer_.start();
+  arrange(xyz);
+  const OptixBuildInput input = primitives(xyz_.data(), n_, cutoff_, margin_);
+  handle_ = accel_.refit(input);
+  build_timer_.stop();
+  return true;
 }
 
 LaunchParams RayTracingMethod::base_params() const {

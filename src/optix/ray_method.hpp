@@ -19,6 +19,8 @@ class RayTracingMethod : public Method {
  public:
   MemorySpace space() const override { return MemorySpace::device; }
   void build(const float* xyz, std::size_t n, float cutoff) override;
+  bool update(const float* xyz, std::size_t n, float cutoff) override;
+  void set_update_policy(const UpdatePolicy& policy) override { policy_ = policy; }
   void compute(Kernel kernel, const KernelOptions& options) override;
   Results results() const override { return results_.to_host(); }
   NeighbourList neighbours() override;
@@ -36,15 +38,21 @@ class RayTracingMethod : public Method {
 
  private:
   LaunchParams base_params() const;
-  void sort_spatially(const float* xyz);
+  // Positions into xyz_, in the method's order (the permutation of the last build, if sorted).
+  void arrange(const float* xyz);
+  // Largest displacement of any particle since the last full build.
+  float max_displacement(const float* xyz);
 
   bool sorted_;
+  UpdatePolicy policy_;
   Pipeline pipeline_;
   Accel accel_;
   OptixTraversableHandle handle_ = 0;
   std::uint32_t n_ = 0;
   float cutoff_ = 0, margin_ = 0;
   cuda::DeviceBuffer<float> xyz_;
+  cuda::DeviceBuffer<float> built_xyz_;        // caller's order, at the last full build
+  cuda::DeviceBuffer<unsigned> displacement_;  // float bits of the largest squared move
   cuda::DeviceBuffer<std::uint64_t> keys_;
   cuda::DeviceBuffer<std::uint32_t> ids_;
   cuda::DeviceBuffer<unsigned char> sort_temp_;

@@ -18,10 +18,12 @@ __global__ void make_boxes(const float* xyz, std::uint32_t n, float half, OptixA
 
 class AabbMethod final : public RayTracingMethod {
  public:
-  explicit AabbMethod(bool sorted)
+  AabbMethod(bool sorted, bool fused)
       : RayTracingMethod(sorted, {raycut_aabb_programs,
                                   raycut_aabb_programs_size,
-                                  {"__raygen__aabb", "__intersection__aabb", "__anyhit__aabb", ""},
+                                  {"__raygen__aabb",
+                                   fused ? "__intersection__aabb_fused" : "__intersection__aabb",
+                                   fused ? "" : "__anyhit__aabb", ""},
                                   2,
                                   0,
                                   OPTIX_PRIMITIVE_TYPE_FLAGS_CUSTOM,
@@ -51,8 +53,8 @@ class AabbMethod final : public RayTracingMethod {
 
 }  // namespace
 
-std::unique_ptr<Method> make_aabb(bool sorted) {
-  return std::make_unique<AabbMethod>(sorted);
+std::unique_ptr<Method> make_aabb(bool sorted, bool fused) {
+  return std::make_unique<AabbMethod>(sorted, fused);
 }
 
 }  // namespace raycut::detail::optix

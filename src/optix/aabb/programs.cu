@@ -34,3 +34,15 @@ extern "C" __global__ void __anyhit__aabb() {
   accept_pair(params, s, j, pair_geometry(params, s.target, j));
   optixIgnoreIntersection();
 }
+
+// The paper's variant, for comparison (method optix-aabb-fused): the pair work inside the
+// intersection program, nothing reported, no any-hit. Exactly once only as far as OptiX calls
+// the intersection program once per (ray, primitive), which it does in every test we ran but
+// does not promise.
+extern "C" __global__ void __intersection__aabb_fused() {
+  TargetState& s = target_state();
+  const std::uint32_t j = optixGetPrimitiveIndex();
+  if (j == s.target) return;
+  const PairGeometry g = pair_geometry(params, s.target, j);
+  if (raycut::in_range(g.r2, params.cutoff_squared)) accept_pair(params, s, j, g);
+}
