@@ -27,12 +27,6 @@ struct BenchOptions {
   std::uint64_t seed = 1;
 };
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  const std::size_t m = v.size() / 2;
-  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
-}
-
 struct Samples {
   std::vector<double> build, compute, total;
   void add(double b, double c) {
@@ -67,8 +61,7 @@ int run_bench(const BenchOptions& o) {
   for (int param : params) {
     for (int p : o.ps) {
       if (o.max_n != 0 && suite_size(param, p) > o.max_n) continue;
-      const PointCloud cloud =
-          o.suite == "uniform" ? uniform_suite(param, p, o.seed) : surface_suite(param, p, o.seed);
+      const PointCloud cloud = suite_cloud(o.suite, param, p, o.seed);
       std::optional<DevicePositions> on_device;
       for (const auto& method : methods) {
         Engine engine(method);

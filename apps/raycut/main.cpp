@@ -1,5 +1,6 @@
 // raycut: particle interactions within a cutoff on CPU and GPU. Subcommands: methods, check,
 // bench, generate. Errors are one line on stderr and exit code 2.
+#include <algorithm>
 #include <cstdio>
 #include <iostream>
 #include <map>
@@ -31,6 +32,17 @@ std::vector<std::string> resolve_methods(const std::vector<std::string>& names) 
     out.push_back(probe.method());
   }
   return out;
+}
+
+PointCloud suite_cloud(const std::string& suite, int param, int p, std::uint64_t seed) {
+  return suite == "uniform" ? uniform_suite(param, p, seed) : surface_suite(param, p, seed);
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const std::size_t m = v.size() / 2;
+  return v.size() % 2 ? v[m] : 0.5 * (v[m - 1] + v[m]);
 }
 
 namespace {

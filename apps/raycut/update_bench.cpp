@@ -24,16 +24,10 @@ struct UpdateOptions {
   std::string kernel = "lj", out = "update.csv";
 };
 
-double median(std::vector<double> v) {
-  std::sort(v.begin(), v.end());
-  return v.empty() ? 0 : v[v.size() / 2];
-}
-
 int run_update_bench(const UpdateOptions& o) {
   const auto methods = resolve_methods(o.methods);
   const Kernel kernel = parse_kernel(o.kernel);
-  const PointCloud start =
-      o.suite == "uniform" ? uniform_suite(o.param, o.p, 1) : surface_suite(o.param, o.p, 1);
+  const PointCloud start = suite_cloud(o.suite, o.param, o.p, 1);
   const SystemInfo sys = system_info();
   std::ofstream csv(o.out);
   if (!csv) throw Error(ErrorCode::io, o.out + ": cannot open for writing");
