@@ -1,4 +1,5 @@
 // Device copies of positions for host-only callers, and what a benchmark ran on.
+#include <cctype>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -39,15 +40,15 @@ DevicePositions& DevicePositions::operator=(DevicePositions&& o) noexcept {
 
 namespace {
 
-// "580.159.04" from the kernel module's version line, or "unknown".
+// "580.159.04": the first dotted number on the kernel module's version line ("NVRM version:
+// NVIDIA UNIX Open Kernel Module for x86_64  580.159.04  Release Build ..."), or "unknown".
 std::string nvidia_driver_version() {
   std::ifstream in("/proc/driver/nvidia/version");
   std::string word;
   while (in >> word) {
-    if (word == "Module") {
-      std::string version;
-      if (in >> version) return version;
-    }
+    const bool dotted_number = !word.empty() && std::isdigit(static_cast<unsigned char>(word[0])) &&
+                               word.find('.') != std::string::npos;
+    if (dotted_number) return word;
   }
   return "unknown";
 }
