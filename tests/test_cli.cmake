@@ -58,4 +58,11 @@ expect_exit(0 bench --suite uniform --methods cell-list --param 4 --p 1,2 --reps
 file(READ ${WORK}/b.csv csv)
 expect_match("${csv}" "^suite,method,param,p,N,cutoff,pairs,build_ms,compute_ms,total_ms,total_ms_min,total_ms_max,reps,timer,gpu,driver,cuda,optix\n")
 expect_match("${csv}" "uniform,cell-list,4,2,128,")
+
+# --paper-binary runs the given program in a scratch folder and merges its results-*.csv.
+file(WRITE ${WORK}/fake_paper.sh "#!/bin/sh\nprintf 'NbParticles,NbInteractions,NbLoops,boxDiv,nbCells,partspercell,interactionsperparticle,timeinit,timecompute,timetotal\\n64,1,5,4,64,1,1,0.001,0.002,0.003\\n64,1,5,4,64,1,1,0.003,0.002,0.005\\n' > results-test.csv\n")
+file(CHMOD ${WORK}/fake_paper.sh PERMISSIONS OWNER_READ OWNER_WRITE OWNER_EXECUTE)
+expect_exit(0 bench --methods cell-list --param 4 --p 1 --reps 1 --out ${WORK}/m.csv --paper-binary ${WORK}/fake_paper.sh)
+file(READ ${WORK}/m.csv csv)
+expect_match("${csv}" "uniform,paper-cudaLJ,4,1,64,0.25,,2.0000,2.0000,4.0000,3.0000,5.0000,2,host,")
 message(STATUS "cli: all checks passed")

@@ -3,10 +3,17 @@
 // medians (min/max of total) per phase, one CSV row per timer (host clock, CUDA events).
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <optional>
+#include <sstream>
+
+#include <unistd.h>
 
 #include "commands.hpp"
 #include "raycut/engine.hpp"
@@ -25,6 +32,7 @@ struct BenchOptions {
   std::size_t max_n = 0;  // 0 = no limit
   std::string out = "bench.csv";
   std::uint64_t seed = 1;
+  std::string paper_binary;  // the paper's cudaLJ, run after ours, its rows merged
 };
 
 struct Samples {
@@ -36,6 +44,116 @@ struct Samples {
   }
 };
 
+// The CSV row tail every row carries: what it ran on.
+std::string environment_columns(const SystemInfo& sys, bool with_optix) {
+  const std::string gpu = sys.gpu == "none" ? "cpu: " + sys.cpu : sys.gpu;
+  return gpu + "," + sys.driver + "," + sys.cuda + "," + (with_optix ? sys.optix : "none");
+}
+
+// Runs the paper's own CUDA grid (Cuda-version/cudaLJ.cu of berenger-eu/particle-interaction-
+// with-optix, built by the user) in a scratch folder and turns its results-*.csv (one line per
+// repetition, seconds, host clock) into rows of method paper-cudaLJ: medians per configuration.
+// It always runs its whole suite; its pair counts are candidates, not pairs, so `pairs` is empty.
+std::vector<std::string> run_paper_binary(const std::string& binary, const std::string& suite,
+                                          const std::string& environment) {
+  namespace fs = std::filesystem;
+  const fs::path exe = fs::absolute(binary);
+  if (!fs::is_regular_file(exe)) throw Error(ErrorCode::io, binary + ": no such file");
+  const fs::path dir = fs::temp_directory_path() / ("raycut-paper-" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const std::string command = "cd '" + dir.string() + "' && '" + exe.string() + "'" +
+                              (suite == "surface" ? " -gs" : "") + " > run.log 2>&1";
+  std::fprintf(stderr, "  running the paper's binary: %s\n", command.c_str());
+  if (std::system(command.c_str()) != 0)
+    throw Error(ErrorCode::backend,
+                binary + " failed; its output is in " + (dir / "run.log").string());
+  fs::path results;
+  for (const auto& entry : fs::directory_iterator(dir))
+    if (entry.path().filename().string().rfind("results", 0) == 0) results = entry.path();
+  if (results.empty())
+    throw Error(ErrorCode::io, binary + " wrote no results-*.csv in " + dir.string());
+
+  // (boxDiv, N) -> per-repetition (init, compute) milliseconds.
+  std::map<std::pair<int, std::size_t>, std::vector<std::pair<double, double>>> runs;
+  std::ifstream in(results);
+  std::string line;
+  std::getline(in, line);  // header
+  while (std::getline(in, line)) {
+    std::vector<std::string> f;
+    std::stringstream ss(line);
+    for (std::string cell; std::getline(ss, cell, ',');) f.push_back(cell);
+    if (f.size() < 10) continue;
+    runs[{std::stoi(f[3]), std::stoull(f[0])}].emplace_back(std::stod(f[7]) * 1e3,
+                                                            std::stod(f[8]) * 1e3);
+  }
+  std::vector<std::string> rows;
+  for (const auto& [key, reps] : runs) {
+    const auto [param, n] = key;
+    const int p = static_cast<int>(n / suite_size(param, 1));
+    const double cutoff = suite == "uniform"
+                              ? 1.0 / param
+                              : std::acos(std::clamp(1.0 - 2.0 * 9.0 * p / n, -1.0, 1.0));
+    std::vector<double> build, compute, total;
+    for (const auto& [b, c] : reps) {
+      build.push_back(b);
+      compute.push_back(c);
+      total.push_back(b + c);
+    }
+    char row[512];
+    std::snprintf(row, sizeof row,
+                  "%s,paper-cudaLJ,%d,%d,%zu,%.9g,,%.4f,%.4f,%.4f,%.4f,%.4f,%zu,host,%s\n",
+                  suite.c_str(), param, p, n, cutoff, median(build), median(compute), median(total),
+                  *std::min_element(total.begin(), total.end()),
+                  *std::max_element(total.begin(), total.end()), reps.size(), environment.c_str());
+    rows.push_back(row);
+  }
+  fs::remove_all(dir);
+  return rows;
+}
+
+// Warm-up (and the pair count), then o.reps timed build + run; one CSV row per timer.
+void bench_method(const BenchOptions& o, const std::string& method, Kernel kernel,
+                  const PointCloud& cloud, int param, int p,
+                  std::optional<DevicePositions>& on_device, const std::string& environment,
+                  std::ofstream& csv) {
+  Engine engine(method);
+  PositionsView view{cloud.xyz.data(), cloud.size(), MemorySpace::host};
+  if (engine.space() == MemorySpace::device) {
+    if (!on_device) on_device.emplace(cloud.xyz);
+    view = on_device->view();
+  }
+  engine.build(view, cloud.cutoff);
+  const auto counts = engine.compute(Kernel::count).count;
+  std::uint64_t pairs = 0;
+  for (auto c : counts) pairs += c;
+  engine.run(kernel);
+
+  Samples host, events;
+  for (int r = 0; r < o.reps; ++r) {
+    engine.build(view, cloud.cutoff);
+    engine.run(kernel);
+    const Timings& t = engine.last_timings();
+    host.add(t.build_ms, t.compute_ms);
+    if (t.device_build_ms >= 0) events.add(t.device_build_ms, t.device_compute_ms);
+  }
+  for (const auto& [samples, timer] : {std::pair{&host, "host"}, std::pair{&events, "events"}}) {
+    const Samples& s = *samples;
+    if (s.total.empty()) continue;
+    char line[512];
+    std::snprintf(
+        line, sizeof line, "%s,%s,%d,%d,%zu,%.9g,%llu,%.4f,%.4f,%.4f,%.4f,%.4f,%d,%s,%s\n",
+        o.suite.c_str(), method.c_str(), param, p, cloud.size(), cloud.cutoff,
+        static_cast<unsigned long long>(pairs), median(s.build), median(s.compute), median(s.total),
+        *std::min_element(s.total.begin(), s.total.end()),
+        *std::max_element(s.total.begin(), s.total.end()), o.reps, timer, environment.c_str());
+    csv << line;
+  }
+  csv.flush();
+  std::fprintf(stderr, "      build %.3f + compute %.3f ms (host, median)\n", median(host.build),
+               median(host.compute));
+}
+
 int run_bench(const BenchOptions& o) {
   const auto methods = resolve_methods(o.methods);
   const Kernel kernel = parse_kernel(o.kernel);
@@ -44,7 +162,8 @@ int run_bench(const BenchOptions& o) {
     params = o.suite == "uniform" ? std::vector<int>{2, 4, 8, 16, 32}
                                   : std::vector<int>{2, 4, 8, 16, 32, 64, 128};
   const SystemInfo sys = system_info();
-  const std::string gpu = sys.gpu == "none" ? "cpu: " + sys.cpu : sys.gpu;
+  const std::string environment = environment_columns(sys, true);
+  const std::string gpu = environment.substr(0, environment.find(','));
 
   std::ofstream csv(o.out);
   if (!csv) throw Error(ErrorCode::io, o.out + ": cannot open for writing");
@@ -64,47 +183,23 @@ int run_bench(const BenchOptions& o) {
       const PointCloud cloud = suite_cloud(o.suite, param, p, o.seed);
       std::optional<DevicePositions> on_device;
       for (const auto& method : methods) {
-        Engine engine(method);
-        PositionsView view{cloud.xyz.data(), cloud.size(), MemorySpace::host};
-        if (engine.space() == MemorySpace::device) {
-          if (!on_device) on_device.emplace(cloud.xyz);
-          view = on_device->view();
+        try {
+          bench_method(o, method, kernel, cloud, param, p, on_device, environment, csv);
+        } catch (const Error& e) {  // e.g. a dense grid that does not fit: say so, go on
+          std::fprintf(stderr, "  [%zu/%zu] %s param=%d p=%d N=%zu %s: skipped: %s\n", done + 1,
+                       configs, o.suite.c_str(), param, p, cloud.size(), method.c_str(), e.what());
+          continue;
         }
-        engine.build(view, cloud.cutoff);  // warm-up, and the pair count
-        const auto counts = engine.compute(Kernel::count).count;
-        std::uint64_t pairs = 0;
-        for (auto c : counts) pairs += c;
-        engine.run(kernel);
-
-        Samples host, events;
-        for (int r = 0; r < o.reps; ++r) {
-          engine.build(view, cloud.cutoff);
-          engine.run(kernel);
-          const Timings& t = engine.last_timings();
-          host.add(t.build_ms, t.compute_ms);
-          if (t.device_build_ms >= 0) events.add(t.device_build_ms, t.device_compute_ms);
-        }
-        auto row = [&](const Samples& s, const char* timer) {
-          if (s.total.empty()) return;
-          char line[512];
-          std::snprintf(line, sizeof line,
-                        "%s,%s,%d,%d,%zu,%.9g,%llu,%.4f,%.4f,%.4f,%.4f,%.4f,%d,%s,%s,%s,%s,%s\n",
-                        o.suite.c_str(), method.c_str(), param, p, cloud.size(), cloud.cutoff,
-                        static_cast<unsigned long long>(pairs), median(s.build), median(s.compute),
-                        median(s.total), *std::min_element(s.total.begin(), s.total.end()),
-                        *std::max_element(s.total.begin(), s.total.end()), o.reps, timer,
-                        gpu.c_str(), sys.driver.c_str(), sys.cuda.c_str(), sys.optix.c_str());
-          csv << line;
-        };
-        row(host, "host");
-        row(events, "events");
-        csv.flush();
-        std::fprintf(stderr, "  [%zu/%zu] %s param=%d p=%d N=%zu %s: total %.3f ms (median)\n",
-                     done + 1, configs, o.suite.c_str(), param, p, cloud.size(), method.c_str(),
-                     median(host.total));
+        std::fprintf(stderr, "  [%zu/%zu] %s param=%d p=%d N=%zu %s: done\n", done + 1, configs,
+                     o.suite.c_str(), param, p, cloud.size(), method.c_str());
       }
       ++done;
     }
+  }
+  if (!o.paper_binary.empty()) {
+    for (const auto& row :
+         run_paper_binary(o.paper_binary, o.suite, environment_columns(sys, false)))
+      csv << row;
   }
   return 0;
 }
@@ -135,6 +230,10 @@ Command add_bench(CLI::App& app) {
   cmd->add_option("--max-n", o->max_n, "Skip configurations with more particles than this");
   cmd->add_option("-o,--out", o->out, "CSV file to write");
   cmd->add_option("--seed", o->seed, "Random seed");
+  cmd->add_option("--paper-binary", o->paper_binary,
+                  "Path of the paper's cudaLJ (built by you from Cuda-version/cudaLJ.cu): run it "
+                  "after ours and merge its rows as method paper-cudaLJ")
+      ->check(CLI::ExistingFile);
   return [o] { return run_bench(*o); };
 }
 
