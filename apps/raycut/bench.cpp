@@ -114,9 +114,8 @@ std::vector<std::string> run_paper_binary(const std::string& binary, const std::
 
 // Warm-up (and the pair count), then o.reps timed build + run; one CSV row per timer.
 void bench_method(const BenchOptions& o, const std::string& method, Kernel kernel,
-                  const PointCloud& cloud, int param, int p,
-                  std::optional<DevicePositions>& on_device, const std::string& environment,
-                  std::ofstream& csv) {
+                  const PointCloud& cloud, int param, int p, std::optional<DeviceArray>& on_device,
+                  const std::string& environment, std::ofstream& csv) {
   Engine engine(method);
   PositionsView view{cloud.xyz.data(), cloud.size(), MemorySpace::host};
   if (engine.space() == MemorySpace::device) {
@@ -181,7 +180,7 @@ int run_bench(const BenchOptions& o) {
     for (int p : o.ps) {
       if (o.max_n != 0 && suite_size(param, p) > o.max_n) continue;
       const PointCloud cloud = suite_cloud(o.suite, param, p, o.seed);
-      std::optional<DevicePositions> on_device;
+      std::optional<DeviceArray> on_device;
       for (const auto& method : methods) {
         try {
           bench_method(o, method, kernel, cloud, param, p, on_device, environment, csv);

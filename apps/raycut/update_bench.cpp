@@ -38,13 +38,13 @@ int run_update_bench(const UpdateOptions& o) {
       Engine engine(method);
       engine.set_update_policy({skin * start.cutoff});
       std::vector<float> xyz = start.xyz;
-      auto view_of = [&](std::optional<DevicePositions>& holder) {
+      auto view_of = [&](std::optional<DeviceArray>& holder) {
         if (engine.space() == MemorySpace::host)
           return PositionsView{xyz.data(), start.size(), MemorySpace::host};
         holder.emplace(xyz);
         return holder->view();
       };
-      std::optional<DevicePositions> on_device;
+      std::optional<DeviceArray> on_device;
       engine.build(view_of(on_device), start.cutoff);
       engine.run(kernel);
       const double build_ms = engine.last_timings().build_ms;

@@ -36,6 +36,15 @@ struct Results {
   std::vector<float> force;          // smooth: 3 per target (fx fy fz)
 };
 
+// The results of the last run() where the method keeps them (Engine::space()), without a copy:
+// valid until the next build(), update() or run(). Null where the kernel does not produce it.
+struct ResultsView {
+  const std::uint32_t* count = nullptr;
+  const float* energy = nullptr;
+  const float* force = nullptr;
+  MemorySpace space = MemorySpace::host;
+};
+
 // Full neighbour list in CSR form: the in-range sources of target i are
 // indices[offsets[i] .. offsets[i+1]); their order within a row is unspecified.
 struct NeighbourList {
@@ -68,20 +77,23 @@ struct MethodDescription {
   std::string why_unavailable;
 };
 
-// A copy of host positions in CUDA device memory, for callers without CUDA code of their own
-// (the benchmark, where positions start on the device). Throws Error(unsupported) without CUDA
-// and Error(out_of_memory) when it does not fit.
-class DevicePositions {
+// A copy of a host float array in CUDA device memory, for callers without CUDA code of their own
+// (the benchmark, where positions start on the device; device-side kernel inputs). Throws
+// Error(unsupported) without CUDA and Error(out_of_memory) when it does not fit.
+class DeviceArray {
  public:
-  explicit DevicePositions(const std::vector<float>& xyz);
-  ~DevicePositions();
-  DevicePositions(DevicePositions&&) noexcept;
-  DevicePositions& operator=(DevicePositions&&) noexcept;
-  PositionsView view() const { return {data_, size_, MemorySpace::device}; }
+  explicit DeviceArray(const std::vector<float>& values);
+  ~DeviceArray();
+  DeviceArray(DeviceArray&&) noexcept;
+  DeviceArray& operator=(DeviceArray&&) noexcept;
+  const float* data() const { return data_; }
+  std::size_t size() const { return size_; }
+  // The array as (N,3) positions.
+  PositionsView view() const { return {data_, size_ / 3, MemorySpace::device}; }
 
  private:
   float* data_ = nullptr;
-  std::size_t size_ = 0;
+  std::size_t size_ = 0;  // floats
 };
 
 // What the results were measured on: for benchmark rows.
@@ -130,6 +142,8 @@ class Engine {
   void run(Kernel kernel, const KernelOptions& options = {});
   // Copies the results of the last run() to the host.
   Results results() const;
+  // The results of the last run() in place (no copy): what an integrator on the device reads.
+  ResultsView results_view() const;
   // run() then results().
   Results compute(Kernel kernel, const KernelOptions& options = {});
 

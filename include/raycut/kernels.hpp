@@ -1,29 +1,46 @@
-// Built-in pair kernels (spec/BENCHMARKS.md): plain functors, callable on host and device.
-// A method calls kernel(acc, dx, dy, dz, r2) once per in-range (target, source) pair, with
-// d = x_source - x_target and r2 = squared_distance(d), and writes acc out once per target.
+// Built-in pair kernels: plain functors, callable on host and device. A method calls
+// kernel(acc, i, j, dx, dy, dz, r2) once per in-range (target i, source j) pair, i and j the
+// caller's particle indices, d = x_j - x_i and r2 = squared_distance(d), and writes acc out once
+// per target.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <type_traits>
 
+#include "raycut/error.hpp"
 #include "raycut/predicate.hpp"
 
 namespace raycut {
 
 enum class Kernel {
-  count,   // number of in-range neighbours per target (exact integers)
-  lj,      // Lennard-Jones energy per target: sum 4 eps ((sigma/r)^12 - (sigma/r)^6)
-  smooth,  // w = C^2 - r^2; energy += w^2; force += w d (finite everywhere)
+  count,        // number of in-range neighbours per target (exact integers)
+  lj,           // Lennard-Jones energy per target: sum 4 eps ((sigma/r)^12 - (sigma/r)^6)
+  smooth,       // w = C^2 - r^2; energy += w^2; force += w d (finite everywhere)
+  sph_density,  // energy = sum_{j != i} m W_poly6(r, h), h = the cutoff (self not included)
+  sph_force,    // force = pressure + viscosity force of Mueller et al. 2003 (not divided by rho_i)
 };
 
-// Parse "count" / "lj" / "smooth"; throws Error(invalid_argument) naming the bad value.
+// Parse "count" / "lj" / "smooth" / "sph_density" / "sph_force"; throws Error(invalid_argument).
 Kernel parse_kernel(std::string_view name);
 std::string to_string(Kernel kernel);
+
+// Per-particle inputs of sph_force, indexed by the caller's particle index, in the memory space
+// of the method (Engine::space()): velocity (3 per particle), density and pressure.
+struct SphInputs {
+  const float* velocity = nullptr;
+  const float* density = nullptr;
+  const float* pressure = nullptr;
+};
 
 struct KernelOptions {
   float lj_epsilon = 1.0f;  // the paper's values
   float lj_sigma = 1.0f;
+  float sph_mass = 0.0f;       // particle mass m
+  float sph_viscosity = 0.0f;  // mu
+  SphInputs sph;
 };
 
 // What one target accumulates; each kernel touches only the fields it produces.
@@ -33,9 +50,15 @@ struct Accumulator {
   float fx = 0.0f, fy = 0.0f, fz = 0.0f;
 };
 
+// The geometric kernels ignore the indices; the 5-argument form stays while methods move to the
+// 7-argument one.
 struct CountKernel {
   static constexpr bool has_count = true, has_energy = false, has_force = false;
   RAYCUT_HD void operator()(Accumulator& acc, float, float, float, float) const { ++acc.count; }
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float dx, float dy,
+                            float dz, float r2) const {
+    (*this)(acc, dx, dy, dz, r2);
+  }
 };
 
 struct LennardJonesKernel {
@@ -46,6 +69,10 @@ struct LennardJonesKernel {
     const float s2 = sigma_squared / r2;
     const float s6 = s2 * s2 * s2;
     acc.energy += four_epsilon * (s6 * s6 - s6);
+  }
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float dx, float dy,
+                            float dz, float r2) const {
+    (*this)(acc, dx, dy, dz, r2);
   }
 };
 
@@ -59,12 +86,76 @@ struct SmoothKernel {
     acc.fy += w * dy;
     acc.fz += w * dz;
   }
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float dx, float dy,
+                            float dz, float r2) const {
+    (*this)(acc, dx, dy, dz, r2);
+  }
 };
+
+// rho_i contribution m W_poly6(r, h) = m 315 / (64 pi h^9) (h^2 - r^2)^3 (Mueller et al. 2003).
+struct SphDensityKernel {
+  static constexpr bool has_count = false, has_energy = true, has_force = false;
+  float mass_poly6;  // m 315 / (64 pi h^9)
+  float h_squared;
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float, float, float,
+                            float r2) const {
+    const float w = h_squared - r2;
+    acc.energy += mass_poly6 * w * w * w;
+  }
+};
+
+// f_i = - sum_j m (p_i + p_j) / (2 rho_j) grad W_spiky + mu sum_j m (v_j - v_i) / rho_j lap W_visc
+// with grad W_spiky = 45 / (pi h^6) (h - r)^2 d / r pointing from i to j (so positive pressure
+// pushes i away from j) and lap W_visc = 45 / (pi h^6) (h - r). Coincident pairs (r = 0) have no
+// direction and get no pressure force.
+struct SphForceKernel {
+  static constexpr bool has_count = false, has_energy = false, has_force = true;
+  float mass, h, spiky;  // spiky = 45 / (pi h^6)
+  float viscosity;
+  SphInputs in;
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, float dx, float dy,
+                            float dz, float r2) const {
+    const float r = sqrtf(r2);
+    const float h_r = h - r;
+    const float rho_j = in.density[j];
+    if (r2 > 0.0f) {
+      const float pressure =
+          -mass * (in.pressure[i] + in.pressure[j]) / (2.0f * rho_j) * spiky * h_r * h_r / r;
+      acc.fx += pressure * dx;
+      acc.fy += pressure * dy;
+      acc.fz += pressure * dz;
+    }
+    const float visc = viscosity * mass / rho_j * spiky * h_r;
+    acc.fx += visc * (in.velocity[3 * j] - in.velocity[3 * i]);
+    acc.fy += visc * (in.velocity[3 * j + 1] - in.velocity[3 * i + 1]);
+    acc.fz += visc * (in.velocity[3 * j + 2] - in.velocity[3 * i + 2]);
+  }
+};
+
+// Which per-target outputs a kernel produces (without building its functor).
+struct KernelOutputs {
+  bool count, energy, force;
+};
+constexpr KernelOutputs outputs_of(Kernel kernel) {
+  switch (kernel) {
+    case Kernel::count:
+      return {true, false, false};
+    case Kernel::lj:
+    case Kernel::sph_density:
+      return {false, true, false};
+    case Kernel::smooth:
+      return {false, true, true};
+    case Kernel::sph_force:
+      return {false, false, true};
+  }
+  return {false, false, false};
+}
 
 // Calls f(kernel_functor) with the functor for `kernel`: one switch, shared by every method.
 template <class F>
-RAYCUT_HD void with_kernel(Kernel kernel, const KernelOptions& options, float cutoff_squared,
-                           F&& f) {
+void with_any_kernel(Kernel kernel, const KernelOptions& options, float cutoff_squared, F&& f) {
+  constexpr float pi = 3.14159265358979f;
+  const float h = std::sqrt(cutoff_squared);
   switch (kernel) {
     case Kernel::count:
       f(CountKernel{});
@@ -75,7 +166,34 @@ RAYCUT_HD void with_kernel(Kernel kernel, const KernelOptions& options, float cu
     case Kernel::smooth:
       f(SmoothKernel{cutoff_squared});
       break;
+    case Kernel::sph_density: {
+      const double h3 = static_cast<double>(h) * h * h;
+      f(SphDensityKernel{static_cast<float>(options.sph_mass * 315.0 / (64.0 * pi * h3 * h3 * h3)),
+                         cutoff_squared});
+      break;
+    }
+    case Kernel::sph_force: {
+      if (!options.sph.velocity || !options.sph.density || !options.sph.pressure)
+        throw Error(ErrorCode::invalid_argument,
+                    "sph_force needs velocity, density and pressure inputs (KernelOptions::sph)");
+      const double h3 = static_cast<double>(h) * h * h;
+      f(SphForceKernel{options.sph_mass, h, static_cast<float>(45.0 / (pi * h3 * h3)),
+                       options.sph_viscosity, options.sph});
+      break;
+    }
   }
+}
+
+// The geometric kernels only, for methods that have not moved to the 7-argument call yet: they
+// refuse the SPH kernels with a clear error.
+template <class F>
+void with_kernel(Kernel kernel, const KernelOptions& options, float cutoff_squared, F&& f) {
+  if (kernel == Kernel::sph_density || kernel == Kernel::sph_force)
+    throw Error(ErrorCode::unsupported,
+                "this method does not compute the SPH kernels yet; use another method");
+  with_any_kernel(kernel, options, cutoff_squared, [&](auto k) {
+    if constexpr (std::is_invocable_v<decltype(k), Accumulator&, float, float, float, float>) f(k);
+  });
 }
 
 }  // namespace raycut

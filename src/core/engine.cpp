@@ -190,6 +190,13 @@ Results Engine::results() const {
   return empty;
 }
 
+ResultsView Engine::results_view() const {
+  if (!has_run_)
+    throw Error(ErrorCode::invalid_argument, "Engine::results_view() called before run()");
+  if (size_ == 0) return ResultsView{nullptr, nullptr, nullptr, impl_->space()};
+  return impl_->results_view();
+}
+
 Results Engine::compute(Kernel kernel, const KernelOptions& options) {
   run(kernel, options);
   return results();

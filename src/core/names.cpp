@@ -30,8 +30,11 @@ Kernel parse_kernel(std::string_view name) {
   if (name == "count") return Kernel::count;
   if (name == "lj") return Kernel::lj;
   if (name == "smooth") return Kernel::smooth;
-  throw Error(ErrorCode::invalid_argument,
-              "unknown kernel '" + std::string(name) + "' (known: count, lj, smooth)");
+  if (name == "sph_density") return Kernel::sph_density;
+  if (name == "sph_force") return Kernel::sph_force;
+  throw Error(ErrorCode::invalid_argument, "unknown kernel '" + std::string(name) +
+                                               "' (known: count, lj, smooth, sph_density, "
+                                               "sph_force)");
 }
 
 std::string to_string(Kernel kernel) {
@@ -42,6 +45,10 @@ std::string to_string(Kernel kernel) {
       return "lj";
     case Kernel::smooth:
       return "smooth";
+    case Kernel::sph_density:
+      return "sph_density";
+    case Kernel::sph_force:
+      return "sph_force";
   }
   return "?";
 }

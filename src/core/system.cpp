@@ -13,26 +13,26 @@
 
 namespace raycut {
 
-DevicePositions::DevicePositions(const std::vector<float>& xyz) : size_(xyz.size() / 3) {
+DeviceArray::DeviceArray(const std::vector<float>& values) : size_(values.size()) {
 #if defined(RAYCUT_HAVE_CUDA)
   if (size_ > 0)
-    data_ =
-        static_cast<float*>(detail::cuda::upload(xyz.data(), xyz.size() * sizeof(float)).release());
+    data_ = static_cast<float*>(
+        detail::cuda::upload(values.data(), values.size() * sizeof(float)).release());
 #else
-  throw Error(ErrorCode::unsupported, "device positions need CUDA; raycut was built without it");
+  throw Error(ErrorCode::unsupported, "device arrays need CUDA; raycut was built without it");
 #endif
 }
 
-DevicePositions::~DevicePositions() {
+DeviceArray::~DeviceArray() {
 #if defined(RAYCUT_HAVE_CUDA)
   detail::cuda::DeviceFree{}(data_);
 #endif
 }
 
-DevicePositions::DevicePositions(DevicePositions&& o) noexcept
+DeviceArray::DeviceArray(DeviceArray&& o) noexcept
     : data_(std::exchange(o.data_, nullptr)), size_(std::exchange(o.size_, 0)) {}
 
-DevicePositions& DevicePositions::operator=(DevicePositions&& o) noexcept {
+DeviceArray& DeviceArray::operator=(DeviceArray&& o) noexcept {
   std::swap(data_, o.data_);
   std::swap(size_, o.size_);
   return *this;

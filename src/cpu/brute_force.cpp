@@ -28,6 +28,7 @@ class BruteForceCpu final : public Method {
     results_ = host_compute(size(), xyz_.data(), cutoff_, kernel, options, all_pairs());
   }
   Results results() const override { return results_; }
+  ResultsView results_view() const override { return view_of(results_); }
   NeighbourList neighbours() override {
     return host_neighbours(size(), xyz_.data(), cutoff_, all_pairs());
   }

@@ -28,12 +28,18 @@ void for_each_in_range(std::size_t i, const float* xyz, float cutoff_squared, Vi
   });
 }
 
+// Host results seen through a ResultsView.
+inline ResultsView view_of(const Results& r) {
+  auto data = [](const auto& v) { return v.empty() ? nullptr : v.data(); };
+  return {data(r.count), data(r.energy), data(r.force), MemorySpace::host};
+}
+
 template <class Visit>
 Results host_compute(std::size_t n, const float* xyz, float cutoff, Kernel kernel,
                      const KernelOptions& options, Visit visit) {
   const float c2 = squared_cutoff(cutoff);
   Results out;
-  with_kernel(kernel, options, c2, [&](auto k) {
+  with_any_kernel(kernel, options, c2, [&](auto k) {
     using K = decltype(k);
     if constexpr (K::has_count) out.count.assign(n, 0);
     if constexpr (K::has_energy) out.energy.assign(n, 0.0f);
@@ -42,8 +48,9 @@ Results host_compute(std::size_t n, const float* xyz, float cutoff, Kernel kerne
     for (std::size_t i = 0; i < n; ++i) {
       Accumulator acc;
       for_each_in_range(
-          i, xyz, c2, visit,
-          [&](std::size_t, float dx, float dy, float dz, float r2) { k(acc, dx, dy, dz, r2); });
+          i, xyz, c2, visit, [&](std::size_t j, float dx, float dy, float dz, float r2) {
+            k(acc, static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j), dx, dy, dz, r2);
+          });
       if constexpr (K::has_count) out.count[i] = acc.count;
       if constexpr (K::has_energy) out.energy[i] = acc.energy;
       if constexpr (K::has_force) {

@@ -44,8 +44,9 @@ __global__ void compute_kernel(const float* xyz, std::size_t n, float cutoff_squ
   const std::size_t i = blockIdx.x * std::size_t{block_size} + threadIdx.x;
   Accumulator acc;
   for_each_pair(
-      xyz, n, cutoff_squared, i,
-      [&](std::size_t, float dx, float dy, float dz, float r2) { kernel(acc, dx, dy, dz, r2); });
+      xyz, n, cutoff_squared, i, [&](std::size_t j, float dx, float dy, float dz, float r2) {
+        kernel(acc, static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j), dx, dy, dz, r2);
+      });
   if (i < n) out.store<K>(i, acc);
 }
 
@@ -83,7 +84,7 @@ class BruteForceGpu final : public Method {
   void compute(Kernel kernel, const KernelOptions& options) override {
     const OutputView out = results_.prepare(kernel, n_);
     compute_timer_.start();
-    with_kernel(kernel, options, cutoff_squared_, [&](auto k) {
+    with_any_kernel(kernel, options, cutoff_squared_, [&](auto k) {
       compute_kernel<<<blocks(), block_size>>>(xyz_.data(), n_, cutoff_squared_, k, out);
     });
     RAYCUT_CUDA_CHECK_LAUNCH();
@@ -91,6 +92,7 @@ class BruteForceGpu final : public Method {
   }
 
   Results results() const override { return results_.to_host(); }
+  ResultsView results_view() const override { return results_.view(); }
 
   NeighbourList neighbours() override {
     return build_neighbour_list(

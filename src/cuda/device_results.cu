@@ -11,21 +11,19 @@ OutputView DeviceResults::prepare(Kernel kernel, std::size_t n) {
   kernel_ = kernel;
   n_ = n;
   OutputView view;
-  with_kernel(kernel, KernelOptions{}, 0.0f, [&](auto k) {
-    using K = decltype(k);
-    if constexpr (K::has_count) {
-      count_.resize(n);
-      view.count = count_.data();
-    }
-    if constexpr (K::has_energy) {
-      energy_.resize(n);
-      view.energy = energy_.data();
-    }
-    if constexpr (K::has_force) {
-      force_.resize(3 * n);
-      view.force = force_.data();
-    }
-  });
+  const KernelOutputs produces = outputs_of(kernel);
+  if (produces.count) {
+    count_.resize(n);
+    view.count = count_.data();
+  }
+  if (produces.energy) {
+    energy_.resize(n);
+    view.energy = energy_.data();
+  }
+  if (produces.force) {
+    force_.resize(3 * n);
+    view.force = force_.data();
+  }
   return view;
 }
 
@@ -36,13 +34,17 @@ Results DeviceResults::to_host() const {
     RAYCUT_CUDA_CHECK(
         cudaMemcpy(host.data(), device.data(), count * sizeof(host[0]), cudaMemcpyDeviceToHost));
   };
-  with_kernel(kernel_, KernelOptions{}, 0.0f, [&](auto k) {
-    using K = decltype(k);
-    if constexpr (K::has_count) copy(out.count, count_, n_);
-    if constexpr (K::has_energy) copy(out.energy, energy_, n_);
-    if constexpr (K::has_force) copy(out.force, force_, 3 * n_);
-  });
+  const KernelOutputs produces = outputs_of(kernel_);
+  if (produces.count) copy(out.count, count_, n_);
+  if (produces.energy) copy(out.energy, energy_, n_);
+  if (produces.force) copy(out.force, force_, 3 * n_);
   return out;
+}
+
+ResultsView DeviceResults::view() const {
+  const KernelOutputs produces = outputs_of(kernel_);
+  return {produces.count ? count_.data() : nullptr, produces.energy ? energy_.data() : nullptr,
+          produces.force ? force_.data() : nullptr, MemorySpace::device};
 }
 
 EventTimer::EventTimer() {

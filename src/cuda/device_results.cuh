@@ -36,6 +36,7 @@ class DeviceResults {
   // Sizes the buffers for `kernel` over n targets (nothing is cleared: every target is stored).
   OutputView prepare(Kernel kernel, std::size_t n);
   Results to_host() const;
+  ResultsView view() const;
 
  private:
   Kernel kernel_ = Kernel::count;

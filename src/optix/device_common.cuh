@@ -59,19 +59,26 @@ __device__ __forceinline__ PairGeometry pair_geometry(const LaunchParams& p, std
 // One kept (target, source j) pair: accumulate by mode.
 __device__ __forceinline__ void accept_pair(const LaunchParams& p, TargetState& s, std::uint32_t j,
                                             const PairGeometry& g) {
+  const std::uint32_t ci = caller_index(p, s.target), cj = caller_index(p, j);
   switch (p.mode) {
     case RayMode::count:
     case RayMode::list_count:
-      CountKernel{}(s.acc, g.dx, g.dy, g.dz, g.r2);
+      CountKernel{}(s.acc, ci, cj, g.dx, g.dy, g.dz, g.r2);
       break;
     case RayMode::lj:
-      LennardJonesKernel{p.lj_four_epsilon, p.lj_sigma_squared}(s.acc, g.dx, g.dy, g.dz, g.r2);
+      p.lj(s.acc, ci, cj, g.dx, g.dy, g.dz, g.r2);
       break;
     case RayMode::smooth:
-      SmoothKernel{p.cutoff_squared}(s.acc, g.dx, g.dy, g.dz, g.r2);
+      p.smooth(s.acc, ci, cj, g.dx, g.dy, g.dz, g.r2);
+      break;
+    case RayMode::sph_density:
+      p.sph_density(s.acc, ci, cj, g.dx, g.dy, g.dz, g.r2);
+      break;
+    case RayMode::sph_force:
+      p.sph_force(s.acc, ci, cj, g.dx, g.dy, g.dz, g.r2);
       break;
     case RayMode::list_fill:
-      p.list_indices[s.slot++] = caller_index(p, j);
+      p.list_indices[s.slot++] = cj;
       break;
   }
 }
@@ -87,6 +94,12 @@ __device__ __forceinline__ void finish_target(const LaunchParams& p, const Targe
       break;
     case RayMode::smooth:
       p.out.store<SmoothKernel>(caller, s.acc);
+      break;
+    case RayMode::sph_density:
+      p.out.store<SphDensityKernel>(caller, s.acc);
+      break;
+    case RayMode::sph_force:
+      p.out.store<SphForceKernel>(caller, s.acc);
       break;
     case RayMode::list_count:
       p.list_counts[caller] = s.acc.count;

@@ -7,6 +7,7 @@
 #include <cstdint>
 
 #include "cuda/device_results.cuh"
+#include "raycut/kernels.hpp"
 
 namespace raycut::detail::optix {
 
@@ -14,6 +15,8 @@ enum class RayMode : int {
   count,  // fused kernels
   lj,
   smooth,
+  sph_density,
+  sph_force,
   list_count,  // neighbour list, pass 1: neighbours per target
   list_fill,   // neighbour list, pass 2: write them at their offsets
 };
@@ -26,7 +29,11 @@ struct LaunchParams {
   float cutoff, cutoff_squared;
   float margin;  // e of src/geometry/ray_geometry.hpp
   RayMode mode;
-  float lj_four_epsilon, lj_sigma_squared;
+  // The functor of the fused mode (the others unused).
+  LennardJonesKernel lj;
+  SmoothKernel smooth;
+  SphDensityKernel sph_density;
+  SphForceKernel sph_force;
   cuda::OutputView out;               // indexed by the caller's particle index
   std::uint32_t* list_counts;         // list_count: per caller index
   const std::uint64_t* list_offsets;  // list_fill: per caller index

@@ -160,13 +160,31 @@ LaunchParams RayTracingMethod::base_params() const {
   return p;
 }
 
+namespace {
+void set_kernel(LaunchParams& p, CountKernel) {
+  p.mode = RayMode::count;
+}
+void set_kernel(LaunchParams& p, LennardJonesKernel k) {
+  p.mode = RayMode::lj;
+  p.lj = k;
+}
+void set_kernel(LaunchParams& p, SmoothKernel k) {
+  p.mode = RayMode::smooth;
+  p.smooth = k;
+}
+void set_kernel(LaunchParams& p, SphDensityKernel k) {
+  p.mode = RayMode::sph_density;
+  p.sph_density = k;
+}
+void set_kernel(LaunchParams& p, SphForceKernel k) {
+  p.mode = RayMode::sph_force;
+  p.sph_force = k;
+}
+}  // namespace
+
 void RayTracingMethod::compute(Kernel kernel, const KernelOptions& options) {
   LaunchParams p = base_params();
-  p.mode = kernel == Kernel::count ? RayMode::count
-           : kernel == Kernel::lj  ? RayMode::lj
-                                   : RayMode::smooth;
-  p.lj_four_epsilon = 4.0f * options.lj_epsilon;
-  p.lj_sigma_squared = options.lj_sigma * options.lj_sigma;
+  with_any_kernel(kernel, options, p.cutoff_squared, [&](auto k) { set_kernel(p, k); });
   p.out = results_.prepare(kernel, n_);
   compute_timer_.start();
   pipeline_.launch(&p, sizeof p, n_);

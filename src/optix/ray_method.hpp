@@ -23,6 +23,7 @@ class RayTracingMethod : public Method {
   void set_update_policy(const UpdatePolicy& policy) override { policy_ = policy; }
   void compute(Kernel kernel, const KernelOptions& options) override;
   Results results() const override { return results_.to_host(); }
+  ResultsView results_view() const override { return results_.view(); }
   NeighbourList neighbours() override;
   void synchronize() override;
   double device_build_ms() const override { return build_timer_.elapsed_ms(); }
