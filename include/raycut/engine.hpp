@@ -87,6 +87,7 @@ class DeviceArray {
   DeviceArray(DeviceArray&&) noexcept;
   DeviceArray& operator=(DeviceArray&&) noexcept;
   const float* data() const { return data_; }
+  float* data() { return data_; }
   std::size_t size() const { return size_; }
   // The array as (N,3) positions.
   PositionsView view() const { return {data_, size_ / 3, MemorySpace::device}; }
