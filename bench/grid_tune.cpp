@@ -4,9 +4,10 @@
 //   grid_tune --suite uniform --params 32 --ps 1,8,32 --variants k1,k2,k3,k2-nocull,k2-compact
 //
 // A variant is k<cells per cutoff>, optionally followed by -nocull (scan whole rows),
-// -dense or -compact (force the cell table); `paper` is the grid-paper method. One CSV row per
-// (configuration, variant) on stdout, CUDA-event medians in ms; `pairs` (count kernel) must be
-// the same on every row of a configuration.
+// -dense or -compact (force the cell table), -g<lanes per target>,
+// -x<x split>; `paper` is grid-paper, `auto` the grid with its automatic choices. One CSV row per
+// (configuration, variant) on stdout, CUDA-event medians in ms; `pairs` (count kernel) must be the
+// same on every row of a configuration.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -33,12 +34,17 @@ std::vector<std::string> split(const std::string& s) {
 std::unique_ptr<raycut::detail::Method> make_variant(const std::string& name) {
   namespace cuda = raycut::detail::cuda;
   if (name == "paper") return cuda::make_grid_paper();
+  if (name == "auto") return cuda::make_grid();
   cuda::GridOptions o;
   if (name.size() < 2 || name[0] != 'k') throw std::runtime_error("bad variant " + name);
   o.cells_per_cutoff = std::stoi(name.substr(1));
   if (name.find("-nocull") != std::string::npos) o.cull = false;
   if (name.find("-dense") != std::string::npos) o.layout = 1;
   if (name.find("-compact") != std::string::npos) o.layout = 2;
+  if (const auto x = name.find("-x"); x != std::string::npos)
+    o.x_split = std::stoi(name.substr(x + 2));
+  if (const auto g = name.find("-g"); g != std::string::npos)
+    o.lanes_per_target = std::stoi(name.substr(g + 2));
   return cuda::make_grid_with(o);
 }
 
@@ -65,13 +71,12 @@ int main(int argc, char** argv) {
   for (const auto& param_s : params) {
     for (const auto& p_s : ps) {
       const int param = std::stoi(param_s), p = std::stoi(p_s);
-      const raycut::PointCloud cloud = suite == "uniform" ? raycut::uniform_suite(param, p)
-                                                          : raycut::surface_suite(param, p);
+      const raycut::PointCloud cloud =
+          suite == "uniform" ? raycut::uniform_suite(param, p) : raycut::surface_suite(param, p);
       const std::size_t n = cloud.size();
       float* xyz = nullptr;
       if (cudaMalloc(&xyz, cloud.xyz.size() * sizeof(float)) != cudaSuccess) return 1;
-      cudaMemcpy(xyz, cloud.xyz.data(), cloud.xyz.size() * sizeof(float),
-                 cudaMemcpyHostToDevice);
+      cudaMemcpy(xyz, cloud.xyz.data(), cloud.xyz.size() * sizeof(float), cudaMemcpyHostToDevice);
       for (const auto& variant : variants) {
         try {
           auto m = make_variant(variant);
@@ -94,8 +99,8 @@ int main(int argc, char** argv) {
                       variant.c_str(), pairs, median(b), median(c), median(t));
           std::fflush(stdout);
         } catch (const std::exception& e) {
-          std::printf("%s,%d,%d,%zu,%s,error: %s\n", suite.c_str(), param, p, n,
-                      variant.c_str(), e.what());
+          std::printf("%s,%d,%d,%zu,%s,error: %s\n", suite.c_str(), param, p, n, variant.c_str(),
+                      e.what());
         }
       }
       cudaFree(xyz);

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <tuple>
@@ -89,7 +90,15 @@ TEST_P(Conformance, MatchesBruteForce) {
   const PointCloud& cloud = ref.cloud;
   const std::size_t n = cloud.size();
   Engine engine(method);
-  engine.build({cloud.xyz.data(), n, MemorySpace::host}, c.cutoff);
+  try {
+    engine.build({cloud.xyz.data(), n, MemorySpace::host}, c.cutoff);
+  } catch (const raycut::Error& e) {
+    // The paper's dense grid cannot hold a box 1e5 cutoffs wide (spec/METHODS.md, method 1):
+    // refusing it with a clear out-of-memory error is its correct behaviour.
+    if (method == "grid-paper" && e.code() == raycut::ErrorCode::out_of_memory)
+      GTEST_SKIP() << e.what();
+    throw;
+  }
 
   // 1. Neighbour sets, each source exactly once.
   const auto diff = raycut::compare_neighbours(engine.neighbours(), ref.list);
@@ -125,7 +134,46 @@ TEST_P(Conformance, MatchesBruteForce) {
       ASSERT_NEAR(smooth.force[3 * i + a], f[a], tol / c.cutoff) << "target " << i;
   }
 
-  // 4. Lennard-Jones where it is finite.
+  // 4. The SPH kernels, against the oracle's own evaluation (same functors, another traversal):
+  //    sums of the same terms in another order, so equal to float round-off.
+  {
+    std::vector<float> velocity(3 * n), density(n), pressure(n);
+    for (std::size_t i = 0; i < n; ++i) {
+      for (int a = 0; a < 3; ++a) velocity[3 * i + a] = std::sin(0.37f * (3 * i + a));
+      density[i] = 900.0f + 200.0f * std::cos(0.11f * i);
+      pressure[i] = 50.0f + 40.0f * std::sin(0.23f * i);
+    }
+    raycut::KernelOptions sph;
+    sph.sph_mass = 0.02f;
+    sph.sph_viscosity = 0.4f;
+    std::optional<raycut::DeviceArray> dv, dd, dp;
+    if (engine.space() == MemorySpace::device) {
+      dv.emplace(velocity), dd.emplace(density), dp.emplace(pressure);
+      sph.sph = {dv->data(), dd->data(), dp->data()};
+    } else {
+      sph.sph = {velocity.data(), density.data(), pressure.data()};
+    }
+    Engine oracle("brute-force");
+    oracle.build({cloud.xyz.data(), n, MemorySpace::host}, c.cutoff);
+    const auto want_rho = oracle.compute(Kernel::sph_density, sph).energy;
+    const auto got_rho = engine.compute(Kernel::sph_density, sph).energy;
+    ASSERT_EQ(got_rho.size(), n);
+    for (std::size_t i = 0; i < n; ++i)
+      ASSERT_NEAR(got_rho[i], want_rho[i], 1e-5 * std::fabs(want_rho[i]) + 1e-30) << "target " << i;
+    raycut::KernelOptions host_sph = sph;
+    host_sph.sph = {velocity.data(), density.data(), pressure.data()};
+    const auto want_f = oracle.compute(Kernel::sph_force, host_sph).force;
+    const auto got_f = engine.compute(Kernel::sph_force, sph).force;
+    ASSERT_EQ(got_f.size(), 3 * n);
+    for (std::size_t i = 0; i < n; ++i) {
+      double scale = 0;
+      for (int a = 0; a < 3; ++a) scale += std::fabs(want_f[3 * i + a]);
+      for (int a = 0; a < 3; ++a)
+        ASSERT_NEAR(got_f[3 * i + a], want_f[3 * i + a], 1e-4 * scale + 1e-3) << "target " << i;
+    }
+  }
+
+  // 5. Lennard-Jones where it is finite.
   if (!family_has_singular_lj(c.family)) {
     const auto lj = engine.compute(Kernel::lj);
     ASSERT_EQ(lj.energy.size(), n);

@@ -33,6 +33,8 @@ struct BenchOptions {
   std::string out = "bench.csv";
   std::uint64_t seed = 1;
   std::string paper_binary;  // the paper's cudaLJ, run after ours, its rows merged
+  std::size_t large_n = 0;   // above this many particles (0: never) ...
+  int large_reps = 2;        // ... time this many repetitions instead (the CSV says how many)
 };
 
 struct Samples {
@@ -128,8 +130,9 @@ void bench_method(const BenchOptions& o, const std::string& method, Kernel kerne
   for (auto c : counts) pairs += c;
   engine.run(kernel);
 
+  const int reps = o.large_n != 0 && cloud.size() > o.large_n ? o.large_reps : o.reps;
   Samples host, events;
-  for (int r = 0; r < o.reps; ++r) {
+  for (int r = 0; r < reps; ++r) {
     engine.build(view, cloud.cutoff);
     engine.run(kernel);
     const Timings& t = engine.last_timings();
@@ -229,6 +232,10 @@ Command add_bench(CLI::App& app) {
   cmd->add_option("--max-n", o->max_n, "Skip configurations with more particles than this");
   cmd->add_option("-o,--out", o->out, "CSV file to write");
   cmd->add_option("--seed", o->seed, "Random seed");
+  cmd->add_option("--large-n", o->large_n,
+                  "Above this many particles, time --large-reps repetitions instead of --reps");
+  cmd->add_option("--large-reps", o->large_reps, "Repetitions above --large-n")
+      ->check(CLI::Range(1, 1000));
   cmd->add_option("--paper-binary", o->paper_binary,
                   "Path of the paper's cudaLJ (built by you from Cuda-version/cudaLJ.cu): run it "
                   "after ours and merge its rows as method paper-cudaLJ")

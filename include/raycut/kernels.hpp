@@ -8,7 +8,6 @@
 #include <cstdint>
 #include <string>
 #include <string_view>
-#include <type_traits>
 
 #include "raycut/error.hpp"
 #include "raycut/predicate.hpp"
@@ -50,14 +49,12 @@ struct Accumulator {
   float fx = 0.0f, fy = 0.0f, fz = 0.0f;
 };
 
-// The geometric kernels ignore the indices; the 5-argument form stays while methods move to the
-// 7-argument one.
+// The geometric kernels ignore the indices.
 struct CountKernel {
   static constexpr bool has_count = true, has_energy = false, has_force = false;
-  RAYCUT_HD void operator()(Accumulator& acc, float, float, float, float) const { ++acc.count; }
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float dx, float dy,
-                            float dz, float r2) const {
-    (*this)(acc, dx, dy, dz, r2);
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float, float, float,
+                            float) const {
+    ++acc.count;
   }
 };
 
@@ -65,30 +62,24 @@ struct LennardJonesKernel {
   static constexpr bool has_count = false, has_energy = true, has_force = false;
   float four_epsilon;
   float sigma_squared;
-  RAYCUT_HD void operator()(Accumulator& acc, float, float, float, float r2) const {
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float, float, float,
+                            float r2) const {
     const float s2 = sigma_squared / r2;
     const float s6 = s2 * s2 * s2;
     acc.energy += four_epsilon * (s6 * s6 - s6);
-  }
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float dx, float dy,
-                            float dz, float r2) const {
-    (*this)(acc, dx, dy, dz, r2);
   }
 };
 
 struct SmoothKernel {
   static constexpr bool has_count = false, has_energy = true, has_force = true;
   float cutoff_squared;
-  RAYCUT_HD void operator()(Accumulator& acc, float dx, float dy, float dz, float r2) const {
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float dx, float dy,
+                            float dz, float r2) const {
     const float w = cutoff_squared - r2;
     acc.energy += w * w;
     acc.fx += w * dx;
     acc.fy += w * dy;
     acc.fz += w * dz;
-  }
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float dx, float dy,
-                            float dz, float r2) const {
-    (*this)(acc, dx, dy, dz, r2);
   }
 };
 
@@ -153,7 +144,7 @@ constexpr KernelOutputs outputs_of(Kernel kernel) {
 
 // Calls f(kernel_functor) with the functor for `kernel`: one switch, shared by every method.
 template <class F>
-void with_any_kernel(Kernel kernel, const KernelOptions& options, float cutoff_squared, F&& f) {
+void with_kernel(Kernel kernel, const KernelOptions& options, float cutoff_squared, F&& f) {
   constexpr float pi = 3.14159265358979f;
   const float h = std::sqrt(cutoff_squared);
   switch (kernel) {
@@ -182,18 +173,6 @@ void with_any_kernel(Kernel kernel, const KernelOptions& options, float cutoff_s
       break;
     }
   }
-}
-
-// The geometric kernels only, for methods that have not moved to the 7-argument call yet: they
-// refuse the SPH kernels with a clear error.
-template <class F>
-void with_kernel(Kernel kernel, const KernelOptions& options, float cutoff_squared, F&& f) {
-  if (kernel == Kernel::sph_density || kernel == Kernel::sph_force)
-    throw Error(ErrorCode::unsupported,
-                "this method does not compute the SPH kernels yet; use another method");
-  with_any_kernel(kernel, options, cutoff_squared, [&](auto k) {
-    if constexpr (std::is_invocable_v<decltype(k), Accumulator&, float, float, float, float>) f(k);
-  });
 }
 
 }  // namespace raycut

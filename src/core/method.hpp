@@ -34,9 +34,7 @@ class Method {
   // Compute `kernel` for every target; keep the results until the next compute()/build().
   virtual void compute(Kernel kernel, const KernelOptions& options) = 0;
   virtual Results results() const = 0;
-  virtual ResultsView results_view() const {
-    throw Error(ErrorCode::unsupported, "this method does not expose its results in place yet");
-  }
+  virtual ResultsView results_view() const = 0;
 
   virtual NeighbourList neighbours() = 0;
 

@@ -74,6 +74,9 @@ class CellListCpu final : public Method {
   Results results() const override {
     return results_;
   }
+  ResultsView results_view() const override {
+    return view_of(results_);
+  }
   NeighbourList neighbours() override {
     return host_neighbours(size(), xyz_.data(), cutoff_, candidates());
   }

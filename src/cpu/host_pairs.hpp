@@ -39,7 +39,7 @@ Results host_compute(std::size_t n, const float* xyz, float cutoff, Kernel kerne
                      const KernelOptions& options, Visit visit) {
   const float c2 = squared_cutoff(cutoff);
   Results out;
-  with_any_kernel(kernel, options, c2, [&](auto k) {
+  with_kernel(kernel, options, c2, [&](auto k) {
     using K = decltype(k);
     if constexpr (K::has_count) out.count.assign(n, 0);
     if constexpr (K::has_energy) out.energy.assign(n, 0.0f);

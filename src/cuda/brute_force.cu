@@ -84,7 +84,7 @@ class BruteForceGpu final : public Method {
   void compute(Kernel kernel, const KernelOptions& options) override {
     const OutputView out = results_.prepare(kernel, n_);
     compute_timer_.start();
-    with_any_kernel(kernel, options, cutoff_squared_, [&](auto k) {
+    with_kernel(kernel, options, cutoff_squared_, [&](auto k) {
       compute_kernel<<<blocks(), block_size>>>(xyz_.data(), n_, cutoff_squared_, k, out);
     });
     RAYCUT_CUDA_CHECK_LAUNCH();

@@ -8,16 +8,21 @@
 //   compact otherwise (a far outlier, a sphere surface at fine cells): the sorted unique cell
 //           keys with their first slots, and a hash table from row (y, z) to that row's run of
 //           unique cells; a row's [a, b] is then two binary searches in its run.
-// Compute: one thread per target, in sorted order (a warp shares cells). Cells are C/k wide
-// (k = reach); the target visits the (2k+1)^2 rows around it, skips those out of reach of its
-// actual position and trims each row to the cells its sphere can touch, so one contiguous range
-// of float4 per row remains. Culling is conservative by construction (slack far above float
-// round-off); the shared predicate decides every pair; self is excluded by slot.
+// Cells are C/k wide in y and z (k = 1 or 2 = reach, by density) and x_split times narrower in
+// x: a row of x cells is one range of slots whatever their width, so narrow x cells trim each
+// row closer to the target's sphere at no cost in rows.
+// Compute: targets in sorted order (neighbouring lanes share cells). Each target visits the
+// (2k+1)^2 rows around it, skips those out of reach of its actual position and trims each row to
+// the x cells its sphere can touch, leaving one contiguous range of float4 per row. Large inputs
+// run a thread per target; small ones (<= 64Ki targets) let 16 or 32 lanes share each target so
+// that they still fill the GPU. Culling is conservative by construction (slack far above float
+// round-off); the shared predicate decides every pair; self is excluded by slot. docs/grid.md
+// has the measurements behind each choice.
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_select.cuh>
-#include <thrust/iterator/counting_iterator.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <string>
 
@@ -34,13 +39,25 @@ using Slot = std::uint32_t;
 constexpr int block_size = 128;
 constexpr std::uint64_t empty_row = ~std::uint64_t{0};
 
-// Cells per cutoff when the caller does not choose (docs/grid.md has the measurements).
-constexpr int default_cells_per_cutoff = 2;
+// The automatic choices, from the measurements in docs/grid.md (H100):
+// - cells C/2 wide (reach 2) once a box of C-cells holds at least this many particles per cell
+//   on average, else cells C wide: finer cells cut candidates by 2x but cost rows and sort bits;
+constexpr double fine_cells_density = 24.0;
+// - x cells 2 (C cells) or 4 (C/2 cells) times narrower than y and z cells: rows trimmed closer
+//   to the sphere, for one more sort bit or two;
+constexpr int default_x_split[3] = {1, 2, 4};
+// - a thread per target from this many targets on; below, G lanes share each target (the
+//   group kernel) so that small inputs still fill the GPU.
+constexpr std::size_t thread_kernel_from = 65536 + 1;
+constexpr std::size_t group_of_32_up_to = 8192;
 
-// What every query kernel needs to know about the grid.
+// What every query kernel needs to know about the grid. Cells are anisotropic: `grid` gives the
+// y and z cells (C/k wide), `xgrid` the x cells, x_split times narrower; a row of x cells is one
+// range of slots whatever their width, so narrow x cells trim rows closer to the sphere for free.
 struct GridView {
-  CellGrid grid;
-  float reach_cells;  // the cutoff in cell units, inflated so that culling stays conservative
+  CellGrid grid, xgrid;
+  float x_cells_per_cell;  // xgrid cells per grid cell, along x
+  float reach_cells;       // the cutoff in cell units, inflated so that culling stays conservative
   bool cull;
 };
 
@@ -108,50 +125,74 @@ __device__ __forceinline__ float slab_distance(int d, float f) {
   return d > 0 ? static_cast<float>(d) - f : (d < 0 ? f - static_cast<float>(d + 1) : 0.0f);
 }
 
+// Where a target sits: its cell and its fraction of the way across it, per axis.
+struct TargetCell {
+  int cell[3];
+  float frac[3];
+};
+
+__device__ __forceinline__ TargetCell locate(const GridView& view, const float4& p) {
+  TargetCell c;
+  const float pc[3] = {p.x, p.y, p.z};
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    const CellGrid& g = a == 0 ? view.xgrid : view.grid;
+    c.cell[a] = static_cast<int>(g.coord(pc[a], a));
+    c.frac[a] = static_cast<float>((static_cast<double>(pc[a]) - g.origin[a]) * g.inverse_width -
+                                   c.cell[a]);
+  }
+  return c;
+}
+
+// Row-major key of the cell holding (x, y, z): the x cells of a row are consecutive keys.
+__host__ __device__ __forceinline__ std::uint64_t cell_key(const GridView& view, float x, float y,
+                                                           float z) {
+  const CellGrid& g = view.grid;
+  return (static_cast<std::uint64_t>(g.coord(z, 2)) * g.dims[1] + g.coord(y, 1)) *
+             view.xgrid.dims[0] +
+         view.xgrid.coord(x, 0);
+}
+
+// The slots [s0, s1) of row (dz, dy) around the target, trimmed in x to the cells its sphere
+// can reach; false when the row is outside the grid, out of reach or empty.
+template <class Table>
+__device__ __forceinline__ bool row_range(const GridView& view, const Table& table,
+                                          const TargetCell& c, int dz, int dy, Slot& s0, Slot& s1) {
+  const CellGrid& g = view.grid;
+  const int jz = c.cell[2] + dz, jy = c.cell[1] + dy;
+  if (jz < 0 || jz >= static_cast<int>(g.dims[2]) || jy < 0 || jy >= static_cast<int>(g.dims[1]))
+    return false;
+  const int x_reach = view.xgrid.reach;
+  int xa = c.cell[0] - x_reach, xb = c.cell[0] + x_reach;
+  if (view.cull) {
+    const float rc = view.reach_cells, rc2 = rc * rc;
+    const float ez = slab_distance(dz, c.frac[2]), ey = slab_distance(dy, c.frac[1]);
+    const float e2 = ez * ez + ey * ey;
+    if (ez >= rc || ey >= rc || e2 >= rc2) return false;
+    const float rx = sqrtf(rc2 - e2) * view.x_cells_per_cell;
+    xa = max(xa, c.cell[0] + static_cast<int>(floorf(c.frac[0] - rx)));
+    xb = min(xb, c.cell[0] + static_cast<int>(floorf(c.frac[0] + rx)));
+  }
+  xa = max(xa, 0);
+  xb = min(xb, static_cast<int>(view.xgrid.dims[0]) - 1);
+  if (xa > xb) return false;
+  const std::uint64_t row = static_cast<std::uint64_t>(jz) * g.dims[1] + jy;
+  return table.range(row, view.xgrid.dims[0], xa, xb, s0, s1);
+}
+
 // Calls on_pair(q, dx, dy, dz, r2) for every in-range source q (a float4, w = original index)
-// of the target p in slot t.
+// of the target p in slot t: one thread per target, row after row.
 template <class Table, class OnPair>
 __device__ __forceinline__ void for_each_pair(const float4* __restrict__ pos, Slot t,
                                               const float4& p, const GridView& view,
                                               const Table& table, float cutoff_squared,
                                               OnPair&& on_pair) {
-  const CellGrid& g = view.grid;
-  const float pc[3] = {p.x, p.y, p.z};
-  int cell[3];
-  float frac[3];
-#pragma unroll
-  for (int a = 0; a < 3; ++a) {
-    cell[a] = static_cast<int>(g.coord(pc[a], a));
-    frac[a] = static_cast<float>((static_cast<double>(pc[a]) - g.origin[a]) * g.inverse_width -
-                                 cell[a]);
-  }
-  const int reach = g.reach;
-  const float rc = view.reach_cells, rc2 = rc * rc;
-  const int dims0 = static_cast<int>(g.dims[0]), dims1 = static_cast<int>(g.dims[1]),
-            dims2 = static_cast<int>(g.dims[2]);
+  const TargetCell c = locate(view, p);
+  const int reach = view.grid.reach;
   for (int dz = -reach; dz <= reach; ++dz) {
-    const int jz = cell[2] + dz;
-    if (jz < 0 || jz >= dims2) continue;
-    const float ez = view.cull ? slab_distance(dz, frac[2]) : 0.0f;
-    if (ez >= rc) continue;
     for (int dy = -reach; dy <= reach; ++dy) {
-      const int jy = cell[1] + dy;
-      if (jy < 0 || jy >= dims1) continue;
-      const float ey = view.cull ? slab_distance(dy, frac[1]) : 0.0f;
-      const float e2 = ez * ez + ey * ey;
-      if (e2 >= rc2) continue;
-      int xa = cell[0] - reach, xb = cell[0] + reach;
-      if (view.cull) {
-        const float rx = sqrtf(rc2 - e2);
-        xa = max(xa, cell[0] + static_cast<int>(floorf(frac[0] - rx)));
-        xb = min(xb, cell[0] + static_cast<int>(floorf(frac[0] + rx)));
-      }
-      xa = max(xa, 0);
-      xb = min(xb, dims0 - 1);
-      if (xa > xb) continue;
       Slot s0, s1;
-      const std::uint64_t row = static_cast<std::uint64_t>(jz) * dims1 + jy;
-      if (!table.range(row, g.dims[0], xa, xb, s0, s1)) continue;
+      if (!row_range(view, table, c, dz, dy, s0, s1)) continue;
 #pragma unroll 4
       for (Slot s = s0; s < s1; ++s) {
         const float4 q = pos[s];
@@ -167,19 +208,128 @@ __device__ __forceinline__ std::uint32_t original_index(const float4& q) {
   return __float_as_uint(q.w);
 }
 
+template <int G>
+__device__ __forceinline__ float group_sum(float v) {
+#pragma unroll
+  for (int offset = G / 2; offset > 0; offset /= 2) v += __shfl_xor_sync(0xffffffffu, v, offset);
+  return v;
+}
+
+template <int G>
+__device__ __forceinline__ std::uint32_t group_sum(std::uint32_t v) {
+#pragma unroll
+  for (int offset = G / 2; offset > 0; offset /= 2) v += __shfl_xor_sync(0xffffffffu, v, offset);
+  return v;
+}
+
+// One thread per target.
 template <class K, class Table>
 __global__ void __launch_bounds__(block_size)
-    compute_kernel(const float4* __restrict__ pos, Slot n, GridView view, Table table,
-                   float cutoff_squared, K kernel, OutputView out) {
+    thread_kernel(const float4* __restrict__ pos, Slot n, GridView view, Table table,
+                  float cutoff_squared, K kernel, OutputView out) {
   const Slot t = blockIdx.x * block_size + threadIdx.x;
   if (t >= n) return;
   const float4 p = pos[t];
   Accumulator acc;
+  const std::uint32_t i = original_index(p);
   for_each_pair(pos, t, p, view, table, cutoff_squared,
-                [&](const float4&, float dx, float dy, float dz, float r2) {
-                  kernel(acc, dx, dy, dz, r2);
+                [&](const float4& q, float dx, float dy, float dz, float r2) {
+                  kernel(acc, i, original_index(q), dx, dy, dz, r2);
                 });
-  out.store<K>(original_index(p), acc);
+  out.store<K>(i, acc);
+}
+
+constexpr int max_rows = 49;  // (2 reach + 1)^2 rows for reach <= 3
+
+// G lanes per target, over the target's candidates flattened into one list: the lanes find the
+// rows' ranges together (a block of rows each), a prefix sum over the group places them one after
+// the other, then lane g takes candidates g, g + G, ... of the whole list. Every lane does the
+// same work whatever the lengths of the rows, and neighbouring lanes read neighbouring sources.
+// The G partial sums are added in a fixed butterfly order: results do not change between runs.
+template <int G, class K, class Table>
+__global__ void __launch_bounds__(block_size)
+    group_kernel(const float4* __restrict__ pos, Slot n, GridView view, Table table,
+                 float cutoff_squared, K kernel, OutputView out) {
+  constexpr int groups = block_size / G;
+  constexpr int rows_per_lane_max = (max_rows + G - 1) / G;
+  __shared__ uint2 rows[groups][max_rows];  // (first slot - first flat index, end flat index)
+  const int group = threadIdx.x / G, lane = threadIdx.x % G;
+  const Slot t = static_cast<Slot>((blockIdx.x * std::uint64_t{block_size} + threadIdx.x) / G);
+  const bool active = t < n;  // no early return: every lane takes part in the shuffles
+  const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
+  const TargetCell c = locate(view, p);
+  const int reach = view.grid.reach, side = 2 * reach + 1, row_count = side * side;
+  const int rows_per_lane = (row_count + G - 1) / G;
+  const int first_row = lane * rows_per_lane;
+
+  Slot base[rows_per_lane_max], length[rows_per_lane_max];
+  Slot total = 0;
+#pragma unroll
+  for (int k = 0; k < rows_per_lane_max; ++k) {
+    const int r = first_row + k;
+    Slot s0 = 0, s1 = 0;
+    if (!(active && k < rows_per_lane && r < row_count &&
+          row_range(view, table, c, r / side - reach, r % side - reach, s0, s1)))
+      s0 = s1 = 0;
+    base[k] = s0;
+    length[k] = s1 - s0;
+    total += length[k];
+  }
+  Slot inclusive = total;
+#pragma unroll
+  for (int offset = 1; offset < G; offset *= 2) {
+    const Slot v = __shfl_up_sync(0xffffffffu, inclusive, offset, G);
+    if (lane >= offset) inclusive += v;
+  }
+  const Slot group_total = __shfl_sync(0xffffffffu, inclusive, G - 1, G);
+  Slot flat = inclusive - total;
+#pragma unroll
+  for (int k = 0; k < rows_per_lane_max; ++k) {
+    const int r = first_row + k;
+    if (k < rows_per_lane && r < row_count) {
+      rows[group][r] = make_uint2(base[k] - flat, flat + length[k]);
+      flat += length[k];
+    }
+  }
+  __syncwarp();
+
+  // Unrolled by U: the slots of U candidates first (the row walk only moves forward), then U
+  // independent loads in flight, then the U tests.
+  constexpr int U = 4;
+  Accumulator acc;
+  int r = 0;
+  uint2 row = rows[group][0];
+  for (Slot first = lane; first < group_total; first += U * G) {
+    Slot s[U];
+#pragma unroll
+    for (int u = 0; u < U; ++u) {
+      const Slot f = first + u * G;
+      if (f < group_total) {
+        while (f >= row.y) row = rows[group][++r];
+        s[u] = row.x + f;
+      } else {
+        s[u] = t;  // a valid slot; skipped below
+      }
+    }
+    float4 q[U];
+#pragma unroll
+    for (int u = 0; u < U; ++u) q[u] = pos[s[u]];
+#pragma unroll
+    for (int u = 0; u < U; ++u) {
+      const float dx = q[u].x - p.x, dy = q[u].y - p.y, dz = q[u].z - p.z;
+      const float r2 = squared_distance(dx, dy, dz);
+      if (in_range(r2, cutoff_squared) && s[u] != t)
+        kernel(acc, original_index(p), original_index(q[u]), dx, dy, dz, r2);
+    }
+  }
+  if constexpr (K::has_count) acc.count = group_sum<G>(acc.count);
+  if constexpr (K::has_energy) acc.energy = group_sum<G>(acc.energy);
+  if constexpr (K::has_force) {
+    acc.fx = group_sum<G>(acc.fx);
+    acc.fy = group_sum<G>(acc.fy);
+    acc.fz = group_sum<G>(acc.fz);
+  }
+  if (active && lane == 0) out.store<K>(original_index(p), acc);
 }
 
 template <class Table>
@@ -203,25 +353,24 @@ __global__ void __launch_bounds__(block_size)
   if (t >= n) return;
   const float4 p = pos[t];
   std::uint64_t slot = offsets[original_index(p)];
-  for_each_pair(pos, t, p, view, table, cutoff_squared,
-                [&](const float4& q, float, float, float, float) {
-                  indices[slot++] = original_index(q);
-                });
+  for_each_pair(
+      pos, t, p, view, table, cutoff_squared,
+      [&](const float4& q, float, float, float, float) { indices[slot++] = original_index(q); });
 }
 
 // ---- build kernels ------------------------------------------------------------------------------
 
 template <class Key>
-__global__ void keys_kernel(const float* __restrict__ xyz, Slot n, CellGrid grid, Key* keys,
+__global__ void keys_kernel(const float* __restrict__ xyz, Slot n, GridView view, Key* keys,
                             Slot* index) {
   const Slot i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= n) return;
-  keys[i] = static_cast<Key>(grid.key_of(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]));
+  keys[i] = static_cast<Key>(cell_key(view, xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]));
   index[i] = i;
 }
 
-__device__ __forceinline__ void gather_one(const float* __restrict__ xyz, const Slot* order,
-                                           Slot s, float4* pos) {
+__device__ __forceinline__ void gather_one(const float* __restrict__ xyz, const Slot* order, Slot s,
+                                           float4* pos) {
   const Slot i = order[s];
   pos[s] = make_float4(xyz[3 * std::size_t{i}], xyz[3 * std::size_t{i} + 1],
                        xyz[3 * std::size_t{i} + 2], __uint_as_float(i));
@@ -321,7 +470,8 @@ unsigned blocks_for(std::uint64_t count, int threads = block_size) {
   return static_cast<unsigned>((count + threads - 1) / threads);
 }
 
-// ---- the method -----------------------------------------------------------------------------------
+// ---- the method
+// -----------------------------------------------------------------------------------
 
 class Grid final : public Method {
  public:
@@ -347,6 +497,7 @@ class Grid final : public Method {
     else
       build_compact(xyz);
     build_timer_.stop();
+    choose_lanes();
   }
 
   void compute(Kernel kernel, const KernelOptions& options) override {
@@ -354,8 +505,24 @@ class Grid final : public Method {
     compute_timer_.start();
     with_kernel(kernel, options, cutoff_squared_, [&](auto k) {
       with_table([&](const auto& table) {
-        compute_kernel<<<blocks_for(n_), block_size>>>(pos_.data(), n_, view_, table,
-                                                       cutoff_squared_, k, out);
+        switch (lanes_) {
+          case 1:
+            thread_kernel<<<blocks_for(n_), block_size>>>(pos_.data(), n_, view_, table,
+                                                          cutoff_squared_, k, out);
+            break;
+          case 4:
+            launch_group<4>(table, k, out);
+            break;
+          case 8:
+            launch_group<8>(table, k, out);
+            break;
+          case 16:
+            launch_group<16>(table, k, out);
+            break;
+          default:
+            launch_group<32>(table, k, out);
+            break;
+        }
       });
     });
     RAYCUT_CUDA_CHECK_LAUNCH();
@@ -363,6 +530,7 @@ class Grid final : public Method {
   }
 
   Results results() const override { return results_.to_host(); }
+  ResultsView results_view() const override { return results_.view(); }
 
   NeighbourList neighbours() override {
     return build_neighbour_list(
@@ -388,6 +556,12 @@ class Grid final : public Method {
   double device_compute_ms() const override { return compute_timer_.elapsed_ms(); }
 
  private:
+  template <int G, class Table, class K>
+  void launch_group(const Table& table, K k, const OutputView& out) {
+    group_kernel<G><<<blocks_for(std::uint64_t{n_} * G), block_size>>>(
+        pos_.data(), n_, view_, table, cutoff_squared_, k, out);
+  }
+
   template <class F>
   void with_table(F&& f) const {
     if (dense_)
@@ -398,18 +572,44 @@ class Grid final : public Method {
   }
 
   void choose_grid(const float lo[3], const float hi[3], float cutoff) {
-    const int k = options_.cells_per_cutoff > 0 ? options_.cells_per_cutoff
-                                                : default_cells_per_cutoff;
+    int k = options_.cells_per_cutoff;
+    if (k <= 0) {
+      const CellGrid coarse = make_cell_grid(lo, hi, cutoff, 1);
+      const double density = static_cast<double>(n_) / static_cast<double>(coarse.cell_count());
+      k = density >= fine_cells_density ? 2 : 1;
+    }
     grid_ = make_cell_grid(lo, hi, cutoff, k);
-    const std::uint64_t cells = grid_.cell_count();
+    view_.grid = grid_;
     const std::uint64_t dense_limit = std::min<std::uint64_t>(8ull * n_ + 4096, 1ull << 31);
+    // Narrower x cells, unless they alone would push a dense table over its limit.
+    int split = options_.x_split > 0 ? options_.x_split : default_x_split[std::min(k, 2)];
+    for (;; split /= 2) {
+      view_.xgrid = split > 1 ? make_cell_grid(lo, hi, cutoff, k * split) : grid_;
+      if (split == 1 || options_.x_split > 0 || options_.layout != 0 ||
+          cell_count() <= dense_limit || grid_.cell_count() > dense_limit)
+        break;
+    }
+    view_.x_cells_per_cell = static_cast<float>(grid_.width * view_.xgrid.inverse_width);
+    const std::uint64_t cells = cell_count();
     dense_ = options_.layout == 1 ? cells <= (1ull << 31)
                                   : (options_.layout == 2 ? false : cells <= dense_limit);
-    view_.grid = grid_;
     // Slack: relative 1e-5 and absolute 1e-5 cell, far above the float round-off of the
     // predicate (~2e-7 relative) and of the cell fractions (~1e-7 cell).
     view_.reach_cells = static_cast<float>(cutoff * grid_.inverse_width * (1.0 + 1e-5) + 1e-5);
     view_.cull = options_.cull;
+  }
+
+  // Lanes per target (see thread_kernel_from).
+  void choose_lanes() {
+    if (grid_.reach > 3) {  // the group kernel's row table holds (2 * 3 + 1)^2 rows
+      lanes_ = 1;
+      return;
+    }
+    if (options_.lanes_per_target > 0) {
+      lanes_ = options_.lanes_per_target;
+      return;
+    }
+    lanes_ = n_ >= thread_kernel_from ? 1 : (n_ <= group_of_32_up_to ? 32 : 16);
   }
 
   // Radix sort of (key, index) on the bits the keys use; returns the sorted buffers.
@@ -417,24 +617,33 @@ class Grid final : public Method {
   void sort(DeviceBuffer<Key>& keys, DeviceBuffer<Key>& keys_alt, int bits, Key*& sorted_keys) {
     cub::DoubleBuffer<Key> k(keys.data(), keys_alt.data());
     cub::DoubleBuffer<Slot> v(index_.data(), index_alt_.data());
-    std::size_t temp_bytes = 0;
-    RAYCUT_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, k, v, n_, 0, bits));
+    // The temporary size depends on (n, bits, key size) only: ask cub again only when they change.
+    const std::uint64_t shape = (std::uint64_t{n_} << 16) | (bits << 4) | sizeof(Key);
+    if (shape != sort_shape_) {
+      RAYCUT_CUDA_CHECK(
+          cub::DeviceRadixSort::SortPairs(nullptr, sort_temp_bytes_, k, v, n_, 0, bits));
+      sort_shape_ = shape;
+    }
+    std::size_t temp_bytes = sort_temp_bytes_;
     temp_.resize(std::max<std::size_t>(temp_bytes, 1));
-    RAYCUT_CUDA_CHECK(
-        cub::DeviceRadixSort::SortPairs(temp_.data(), temp_bytes, k, v, n_, 0, bits));
+    RAYCUT_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp_.data(), temp_bytes, k, v, n_, 0, bits));
     sorted_keys = k.Current();
     order_ = v.Current();
   }
 
+  std::uint64_t cell_count() const {
+    return std::uint64_t{view_.xgrid.dims[0]} * grid_.dims[1] * grid_.dims[2];
+  }
+
   void build_dense(const float* xyz) {
-    const std::uint64_t cells = grid_.cell_count();
+    const std::uint64_t cells = cell_count();
     keys32_.resize(n_);
     keys32_alt_.resize(n_);
     index_.resize(n_);
     index_alt_.resize(n_);
     pos_.resize(n_);
     start_.resize(cells + 1);
-    keys_kernel<<<blocks_for(n_, 256), 256>>>(xyz, n_, grid_, keys32_.data(), index_.data());
+    keys_kernel<<<blocks_for(n_, 256), 256>>>(xyz, n_, view_, keys32_.data(), index_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
     std::uint32_t* sorted = nullptr;
     sort(keys32_, keys32_alt_, key_bits(cells), sorted);
@@ -450,20 +659,21 @@ class Grid final : public Method {
     index_alt_.resize(n_);
     pos_.resize(n_);
     run_start_.resize(n_);
-    keys_kernel<<<blocks_for(n_, 256), 256>>>(xyz, n_, grid_, keys64_.data(), index_.data());
+    keys_kernel<<<blocks_for(n_, 256), 256>>>(xyz, n_, view_, keys64_.data(), index_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
     std::uint64_t* sorted = nullptr;
-    sort(keys64_, keys64_alt_, key_bits(grid_.cell_count()), sorted);
+    sort(keys64_, keys64_alt_, key_bits(cell_count()), sorted);
     gather_kernel<<<blocks_for(n_, 256), 256>>>(xyz, order_, n_, pos_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
 
     // First slot of every non-empty cell; the number of cells comes back to size the tables.
-    if (!runs_host_)
-      RAYCUT_CUDA_CHECK(cudaHostAlloc(reinterpret_cast<void**>(&runs_host_),
-                                      sizeof(std::uint32_t), cudaHostAllocMapped));
-    std::uint32_t* runs_device = nullptr;
-    RAYCUT_CUDA_CHECK(
-        cudaHostGetDevicePointer(reinterpret_cast<void**>(&runs_device), runs_host_, 0));
+    if (!runs_host_) {
+      RAYCUT_CUDA_CHECK(cudaHostAlloc(reinterpret_cast<void**>(&runs_host_), sizeof(std::uint32_t),
+                                      cudaHostAllocMapped));
+      RAYCUT_CUDA_CHECK(
+          cudaHostGetDevicePointer(reinterpret_cast<void**>(&runs_device_), runs_host_, 0));
+    }
+    std::uint32_t* runs_device = runs_device_;
     const thrust::counting_iterator<Slot> slots(0);
     std::size_t temp_bytes = 0;
     RAYCUT_CUDA_CHECK(cub::DeviceSelect::If(nullptr, temp_bytes, slots, run_start_.data(),
@@ -476,18 +686,19 @@ class Grid final : public Method {
 
     cell_keys_.resize(runs);
     start_.resize(runs + 1);
-    const std::uint64_t capacity = power_of_two_at_least(std::max<std::uint64_t>(2ull * runs, 1024));
+    const std::uint64_t capacity =
+        power_of_two_at_least(std::max<std::uint64_t>(2ull * runs, 1024));
     row_keys_.resize(capacity);
     row_cells_.resize(capacity);
     row_mask_ = capacity - 1;
     row_shift_ = 64 - log2_of_power_of_two(capacity);
     RAYCUT_CUDA_CHECK(cudaMemsetAsync(row_keys_.data(), 0xFF, capacity * sizeof(std::uint64_t)));
     insert_rows_kernel<<<blocks_for(runs, 256), 256>>>(
-        sorted, run_start_.data(), runs_device, n_, grid_.dims[0], cell_keys_.data(),
+        sorted, run_start_.data(), runs_device, n_, view_.xgrid.dims[0], cell_keys_.data(),
         start_.data(), row_keys_.data(), row_cells_.data(), row_mask_, row_shift_);
     RAYCUT_CUDA_CHECK_LAUNCH();
     close_rows_kernel<<<blocks_for(runs, 256), 256>>>(cell_keys_.data(), runs_device,
-                                                      grid_.dims[0], row_keys_.data(),
+                                                      view_.xgrid.dims[0], row_keys_.data(),
                                                       row_cells_.data(), row_mask_, row_shift_);
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
@@ -495,6 +706,7 @@ class Grid final : public Method {
   GridOptions options_;
   Slot n_ = 0;
   float cutoff_squared_ = 0;
+  int lanes_ = 1;
   CellGrid grid_;
   GridView view_{};
   bool dense_ = true;
@@ -509,8 +721,11 @@ class Grid final : public Method {
   DeviceBuffer<uint2> row_cells_;
   std::uint64_t row_mask_ = 0;
   int row_shift_ = 0;
-  std::uint32_t* runs_host_ = nullptr;
+  std::uint32_t* runs_host_ = nullptr;  // mapped pinned memory
+  std::uint32_t* runs_device_ = nullptr;
   DeviceBuffer<unsigned char> temp_;
+  std::uint64_t sort_shape_ = 0;
+  std::size_t sort_temp_bytes_ = 0;
   DeviceResults results_;
   EventTimer build_timer_, compute_timer_;
 };
@@ -520,6 +735,8 @@ class Grid final : public Method {
 std::unique_ptr<Method> make_grid_with(const GridOptions& options) {
   return std::make_unique<Grid>(options);
 }
-std::unique_ptr<Method> make_grid() { return make_grid_with(GridOptions{}); }
+std::unique_ptr<Method> make_grid() {
+  return make_grid_with(GridOptions{});
+}
 
 }  // namespace raycut::detail::cuda

@@ -11,7 +11,7 @@ namespace {
 // 3 x 128 threads: with a stride that is a multiple of 3, each thread reads one axis only, and
 // a warp reads 32 consecutive floats.
 constexpr int bbox_block = 384;
-constexpr int bbox_max_blocks = 1024;
+constexpr int bbox_max_blocks = 264;  // two per SM of an H100: enough to stream the positions
 
 struct Min {
   __device__ float operator()(float a, float b) const { return fminf(a, b); }
@@ -49,6 +49,7 @@ __global__ void __launch_bounds__(bbox_block)
       block_value[3 + a] = block_hi;
     }
   }
+  __syncthreads();
   if (threadIdx.x < 6) partials[6 * blockIdx.x + threadIdx.x] = block_value[threadIdx.x];
   __threadfence();
   __syncthreads();
@@ -56,14 +57,17 @@ __global__ void __launch_bounds__(bbox_block)
   __syncthreads();
   if (!last) return;
   __threadfence();
-  if (threadIdx.x < 6) {
-    const bool is_lo = threadIdx.x < 3;
+  // The last block reduces the partials of all blocks, all its threads together.
+  for (int k = 0; k < 6; ++k) {
+    const bool is_lo = k < 3;
     float v = is_lo ? FLT_MAX : -FLT_MAX;
-    for (unsigned b = 0; b < gridDim.x; ++b) {
-      const float p = *(volatile float*)&partials[6 * b + threadIdx.x];
-      v = is_lo ? fminf(v, p) : fmaxf(v, p);
+    for (unsigned b = threadIdx.x; b < gridDim.x; b += bbox_block) {
+      const float q = __ldcg(&partials[6 * b + k]);
+      v = is_lo ? fminf(v, q) : fmaxf(v, q);
     }
-    result[threadIdx.x] = v;
+    const float r = is_lo ? Reduce(temp).Reduce(v, Min{}) : Reduce(temp).Reduce(v, Max{});
+    __syncthreads();
+    if (threadIdx.x == 0) result[k] = r;
   }
   if (threadIdx.x == 0) *counter = 0;  // ready for the next call
   __threadfence_system();
@@ -78,19 +82,19 @@ BoundingBox::~BoundingBox() {
 void BoundingBox::compute(const float* xyz, std::size_t n, float lo[3], float hi[3],
                           cudaStream_t stream) {
   if (!result_) {
-    RAYCUT_CUDA_CHECK(cudaHostAlloc(reinterpret_cast<void**>(&result_), 6 * sizeof(float),
-                                    cudaHostAllocMapped));
+    RAYCUT_CUDA_CHECK(
+        cudaHostAlloc(reinterpret_cast<void**>(&result_), 6 * sizeof(float), cudaHostAllocMapped));
     counter_.resize(1);
     RAYCUT_CUDA_CHECK(cudaMemset(counter_.data(), 0, sizeof(unsigned)));
     partials_.resize(6 * bbox_max_blocks);
+    RAYCUT_CUDA_CHECK(
+        cudaHostGetDevicePointer(reinterpret_cast<void**>(&device_result_), result_, 0));
   }
   const std::size_t count = 3 * n;
   const int blocks = static_cast<int>(
       std::min<std::size_t>((count + bbox_block - 1) / bbox_block, bbox_max_blocks));
-  float* device_result = nullptr;
-  RAYCUT_CUDA_CHECK(cudaHostGetDevicePointer(reinterpret_cast<void**>(&device_result), result_, 0));
   bounding_box_kernel<<<blocks, bbox_block, 0, stream>>>(xyz, count, partials_.data(),
-                                                         counter_.data(), device_result);
+                                                         counter_.data(), device_result_);
   RAYCUT_CUDA_CHECK_LAUNCH();
   RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
   for (int a = 0; a < 3; ++a) {

@@ -24,9 +24,10 @@ class BoundingBox {
                cudaStream_t stream = nullptr);
 
  private:
-  DeviceBuffer<float> partials_;       // 6 per block
-  DeviceBuffer<unsigned> counter_;     // blocks done; the last one resets it to 0
-  float* result_ = nullptr;            // mapped pinned host memory: lo[3], hi[3]
+  DeviceBuffer<float> partials_;    // 6 per block
+  DeviceBuffer<unsigned> counter_;  // blocks done; the last one resets it to 0
+  float* result_ = nullptr;         // mapped pinned host memory: lo[3], hi[3]
+  float* device_result_ = nullptr;  // the same memory, as the device sees it
 };
 
 }  // namespace raycut::detail::cuda

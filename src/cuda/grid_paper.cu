@@ -61,9 +61,9 @@ __device__ __forceinline__ void for_each_pair(const SortedParticles& p, const Ce
   for (std::int64_t iz = cz > 0 ? cz - 1 : 0; iz <= (cz < last_z ? cz + 1 : last_z); ++iz) {
     for (std::int64_t iy = cy > 0 ? cy - 1 : 0; iy <= (cy < last_y ? cy + 1 : last_y); ++iy) {
       for (std::int64_t ix = cx > 0 ? cx - 1 : 0; ix <= (cx < last_x ? cx + 1 : last_x); ++ix) {
-        const std::uint64_t key = grid.key(static_cast<std::uint32_t>(ix),
-                                           static_cast<std::uint32_t>(iy),
-                                           static_cast<std::uint32_t>(iz));
+        const std::uint64_t key =
+            grid.key(static_cast<std::uint32_t>(ix), static_cast<std::uint32_t>(iy),
+                     static_cast<std::uint32_t>(iz));
         const std::uint32_t end = start[key + 1];
         for (std::uint32_t s = start[key]; s < end; ++s) {
           if (s == t) continue;
@@ -83,11 +83,12 @@ __global__ void compute_kernel(SortedParticles p, std::uint32_t n, CellGrid grid
   const std::uint32_t t = blockIdx.x * paper_block + threadIdx.x;
   if (t >= n) return;
   Accumulator acc;
+  const std::uint32_t i = p.index[t];
   for_each_pair(p, grid, start, cutoff_squared, t,
-                [&](std::uint32_t, float dx, float dy, float dz, float r2) {
-                  kernel(acc, dx, dy, dz, r2);
+                [&](std::uint32_t s, float dx, float dy, float dz, float r2) {
+                  kernel(acc, i, p.index[s], dx, dy, dz, r2);
                 });
-  out.store<K>(p.index[t], acc);
+  out.store<K>(i, acc);
 }
 
 __global__ void count_kernel(SortedParticles p, std::uint32_t n, CellGrid grid,
@@ -150,14 +151,15 @@ class GridPaper final : public Method {
     const OutputView out = results_.prepare(kernel, n_);
     compute_timer_.start();
     with_kernel(kernel, options, cutoff_squared_, [&](auto k) {
-      compute_kernel<<<blocks(), paper_block>>>(sorted(), n_, grid_, start_.data(),
-                                                cutoff_squared_, k, out);
+      compute_kernel<<<blocks(), paper_block>>>(sorted(), n_, grid_, start_.data(), cutoff_squared_,
+                                                k, out);
     });
     RAYCUT_CUDA_CHECK_LAUNCH();
     compute_timer_.stop();
   }
 
   Results results() const override { return results_.to_host(); }
+  ResultsView results_view() const override { return results_.view(); }
 
   NeighbourList neighbours() override {
     return build_neighbour_list(
@@ -191,11 +193,11 @@ class GridPaper final : public Method {
     const double need = table_bytes + particle_bytes;
     if (need > held) {
       const double extra = need - held;
-      const std::string what =
-          "grid-paper's dense grid of " + std::to_string(grid_.dims[0]) + " x " +
-          std::to_string(grid_.dims[1]) + " x " + std::to_string(grid_.dims[2]) + " = " +
-          std::to_string(cells) + " cells (" + format_bytes(table_bytes) +
-          ") plus the sorted particles (" + format_bytes(particle_bytes) + ")";
+      const std::string what = "grid-paper's dense grid of " + std::to_string(grid_.dims[0]) +
+                               " x " + std::to_string(grid_.dims[1]) + " x " +
+                               std::to_string(grid_.dims[2]) + " = " + std::to_string(cells) +
+                               " cells (" + format_bytes(table_bytes) +
+                               ") plus the sorted particles (" + format_bytes(particle_bytes) + ")";
       if (extra >= 9.0e18)  // beyond any device: do not even ask
         throw Error(ErrorCode::out_of_memory, "not enough device memory for " + what);
       require_device_memory(static_cast<std::size_t>(extra), what.c_str());
@@ -222,6 +224,8 @@ class GridPaper final : public Method {
 
 }  // namespace
 
-std::unique_ptr<Method> make_grid_paper() { return std::make_unique<GridPaper>(); }
+std::unique_ptr<Method> make_grid_paper() {
+  return std::make_unique<GridPaper>();
+}
 
 }  // namespace raycut::detail::cuda

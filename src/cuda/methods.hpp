@@ -16,8 +16,11 @@ std::unique_ptr<Method> make_grid_paper();
 // that bench/grid_tune.cpp can measure the alternatives; users get the defaults.
 struct GridOptions {
   int cells_per_cutoff = 0;  // cells of width C / k, searched `k` cells around; 0: automatic
+  int x_split = 0;           // x cells this many times narrower than y, z cells; 0: automatic
   bool cull = true;          // per-target: skip rows of cells out of reach, trim each row in x
   int layout = 0;            // 0: automatic, 1: dense cell table, 2: compact (hashed rows)
+  // 1: a thread per target; 4, 8, 16, 32: lanes sharing each target; 0: automatic.
+  int lanes_per_target = 0;
 };
 std::unique_ptr<Method> make_grid_with(const GridOptions& options);
 std::unique_ptr<Method> make_grid();

@@ -184,7 +184,7 @@ void set_kernel(LaunchParams& p, SphForceKernel k) {
 
 void RayTracingMethod::compute(Kernel kernel, const KernelOptions& options) {
   LaunchParams p = base_params();
-  with_any_kernel(kernel, options, p.cutoff_squared, [&](auto k) { set_kernel(p, k); });
+  with_kernel(kernel, options, p.cutoff_squared, [&](auto k) { set_kernel(p, k); });
   p.out = results_.prepare(kernel, n_);
   compute_timer_.start();
   pipeline_.launch(&p, sizeof p, n_);
