@@ -45,7 +45,8 @@ def draw_suite(rows, suite, out_dir):
         by_param[int(r["param"])].append(r)
     methods = method_order({r["method"] for r in rows})
     colours = {m: plt.cm.tab10(i % 10) for i, m in enumerate(methods)}
-    params = sorted(by_param)
+    # Panels where some method of ours ran (the paper's binary runs sizes we may skip).
+    params = sorted(q for q in by_param if any(r["method"] != PAPER for r in by_param[q]))
     fig, axes = plt.subplots(len(params), 1, figsize=(max(8, 1.6 * len(methods) + 4),
                                                        3.2 * len(params)), squeeze=False)
     gpu = rows[0]["gpu"]
@@ -65,7 +66,7 @@ def draw_suite(rows, suite, out_dir):
                 paper = table.get((PAPER, n))
                 if paper is not None and method != PAPER:
                     speedup = float(paper["total_ms"]) / (build + compute)
-                    ax.text(pos, (build + compute) * 1.08, f"{speedup:.1f}", ha="center",
+                    ax.text(pos, (build + compute) * 1.08, f"{speedup:.2g}", ha="center",
                             va="bottom", fontsize=6, rotation=90)
         ax.set_yscale("log")
         ax.set_xticks(range(len(sizes)))
