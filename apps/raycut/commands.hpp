@@ -18,6 +18,7 @@ using Command = std::function<int()>;
 Command add_check(CLI::App& app);
 Command add_bench(CLI::App& app);
 Command add_update_bench(CLI::App& app);
+Command add_sph(CLI::App& app);
 
 // Expands "all" / "default" and checks the names; throws raycut::Error for unknown ones.
 std::vector<std::string> resolve_methods(const std::vector<std::string>& names);

@@ -103,6 +103,7 @@ int main(int argc, char** argv) {
                                              {"check", add_check(app)},
                                              {"bench", add_bench(app)},
                                              {"update-bench", add_update_bench(app)},
+                                             {"sph", add_sph(app)},
                                              {"generate", add_generate(app)}};
   try {
     app.parse(argc, argv);
