@@ -209,8 +209,4 @@ NeighbourList RayTracingMethod::neighbours() {
       });
 }
 
-void RayTracingMethod::synchronize() {
-  RAYCUT_CUDA_CHECK(cudaDeviceSynchronize());
-}
-
 }  // namespace raycut::detail::optix
