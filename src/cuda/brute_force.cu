@@ -1,6 +1,6 @@
 // The oracle on the GPU: every target against every source, sources staged through shared
 // memory in tiles. O(N^2): for tests and small inputs.
-#include "cuda/gpu_method.cuh"
+#include "cuda/device_results.cuh"
 #include "cuda/methods.hpp"
 #include "raycut/predicate.hpp"
 
@@ -67,8 +67,10 @@ __global__ void fill_kernel(const float* xyz, std::size_t n, float cutoff_square
   });
 }
 
-class BruteForceGpu final : public GpuMethod {
+class BruteForceGpu final : public Method {
  public:
+  MemorySpace space() const override { return MemorySpace::device; }
+
   void build(const float* xyz, std::size_t n, float cutoff) override {
     build_timer_.start();
     xyz_.resize(3 * n);
@@ -89,6 +91,9 @@ class BruteForceGpu final : public GpuMethod {
     compute_timer_.stop();
   }
 
+  Results results() const override { return results_.to_host(); }
+  ResultsView results_view() const override { return results_.view(); }
+
   NeighbourList neighbours() override {
     return build_neighbour_list(
         n_,
@@ -102,12 +107,18 @@ class BruteForceGpu final : public GpuMethod {
         });
   }
 
+  void synchronize() override { RAYCUT_CUDA_CHECK(cudaDeviceSynchronize()); }
+  double device_build_ms() const override { return build_timer_.elapsed_ms(); }
+  double device_compute_ms() const override { return compute_timer_.elapsed_ms(); }
+
  private:
   unsigned blocks() const { return static_cast<unsigned>((n_ + block_size - 1) / block_size); }
 
   DeviceBuffer<float> xyz_;
   std::size_t n_ = 0;
   float cutoff_squared_ = 0;
+  DeviceResults results_;
+  EventTimer build_timer_, compute_timer_;
 };
 
 }  // namespace

@@ -27,7 +27,7 @@
 #include <string>
 
 #include "core/cell_grid.hpp"
-#include "cuda/gpu_method.cuh"
+#include "cuda/device_results.cuh"
 #include "cuda/grid_common.cuh"
 #include "cuda/methods.hpp"
 #include "raycut/predicate.hpp"
@@ -473,12 +473,14 @@ unsigned blocks_for(std::uint64_t count, int threads = block_size) {
 // ---- the method
 // -----------------------------------------------------------------------------------
 
-class Grid final : public GpuMethod {
+class Grid final : public Method {
  public:
   explicit Grid(const GridOptions& options) : options_(options) {}
   ~Grid() override {
     if (runs_host_) cudaFreeHost(runs_host_);
   }
+
+  MemorySpace space() const override { return MemorySpace::device; }
 
   void build(const float* xyz, std::size_t n, float cutoff) override {
     if (n >= UINT32_MAX)
@@ -527,6 +529,9 @@ class Grid final : public GpuMethod {
     compute_timer_.stop();
   }
 
+  Results results() const override { return results_.to_host(); }
+  ResultsView results_view() const override { return results_.view(); }
+
   NeighbourList neighbours() override {
     return build_neighbour_list(
         n_,
@@ -545,6 +550,10 @@ class Grid final : public GpuMethod {
           RAYCUT_CUDA_CHECK_LAUNCH();
         });
   }
+
+  void synchronize() override { RAYCUT_CUDA_CHECK(cudaDeviceSynchronize()); }
+  double device_build_ms() const override { return build_timer_.elapsed_ms(); }
+  double device_compute_ms() const override { return compute_timer_.elapsed_ms(); }
 
  private:
   template <int G, class Table, class K>
@@ -717,6 +726,8 @@ class Grid final : public GpuMethod {
   DeviceBuffer<unsigned char> temp_;
   std::uint64_t sort_shape_ = 0;
   std::size_t sort_temp_bytes_ = 0;
+  DeviceResults results_;
+  EventTimer build_timer_, compute_timer_;
 };
 
 }  // namespace

@@ -10,7 +10,7 @@
 #include <string>
 
 #include "core/cell_grid.hpp"
-#include "cuda/gpu_method.cuh"
+#include "cuda/device_results.cuh"
 #include "cuda/grid_common.cuh"
 #include "cuda/methods.hpp"
 #include "raycut/predicate.hpp"
@@ -112,8 +112,10 @@ __global__ void fill_kernel(SortedParticles p, std::uint32_t n, CellGrid grid,
                 [&](std::uint32_t s, float, float, float, float) { indices[slot++] = p.index[s]; });
 }
 
-class GridPaper final : public GpuMethod {
+class GridPaper final : public Method {
  public:
+  MemorySpace space() const override { return MemorySpace::device; }
+
   void build(const float* xyz, std::size_t n, float cutoff) override {
     if (n >= UINT32_MAX)
       throw Error(ErrorCode::invalid_argument,
@@ -156,6 +158,9 @@ class GridPaper final : public GpuMethod {
     compute_timer_.stop();
   }
 
+  Results results() const override { return results_.to_host(); }
+  ResultsView results_view() const override { return results_.view(); }
+
   NeighbourList neighbours() override {
     return build_neighbour_list(
         n_,
@@ -170,6 +175,10 @@ class GridPaper final : public GpuMethod {
           RAYCUT_CUDA_CHECK_LAUNCH();
         });
   }
+
+  void synchronize() override { RAYCUT_CUDA_CHECK(cudaDeviceSynchronize()); }
+  double device_build_ms() const override { return build_timer_.elapsed_ms(); }
+  double device_compute_ms() const override { return compute_timer_.elapsed_ms(); }
 
  private:
   unsigned blocks() const { return (n_ + paper_block - 1) / paper_block; }
@@ -209,6 +218,8 @@ class GridPaper final : public GpuMethod {
   DeviceBuffer<std::uint32_t> counts_, start_, index_;
   DeviceBuffer<float> x_, y_, z_;
   DeviceBuffer<unsigned char> temp_;
+  DeviceResults results_;
+  EventTimer build_timer_, compute_timer_;
 };
 
 }  // namespace

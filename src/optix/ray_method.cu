@@ -209,4 +209,8 @@ NeighbourList RayTracingMethod::neighbours() {
       });
 }
 
+void RayTracingMethod::synchronize() {
+  RAYCUT_CUDA_CHECK(cudaDeviceSynchronize());
+}
+
 }  // namespace raycut::detail::optix
