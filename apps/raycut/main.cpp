@@ -99,12 +99,10 @@ int main(int argc, char** argv) {
       "raycut: particle interactions within a cutoff radius, on CPU, CUDA grids and OptiX ray "
       "tracing"};
   app.require_subcommand(1);
-  std::map<std::string, Command> commands = {{"methods", add_methods(app)},
-                                             {"check", add_check(app)},
-                                             {"bench", add_bench(app)},
-                                             {"update-bench", add_update_bench(app)},
-                                             {"sph", add_sph(app)},
-                                             {"generate", add_generate(app)}};
+  std::map<std::string, Command> commands = {
+      {"methods", add_methods(app)}, {"check", add_check(app)},
+      {"bench", add_bench(app)},     {"update-bench", add_update_bench(app)},
+      {"sph", add_sph(app)},         {"generate", add_generate(app)}};
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {

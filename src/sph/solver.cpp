@@ -1,0 +1,316 @@
+#include "sph/solver.hpp"
+
+#include <chrono>
+#include <cmath>
+#include <optional>
+#include <utility>
+
+#include "raycut/error.hpp"
+#include "sph/physics.hpp"
+#if defined(RAYCUT_HAVE_CUDA)
+#include "sph/device_steps.hpp"
+#endif
+
+namespace raycut::sph {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double elapsed_ms(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+StepConstants constants_of(const SphParameters& p) {
+  StepConstants c{};
+  const double pi = 3.14159265358979323846;
+  const double h = p.smoothing_length;
+  // m W_poly6(0, h) = m 315 / (64 pi h^9) h^6, in double then rounded once.
+  c.self_density = static_cast<float>(p.particle_mass * 315.0 / (64.0 * pi * h * h * h));
+  c.rest_density = p.rest_density;
+  c.stiffness = p.stiffness;
+  c.wall_stiffness = p.wall_stiffness;
+  for (int k = 0; k < 3; ++k) c.gravity[k] = p.gravity[k];
+  c.dt = p.dt;
+  for (int w = 0; w < 6; ++w) {
+    for (int k = 0; k < 3; ++k) c.wall_normal[w][k] = p.walls[w].normal[k];
+    c.wall_d[w] = p.walls[w].d;
+  }
+  return c;
+}
+
+// An engine of `name` that computes the SPH kernels, or nothing: probed on two particles.
+std::optional<Engine> probe(const std::string& name) {
+  try {
+    Engine engine(name);
+    const std::vector<float> two = {0.0f, 0.0f, 0.0f, 0.5f, 0.0f, 0.0f};
+    engine.build({two.data(), 2, MemorySpace::host}, 1.0f);
+    KernelOptions options;
+    options.sph_mass = 1.0f;
+    engine.run(Kernel::sph_density, options);
+    return engine;
+  } catch (const Error& e) {
+    if (e.code() == ErrorCode::unsupported) return std::nullopt;
+    throw;
+  }
+}
+
+// The solver's preference for "auto": fastest first (docs/sph.md, measured on the H100).
+// grid-paper, the dense-grid comparison method, only after the ray-tracing methods.
+const char* const auto_order[] = {"grid",
+                                  "optix-aabb-sorted",
+                                  "optix-aabb",
+                                  "optix-aabb-fused",
+                                  "optix-spheres",
+                                  "optix-triangles",
+                                  "grid-paper",
+                                  "cell-list",
+                                  "brute-force-gpu",
+                                  "brute-force"};
+
+std::optional<Engine> auto_engine() {
+  for (const char* name : auto_order) {
+    bool available = false;
+    for (const auto& m : list_methods()) available |= m.name == name && m.available;
+    if (!available) continue;
+    if (auto engine = probe(name)) return engine;
+  }
+  return std::nullopt;
+}
+
+}  // namespace
+
+std::string auto_sph_method() {
+  auto engine = auto_engine();
+  if (!engine) throw Error(ErrorCode::unsupported, "no available method computes the SPH kernels");
+  return engine->method();
+}
+
+struct Solver::Impl {
+  SphParameters params;
+  StepConstants constants;
+  Engine engine;
+  std::size_t n = 0;
+  float skin = 0;
+  int frame = 0;
+  bool device = false;
+  bool structure_current = false;  // the engine's structure is over the current positions
+  StepTimes times;
+  bool host_view_ok = true;  // the host method exposes results_view (else results() copies)
+  Results host_results;      // the copy, for host methods without results_view
+
+  // Host state (CPU methods).
+  std::vector<float> x, v, rho, p;
+  // Device state (GPU methods): DeviceArray exists only with CUDA; empty optionals otherwise.
+  std::optional<DeviceArray> dx, dv, drho, dp;
+
+  explicit Impl(Engine e) : engine(std::move(e)) {}
+
+  float* x_ptr() { return device ? dx->data() : x.data(); }
+  float* v_ptr() { return device ? dv->data() : v.data(); }
+  float* rho_ptr() { return device ? drho->data() : rho.data(); }
+  float* p_ptr() { return device ? dp->data() : p.data(); }
+
+  // Energy or force of the last run, where the method keeps them.
+  const float* result(bool force) {
+    if (device || host_view_ok) {
+      try {
+        const ResultsView view = engine.results_view();
+        return force ? view.force : view.energy;
+      } catch (const Error& e) {
+        if (device || e.code() != ErrorCode::unsupported) throw;
+        host_view_ok = false;
+      }
+    }
+    host_results = engine.results();
+    return force ? host_results.force.data() : host_results.energy.data();
+  }
+
+  KernelOptions options() const {
+    KernelOptions o;
+    o.sph_mass = params.particle_mass;
+    o.sph_viscosity = params.viscosity;
+    return o;
+  }
+
+  // Density (neighbours j != i, then the self term) and pressure at the built positions.
+  void density_pass() {
+    const float* neighbour_density = nullptr;
+    if (n > 0) {
+      engine.run(Kernel::sph_density, options());
+      neighbour_density = result(false);
+    }
+    density_and_pressure(neighbour_density);
+    sync();
+  }
+
+  void sync() {
+#if defined(RAYCUT_HAVE_CUDA)
+    if (device) device::synchronize();
+#endif
+  }
+
+  void density_and_pressure(const float* neighbour_density) {
+    if (device) {
+#if defined(RAYCUT_HAVE_CUDA)
+      device::density_and_pressure(neighbour_density, rho_ptr(), p_ptr(), n, constants);
+#endif
+      return;
+    }
+    const StepConstants c = constants;
+    const long long count = static_cast<long long>(n);
+#pragma omp parallel for schedule(static)
+    for (long long i = 0; i < count; ++i) {
+      rho[i] = density_with_self(neighbour_density ? neighbour_density[i] : 0.0f, c);
+      p[i] = pressure_of(rho[i], c);
+    }
+  }
+
+  void integrate(const float* force) {
+    if (device) {
+#if defined(RAYCUT_HAVE_CUDA)
+      device::integrate(x_ptr(), v_ptr(), force, rho_ptr(), n, constants);
+#endif
+      return;
+    }
+    const StepConstants c = constants;
+    const long long count = static_cast<long long>(n);
+    const float zero[3] = {0.0f, 0.0f, 0.0f};
+#pragma omp parallel for schedule(static)
+    for (long long i = 0; i < count; ++i)
+      integrate_particle(&x[3 * i], &v[3 * i], force ? &force[3 * i] : zero, rho[i], c);
+  }
+};
+
+Solver::Solver(const SphScenario& scenario, std::string_view method, float skin) {
+  validate(scenario);
+  if (!(skin < 0) && !std::isfinite(skin))
+    throw Error(ErrorCode::invalid_argument, "skin must be finite");
+  std::optional<Engine> engine;
+  if (method == "auto") {
+    engine = auto_engine();
+    if (!engine)
+      throw Error(ErrorCode::unsupported, "no available method computes the SPH kernels");
+  } else {
+    engine.emplace(method);
+  }
+  impl_ = std::make_unique<Impl>(std::move(*engine));
+  Impl& s = *impl_;
+  s.params = scenario.params;
+  s.constants = constants_of(s.params);
+  s.n = scenario.position.size() / 3;
+  s.skin = skin < 0 ? s.params.smoothing_length : skin;
+  s.engine.set_update_policy({s.skin});
+  s.device = s.engine.space() == MemorySpace::device;
+  const std::vector<float> zeros(s.n, 0.0f);
+  if (s.device) {
+    s.dx.emplace(scenario.position);
+    s.dv.emplace(scenario.velocity);
+    s.drho.emplace(zeros);
+    s.dp.emplace(zeros);
+  } else {
+    s.x = scenario.position;
+    s.v = scenario.velocity;
+    s.rho = zeros;
+    s.p = zeros;
+  }
+  // The first full build, outside the steps; and rho, p of the initial state (for output).
+  s.engine.build({s.x_ptr(), s.n, s.device ? MemorySpace::device : MemorySpace::host},
+                 s.params.smoothing_length);
+  s.structure_current = true;
+  s.density_pass();
+}
+
+Solver::~Solver() = default;
+Solver::Solver(Solver&&) noexcept = default;
+Solver& Solver::operator=(Solver&&) noexcept = default;
+
+void Solver::step() {
+  Impl& s = *impl_;
+  StepTimes t;
+  const MemorySpace space = s.device ? MemorySpace::device : MemorySpace::host;
+  const PositionsView positions{s.x_ptr(), s.n, space};
+
+  // 1. The structure over the current positions (already there on the first step: the
+  // constructor built it).
+  auto start = Clock::now();
+  if (!s.structure_current) {
+    s.engine.update(positions);
+    t.refit = s.engine.last_timings().refit;
+  }
+  s.structure_current = false;
+  t.update_ms = elapsed_ms(start);
+
+  // 2. Density (neighbours j != i, then the self term) and pressure.
+  start = Clock::now();
+  s.density_pass();
+  t.density_ms = elapsed_ms(start);
+
+  // 3. Pressure + viscosity force (not yet divided by rho_i).
+  start = Clock::now();
+  const float* force = nullptr;
+  if (s.n > 0) {
+    KernelOptions options = s.options();
+    options.sph = {s.v_ptr(), s.rho_ptr(), s.p_ptr()};
+    s.engine.run(Kernel::sph_force, options);
+    force = s.result(true);
+  }
+  t.force_ms = elapsed_ms(start);
+
+  // 4. Walls, gravity, semi-implicit Euler.
+  start = Clock::now();
+  s.integrate(force);
+  s.sync();
+  t.integrate_ms = elapsed_ms(start);
+
+  s.times = t;
+  ++s.frame;
+}
+
+double Solver::time() const {
+  return impl_->frame * static_cast<double>(impl_->params.dt);
+}
+int Solver::frame() const {
+  return impl_->frame;
+}
+std::size_t Solver::size() const {
+  return impl_->n;
+}
+const SphParameters& Solver::parameters() const {
+  return impl_->params;
+}
+const std::string& Solver::method() const {
+  return impl_->engine.method();
+}
+MemorySpace Solver::space() const {
+  return impl_->engine.space();
+}
+float Solver::skin() const {
+  return impl_->skin;
+}
+StepTimes Solver::last_times() const {
+  return impl_->times;
+}
+
+void Solver::copy_state(std::vector<float>& x, std::vector<float>& v, std::vector<float>& rho,
+                        std::vector<float>& p) const {
+  const Impl& s = *impl_;
+  if (!s.device) {
+    x = s.x;
+    v = s.v;
+    rho = s.rho;
+    p = s.p;
+    return;
+  }
+  x.resize(3 * s.n);
+  v.resize(3 * s.n);
+  rho.resize(s.n);
+  p.resize(s.n);
+#if defined(RAYCUT_HAVE_CUDA)
+  device::copy_to_host(x.data(), s.dx->data(), 3 * s.n);
+  device::copy_to_host(v.data(), s.dv->data(), 3 * s.n);
+  device::copy_to_host(rho.data(), s.drho->data(), s.n);
+  device::copy_to_host(p.data(), s.dp->data(), s.n);
+#endif
+}
+
+}  // namespace raycut::sph
