@@ -1,23 +1,13 @@
 # raycut sph through the command line: the small scenario on the CPU cell list writes the .pvd
 # series, one .vtp per saved frame and the PNG renders, appends a CSV row, and refuses bad usage.
-file(REMOVE_RECURSE ${WORK})
-file(MAKE_DIRECTORY ${WORK})
+include(${CMAKE_CURRENT_LIST_DIR}/cli_helpers.cmake)
 
-function(run_raycut code)
-  execute_process(COMMAND ${RAYCUT} ${ARGN} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
-  if(NOT rc EQUAL code)
-    message(FATAL_ERROR "raycut ${ARGN}: exit ${rc}, expected ${code}\nstdout:\n${out}\nstderr:\n${err}")
-  endif()
-  set(last_out "${out}" PARENT_SCOPE)
-  set(last_err "${err}" PARENT_SCOPE)
-endfunction()
-
-run_raycut(0 sph --help)
+expect_exit(0 sph --help)
 if(NOT last_out MATCHES "--scenario")
   message(FATAL_ERROR "sph --help does not list --scenario:\n${last_out}")
 endif()
 
-run_raycut(0 sph --scenario small --n 1000 --method cell-list --frames 5 --every 5
+expect_exit(0 sph --scenario small --n 1000 --method cell-list --frames 5 --every 5
   --out ${WORK}/run --png --csv ${WORK}/sph.csv)
 foreach(file frames.pvd frames_000000.vtp frames_000001.vtp frame_000000.png frame_000005.png)
   if(NOT EXISTS ${WORK}/run/${file})
@@ -45,6 +35,6 @@ if(NOT row_count EQUAL 2 OR NOT header MATCHES "^scenario,method,N,frames,steps_
 endif()
 
 # Bad usage: exit 2 with one line.
-run_raycut(2 sph --scenario nowhere)
-run_raycut(2 sph --scenario small --method no-such-method --frames 1)
-run_raycut(2 sph --scenario small --png --frames 1)
+expect_exit(2 sph --scenario nowhere)
+expect_exit(2 sph --scenario small --method no-such-method --frames 1)
+expect_exit(2 sph --scenario small --png --frames 1)
