@@ -38,52 +38,7 @@ StepConstants constants_of(const SphParameters& p) {
   return c;
 }
 
-// An engine of `name` that computes the SPH kernels, or nothing: probed on two particles.
-std::optional<Engine> probe(const std::string& name) {
-  try {
-    Engine engine(name);
-    const std::vector<float> two = {0.0f, 0.0f, 0.0f, 0.5f, 0.0f, 0.0f};
-    engine.build({two.data(), 2, MemorySpace::host}, 1.0f);
-    KernelOptions options;
-    options.sph_mass = 1.0f;
-    engine.run(Kernel::sph_density, options);
-    return engine;
-  } catch (const Error& e) {
-    if (e.code() == ErrorCode::unsupported) return std::nullopt;
-    throw;
-  }
-}
-
-// The solver's preference for "auto": fastest first (docs/sph.md, measured on the H100).
-// grid-paper, the dense-grid comparison method, only after the ray-tracing methods.
-const char* const auto_order[] = {"grid",
-                                  "optix-aabb-sorted",
-                                  "optix-aabb",
-                                  "optix-aabb-fused",
-                                  "optix-spheres",
-                                  "optix-triangles",
-                                  "grid-paper",
-                                  "cell-list",
-                                  "brute-force-gpu",
-                                  "brute-force"};
-
-std::optional<Engine> auto_engine() {
-  for (const char* name : auto_order) {
-    bool available = false;
-    for (const auto& m : list_methods()) available |= m.name == name && m.available;
-    if (!available) continue;
-    if (auto engine = probe(name)) return engine;
-  }
-  return std::nullopt;
-}
-
 }  // namespace
-
-std::string auto_sph_method() {
-  auto engine = auto_engine();
-  if (!engine) throw Error(ErrorCode::unsupported, "no available method computes the SPH kernels");
-  return engine->method();
-}
 
 struct Solver::Impl {
   SphParameters params;
@@ -95,8 +50,6 @@ struct Solver::Impl {
   bool device = false;
   bool structure_current = false;  // the engine's structure is over the current positions
   StepTimes times;
-  bool host_view_ok = true;  // the host method exposes results_view (else results() copies)
-  Results host_results;      // the copy, for host methods without results_view
 
   // Host state (CPU methods).
   std::vector<float> x, v, rho, p;
@@ -110,19 +63,10 @@ struct Solver::Impl {
   float* rho_ptr() { return device ? drho->data() : rho.data(); }
   float* p_ptr() { return device ? dp->data() : p.data(); }
 
-  // Energy or force of the last run, where the method keeps them.
-  const float* result(bool force) {
-    if (device || host_view_ok) {
-      try {
-        const ResultsView view = engine.results_view();
-        return force ? view.force : view.energy;
-      } catch (const Error& e) {
-        if (device || e.code() != ErrorCode::unsupported) throw;
-        host_view_ok = false;
-      }
-    }
-    host_results = engine.results();
-    return force ? host_results.force.data() : host_results.energy.data();
+  // Energy or force of the last run, where the method keeps them (no copy).
+  const float* result(bool force) const {
+    const ResultsView view = engine.results_view();
+    return force ? view.force : view.energy;
   }
 
   KernelOptions options() const {
@@ -185,15 +129,7 @@ Solver::Solver(const SphScenario& scenario, std::string_view method, float skin)
   validate(scenario);
   if (!(skin < 0) && !std::isfinite(skin))
     throw Error(ErrorCode::invalid_argument, "skin must be finite");
-  std::optional<Engine> engine;
-  if (method == "auto") {
-    engine = auto_engine();
-    if (!engine)
-      throw Error(ErrorCode::unsupported, "no available method computes the SPH kernels");
-  } else {
-    engine.emplace(method);
-  }
-  impl_ = std::make_unique<Impl>(std::move(*engine));
+  impl_ = std::make_unique<Impl>(Engine(method));  // every method computes the SPH kernels
   Impl& s = *impl_;
   s.params = scenario.params;
   s.constants = constants_of(s.params);

@@ -33,16 +33,13 @@ struct StepTimes {
   double total_ms() const { return update_ms + density_ms + force_ms + integrate_ms; }
 };
 
-// What "auto" picks for the solver here: the fastest available method that computes the SPH
-// kernels (measured order of docs/sph.md), probed on two particles.
-std::string auto_sph_method();
-
 class Solver {
  public:
   // Validates the scenario (sph::validate), creates the engine, builds it over the initial
   // positions and runs one density pass (so copy_state has rho and p of frame 0); no step is
   // taken. `method` is
-  // a name of list_methods() or "auto" (auto_sph_method()). skin < 0 picks the default, h: the
+  // a name of list_methods() or "auto" (raycut::auto_method(): grid with a GPU, else cell-list,
+  // also the fastest for SPH, docs/sph.md). skin < 0 picks the default, h: the
   // OptiX methods then refit while no particle has moved more than h / 2 since the last full
   // build; the other methods ignore the skin and rebuild every step. skin = 0 rebuilds always.
   // Throws Error(invalid_argument / unsupported) for a bad scenario, method or skin.
