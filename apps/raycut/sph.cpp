@@ -1,7 +1,9 @@
 // raycut sph: the SPH fluid solver of spec/SPH.md on any method. Runs a scenario (the HIP RT
-// article's drop, or a small one for CI), writes every k-th frame as VTK XML PolyData plus a .pvd
-// series (and PNG renders with --png), prints progress on stderr and a summary (steps/s, mean
-// milliseconds per pass); --csv appends one row per run.
+// article's drop, or a small one for CI, in the article's model; or the weakly compressible
+// validation scenarios hydrostatic and dam-break, docs/sph-validation.md), writes every k-th frame
+// as VTK XML PolyData plus a .pvd series (and PNG renders with --png), prints progress on stderr
+// and a summary (steps/s, mean milliseconds per pass); --csv appends one row per run;
+// --result-csv writes the validation result (pressure profile or surge front).
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -11,6 +13,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "commands.hpp"
@@ -35,7 +38,108 @@ struct SphOptions {
   float skin = -1;
   std::string csv;
   bool quiet = false;
+  // Weakly compressible mode (hydrostatic, dam-break).
+  std::string mode;                                       // article or wcsph; empty: the scenario's
+  std::string config;                                     // key = value scenario file
+  std::vector<std::pair<std::string, std::string>> keys;  // CLI overrides, after the file
+  std::string result_csv;
 };
+
+bool is_validation(const std::string& scenario) {
+  return scenario == "hydrostatic" || scenario == "dam-break";
+}
+
+// Pressure against depth of a settled column: fluid particles binned by y (bins of dx from the
+// floor), time-averaged over the samples added, with rho0 g (H - y) at each bin's mean y; H = the
+// initial column's top (layers * dx).
+struct Profile {
+  const sph::WcsphConfig& c;
+  int layers;
+  std::vector<double> sy, sp, sr, rmin, rmax;
+  std::vector<long> count;
+  int samples = 0;
+  explicit Profile(const sph::WcsphConfig& config)
+      : c(config), layers(static_cast<int>(std::lround(config.height() / config.dx()))) {
+    const std::size_t bins = layers + 4;
+    sy.assign(bins, 0.0);
+    sp.assign(bins, 0.0);
+    sr.assign(bins, 0.0);
+    rmin.assign(bins, 1e30);
+    rmax.assign(bins, -1e30);
+    count.assign(bins, 0);
+  }
+  void add(const std::vector<float>& fixed, const std::vector<float>& x,
+           const std::vector<float>& rho, const std::vector<float>& p) {
+    const double dx = c.dx();
+    for (std::size_t i = 0; i < fixed.size(); ++i) {
+      if (fixed[i] != 0.0f) continue;
+      const int b = std::clamp(static_cast<int>(std::floor(x[3 * i + 1] / dx)), 0, layers + 3);
+      sy[b] += x[3 * i + 1];
+      sp[b] += p[i];
+      sr[b] += rho[i];
+      rmin[b] = std::min<double>(rmin[b], rho[i]);
+      rmax[b] = std::max<double>(rmax[b], rho[i]);
+      ++count[b];
+    }
+    ++samples;
+  }
+  void write(const std::string& path, double from, double to) const {
+    const double height = layers * c.dx();
+    const double rho0 = c.rest_density, g = c.gravity;
+    std::ofstream out(path);
+    if (!out) throw Error(ErrorCode::io, path + ": cannot open for writing");
+    out << "layer,y,count,p_mean,rho_mean,rho_min,rho_max,p_hydrostatic,p_rel_error,rho_rel_dev\n";
+    double worst_p = 0, worst_rho = 0, sum_p = 0;
+    int counted = 0;
+    for (int b = 0; b < layers + 4; ++b) {
+      if (count[b] == 0) continue;
+      const double y = sy[b] / count[b], pm = sp[b] / count[b], rm = sr[b] / count[b];
+      const double ph = rho0 * g * (height - y);
+      const double err = ph > 0 ? (pm - ph) / ph : 0.0;
+      const double dev = rm / rho0 - 1.0;
+      char line[320];
+      std::snprintf(line, sizeof line, "%d,%.6f,%.2f,%.4f,%.4f,%.4f,%.4f,%.4f,%.6f,%.6f\n", b, y,
+                    static_cast<double>(count[b]) / samples, pm, rm, rmin[b], rmax[b], ph, err,
+                    dev);
+      out << line;
+      if (b < layers - 2) {  // below the top two particle layers
+        worst_p = std::max(worst_p, std::abs(err));
+        worst_rho = std::max(worst_rho, std::abs(dev));
+        sum_p += std::abs(err);
+        ++counted;
+      }
+    }
+    std::printf(
+        "hydrostatic: H = %.4f m, %d layers, averaged over %d samples in t = [%.3f, %.3f] "
+        "s; below the top two layers: |p - rho0 g (H - y)| / (rho0 g (H - y)) max %.2f %% "
+        "(mean %.2f %%), max |rho_mean / rho0 - 1| = %.3f %% (%d layers)\n",
+        height, layers, samples, from, to, 100 * worst_p, counted ? 100 * sum_p / counted : 0.0,
+        100 * worst_rho, counted);
+    std::printf("wrote %s\n", path.c_str());
+  }
+};
+
+// The surge front: x_front = the largest fluid particle centre x + dx / 2 (the particle's volume
+// edge, so the initial front is exactly x = a), Z = x_front / a, T = t sqrt(2 g / a).
+struct FrontSample {
+  double t, T, x_front, Z, max_speed, kinetic_energy;
+};
+FrontSample front_of(double t, const sph::WcsphConfig& c, double mass,
+                     const std::vector<float>& fixed, const std::vector<float>& x,
+                     const std::vector<float>& v) {
+  double xmax = -1e30, vmax2 = 0, ke = 0;
+  for (std::size_t i = 0; i < fixed.size(); ++i) {
+    if (fixed[i] != 0.0f) continue;
+    xmax = std::max<double>(xmax, x[3 * i]);
+    const double v2 = double{v[3 * i]} * v[3 * i] + double{v[3 * i + 1]} * v[3 * i + 1] +
+                      double{v[3 * i + 2]} * v[3 * i + 2];
+    vmax2 = std::max(vmax2, v2);
+    ke += 0.5 * mass * v2;
+  }
+  const double a = c.column_width;
+  const double xf = xmax + 0.5 * c.dx();
+  return {t, t * std::sqrt(2.0 * c.gravity / a), xf, xf / a, std::sqrt(vmax2), ke};
+}
 
 using Clock = std::chrono::steady_clock;
 
@@ -62,7 +166,28 @@ void append_csv(const std::string& path, const std::string& scenario, const sph:
 }
 
 int run_sph(const SphOptions& o) {
-  sph::SphScenario scenario = o.scenario == "hiprt-drop" ? sph::hiprt_drop() : sph::small_drop(o.n);
+  const bool wcsph = is_validation(o.scenario);
+  const std::string mode = o.mode.empty() ? (wcsph ? "wcsph" : "article") : o.mode;
+  if ((mode == "wcsph") != wcsph)
+    throw Error(ErrorCode::invalid_argument,
+                "--mode " + mode + " does not go with --scenario " + o.scenario +
+                    " (wcsph: hydrostatic or dam-break; article: hiprt-drop or small)");
+  if (!wcsph && (!o.config.empty() || !o.keys.empty() || !o.result_csv.empty()))
+    throw Error(ErrorCode::invalid_argument,
+                "--config, --result-csv and the wcsph options need --scenario hydrostatic or "
+                "dam-break");
+  sph::WcsphConfig config;
+  config.scenario = o.scenario;
+  if (!o.config.empty()) {
+    config = sph::read_wcsph_config(o.config, config);
+    if (config.scenario != o.scenario)
+      throw Error(ErrorCode::invalid_argument, o.config + " sets scenario = " + config.scenario +
+                                                   ", the command line " + o.scenario);
+  }
+  for (const auto& [key, value] : o.keys) sph::set_wcsph_key(config, key, value);
+  sph::SphScenario scenario = wcsph                        ? sph::wcsph_scenario(config)
+                              : o.scenario == "hiprt-drop" ? sph::hiprt_drop()
+                                                           : sph::small_drop(o.n);
   const int frames = o.frames >= 0 ? o.frames : scenario.frames;
   sph::Solver solver(scenario, o.method, o.skin);
   const std::size_t n = solver.size();
@@ -71,6 +196,52 @@ int run_sph(const SphOptions& o) {
                scenario.name.c_str(), n, solver.method().c_str(),
                solver.space() == MemorySpace::device ? "device" : "host", solver.skin(), frames,
                solver.parameters().dt);
+  std::size_t fluid = n;
+  if (wcsph) {
+    const sph::SphParameters& prm = solver.parameters();
+    fluid =
+        static_cast<std::size_t>(std::count(scenario.fixed.begin(), scenario.fixed.end(), 0.0f));
+    const sph::TimeStepLimits lim =
+        sph::wcsph_time_step(prm.smoothing_length, prm.sound_speed, 0.1f * prm.sound_speed,
+                             100.0f * config.gravity, prm.rest_density, prm.viscosity, config.cfl);
+    std::fprintf(stderr,
+                 "  wcsph: a = %g m, H = %g m, dx = %g m (%d across a), h = %g m (%g dx), "
+                 "%zu fluid + %zu boundary particles (%d layers), m = %g kg\n"
+                 "  c0 = %g m/s, B = %g Pa, alpha = %g -> mu = %g Pa s, negative pressure %s; "
+                 "dt limits: CFL %g, force %g, viscous %g s; t_end = %g s; damping %g 1/s "
+                 "until %g s; gradient correction %g\n",
+                 config.column_width, config.height(), config.dx(), config.resolution,
+                 prm.smoothing_length, config.h_over_dx, fluid, n - fluid, config.boundary_layers,
+                 prm.particle_mass, prm.sound_speed,
+                 prm.sound_speed * prm.sound_speed * prm.rest_density / 7.0, config.viscosity_alpha,
+                 prm.viscosity, prm.clamp_negative_pressure ? "clamped at 0" : "kept", lim.cfl,
+                 lim.force, lim.viscous, config.run_time(), prm.damping, prm.damping_time,
+                 prm.gradient_correction);
+  }
+  // The dam break's front, sampled every 0.05 in T (and at the first and last frames).
+  std::vector<FrontSample> fronts;
+  std::vector<float> fx, fv, frho, fp;
+  const double T_per_t = std::sqrt(2.0 * config.gravity / config.column_width);
+  int last_sample = -1;
+  double max_mach = 0;
+  // The hydrostatic profile: averaged over every 20th step of the last 0.1 s (after the
+  // settling damping).
+  Profile profile(config);
+  const double profile_from =
+      std::max<double>(solver.parameters().damping_time, config.run_time() - 0.1);
+  double profile_first = -1;
+  auto sample = [&](int frame, bool force) {
+    if (!wcsph) return;
+    const int bucket = static_cast<int>(std::floor(solver.time() * T_per_t / 0.05 + 1e-9));
+    if (!force && bucket == last_sample) return;
+    last_sample = bucket;
+    solver.copy_state(fx, fv, frho, fp);
+    const FrontSample f =
+        front_of(solver.time(), config, solver.parameters().particle_mass, scenario.fixed, fx, fv);
+    max_mach = std::max(max_mach, f.max_speed / solver.parameters().sound_speed);
+    fronts.push_back(f);
+    (void)frame;
+  };
 
   std::optional<sph::VtkSeries> series;
   if (!o.out.empty()) series.emplace(o.out, "frames");
@@ -104,10 +275,18 @@ int run_sph(const SphOptions& o) {
   const auto wall_start = Clock::now();
   auto last_report = wall_start;
   save(0);
+  sample(0, true);
   for (int frame = 1; frame <= frames; ++frame) {
     const auto start = Clock::now();
     solver.step();
     step_seconds += seconds_since(start);
+    sample(frame, frame == frames);
+    if (wcsph && config.scenario == "hydrostatic" && solver.time() >= profile_from &&
+        (frame % 20 == 0 || frame == frames)) {
+      solver.copy_state(fx, fv, frho, fp);
+      profile.add(scenario.fixed, fx, frho, fp);
+      if (profile_first < 0) profile_first = solver.time();
+    }
     const sph::StepTimes t = solver.last_times();
     sum.update_ms += t.update_ms;
     sum.density_ms += t.density_ms;
@@ -116,7 +295,12 @@ int run_sph(const SphOptions& o) {
     if (frame % o.every == 0 || frame == frames) save(frame);
     if (!o.quiet && (seconds_since(last_report) > 1.0 || frame == frames)) {
       last_report = Clock::now();
-      std::fprintf(stderr, "  frame %d/%d  %.1f steps/s\n", frame, frames, frame / step_seconds);
+      if (wcsph)
+        std::fprintf(stderr, "  frame %d/%d  %.1f steps/s  t = %.4f s  Z = %.3f  KE = %.4g J\n",
+                     frame, frames, frame / step_seconds, solver.time(), fronts.back().Z,
+                     fronts.back().kinetic_energy);
+      else
+        std::fprintf(stderr, "  frame %d/%d  %.1f steps/s\n", frame, frames, frame / step_seconds);
     }
   }
   const double total_s = seconds_since(wall_start);
@@ -142,6 +326,38 @@ int run_sph(const SphOptions& o) {
     std::printf("wrote %d frames to %s%s\n", saved, series->pvd_path().c_str(),
                 o.png ? " (+ PNG)" : "");
   if (!o.csv.empty()) append_csv(o.csv, scenario.name, solver, frames, steps_per_s, mean);
+  if (wcsph) {
+    solver.copy_state(fx, fv, frho, fp);
+    double ke = 0;
+    for (std::size_t i = 0; i < n; ++i)
+      if (scenario.fixed[i] == 0.0f)
+        ke += 0.5 * solver.parameters().particle_mass *
+              (double{fv[3 * i]} * fv[3 * i] + double{fv[3 * i + 1]} * fv[3 * i + 1] +
+               double{fv[3 * i + 2]} * fv[3 * i + 2]);
+    std::printf("t = %.4f s, fluid kinetic energy %.4g J, max Mach |v|max / c0 = %.3f\n",
+                solver.time(), ke, max_mach);
+    if (config.scenario == "hydrostatic") {
+      if (profile.samples == 0) profile.add(scenario.fixed, fx, frho, fp);
+      if (!o.result_csv.empty())
+        profile.write(o.result_csv, profile_first < 0 ? solver.time() : profile_first,
+                      solver.time());
+    } else {
+      const FrontSample& f = fronts.back();
+      std::printf("dam-break: T = %.3f, Z = %.3f (x_front = %.4f m)\n", f.T, f.Z, f.x_front);
+      if (!o.result_csv.empty()) {
+        std::ofstream out(o.result_csv);
+        if (!out) throw Error(ErrorCode::io, o.result_csv + ": cannot open for writing");
+        out << "t,T,x_front,Z,max_speed,kinetic_energy\n";
+        char line[200];
+        for (const FrontSample& s : fronts) {
+          std::snprintf(line, sizeof line, "%.6f,%.5f,%.6f,%.5f,%.4f,%.6g\n", s.t, s.T, s.x_front,
+                        s.Z, s.max_speed, s.kinetic_energy);
+          out << line;
+        }
+        std::printf("wrote %s (%zu samples)\n", o.result_csv.c_str(), fronts.size());
+      }
+    }
+  }
   return 0;
 }
 
@@ -151,8 +367,40 @@ Command add_sph(CLI::App& app) {
   auto* cmd = app.add_subcommand(
       "sph", "SPH fluid (spec/SPH.md): the HIP RT article's falling water on any method");
   auto o = std::make_shared<SphOptions>();
-  cmd->add_option("--scenario", o->scenario, "hiprt-drop (131,072 particles) or small")
-      ->check(CLI::IsMember({"hiprt-drop", "small"}));
+  auto* scenario_option =
+      cmd->add_option(
+             "--scenario", o->scenario,
+             "hiprt-drop (131,072 particles) or small (the article's model); hydrostatic or "
+             "dam-break (weakly compressible, docs/sph-validation.md)")
+          ->check(CLI::IsMember({"hiprt-drop", "small", "hydrostatic", "dam-break"}));
+  cmd->add_option("--mode", o->mode,
+                  "article or wcsph (default: the scenario's; wcsph alone runs dam-break)")
+      ->check(CLI::IsMember({"article", "wcsph"}));
+  cmd->add_option("--config", o->config,
+                  "Scenario file of key = value lines (docs/sph-validation.md); the options below "
+                  "override it");
+  const auto key = [cmd, o](const char* flag, const char* name, const char* help) {
+    cmd->add_option_function<std::string>(
+        flag, [o, name](const std::string& value) { o->keys.emplace_back(name, value); }, help);
+  };
+  key("--c0", "c0",
+      "wcsph: speed of sound in m/s (default 10 sqrt(2 g H), dam-break 20 sqrt(g H))");
+  key("--dx", "dx", "wcsph: particle spacing in m (sets --resolution = a / dx)");
+  key("--resolution", "resolution", "wcsph: particles across the column width a (default 10)");
+  key("--cfl", "cfl", "wcsph: time-step coefficient (default 0.25)");
+  key("--viscosity-alpha", "viscosity_alpha",
+      "wcsph: Monaghan's alpha, mu = rho0 alpha h c0 / 20 (default 0.04)");
+  key("--h-over-dx", "h_over_dx", "wcsph: support radius h / dx (default 2)");
+  key("--layers", "boundary_layers", "wcsph: layers of fixed boundary particles (default 3)");
+  key("--negative-pressure", "negative_pressure", "wcsph: clamp (default) or keep");
+  key("--column-width", "column_width", "wcsph: a in m (default 0.1)");
+  key("--column-height", "column_height", "wcsph: H in m (default 2 a)");
+  key("--tank-length", "tank_length", "wcsph: the tank's length in m (default 5 a / a)");
+  key("--end-time", "end_time", "wcsph: simulated seconds (default T = 3.3 / 0.5 s)");
+  key("--damping", "damping", "wcsph: settling damping rate in 1/s (default c0 / H, hydrostatic)");
+  key("--damping-time", "damping_time", "wcsph: damp while t < this (default 0.3 s, hydrostatic)");
+  cmd->add_option("--result-csv", o->result_csv,
+                  "wcsph: write the pressure profile (hydrostatic) or the surge front (dam-break)");
   cmd->add_option("-n,--n", o->n, "Particles of the small scenario")->check(CLI::PositiveNumber);
   cmd->add_option("-m,--method", o->method, "Interaction method, or auto");
   cmd->add_option("--frames", o->frames, "Steps to run (default: the scenario's, 200)")
@@ -168,8 +416,10 @@ Command add_sph(CLI::App& app) {
       ->check(CLI::NonNegativeNumber);
   cmd->add_option("--csv", o->csv, "Append a result row to this CSV file");
   cmd->add_flag("-q,--quiet", o->quiet, "No progress lines");
-  return [o] {
+  return [o, scenario_option] {
     if (o->png && o->out.empty()) throw Error(ErrorCode::invalid_argument, "--png needs --out DIR");
+    // --mode wcsph alone runs the dam break.
+    if (o->mode == "wcsph" && scenario_option->count() == 0) o->scenario = "dam-break";
     return run_sph(*o);
   };
 }

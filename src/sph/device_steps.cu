@@ -25,7 +25,7 @@ __global__ void density_and_pressure_kernel(const float* __restrict__ neighbour_
 
 __global__ void integrate_kernel(float* __restrict__ x, float* __restrict__ v,
                                  const float* __restrict__ force, const float* __restrict__ rho,
-                                 std::size_t n, StepConstants c) {
+                                 const float* __restrict__ fixed, std::size_t n, StepConstants c) {
   const std::size_t i = blockIdx.x * std::size_t{blockDim.x} + threadIdx.x;
   if (i >= n) return;
   float xi[3] = {x[3 * i], x[3 * i + 1], x[3 * i + 2]};
@@ -33,7 +33,12 @@ __global__ void integrate_kernel(float* __restrict__ x, float* __restrict__ v,
   const float zero[3] = {0.0f, 0.0f, 0.0f};
   const float fi[3] = {force ? force[3 * i] : 0.0f, force ? force[3 * i + 1] : 0.0f,
                        force ? force[3 * i + 2] : 0.0f};
-  integrate_particle(xi, vi, force ? fi : zero, rho[i], c);
+  if (fixed) {
+    if (fixed[i] != 0.0f) return;  // boundary particle: never moves
+    integrate_or_hold(xi, vi, force ? fi : zero, rho[i], 0.0f, c);
+  } else {
+    integrate_particle(xi, vi, force ? fi : zero, rho[i], c);
+  }
   for (int k = 0; k < 3; ++k) {
     x[3 * i + k] = xi[k];
     v[3 * i + k] = vi[k];
@@ -49,10 +54,10 @@ void density_and_pressure(const float* neighbour_density, float* rho, float* p, 
   RAYCUT_CUDA_CHECK_LAUNCH();
 }
 
-void integrate(float* x, float* v, const float* force, const float* rho, std::size_t n,
-               const StepConstants& c) {
+void integrate(float* x, float* v, const float* force, const float* rho, const float* fixed,
+               std::size_t n, const StepConstants& c) {
   if (n == 0) return;
-  integrate_kernel<<<blocks_for(n), block>>>(x, v, force, rho, n, c);
+  integrate_kernel<<<blocks_for(n), block>>>(x, v, force, rho, fixed, n, c);
   RAYCUT_CUDA_CHECK_LAUNCH();
 }
 

@@ -15,9 +15,11 @@ namespace raycut::sph::device {
 void density_and_pressure(const float* neighbour_density, float* rho, float* p, std::size_t n,
                           const StepConstants& c);
 
-// integrate_particle for every particle: x, v and force are (n, 3), rho has n values.
-void integrate(float* x, float* v, const float* force, const float* rho, std::size_t n,
-               const StepConstants& c);
+// integrate_particle for every particle: x, v and force are (n, 3), rho has n values. fixed
+// (n values, or null for none: integrate_particle, the article's model) marks the boundary
+// particles of the weakly compressible mode (integrate_or_hold).
+void integrate(float* x, float* v, const float* force, const float* rho, const float* fixed,
+               std::size_t n, const StepConstants& c);
 
 // Copies n floats device -> host (synchronous).
 void copy_to_host(float* host, const float* device_values, std::size_t n);

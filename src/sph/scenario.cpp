@@ -2,7 +2,10 @@
 // main.cpp) arithmetic in float, so hiprt_drop's coordinates are the sample's bit for bit.
 #include "sph/scenario.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <fstream>
+#include <limits>
 #include <string>
 #include <utility>
 
@@ -141,6 +144,10 @@ void validate(const SphScenario& s) {
               std::to_string(s.position.size()) + " and " + std::to_string(s.velocity.size()) +
               ")");
   const std::size_t n = s.position.size() / 3;
+  require(s.fixed.empty() || s.fixed.size() == n, ErrorCode::invalid_input,
+          "scenario '" + s.name + "': fixed must be empty or hold N values");
+  require(!p.weakly_compressible || positive_finite(p.sound_speed), ErrorCode::invalid_argument,
+          bad("sound_speed"));
   for (std::size_t i = 0; i < n; ++i) {
     const float* x = &s.position[3 * i];
     const float* v = &s.velocity[3 * i];
@@ -149,6 +156,7 @@ void validate(const SphScenario& s) {
     require(finite, ErrorCode::invalid_input,
             "scenario '" + s.name + "': non-finite position or velocity at particle index " +
                 std::to_string(i));
+    if (!s.fixed.empty() && s.fixed[i] != 0.0f) continue;  // boundary particles may sit outside
     for (std::size_t w = 0; w < p.walls.size(); ++w) {
       const WallPlane& wall = p.walls[w];
       const float inside =
@@ -158,6 +166,252 @@ void validate(const SphScenario& s) {
                   " is outside the pool (wall " + std::to_string(w) + ")");
     }
   }
+}
+
+float WcsphConfig::c0() const {
+  if (sound_speed > 0.0f) return sound_speed;
+  return scenario == "dam-break" ? 20.0f * std::sqrt(gravity * height())
+                                 : 10.0f * std::sqrt(2.0f * gravity * height());
+}
+
+float WcsphConfig::viscosity() const {
+  const float h = h_over_dx * dx();
+  return rest_density * viscosity_alpha * h * c0() / 20.0f;
+}
+
+float WcsphConfig::run_time() const {
+  if (end_time > 0.0f) return end_time;
+  if (scenario == "dam-break") return 3.3f / std::sqrt(2.0f * gravity / column_width);
+  return 0.5f;
+}
+
+double TimeStepLimits::dt() const {
+  return std::min({cfl, force, viscous});
+}
+
+TimeStepLimits wcsph_time_step(float h, float c0, float max_speed, float max_acceleration,
+                               float rest_density, float viscosity, float coefficient) {
+  const double inf = std::numeric_limits<double>::infinity();
+  const double hm = 0.5 * h;  // Monaghan's smoothing length: our h is the support radius 2 h_M
+  TimeStepLimits t;
+  t.cfl = coefficient * hm / (double{c0} + max_speed);
+  t.force = max_acceleration > 0.0f ? coefficient * std::sqrt(hm / max_acceleration) : inf;
+  t.viscous = viscosity > 0.0f ? 0.5 * coefficient * hm * hm * rest_density / viscosity : inf;
+  return t;
+}
+
+namespace {
+
+// Sums over the cubic lattice of spacing dx around a point of it, in double: poly6 = sum_j
+// W_poly6(r, h) (the point included), gradient = sum_j x_j^2 |grad W_spiky(r, h)| / r (the
+// point excluded; times the particle volume it is 1 in the continuum).
+struct LatticeSums {
+  double poly6 = 0, gradient = 0;
+};
+LatticeSums lattice_sums(double dx, double h) {
+  const double pi = 3.14159265358979323846;
+  const double poly6 = 315.0 / (64.0 * pi * std::pow(h, 9));
+  const double spiky = 45.0 / (pi * std::pow(h, 6));
+  const int reach = static_cast<int>(std::ceil(h / dx));
+  LatticeSums s;
+  for (int i = -reach; i <= reach; ++i)
+    for (int j = -reach; j <= reach; ++j)
+      for (int k = -reach; k <= reach; ++k) {
+        const double r2 = dx * dx * (i * i + j * j + k * k);
+        if (r2 >= h * h) continue;
+        s.poly6 += poly6 * std::pow(h * h - r2, 3);
+        if (r2 > 0) {
+          const double r = std::sqrt(r2);
+          s.gradient += dx * dx * i * i * spiky * (h - r) * (h - r) / r;
+        }
+      }
+  return s;
+}
+
+float parse_float(const std::string& key, const std::string& value) {
+  try {
+    std::size_t used = 0;
+    const float f = std::stof(value, &used);
+    if (used != value.size()) throw std::invalid_argument(value);
+    return f;
+  } catch (const std::exception&) {
+    throw Error(ErrorCode::invalid_argument, "scenario key '" + key + "': not a number: " + value);
+  }
+}
+
+std::string trim(const std::string& s) {
+  const auto b = s.find_first_not_of(" \t\r");
+  if (b == std::string::npos) return "";
+  const auto e = s.find_last_not_of(" \t\r");
+  return s.substr(b, e - b + 1);
+}
+
+}  // namespace
+
+void set_wcsph_key(WcsphConfig& c, const std::string& key, const std::string& value) {
+  const auto number = [&] { return parse_float(key, value); };
+  const auto integer = [&] {
+    const float f = number();
+    if (f != std::floor(f))
+      throw Error(ErrorCode::invalid_argument, "scenario key '" + key + "': not an integer");
+    return static_cast<int>(f);
+  };
+  if (key == "scenario") {
+    require(value == "dam-break" || value == "hydrostatic", ErrorCode::invalid_argument,
+            "scenario must be dam-break or hydrostatic, not " + value);
+    c.scenario = value;
+  } else if (key == "column_width") {
+    c.column_width = number();
+  } else if (key == "column_height") {
+    c.column_height = number();
+  } else if (key == "tank_length") {
+    c.tank_length = number();
+  } else if (key == "resolution") {
+    c.resolution = integer();
+  } else if (key == "dx") {
+    const float dx = number();
+    require(dx > 0.0f, ErrorCode::invalid_argument, "dx must be > 0");
+    c.resolution = static_cast<int>(std::lround(c.column_width / dx));
+  } else if (key == "h_over_dx") {
+    c.h_over_dx = number();
+  } else if (key == "sound_speed" || key == "c0") {
+    c.sound_speed = number();
+  } else if (key == "cfl") {
+    c.cfl = number();
+  } else if (key == "viscosity_alpha") {
+    c.viscosity_alpha = number();
+  } else if (key == "rest_density") {
+    c.rest_density = number();
+  } else if (key == "gravity") {
+    c.gravity = number();
+  } else if (key == "boundary_layers") {
+    c.boundary_layers = integer();
+  } else if (key == "negative_pressure") {
+    require(value == "clamp" || value == "keep", ErrorCode::invalid_argument,
+            "negative_pressure must be clamp or keep, not " + value);
+    c.clamp_negative_pressure = value == "clamp";
+  } else if (key == "end_time") {
+    c.end_time = number();
+  } else if (key == "damping") {
+    c.damping = number();
+  } else if (key == "damping_time") {
+    c.damping_time = number();
+  } else {
+    throw Error(ErrorCode::invalid_argument, "unknown scenario key '" + key + "'");
+  }
+}
+
+WcsphConfig read_wcsph_config(const std::string& path, WcsphConfig base) {
+  std::ifstream in(path);
+  if (!in) throw Error(ErrorCode::io, path + ": cannot open");
+  std::string line;
+  int number = 0;
+  while (std::getline(in, line)) {
+    ++number;
+    const auto hash = line.find('#');
+    if (hash != std::string::npos) line.resize(hash);
+    line = trim(line);
+    if (line.empty()) continue;
+    const auto eq = line.find('=');
+    if (eq == std::string::npos)
+      throw Error(ErrorCode::invalid_argument,
+                  path + ":" + std::to_string(number) + ": expected key = value");
+    try {
+      set_wcsph_key(base, trim(line.substr(0, eq)), trim(line.substr(eq + 1)));
+    } catch (const Error& e) {
+      throw Error(ErrorCode::invalid_argument,
+                  path + ":" + std::to_string(number) + ": " + e.what());
+    }
+  }
+  return base;
+}
+
+SphScenario wcsph_scenario(const WcsphConfig& c) {
+  require(c.scenario == "dam-break" || c.scenario == "hydrostatic", ErrorCode::invalid_argument,
+          "scenario must be dam-break or hydrostatic");
+  require(positive_finite(c.column_width) && c.resolution >= 2 && c.resolution <= 1000,
+          ErrorCode::invalid_argument, "need column_width > 0 and resolution in [2, 1000]");
+  require(c.h_over_dx >= 1.0f && c.h_over_dx <= 4.0f, ErrorCode::invalid_argument,
+          "h_over_dx must be in [1, 4]");
+  require(c.boundary_layers >= 1 && c.boundary_layers <= 8, ErrorCode::invalid_argument,
+          "boundary_layers must be in [1, 8]");
+  require(positive_finite(c.cfl) && c.cfl <= 1.0f, ErrorCode::invalid_argument,
+          "cfl must be in (0, 1]");
+  require(std::isfinite(c.viscosity_alpha) && c.viscosity_alpha >= 0.0f,
+          ErrorCode::invalid_argument, "viscosity_alpha must be >= 0");
+  require(positive_finite(c.rest_density) && positive_finite(c.gravity) &&
+              positive_finite(c.height()) && positive_finite(c.length()) &&
+              c.length() >= c.column_width && c.sound_speed >= 0.0f && c.end_time >= 0.0f,
+          ErrorCode::invalid_argument, "bad rest_density, gravity, lengths, c0 or end_time");
+
+  const double dx = c.dx();
+  const float h = c.h_over_dx * c.dx();
+  const float c0 = c.c0();
+  const int nx_fluid = c.resolution;
+  const int ny_fluid = static_cast<int>(std::lround(c.height() / dx));
+  const int nz = c.resolution;
+  const int nx_tank = static_cast<int>(std::lround(c.length() / dx));
+  const int ny_tank = ny_fluid + 2;  // walls: 2 dx above the fluid's top, open top
+  const int layers = c.boundary_layers;
+
+  SphScenario s;
+  s.name = c.scenario;
+  SphParameters& p = s.params;
+  p.rest_density = c.rest_density;
+  const LatticeSums sums = lattice_sums(dx, h);
+  p.particle_mass = static_cast<float>(c.rest_density / sums.poly6);
+  p.gradient_correction = static_cast<float>(sums.poly6 / sums.gradient);  // 1 / (V sum)
+  p.smoothing_length = h;
+  p.stiffness = 1.0f;  // unused by Tait
+  p.viscosity = c.viscosity();
+  p.gravity = {0.0f, -c.gravity, 0.0f};
+  p.weakly_compressible = true;
+  p.sound_speed = c0;
+  p.clamp_negative_pressure = c.clamp_negative_pressure;
+  const bool settle = c.scenario == "hydrostatic";
+  p.damping = c.damping >= 0.0f ? c.damping : (settle ? c0 / c.height() : 0.0f);
+  p.damping_time = c.damping_time >= 0.0f ? c.damping_time : (settle ? 0.3f : 0.0f);
+  require(std::isfinite(p.damping) && std::isfinite(p.damping_time), ErrorCode::invalid_argument,
+          "damping and damping_time must be finite");
+  const TimeStepLimits limits =
+      wcsph_time_step(h, c0, 0.1f * c0, 100.0f * c.gravity, c.rest_density, p.viscosity, c.cfl);
+  p.dt = static_cast<float>(limits.dt());
+  // Safety planes through the innermost boundary layer; stiffness (c0 / h_M)^2 (a period of
+  // 2 pi h_M / c0, resolved by the CFL step).
+  const float hm = 0.5f * h;
+  p.wall_stiffness = (c0 / hm) * (c0 / hm);
+  const float half = 0.5f * static_cast<float>(dx);
+  const float lx = static_cast<float>(nx_tank * dx), lz = static_cast<float>(nz * dx);
+  const float ceiling = 100.0f * static_cast<float>(ny_tank * dx);
+  p.walls = {{{{0.0f, 1.0f, 0.0f}, half},
+              {{0.0f, -1.0f, 0.0f}, ceiling},
+              {{1.0f, 0.0f, 0.0f}, half},
+              {{-1.0f, 0.0f, 0.0f}, lx + half},
+              {{0.0f, 0.0f, 1.0f}, half},
+              {{0.0f, 0.0f, -1.0f}, lz + half}}};
+
+  const auto add = [&](int i, int j, int k, float fixed) {
+    s.position.push_back(static_cast<float>((i + 0.5) * dx));
+    s.position.push_back(static_cast<float>((j + 0.5) * dx));
+    s.position.push_back(static_cast<float>((k + 0.5) * dx));
+    s.fixed.push_back(fixed);
+  };
+  // Fluid first (x fastest, then y, then z), then the boundary.
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny_fluid; ++j)
+      for (int i = 0; i < nx_fluid; ++i) add(i, j, k, 0.0f);
+  for (int k = -layers; k < nz + layers; ++k)
+    for (int j = -layers; j < ny_tank; ++j)
+      for (int i = -layers; i < nx_tank + layers; ++i) {
+        const bool inside = i >= 0 && i < nx_tank && j >= 0 && k >= 0 && k < nz;
+        if (!inside) add(i, j, k, 1.0f);
+      }
+  s.velocity.assign(s.position.size(), 0.0f);
+  const double frames = std::ceil(c.run_time() / double{p.dt});
+  require(frames < 1e8, ErrorCode::invalid_argument, "end_time / dt: too many steps");
+  s.frames = static_cast<int>(frames);
+  s.image_frame = 0;
+  return s;
 }
 
 }  // namespace raycut::sph

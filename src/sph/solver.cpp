@@ -35,10 +35,33 @@ StepConstants constants_of(const SphParameters& p) {
     for (int k = 0; k < 3; ++k) c.wall_normal[w][k] = p.walls[w].normal[k];
     c.wall_d[w] = p.walls[w].d;
   }
+  c.equation_of_state = p.weakly_compressible ? eos_tait : eos_article;
+  // B = c0^2 rho0 / gamma, gamma = 7 (in double, rounded once).
+  c.tait_b = static_cast<float>(double{p.sound_speed} * p.sound_speed * p.rest_density / 7.0);
+  c.clamp_negative = p.clamp_negative_pressure ? 1 : 0;
+  c.velocity_keep = 1.0f;  // Solver::step sets the settling damping's
   return c;
 }
 
 }  // namespace
+
+// Mueller's pressure term -m (p_i + p_j) / (2 rho_j) grad W estimates grad p / 2 (the arithmetic
+// mean halves the interpolant sum m p_j / rho_j grad W), so the weakly compressible mode runs it
+// with 2 m: -sum m (p_i + p_j) / rho_j grad W, which divided by rho_i is the consistent, symmetric
+// (momentum-conserving) -sum m (p_i + p_j) / (rho_i rho_j) grad W -> -grad p / rho; times the
+// lattice's gradient renormalisation. mu is divided by the same factor, so the viscosity term
+// mu m (v_j - v_i) / rho_j lap W keeps its value.
+KernelOptions force_pass_options(const SphParameters& params) {
+  KernelOptions o;
+  o.sph_mass = params.particle_mass;
+  o.sph_viscosity = params.viscosity;
+  if (params.weakly_compressible) {
+    const float scale = 2.0f * params.gradient_correction;
+    o.sph_mass = scale * params.particle_mass;
+    o.sph_viscosity = params.viscosity / scale;
+  }
+  return o;
+}
 
 struct Solver::Impl {
   SphParameters params;
@@ -53,8 +76,9 @@ struct Solver::Impl {
 
   // Host state (CPU methods).
   std::vector<float> x, v, rho, p;
+  std::vector<float> fixed;  // 1 for a fixed boundary particle; empty: none
   // Device state (GPU methods): DeviceArray exists only with CUDA; empty optionals otherwise.
-  std::optional<DeviceArray> dx, dv, drho, dp;
+  std::optional<DeviceArray> dx, dv, drho, dp, dfixed;
 
   explicit Impl(Engine e) : engine(std::move(e)) {}
 
@@ -62,6 +86,10 @@ struct Solver::Impl {
   float* v_ptr() { return device ? dv->data() : v.data(); }
   float* rho_ptr() { return device ? drho->data() : rho.data(); }
   float* p_ptr() { return device ? dp->data() : p.data(); }
+  const float* fixed_ptr() const {
+    if (fixed.empty()) return nullptr;
+    return device ? dfixed->data() : fixed.data();
+  }
 
   // Energy or force of the last run, where the method keeps them (no copy).
   const float* result(bool force) const {
@@ -75,6 +103,8 @@ struct Solver::Impl {
     o.sph_viscosity = params.viscosity;
     return o;
   }
+
+  KernelOptions force_options() const { return force_pass_options(params); }
 
   // Density (neighbours j != i, then the self term) and pressure at the built positions.
   void density_pass() {
@@ -112,13 +142,19 @@ struct Solver::Impl {
   void integrate(const float* force) {
     if (device) {
 #if defined(RAYCUT_HAVE_CUDA)
-      device::integrate(x_ptr(), v_ptr(), force, rho_ptr(), n, constants);
+      device::integrate(x_ptr(), v_ptr(), force, rho_ptr(), fixed_ptr(), n, constants);
 #endif
       return;
     }
     const StepConstants c = constants;
     const long long count = static_cast<long long>(n);
     const float zero[3] = {0.0f, 0.0f, 0.0f};
+    if (!fixed.empty()) {
+#pragma omp parallel for schedule(static)
+      for (long long i = 0; i < count; ++i)
+        integrate_or_hold(&x[3 * i], &v[3 * i], force ? &force[3 * i] : zero, rho[i], fixed[i], c);
+      return;
+    }
 #pragma omp parallel for schedule(static)
     for (long long i = 0; i < count; ++i)
       integrate_particle(&x[3 * i], &v[3 * i], force ? &force[3 * i] : zero, rho[i], c);
@@ -138,6 +174,8 @@ Solver::Solver(const SphScenario& scenario, std::string_view method, float skin)
   s.engine.set_update_policy({s.skin});
   s.device = s.engine.space() == MemorySpace::device;
   const std::vector<float> zeros(s.n, 0.0f);
+  s.fixed = scenario.fixed;
+  if (s.device && !s.fixed.empty()) s.dfixed.emplace(s.fixed);
   if (s.device) {
     s.dx.emplace(scenario.position);
     s.dv.emplace(scenario.velocity);
@@ -185,15 +223,17 @@ void Solver::step() {
   start = Clock::now();
   const float* force = nullptr;
   if (s.n > 0) {
-    KernelOptions options = s.options();
+    KernelOptions options = s.force_options();
     options.sph = {s.v_ptr(), s.rho_ptr(), s.p_ptr()};
     s.engine.run(Kernel::sph_force, options);
     force = s.result(true);
   }
   t.force_ms = elapsed_ms(start);
 
-  // 4. Walls, gravity, semi-implicit Euler.
+  // 4. Walls, gravity, semi-implicit Euler (the settling damping while t < damping_time).
   start = Clock::now();
+  const bool damped = s.params.damping > 0.0f && time() < s.params.damping_time;
+  s.constants.velocity_keep = damped ? 1.0f / (1.0f + s.params.dt * s.params.damping) : 1.0f;
   s.integrate(force);
   s.sync();
   t.integrate_ms = elapsed_ms(start);

@@ -33,6 +33,11 @@ struct StepTimes {
   double total_ms() const { return update_ms + density_ms + force_ms + integrate_ms; }
 };
 
+// The KernelOptions (mass, viscosity) of the force pass: the parameters' own in the article's
+// model; 2 m gradient_correction and mu / (2 gradient_correction) in the weakly compressible mode
+// (solver.cpp says why). The inputs (KernelOptions::sph) are left empty.
+KernelOptions force_pass_options(const SphParameters& params);
+
 class Solver {
  public:
   // Validates the scenario (sph::validate), creates the engine, builds it over the initial
