@@ -339,10 +339,18 @@ SphScenario wcsph_scenario(const WcsphConfig& c) {
           "cfl must be in (0, 1]");
   require(std::isfinite(c.viscosity_alpha) && c.viscosity_alpha >= 0.0f,
           ErrorCode::invalid_argument, "viscosity_alpha must be >= 0");
-  require(positive_finite(c.rest_density) && positive_finite(c.gravity) &&
-              positive_finite(c.height()) && positive_finite(c.length()) &&
-              c.length() >= c.column_width && c.sound_speed >= 0.0f && c.end_time >= 0.0f,
-          ErrorCode::invalid_argument, "bad rest_density, gravity, lengths, c0 or end_time");
+  require(positive_finite(c.rest_density), ErrorCode::invalid_argument,
+          "rest_density must be finite and > 0");
+  require(positive_finite(c.gravity), ErrorCode::invalid_argument,
+          "gravity must be finite and > 0");
+  require(
+      positive_finite(c.height()) && positive_finite(c.length()) && c.length() >= c.column_width,
+      ErrorCode::invalid_argument,
+      "column_height must be > 0 and tank_length at least column_width");
+  require(std::isfinite(c.sound_speed) && c.sound_speed >= 0.0f, ErrorCode::invalid_argument,
+          "c0 must be finite and >= 0 (0: the default)");
+  require(std::isfinite(c.end_time) && c.end_time >= 0.0f, ErrorCode::invalid_argument,
+          "end_time must be finite and >= 0 (0: the default)");
 
   const double dx = c.dx();
   const float h = c.h_over_dx * c.dx();
