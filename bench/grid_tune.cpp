@@ -4,10 +4,11 @@
 //   grid_tune --suite uniform --params 32 --ps 1,8,32 --variants k1,k2,k3,k2-nocull,k2-compact
 //
 // A variant is k<cells per cutoff>, optionally followed by -nocull (scan whole rows),
-// -dense or -compact (force the cell table), -g<lanes per target>,
-// -x<x split>; `paper` is grid-paper, `auto` the grid with its automatic choices. One CSV row per
-// (configuration, variant) on stdout, CUDA-event medians in ms; `pairs` (count kernel) must be the
-// same on every row of a configuration.
+// -dense or -compact (force the cell table), -counting or -radix (how the dense table is built),
+// -g<lanes per target>, -x<x split>; `paper` is grid-paper, `auto` the grid with its automatic
+// choices (auto-radix: with a suffix). One CSV row per (configuration, variant) on stdout,
+// CUDA-event medians in ms; `pairs` (count kernel) must be the same on every row of a
+// configuration.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -34,13 +35,16 @@ std::vector<std::string> split(const std::string& s) {
 std::unique_ptr<raycut::detail::Method> make_variant(const std::string& name) {
   namespace cuda = raycut::detail::cuda;
   if (name == "paper") return cuda::make_grid_paper();
-  if (name == "auto") return cuda::make_grid();
   cuda::GridOptions o;
-  if (name.size() < 2 || name[0] != 'k') throw std::runtime_error("bad variant " + name);
-  o.cells_per_cutoff = std::stoi(name.substr(1));
+  if (name.size() >= 2 && name[0] == 'k')
+    o.cells_per_cutoff = std::stoi(name.substr(1));
+  else if (name.rfind("auto", 0) != 0)
+    throw std::runtime_error("bad variant " + name);
   if (name.find("-nocull") != std::string::npos) o.cull = false;
   if (name.find("-dense") != std::string::npos) o.layout = 1;
   if (name.find("-compact") != std::string::npos) o.layout = 2;
+  if (name.find("-counting") != std::string::npos) o.dense_build = 1;
+  if (name.find("-radix") != std::string::npos) o.dense_build = 2;
   if (const auto x = name.find("-x"); x != std::string::npos)
     o.x_split = std::stoi(name.substr(x + 2));
   if (const auto g = name.find("-g"); g != std::string::npos)

@@ -49,6 +49,16 @@ struct Accumulator {
   float fx = 0.0f, fy = 0.0f, fz = 0.0f;
 };
 
+// a / b: on the device the hardware reciprocal (within 2 ulp; the IEEE division costs as much as
+// the rest of a Lennard-Jones pair), on the host the division.
+RAYCUT_HD float fast_divide(float a, float b) {
+#if defined(__CUDA_ARCH__)
+  return __fdividef(a, b);
+#else
+  return a / b;
+#endif
+}
+
 // The geometric kernels ignore the indices.
 struct CountKernel {
   static constexpr bool has_count = true, has_energy = false, has_force = false;
@@ -64,7 +74,7 @@ struct LennardJonesKernel {
   float sigma_squared;
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float, float, float,
                             float r2) const {
-    const float s2 = sigma_squared / r2;
+    const float s2 = fast_divide(sigma_squared, r2);
     const float s6 = s2 * s2 * s2;
     acc.energy += four_epsilon * (s6 * s6 - s6);
   }

@@ -1,13 +1,15 @@
 // grid: the production CUDA grid. Memory O(N) whatever the distribution, exact full semantics.
 //
-// Build: bounding box (one read back), cell key per particle (row-major, so the cells of one x
-// row are consecutive keys), a stable radix sort of (key, index) on only the key bits in use,
-// the positions gathered into cell order as float4 (w = original index), then a cell table:
-//   dense   when the box has at most 8N cells: start[c] for every cell c (+1 entry), so the
-//           particles of cells [a, b] of a row are slots [start[a], start[b + 1]);
-//   compact otherwise (a far outlier, a sphere surface at fine cells): the sorted unique cell
-//           keys with their first slots, and a hash table from row (y, z) to that row's run of
-//           unique cells; a row's [a, b] is then two binary searches in its run.
+// Build: bounding box (one read back), a cell key per particle (row-major, so the cells of one
+// x row are consecutive keys), the particles in cell order (within a cell by index: the layout,
+// and every sum, is the same on every run) as float4 (w = original index), and a cell table:
+//   dense   when the box has at most 8 cells per particle (or 64 within 2^24 cells): start[c]
+//           for every cell c (+1 entry), so the particles of cells [a, b] of a row are slots
+//           [start[a], start[b + 1]). Built by a counting sort below 2^20 particles (atomics,
+//           then ranks by index within each cell), by a radix sort of (key, index) above;
+//   compact otherwise (a far outlier, a sphere surface at fine cells): a radix sort, the sorted
+//           unique cell keys with their first slots, and a hash table from row (y, z) to that
+//           row's run of unique cells; a row's [a, b] is then two binary searches in its run.
 // Cells are C/k wide in y and z (k = 1 or 2 = reach, by density) and x_split times narrower in
 // x: a row of x cells is one range of slots whatever their width, so narrow x cells trim each
 // row closer to the target's sphere at no cost in rows.
@@ -19,7 +21,10 @@
 // round-off); the shared predicate decides every pair; self is excluded by slot. docs/grid.md
 // has the measurements behind each choice.
 #include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_scan.cuh>
 #include <cub/device/device_select.cuh>
+#include <cuda/functional>
+#include <cuda/std/functional>
 
 #include <algorithm>
 #include <cmath>
@@ -50,6 +55,12 @@ constexpr int default_x_split[3] = {1, 2, 4};
 //   group kernel) so that small inputs still fill the GPU.
 constexpr std::size_t thread_kernel_from = 65536 + 1;
 constexpr std::size_t group_of_32_up_to = 8192;
+// - the dense table from a counting sort below this many particles, from a radix sort above:
+//   the counting sort's scattered atomics lose to the sort's streaming passes at large N.
+constexpr std::size_t counting_sort_below = std::size_t{1} << 20;
+// - the dense cell table when it has at most 8 cells per particle, or up to 64 while it has at
+//   most this many cells (64 MiB); else the compact table (Grid::fits_dense).
+constexpr std::uint64_t dense_cells_any_n = std::uint64_t{1} << 24;
 
 // What every query kernel needs to know about the grid. Cells are anisotropic: `grid` gives the
 // y and z cells (C/k wide), `xgrid` the x cells, x_split times narrower; a row of x cells is one
@@ -376,23 +387,52 @@ __device__ __forceinline__ void gather_one(const float* __restrict__ xyz, const 
                        xyz[3 * std::size_t{i} + 2], __uint_as_float(i));
 }
 
-// Dense: start[c] = first slot whose key is >= c, for c in [0, cells]; and the gather.
-__global__ void dense_table_kernel(const float* __restrict__ xyz, const std::uint32_t* keys,
-                                   const Slot* order, Slot n, std::uint32_t cells, Slot* start,
-                                   float4* pos) {
-  const std::uint64_t i = blockIdx.x * std::uint64_t{blockDim.x} + threadIdx.x;
-  if (i <= cells) {
-    Slot first = 0, last = n;
-    while (first < last) {
-      const Slot mid = first + (last - first) / 2;
-      if (keys[mid] < i)
-        first = mid + 1;
-      else
-        last = mid;
-    }
-    start[i] = first;
-  }
-  if (i < n) gather_one(xyz, order, static_cast<Slot>(i), pos);
+// Dense, after a radix sort: the end of each cell's run, at entry key + 1 of start[] (zeroed,
+// cells + 1 entries), and the gather. A prefix maximum then gives start[c] = the number of
+// particles in cells below c, empty cells included: no search, no atomics.
+__global__ void run_ends_kernel(const float* __restrict__ xyz, const std::uint32_t* keys,
+                                const Slot* order, Slot n, Slot* start, float4* pos) {
+  const Slot s = blockIdx.x * blockDim.x + threadIdx.x;
+  if (s >= n) return;
+  if (s + 1 == n || keys[s] != keys[s + 1]) start[keys[s] + 1] = s + 1;
+  gather_one(xyz, order, s, pos);
+}
+
+// Dense, counting sort. Pass 1: each particle's cell, counted in start[] (zeroed, cells + 1
+// entries) by an atomic whose return value is a provisional rank within the cell; the order of
+// the atomics varies from run to run, pass 4 removes it.
+__global__ void count_cells_kernel(const float* __restrict__ xyz, Slot n, GridView view,
+                                   std::uint32_t* keys, Slot* provisional, Slot* start) {
+  const Slot i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  const auto key =
+      static_cast<std::uint32_t>(cell_key(view, xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]));
+  keys[i] = key;
+  provisional[i] = atomicAdd(&start[key], 1u);
+}
+
+// Pass 2 is an exclusive scan of start[] in place. Pass 3: the particles of each cell, in the
+// provisional order.
+__global__ void scatter_cells_kernel(const std::uint32_t* keys, const Slot* provisional,
+                                     const Slot* start, Slot n, Slot* members) {
+  const Slot i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i < n) members[start[keys[i]] + provisional[i]] = i;
+}
+
+// Pass 4: the final slot is the cell's start plus the number of its particles with a smaller
+// index: exactly the layout of a stable sort by cell, so every sum is the same from run to run.
+// The scan of the cell costs less than the compute's own scan of it (every target tests every
+// particle of its own cell).
+__global__ void place_kernel(const float* __restrict__ xyz, const std::uint32_t* keys,
+                             const Slot* start, const Slot* members, Slot n, float4* pos) {
+  const Slot i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  const std::uint32_t key = keys[i];
+  const Slot first = start[key], last = start[key + 1];
+  Slot rank = 0;
+  for (Slot s = first; s < last; ++s) rank += members[s] < i;
+  pos[first + rank] = make_float4(xyz[3 * std::size_t{i}], xyz[3 * std::size_t{i} + 1],
+                                  xyz[3 * std::size_t{i} + 2], __uint_as_float(i));
 }
 
 __global__ void gather_kernel(const float* __restrict__ xyz, const Slot* order, Slot n,
@@ -580,23 +620,31 @@ class Grid final : public Method {
     }
     grid_ = make_cell_grid(lo, hi, cutoff, k);
     view_.grid = grid_;
-    const std::uint64_t dense_limit = std::min<std::uint64_t>(8ull * n_ + 4096, 1ull << 31);
-    // Narrower x cells, unless they alone would push a dense table over its limit.
+    // Narrower x cells, unless they alone would push a dense table over 8 cells per particle
+    // (a sphere surface at alpha = 64: x cells C wide, 19 cells per particle: 0.127 ms; C/2 wide,
+    // 38 per particle: 0.148 ms) or the table would be compact anyway.
     int split = options_.x_split > 0 ? options_.x_split : default_x_split[std::min(k, 2)];
     for (;; split /= 2) {
       view_.xgrid = split > 1 ? make_cell_grid(lo, hi, cutoff, k * split) : grid_;
       if (split == 1 || options_.x_split > 0 || options_.layout != 0 ||
-          cell_count() <= dense_limit || grid_.cell_count() > dense_limit)
+          cell_count() <= 8ull * n_ + 4096 || !fits_dense(grid_.cell_count()))
         break;
     }
     view_.x_cells_per_cell = static_cast<float>(grid_.width * view_.xgrid.inverse_width);
     const std::uint64_t cells = cell_count();
     dense_ = options_.layout == 1 ? cells <= (1ull << 31)
-                                  : (options_.layout == 2 ? false : cells <= dense_limit);
+                                  : (options_.layout == 2 ? false : fits_dense(cells));
     // Slack: relative 1e-5 and absolute 1e-5 cell, far above the float round-off of the
     // predicate (~2e-7 relative) and of the cell fractions (~1e-7 cell).
     view_.reach_cells = static_cast<float>(cutoff * grid_.inverse_width * (1.0 + 1e-5) + 1e-5);
     view_.cull = options_.cull;
+  }
+
+  // The dense table: up to 8 cells per particle (32 bytes), or up to 64 while the table stays
+  // within 64 MiB (a sphere surface at alpha = 64: dense 0.15 ms, compact 0.22 ms; at alpha = 128,
+  // 0.9 GB of table, compact wins 2x). Memory stays O(N) plus a constant.
+  bool fits_dense(std::uint64_t cells) const {
+    return cells <= 8ull * n_ + 4096 || (cells <= 64ull * n_ && cells <= dense_cells_any_n);
   }
 
   // Lanes per target (see thread_kernel_from).
@@ -638,18 +686,54 @@ class Grid final : public Method {
   void build_dense(const float* xyz) {
     const std::uint64_t cells = cell_count();
     keys32_.resize(n_);
-    keys32_alt_.resize(n_);
     index_.resize(n_);
     index_alt_.resize(n_);
     pos_.resize(n_);
     start_.resize(cells + 1);
-    keys_kernel<<<blocks_for(n_, 256), 256>>>(xyz, n_, view_, keys32_.data(), index_.data());
+    RAYCUT_CUDA_CHECK(cudaMemsetAsync(start_.data(), 0, (cells + 1) * sizeof(Slot)));
+    if (options_.dense_build == 2 || (options_.dense_build == 0 && n_ >= counting_sort_below)) {
+      keys32_alt_.resize(n_);
+      keys_kernel<<<blocks_for(n_, 256), 256>>>(xyz, n_, view_, keys32_.data(), index_.data());
+      RAYCUT_CUDA_CHECK_LAUNCH();
+      std::uint32_t* sorted = nullptr;
+      sort(keys32_, keys32_alt_, key_bits(cells), sorted);
+      run_ends_kernel<<<blocks_for(n_, 256), 256>>>(xyz, sorted, order_, n_, start_.data(),
+                                                    pos_.data());
+      RAYCUT_CUDA_CHECK_LAUNCH();
+      scan(::cuda::maximum<Slot>{}, cells + 1);
+      return;
+    }
+    // Counting sort: no radix passes, no table search; its atomics lose to the sort's streaming
+    // at large N.
+    count_cells_kernel<<<blocks_for(n_, 256), 256>>>(xyz, n_, view_, keys32_.data(), index_.data(),
+                                                     start_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
-    std::uint32_t* sorted = nullptr;
-    sort(keys32_, keys32_alt_, key_bits(cells), sorted);
-    dense_table_kernel<<<blocks_for(std::max<std::uint64_t>(n_, cells + 1), 256), 256>>>(
-        xyz, sorted, order_, n_, static_cast<std::uint32_t>(cells), start_.data(), pos_.data());
+    scan(::cuda::std::plus<Slot>{}, cells + 1, /*exclusive=*/true);
+    scatter_cells_kernel<<<blocks_for(n_, 256), 256>>>(keys32_.data(), index_.data(), start_.data(),
+                                                       n_, index_alt_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
+    place_kernel<<<blocks_for(n_, 256), 256>>>(xyz, keys32_.data(), start_.data(),
+                                               index_alt_.data(), n_, pos_.data());
+    RAYCUT_CUDA_CHECK_LAUNCH();
+  }
+
+  // start_[0, count) scanned in place with op (inclusive, or exclusive from 0).
+  template <class Op>
+  void scan(Op op, std::uint64_t count, bool exclusive = false) {
+    const auto run = [&](void* temp, std::size_t& bytes) {
+      return exclusive ? cub::DeviceScan::ExclusiveScan(temp, bytes, start_.data(), start_.data(),
+                                                        op, Slot{0}, count)
+                       : cub::DeviceScan::InclusiveScan(temp, bytes, start_.data(), start_.data(),
+                                                        op, count);
+    };
+    // The temporary size depends on the length only: ask cub again only when it changes.
+    if (count != scan_shape_) {
+      RAYCUT_CUDA_CHECK(run(nullptr, scan_temp_bytes_));
+      scan_shape_ = count;
+    }
+    std::size_t temp_bytes = scan_temp_bytes_;
+    temp_.resize(std::max<std::size_t>(temp_bytes, 1));
+    RAYCUT_CUDA_CHECK(run(temp_.data(), temp_bytes));
   }
 
   void build_compact(const float* xyz) {
@@ -724,8 +808,8 @@ class Grid final : public Method {
   std::uint32_t* runs_host_ = nullptr;  // mapped pinned memory
   std::uint32_t* runs_device_ = nullptr;
   DeviceBuffer<unsigned char> temp_;
-  std::uint64_t sort_shape_ = 0;
-  std::size_t sort_temp_bytes_ = 0;
+  std::uint64_t sort_shape_ = 0, scan_shape_ = 0;
+  std::size_t sort_temp_bytes_ = 0, scan_temp_bytes_ = 0;
   DeviceResults results_;
   EventTimer build_timer_, compute_timer_;
 };

@@ -32,10 +32,18 @@ __global__ void __launch_bounds__(bbox_block)
   const std::size_t stride = std::size_t{gridDim.x} * bbox_block;
   const int axis = static_cast<int>(first % 3);  // stride % 3 == 0: fixed per thread
   float lo = FLT_MAX, hi = -FLT_MAX;
-  for (std::size_t e = first; e < count; e += stride) {
-    const float v = xyz[e];
-    lo = fminf(lo, v);
-    hi = fmaxf(hi, v);
+  // Unrolled so that U independent loads are in flight per thread (a few per thread in all).
+  constexpr int U = 4;
+  for (std::size_t e = first; e < count; e += U * stride) {
+    float v[U];
+#pragma unroll
+    for (int u = 0; u < U; ++u)
+      v[u] = e + u * stride < count ? __ldg(&xyz[e + u * stride]) : xyz[e];
+#pragma unroll
+    for (int u = 0; u < U; ++u) {
+      lo = fminf(lo, v[u]);
+      hi = fmaxf(hi, v[u]);
+    }
   }
   for (int a = 0; a < 3; ++a) {
     const float mine_lo = a == axis ? lo : FLT_MAX;
