@@ -67,10 +67,8 @@ __global__ void fill_kernel(const float* xyz, std::size_t n, float cutoff_square
   });
 }
 
-class BruteForceGpu final : public Method {
+class BruteForceGpu final : public GpuMethod {
  public:
-  MemorySpace space() const override { return MemorySpace::device; }
-
   void build(const float* xyz, std::size_t n, float cutoff) override {
     build_timer_.start();
     xyz_.resize(3 * n);
@@ -82,17 +80,12 @@ class BruteForceGpu final : public Method {
   }
 
   void compute(Kernel kernel, const KernelOptions& options) override {
-    const OutputView out = results_.prepare(kernel, n_);
-    compute_timer_.start();
-    with_kernel(kernel, options, cutoff_squared_, [&](auto k) {
-      compute_kernel<<<blocks(), block_size>>>(xyz_.data(), n_, cutoff_squared_, k, out);
+    timed_compute(kernel, n_, [&](const OutputView& out) {
+      with_kernel(kernel, options, cutoff_squared_, [&](auto k) {
+        compute_kernel<<<blocks(), block_size>>>(xyz_.data(), n_, cutoff_squared_, k, out);
+      });
     });
-    RAYCUT_CUDA_CHECK_LAUNCH();
-    compute_timer_.stop();
   }
-
-  Results results() const override { return results_.to_host(); }
-  ResultsView results_view() const override { return results_.view(); }
 
   NeighbourList neighbours() override {
     return build_neighbour_list(
@@ -107,18 +100,12 @@ class BruteForceGpu final : public Method {
         });
   }
 
-  void synchronize() override { RAYCUT_CUDA_CHECK(cudaDeviceSynchronize()); }
-  double device_build_ms() const override { return build_timer_.elapsed_ms(); }
-  double device_compute_ms() const override { return compute_timer_.elapsed_ms(); }
-
  private:
   unsigned blocks() const { return static_cast<unsigned>((n_ + block_size - 1) / block_size); }
 
   DeviceBuffer<float> xyz_;
   std::size_t n_ = 0;
   float cutoff_squared_ = 0;
-  DeviceResults results_;
-  EventTimer build_timer_, compute_timer_;
 };
 
 }  // namespace

@@ -1,5 +1,6 @@
 // Per-target outputs of GPU methods: allocation by kernel, the device-side store, the copy back,
-// the CUDA-event timer and the CSR assembly. Shared by every CUDA and OptiX method.
+// the CUDA-event timer, the CSR assembly and the GpuMethod base. Shared by every CUDA and OptiX
+// method.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -7,6 +8,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "core/method.hpp"
+#include "cuda/check.cuh"
 #include "cuda/device_buffer.cuh"
 #include "raycut/engine.hpp"
 #include "raycut/kernels.hpp"
@@ -60,6 +63,32 @@ class EventTimer {
  private:
   cudaEvent_t start_ = nullptr, stop_ = nullptr;
   bool started_ = false;
+};
+
+// What every GPU method shares: positions and results on the device, the results kept until the
+// next compute, the CUDA-event timers of build and compute, and the synchronisation.
+class GpuMethod : public Method {
+ public:
+  MemorySpace space() const override { return MemorySpace::device; }
+  Results results() const override { return results_.to_host(); }
+  ResultsView results_view() const override { return results_.view(); }
+  void synchronize() override { RAYCUT_CUDA_CHECK(cudaDeviceSynchronize()); }
+  double device_build_ms() const override { return build_timer_.elapsed_ms(); }
+  double device_compute_ms() const override { return compute_timer_.elapsed_ms(); }
+
+ protected:
+  // Sizes the results for `kernel` over n targets, then times launch(out) as the compute.
+  template <class Launch>
+  void timed_compute(Kernel kernel, std::size_t n, Launch&& launch) {
+    const OutputView out = results_.prepare(kernel, n);
+    compute_timer_.start();
+    launch(out);
+    RAYCUT_CUDA_CHECK_LAUNCH();
+    compute_timer_.stop();
+  }
+
+  DeviceResults results_;
+  EventTimer build_timer_, compute_timer_;
 };
 
 // Assembles a CSR list: count(counts) must write each target's number of neighbours into

@@ -513,14 +513,12 @@ unsigned blocks_for(std::uint64_t count, int threads = block_size) {
 // ---- the method
 // -----------------------------------------------------------------------------------
 
-class Grid final : public Method {
+class Grid final : public GpuMethod {
  public:
   explicit Grid(const GridOptions& options) : options_(options) {}
   ~Grid() override {
     if (runs_host_) cudaFreeHost(runs_host_);
   }
-
-  MemorySpace space() const override { return MemorySpace::device; }
 
   void build(const float* xyz, std::size_t n, float cutoff) override {
     if (n >= UINT32_MAX)
@@ -541,36 +539,31 @@ class Grid final : public Method {
   }
 
   void compute(Kernel kernel, const KernelOptions& options) override {
-    const OutputView out = results_.prepare(kernel, n_);
-    compute_timer_.start();
-    with_kernel(kernel, options, cutoff_squared_, [&](auto k) {
-      with_table([&](const auto& table) {
-        switch (lanes_) {
-          case 1:
-            thread_kernel<<<blocks_for(n_), block_size>>>(pos_.data(), n_, view_, table,
-                                                          cutoff_squared_, k, out);
-            break;
-          case 4:
-            launch_group<4>(table, k, out);
-            break;
-          case 8:
-            launch_group<8>(table, k, out);
-            break;
-          case 16:
-            launch_group<16>(table, k, out);
-            break;
-          default:
-            launch_group<32>(table, k, out);
-            break;
-        }
+    timed_compute(kernel, n_, [&](const OutputView& out) {
+      with_kernel(kernel, options, cutoff_squared_, [&](auto k) {
+        with_table([&](const auto& table) {
+          switch (lanes_) {
+            case 1:
+              thread_kernel<<<blocks_for(n_), block_size>>>(pos_.data(), n_, view_, table,
+                                                            cutoff_squared_, k, out);
+              break;
+            case 4:
+              launch_group<4>(table, k, out);
+              break;
+            case 8:
+              launch_group<8>(table, k, out);
+              break;
+            case 16:
+              launch_group<16>(table, k, out);
+              break;
+            default:
+              launch_group<32>(table, k, out);
+              break;
+          }
+        });
       });
     });
-    RAYCUT_CUDA_CHECK_LAUNCH();
-    compute_timer_.stop();
   }
-
-  Results results() const override { return results_.to_host(); }
-  ResultsView results_view() const override { return results_.view(); }
 
   NeighbourList neighbours() override {
     return build_neighbour_list(
@@ -590,10 +583,6 @@ class Grid final : public Method {
           RAYCUT_CUDA_CHECK_LAUNCH();
         });
   }
-
-  void synchronize() override { RAYCUT_CUDA_CHECK(cudaDeviceSynchronize()); }
-  double device_build_ms() const override { return build_timer_.elapsed_ms(); }
-  double device_compute_ms() const override { return compute_timer_.elapsed_ms(); }
 
  private:
   template <int G, class Table, class K>
@@ -810,8 +799,6 @@ class Grid final : public Method {
   DeviceBuffer<unsigned char> temp_;
   std::uint64_t sort_shape_ = 0, scan_shape_ = 0;
   std::size_t sort_temp_bytes_ = 0, scan_temp_bytes_ = 0;
-  DeviceResults results_;
-  EventTimer build_timer_, compute_timer_;
 };
 
 }  // namespace

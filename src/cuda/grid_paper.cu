@@ -112,10 +112,8 @@ __global__ void fill_kernel(SortedParticles p, std::uint32_t n, CellGrid grid,
                 [&](std::uint32_t s, float, float, float, float) { indices[slot++] = p.index[s]; });
 }
 
-class GridPaper final : public Method {
+class GridPaper final : public GpuMethod {
  public:
-  MemorySpace space() const override { return MemorySpace::device; }
-
   void build(const float* xyz, std::size_t n, float cutoff) override {
     if (n >= UINT32_MAX)
       throw Error(ErrorCode::invalid_argument,
@@ -148,18 +146,13 @@ class GridPaper final : public Method {
   }
 
   void compute(Kernel kernel, const KernelOptions& options) override {
-    const OutputView out = results_.prepare(kernel, n_);
-    compute_timer_.start();
-    with_kernel(kernel, options, cutoff_squared_, [&](auto k) {
-      compute_kernel<<<blocks(), paper_block>>>(sorted(), n_, grid_, start_.data(), cutoff_squared_,
-                                                k, out);
+    timed_compute(kernel, n_, [&](const OutputView& out) {
+      with_kernel(kernel, options, cutoff_squared_, [&](auto k) {
+        compute_kernel<<<blocks(), paper_block>>>(sorted(), n_, grid_, start_.data(),
+                                                  cutoff_squared_, k, out);
+      });
     });
-    RAYCUT_CUDA_CHECK_LAUNCH();
-    compute_timer_.stop();
   }
-
-  Results results() const override { return results_.to_host(); }
-  ResultsView results_view() const override { return results_.view(); }
 
   NeighbourList neighbours() override {
     return build_neighbour_list(
@@ -175,10 +168,6 @@ class GridPaper final : public Method {
           RAYCUT_CUDA_CHECK_LAUNCH();
         });
   }
-
-  void synchronize() override { RAYCUT_CUDA_CHECK(cudaDeviceSynchronize()); }
-  double device_build_ms() const override { return build_timer_.elapsed_ms(); }
-  double device_compute_ms() const override { return compute_timer_.elapsed_ms(); }
 
  private:
   unsigned blocks() const { return (n_ + paper_block - 1) / paper_block; }
@@ -218,8 +207,6 @@ class GridPaper final : public Method {
   DeviceBuffer<std::uint32_t> counts_, start_, index_;
   DeviceBuffer<float> x_, y_, z_;
   DeviceBuffer<unsigned char> temp_;
-  DeviceResults results_;
-  EventTimer build_timer_, compute_timer_;
 };
 
 }  // namespace

@@ -185,10 +185,10 @@ void set_kernel(LaunchParams& p, SphForceKernel k) {
 void RayTracingMethod::compute(Kernel kernel, const KernelOptions& options) {
   LaunchParams p = base_params();
   with_kernel(kernel, options, p.cutoff_squared, [&](auto k) { set_kernel(p, k); });
-  p.out = results_.prepare(kernel, n_);
-  compute_timer_.start();
-  pipeline_.launch(&p, sizeof p, n_);
-  compute_timer_.stop();
+  timed_compute(kernel, n_, [&](const cuda::OutputView& out) {
+    p.out = out;
+    pipeline_.launch(&p, sizeof p, n_);
+  });
 }
 
 NeighbourList RayTracingMethod::neighbours() {
@@ -207,10 +207,6 @@ NeighbourList RayTracingMethod::neighbours() {
         p.list_indices = indices;
         pipeline_.launch(&p, sizeof p, n_);
       });
-}
-
-void RayTracingMethod::synchronize() {
-  RAYCUT_CUDA_CHECK(cudaDeviceSynchronize());
 }
 
 }  // namespace raycut::detail::optix

@@ -15,19 +15,13 @@
 
 namespace raycut::detail::optix {
 
-class RayTracingMethod : public Method {
+class RayTracingMethod : public cuda::GpuMethod {
  public:
-  MemorySpace space() const override { return MemorySpace::device; }
   void build(const float* xyz, std::size_t n, float cutoff) override;
   bool update(const float* xyz, std::size_t n, float cutoff) override;
   void set_update_policy(const UpdatePolicy& policy) override { policy_ = policy; }
   void compute(Kernel kernel, const KernelOptions& options) override;
-  Results results() const override { return results_.to_host(); }
-  ResultsView results_view() const override { return results_.view(); }
   NeighbourList neighbours() override;
-  void synchronize() override;
-  double device_build_ms() const override { return build_timer_.elapsed_ms(); }
-  double device_compute_ms() const override { return compute_timer_.elapsed_ms(); }
 
  protected:
   RayTracingMethod(bool sorted, const PipelineSpec& programs);
@@ -58,8 +52,6 @@ class RayTracingMethod : public Method {
   cuda::DeviceBuffer<std::uint32_t> ids_;
   cuda::DeviceBuffer<unsigned char> sort_temp_;
   cuda::BoundingBox bbox_;
-  cuda::DeviceResults results_;
-  cuda::EventTimer build_timer_, compute_timer_;
 };
 
 // Launch configuration for one thread per element.
