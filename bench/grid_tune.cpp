@@ -4,10 +4,10 @@
 //   grid_tune --suite uniform --params 32 --ps 1,8,32 --variants k1,k2,k3,k2-nocull,k2-compact
 //
 // A variant is k<cells per cutoff>, optionally followed by -nocull (scan whole rows),
-// -dense or -compact (force the cell table), -counting or -radix (how the dense table is built),
-// -g<lanes per target>, -x<x split>; `paper` is grid-paper, `auto` the grid with its automatic
-// choices (auto-radix: with a suffix). One CSV row per (configuration, variant) on stdout,
-// CUDA-event medians in ms; `pairs` (count kernel) must be the same on every row of a
+// -dense or -compact (force the cell table), -counting, -radix or -oneblock (how the dense table is
+// built), -g<lanes per target>, -x<x split>; `paper` is grid-paper, `auto` the grid with its
+// automatic choices (auto-radix: with a suffix). One CSV row per (configuration, variant) on
+// stdout, CUDA-event medians in ms; `pairs` (count kernel) must be the same on every row of a
 // configuration.
 #include <cuda_runtime.h>
 
@@ -45,6 +45,7 @@ std::unique_ptr<raycut::detail::Method> make_variant(const std::string& name) {
   if (name.find("-compact") != std::string::npos) o.layout = 2;
   if (name.find("-counting") != std::string::npos) o.dense_build = 1;
   if (name.find("-radix") != std::string::npos) o.dense_build = 2;
+  if (name.find("-oneblock") != std::string::npos) o.dense_build = 3;
   if (const auto x = name.find("-x"); x != std::string::npos)
     o.x_split = std::stoi(name.substr(x + 2));
   if (const auto g = name.find("-g"); g != std::string::npos)

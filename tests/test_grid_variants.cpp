@@ -1,7 +1,8 @@
 // Every kernel and table path of the `grid` method (GridOptions: a thread per target or grouped
-// lanes; dense tables from a counting or a radix sort; the compact table; reach 1 to 3)
-// against the CPU brute force. The conformance suite runs `grid` with its automatic choices, which
-// at its sizes always take the grouped kernel; this file makes every path meet the oracle.
+// lanes; dense tables from a counting sort (in one block or several) or a radix sort; the compact
+// table; reach 1 to 3) against the CPU brute force. The conformance suite runs `grid` with its
+// automatic choices, which at its sizes always take the grouped kernel; this file makes every path
+// meet the oracle.
 #include <cuda_runtime.h>
 #include <gtest/gtest.h>
 
@@ -39,7 +40,8 @@ const Variant variants[] = {
     {"thread_k3_counting", make(3, 1, 1, 1)}, {"thread_k2_compact", make(2, 1, 2, 0)},
     {"thread_k1_compact", make(1, 1, 2, 0)},  {"group4_k2_counting", make(2, 4, 1, 1)},
     {"group8_k1_radix", make(1, 8, 1, 2)},    {"group16_k1_compact", make(1, 16, 2, 0)},
-    {"group32_k3_radix", make(3, 32, 1, 2)},
+    {"group32_k3_radix", make(3, 32, 1, 2)},  {"group16_k2_oneblock", make(2, 16, 1, 3)},
+    {"thread_k1_oneblock", make(1, 1, 1, 3)},
 };
 
 const char* families[] = {"uniform",          "lattice-k2",     "coincident",

@@ -49,37 +49,53 @@ bool is_validation(const std::string& scenario) {
   return scenario == "hydrostatic" || scenario == "dam-break";
 }
 
-// Pressure against depth of a settled column: fluid particles binned by y (bins of dx from the
-// floor), time-averaged over the samples added, with rho0 g (H - y) at each bin's mean y; H = the
-// initial column's top (layers * dx).
+// Pressure against depth of a settled column, per particle layer: each fluid particle belongs to
+// the lattice layer it started in (bins of dx from the floor at t = 0), so that a layer stays one
+// layer however the column compresses (fixed bins would split and merge the compressed layers).
+// Time-averaged over the samples added. The reference is exact for any compression: the weight
+// per area above a layer is rho0 g (H - y0), with y0 the layer's initial height and H the initial
+// column's top (layers * dx), since the mass above a layer never changes.
 struct Profile {
   const sph::WcsphConfig& c;
   int layers;
-  std::vector<double> sy, sp, sr, rmin, rmax;
+  std::vector<int> layer_of;  // per particle; -1 for boundary particles
+  std::vector<double> y0, sy, sp, sr, rmin, rmax;
   std::vector<long> count;
   int samples = 0;
-  explicit Profile(const sph::WcsphConfig& config)
+  Profile(const sph::WcsphConfig& config, const std::vector<float>& fixed,
+          const std::vector<float>& x0)
       : c(config), layers(static_cast<int>(std::lround(config.height() / config.dx()))) {
-    const std::size_t bins = layers + 4;
-    sy.assign(bins, 0.0);
-    sp.assign(bins, 0.0);
-    sr.assign(bins, 0.0);
-    rmin.assign(bins, 1e30);
-    rmax.assign(bins, -1e30);
-    count.assign(bins, 0);
-  }
-  void add(const std::vector<float>& fixed, const std::vector<float>& x,
-           const std::vector<float>& rho, const std::vector<float>& p) {
-    const double dx = c.dx();
+    y0.assign(layers, 0.0);
+    sy.assign(layers, 0.0);
+    sp.assign(layers, 0.0);
+    sr.assign(layers, 0.0);
+    rmin.assign(layers, 1e30);
+    rmax.assign(layers, -1e30);
+    count.assign(layers, 0);
+    std::vector<long> initial(layers, 0);
+    layer_of.assign(fixed.size(), -1);
     for (std::size_t i = 0; i < fixed.size(); ++i) {
       if (fixed[i] != 0.0f) continue;
-      const int b = std::clamp(static_cast<int>(std::floor(x[3 * i + 1] / dx)), 0, layers + 3);
-      sy[b] += x[3 * i + 1];
-      sp[b] += p[i];
-      sr[b] += rho[i];
-      rmin[b] = std::min<double>(rmin[b], rho[i]);
-      rmax[b] = std::max<double>(rmax[b], rho[i]);
-      ++count[b];
+      const int k = std::clamp(static_cast<int>(std::floor(x0[3 * i + 1] / config.dx())), 0,
+                               layers - 1);
+      layer_of[i] = k;
+      y0[k] += x0[3 * i + 1];
+      ++initial[k];
+    }
+    for (int k = 0; k < layers; ++k)
+      if (initial[k] > 0) y0[k] /= initial[k];
+  }
+  void add(const std::vector<float>& x, const std::vector<float>& rho,
+           const std::vector<float>& p) {
+    for (std::size_t i = 0; i < layer_of.size(); ++i) {
+      const int k = layer_of[i];
+      if (k < 0) continue;
+      sy[k] += x[3 * i + 1];
+      sp[k] += p[i];
+      sr[k] += rho[i];
+      rmin[k] = std::min<double>(rmin[k], rho[i]);
+      rmax[k] = std::max<double>(rmax[k], rho[i]);
+      ++count[k];
     }
     ++samples;
   }
@@ -88,21 +104,22 @@ struct Profile {
     const double rho0 = c.rest_density, g = c.gravity;
     std::ofstream out(path);
     if (!out) throw Error(ErrorCode::io, path + ": cannot open for writing");
-    out << "layer,y,count,p_mean,rho_mean,rho_min,rho_max,p_hydrostatic,p_rel_error,rho_rel_dev\n";
+    out << "layer,y,y_now,count,p_mean,rho_mean,rho_min,rho_max,p_hydrostatic,p_rel_error,"
+           "rho_rel_dev\n";
     double worst_p = 0, worst_rho = 0, sum_p = 0;
     int counted = 0;
-    for (int b = 0; b < layers + 4; ++b) {
-      if (count[b] == 0) continue;
-      const double y = sy[b] / count[b], pm = sp[b] / count[b], rm = sr[b] / count[b];
-      const double ph = rho0 * g * (height - y);
-      const double err = ph > 0 ? (pm - ph) / ph : 0.0;
+    for (int k = 0; k < layers; ++k) {
+      if (count[k] == 0) continue;
+      const double y = sy[k] / count[k], pm = sp[k] / count[k], rm = sr[k] / count[k];
+      const double ph = rho0 * g * (height - y0[k]);
+      const double err = (pm - ph) / ph;
       const double dev = rm / rho0 - 1.0;
-      char line[320];
-      std::snprintf(line, sizeof line, "%d,%.6f,%.2f,%.4f,%.4f,%.4f,%.4f,%.4f,%.6f,%.6f\n", b, y,
-                    static_cast<double>(count[b]) / samples, pm, rm, rmin[b], rmax[b], ph, err,
-                    dev);
+      char line[360];
+      std::snprintf(line, sizeof line, "%d,%.6f,%.6f,%.2f,%.4f,%.4f,%.4f,%.4f,%.4f,%.6f,%.6f\n", k,
+                    y0[k], y, static_cast<double>(count[k]) / samples, pm, rm, rmin[k], rmax[k],
+                    ph, err, dev);
       out << line;
-      if (b < layers - 2) {  // below the top two particle layers
+      if (k < layers - 2) {  // below the top two particle layers
         worst_p = std::max(worst_p, std::abs(err));
         worst_rho = std::max(worst_rho, std::abs(dev));
         sum_p += std::abs(err);
@@ -111,7 +128,7 @@ struct Profile {
     }
     std::printf(
         "hydrostatic: H = %.4f m, %d layers, averaged over %d samples in t = [%.3f, %.3f] "
-        "s; below the top two layers: |p - rho0 g (H - y)| / (rho0 g (H - y)) max %.2f %% "
+        "s; below the top two layers: |p - rho0 g (H - y0)| / (rho0 g (H - y0)) max %.2f %% "
         "(mean %.2f %%), max |rho_mean / rho0 - 1| = %.3f %% (%d layers)\n",
         height, layers, samples, from, to, 100 * worst_p, counted ? 100 * sum_p / counted : 0.0,
         100 * worst_rho, counted);
@@ -226,7 +243,7 @@ int run_sph(const SphOptions& o) {
   double max_mach = 0;
   // The hydrostatic profile: averaged over every 20th step of the last 0.1 s (after the
   // settling damping).
-  Profile profile(config);
+  Profile profile(config, scenario.fixed, scenario.position);
   const double profile_from =
       std::max<double>(solver.parameters().damping_time, config.run_time() - 0.1);
   double profile_first = -1;
@@ -284,7 +301,7 @@ int run_sph(const SphOptions& o) {
     if (wcsph && config.scenario == "hydrostatic" && solver.time() >= profile_from &&
         (frame % 20 == 0 || frame == frames)) {
       solver.copy_state(fx, fv, frho, fp);
-      profile.add(scenario.fixed, fx, frho, fp);
+      profile.add(fx, frho, fp);
       if (profile_first < 0) profile_first = solver.time();
     }
     const sph::StepTimes t = solver.last_times();
@@ -337,7 +354,7 @@ int run_sph(const SphOptions& o) {
     std::printf("t = %.4f s, fluid kinetic energy %.4g J, max Mach |v|max / c0 = %.3f\n",
                 solver.time(), ke, max_mach);
     if (config.scenario == "hydrostatic") {
-      if (profile.samples == 0) profile.add(scenario.fixed, fx, frho, fp);
+      if (profile.samples == 0) profile.add(fx, frho, fp);
       if (!o.result_csv.empty())
         profile.write(o.result_csv, profile_first < 0 ? solver.time() : profile_first,
                       solver.time());

@@ -6,7 +6,8 @@
 //   dense   when the box has at most 8 cells per particle (or 64 within 2^24 cells): start[c]
 //           for every cell c (+1 entry), so the particles of cells [a, b] of a row are slots
 //           [start[a], start[b + 1]). Built by a counting sort below 2^20 particles (atomics,
-//           then ranks by index within each cell), by a radix sort of (key, index) above;
+//           then ranks by index within each cell; in one block up to 16k particles), by a radix
+//           sort of (key, index) above;
 //   compact otherwise (a far outlier, a sphere surface at fine cells): a radix sort, the sorted
 //           unique cell keys with their first slots, and a hash table from row (y, z) to that
 //           row's run of unique cells; a row's [a, b] is then two binary searches in its run.
@@ -20,6 +21,7 @@
 // that they still fill the GPU. Culling is conservative by construction (slack far above float
 // round-off); the shared predicate decides every pair; self is excluded by slot. docs/grid.md
 // has the measurements behind each choice.
+#include <cub/block/block_scan.cuh>
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
 #include <cub/device/device_select.cuh>
@@ -58,6 +60,11 @@ constexpr std::size_t group_of_32_up_to = 8192;
 // - the dense table from a counting sort below this many particles, from a radix sort above:
 //   the counting sort's scattered atomics lose to the sort's streaming passes at large N.
 constexpr std::size_t counting_sort_below = std::size_t{1} << 20;
+// - the whole dense build in one block up to this many particles and cells + 1 (launches cost
+//   more than the work there);
+constexpr int small_build_block = 1024;
+constexpr std::size_t small_build_up_to = 16384;
+constexpr std::uint64_t small_build_cells = 131072;
 // - the dense cell table when it has at most 8 cells per particle, or up to 64 while it has at
 //   most this many cells (64 MiB); else the compact table (Grid::fits_dense).
 constexpr std::uint64_t dense_cells_any_n = std::uint64_t{1} << 24;
@@ -411,6 +418,50 @@ __global__ void count_cells_kernel(const float* __restrict__ xyz, Slot n, GridVi
   provisional[i] = atomicAdd(&start[key], 1u);
 }
 
+// Dense, small inputs: the counting sort below (passes 1 to 4) in one block, one launch instead of
+// six (launches, not work, are the cost below ~16k particles). The scan gives each thread a run of
+// consecutive cells.
+__global__ void __launch_bounds__(small_build_block)
+    small_dense_build_kernel(const float* __restrict__ xyz, Slot n, GridView view,
+                             std::uint32_t cells, std::uint32_t* keys, Slot* provisional,
+                             Slot* members, Slot* start, float4* pos) {
+  using Scan = cub::BlockScan<Slot, small_build_block>;
+  __shared__ typename Scan::TempStorage scan_temp;
+  const Slot entries = cells + 1;
+  for (Slot c = threadIdx.x; c < entries; c += small_build_block) start[c] = 0;
+  __syncthreads();
+  for (Slot i = threadIdx.x; i < n; i += small_build_block) {
+    const auto key =
+        static_cast<std::uint32_t>(cell_key(view, xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]));
+    keys[i] = key;
+    provisional[i] = atomicAdd(&start[key], 1u);
+  }
+  __syncthreads();
+  const Slot per_thread = (entries + small_build_block - 1) / small_build_block;
+  const Slot first = threadIdx.x * per_thread, last = min(first + per_thread, entries);
+  Slot sum = 0;
+  for (Slot c = first; c < last; ++c) sum += start[c];
+  Slot offset;
+  Scan(scan_temp).ExclusiveSum(sum, offset);
+  for (Slot c = first; c < last; ++c) {
+    const Slot count = start[c];
+    start[c] = offset;
+    offset += count;
+  }
+  __syncthreads();
+  for (Slot i = threadIdx.x; i < n; i += small_build_block)
+    members[start[keys[i]] + provisional[i]] = i;
+  __syncthreads();
+  for (Slot i = threadIdx.x; i < n; i += small_build_block) {
+    const std::uint32_t key = keys[i];
+    const Slot cell_first = start[key], cell_last = start[key + 1];
+    Slot rank = 0;
+    for (Slot s = cell_first; s < cell_last; ++s) rank += members[s] < i;
+    pos[cell_first + rank] = make_float4(xyz[3 * std::size_t{i}], xyz[3 * std::size_t{i} + 1],
+                                         xyz[3 * std::size_t{i} + 2], __uint_as_float(i));
+  }
+}
+
 // Pass 2 is an exclusive scan of start[] in place. Pass 3: the particles of each cell, in the
 // provisional order.
 __global__ void scatter_cells_kernel(const std::uint32_t* keys, const Slot* provisional,
@@ -679,6 +730,14 @@ class Grid final : public GpuMethod {
     index_alt_.resize(n_);
     pos_.resize(n_);
     start_.resize(cells + 1);
+    const bool small = n_ <= small_build_up_to && cells + 1 <= small_build_cells;
+    if (options_.dense_build == 3 || (options_.dense_build == 0 && small)) {
+      small_dense_build_kernel<<<1, small_build_block>>>(
+          xyz, n_, view_, static_cast<std::uint32_t>(cells), keys32_.data(), index_.data(),
+          index_alt_.data(), start_.data(), pos_.data());
+      RAYCUT_CUDA_CHECK_LAUNCH();
+      return;
+    }
     RAYCUT_CUDA_CHECK(cudaMemsetAsync(start_.data(), 0, (cells + 1) * sizeof(Slot)));
     if (options_.dense_build == 2 || (options_.dense_build == 0 && n_ >= counting_sort_below)) {
       keys32_alt_.resize(n_);
