@@ -419,10 +419,9 @@ __global__ void count_cells_kernel(const float* __restrict__ xyz, Slot n, GridVi
 }
 
 // Dense, small inputs: the counting sort of passes 1 to 4 (count_cells_kernel .. place_kernel) in
-// one block, one launch instead of
-// six (launches, not work, are the cost up to 4096 particles: 0.027 against 0.049 ms;
-// at 16384 its one block is the slower, 0.098 against 0.052). The scan gives each thread a run of
-// consecutive cells.
+// one block, one launch instead of six: launches, not work, are the cost up to 4096 particles
+// (0.027 against 0.049 ms; at 16384 the one block is the slower, 0.098 against 0.052). The scan
+// gives each thread a run of consecutive cells.
 __global__ void __launch_bounds__(small_build_block)
     small_dense_build_kernel(const float* __restrict__ xyz, Slot n, GridView view,
                              std::uint32_t cells, std::uint32_t* keys, Slot* provisional,
