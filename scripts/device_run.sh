@@ -1,0 +1,69 @@
+#!/usr/bin/env bash
+# One call on a GPU machine: build (Release, sm_90), the GPU tests, then the benchmarks, with
+# every result in one tarball (for machines that hand back few files). What this project's device
+# sessions ran, in one place.
+#
+#   scripts/device_run.sh [tests REGEX] [bench] [sph]      results: ${OUT:-/tmp/raycut-out}/results.tgz
+#
+#   tests REGEX  ctest -R REGEX (e.g. "GridVariants|grid_|Sph"; "." for everything, ~6 min)
+#   bench        both suites, every GPU method, plus the paper's grid when its source is in
+#                .deps/paper/Cuda-version/cudaLJ.cu (spec/BENCHMARKS.md; never committed)
+#   sph          the article's SPH run with every GPU method, and the validation scenarios
+set -uo pipefail
+cd "$(dirname "$0")/.."
+out="${OUT:-/tmp/raycut-out}"
+res="$(mktemp -d)"
+mkdir -p "$out"
+export PATH="/usr/local/cuda/bin:$PATH"
+start=$(date +%s)
+step() { echo "[$(($(date +%s) - start)) s] $*"; }
+
+BUILD_DIR=build scripts/configure.sh -DCMAKE_CUDA_ARCHITECTURES=90 > "$res/build.log" 2>&1 ||
+  { tail -40 "$res/build.log"; exit 1; }
+step "built"
+raycut=build/apps/raycut
+paper=()
+if [ -f .deps/paper/Cuda-version/cudaLJ.cu ] &&
+  nvcc -O3 -std=c++17 -DSTANDALONE -arch=sm_90 -include tuple -include list \
+    .deps/paper/Cuda-version/cudaLJ.cu -o "$res/cudaLJ" > "$res/paper-build.log" 2>&1; then
+  paper=(--paper-binary "$res/cudaLJ")
+fi
+
+while [ $# -gt 0 ]; do
+  case "$1" in
+    tests)
+      (cd build && ctest -R "$2" -j12 --output-on-failure > "$res/ctest.log" 2>&1)
+      grep -E "tests passed|tests failed" "$res/ctest.log"
+      grep -E "\(Failed\)|\(Timeout\)" "$res/ctest.log" | head -20
+      shift
+      ;;
+    bench)
+      methods=grid,grid-paper,optix-aabb,optix-aabb-sorted,optix-spheres,optix-triangles
+      "$raycut" bench -s uniform -m "$methods" -o "$res/bench-uniform.csv" "${paper[@]}" \
+        > "$res/bench-uniform.log" 2>&1
+      "$raycut" bench -s surface --param 8,16,32,64,128 -m "$methods" --large-n 4000000 \
+        --large-reps 2 -o "$res/bench-surface.csv" "${paper[@]}" > "$res/bench-surface.log" 2>&1
+      python3 bench/auto_table.py "$res/bench-uniform.csv" "$res/bench-surface.csv" \
+        --md "$res/auto-vs-best.md"
+      ;;
+    sph)
+      for m in grid grid-paper optix-aabb-sorted optix-aabb optix-spheres optix-triangles; do
+        "$raycut" sph --scenario hiprt-drop -m "$m" --csv "$res/sph-hiprt-drop.csv" -q | tail -1
+      done
+      for r in 10 20 40; do
+        "$raycut" sph --scenario dam-break -m grid --resolution $r -q \
+          --result-csv "$res/sph-dam-break-r$r.csv" --csv "$res/sph-validation-runs.csv" | tail -1
+        "$raycut" sph --scenario hydrostatic -m grid --resolution $r -q \
+          --result-csv "$res/sph-hydrostatic-r$r.csv" --csv "$res/sph-validation-runs.csv" | tail -1
+      done
+      ;;
+    *)
+      echo "unknown step '$1'" >&2
+      exit 2
+      ;;
+  esac
+  step "$1 done"
+  shift
+done
+tar czf "$out/results.tgz" -C "$res" --exclude cudaLJ .
+step "results: $out/results.tgz"
