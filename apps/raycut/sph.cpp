@@ -76,8 +76,8 @@ struct Profile {
     layer_of.assign(fixed.size(), -1);
     for (std::size_t i = 0; i < fixed.size(); ++i) {
       if (fixed[i] != 0.0f) continue;
-      const int k = std::clamp(static_cast<int>(std::floor(x0[3 * i + 1] / config.dx())), 0,
-                               layers - 1);
+      const int k =
+          std::clamp(static_cast<int>(std::floor(x0[3 * i + 1] / config.dx())), 0, layers - 1);
       layer_of[i] = k;
       y0[k] += x0[3 * i + 1];
       ++initial[k];
@@ -116,8 +116,8 @@ struct Profile {
       const double dev = rm / rho0 - 1.0;
       char line[360];
       std::snprintf(line, sizeof line, "%d,%.6f,%.6f,%.2f,%.4f,%.4f,%.4f,%.4f,%.4f,%.6f,%.6f\n", k,
-                    y0[k], y, static_cast<double>(count[k]) / samples, pm, rm, rmin[k], rmax[k],
-                    ph, err, dev);
+                    y0[k], y, static_cast<double>(count[k]) / samples, pm, rm, rmin[k], rmax[k], ph,
+                    err, dev);
       out << line;
       if (k < layers - 2) {  // below the top two particle layers
         worst_p = std::max(worst_p, std::abs(err));
