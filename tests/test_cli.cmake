@@ -42,6 +42,12 @@ expect_exit(0 bench --suite uniform --methods cell-list --param 4 --p 1,2 --reps
 file(READ ${WORK}/b.csv csv)
 expect_match("${csv}" "^suite,method,param,p,N,cutoff,pairs,build_ms,compute_ms,total_ms,total_ms_min,total_ms_max,reps,timer,gpu,driver,cuda,optix\n")
 expect_match("${csv}" "uniform,cell-list,4,2,128,")
+# --large-n / --large-reps: the reps column says how many repetitions were timed.
+expect_exit(0 bench --suite uniform --methods cell-list --param 4 --p 1,2 --reps 3 --large-n 100
+            --large-reps 1 --out ${WORK}/l.csv)
+file(READ ${WORK}/l.csv csv)
+expect_match("${csv}" "uniform,cell-list,4,1,64,[^\n]*,3,host,")
+expect_match("${csv}" "uniform,cell-list,4,2,128,[^\n]*,1,host,")
 
 # --paper-binary runs the given program in a scratch folder and merges its results-*.csv.
 file(WRITE ${WORK}/fake_paper.sh "#!/bin/sh\nprintf 'NbParticles,NbInteractions,NbLoops,boxDiv,nbCells,partspercell,interactionsperparticle,timeinit,timecompute,timetotal\\n64,1,5,4,64,1,1,0.001,0.002,0.003\\n64,1,5,4,64,1,1,0.003,0.002,0.005\\n' > results-test.csv\n")

@@ -114,7 +114,11 @@ std::vector<std::string> run_paper_binary(const std::string& binary, const std::
   return rows;
 }
 
-// Warm-up (and the pair count), then o.reps timed build + run; one CSV row per timer.
+// A configuration whose slowest repetition took this many times its fastest is reported noisy.
+constexpr double noisy_spread = 1.5;
+
+// Warm-up (and the pair count), then o.reps timed build + run (o.large_reps above o.large_n
+// particles); one CSV row per timer, whose reps column says how many were timed.
 void bench_method(const BenchOptions& o, const std::string& method, Kernel kernel,
                   const PointCloud& cloud, int param, int p, std::optional<DeviceArray>& on_device,
                   const std::string& environment, std::ofstream& csv) {
@@ -148,12 +152,21 @@ void bench_method(const BenchOptions& o, const std::string& method, Kernel kerne
         o.suite.c_str(), method.c_str(), param, p, cloud.size(), cloud.cutoff,
         static_cast<unsigned long long>(pairs), median(s.build), median(s.compute), median(s.total),
         *std::min_element(s.total.begin(), s.total.end()),
-        *std::max_element(s.total.begin(), s.total.end()), o.reps, timer, environment.c_str());
+        *std::max_element(s.total.begin(), s.total.end()), reps, timer, environment.c_str());
     csv << line;
   }
   csv.flush();
   std::fprintf(stderr, "      build %.3f + compute %.3f ms (host, median)\n", median(host.build),
                median(host.compute));
+  // Lent machines have moments where one configuration runs several times slower: say so, so
+  // that the row is rerun rather than believed.
+  const double fastest = *std::min_element(host.total.begin(), host.total.end());
+  const double slowest = *std::max_element(host.total.begin(), host.total.end());
+  if (reps >= 3 && fastest > 0 && slowest > noisy_spread * fastest)
+    std::fprintf(stderr,
+                 "      warning: noisy: the slowest repetition took %.1fx the fastest; rerun this "
+                 "configuration before trusting its median\n",
+                 slowest / fastest);
 }
 
 int run_bench(const BenchOptions& o) {
