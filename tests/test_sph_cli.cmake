@@ -34,6 +34,23 @@ if(NOT row_count EQUAL 2 OR NOT header MATCHES "^scenario,method,N,frames,steps_
   message(FATAL_ERROR "unexpected CSV:\n${rows}")
 endif()
 
+# The hydrostatic profile: one row per particle layer (8 at 4 particles across a, H = 2a), each
+# layer keeping its 4 x 4 particles however the column compresses.
+expect_exit(0 sph --scenario hydrostatic -m cell-list --resolution 4 --end-time 0.05
+  --damping-time 0.03 --result-csv ${WORK}/hydrostatic.csv -q)
+file(STRINGS ${WORK}/hydrostatic.csv rows)
+list(LENGTH rows row_count)
+list(GET rows 0 header)
+if(NOT row_count EQUAL 9 OR NOT header MATCHES "^layer,y,y_now,count,p_mean,rho_mean,")
+  message(FATAL_ERROR "unexpected hydrostatic CSV:\n${rows}")
+endif()
+list(SUBLIST rows 1 8 layers)
+foreach(row ${layers})
+  if(NOT row MATCHES "^[0-7],[0-9.]+,[0-9.]+,16.00,")
+    message(FATAL_ERROR "a layer without its 16 particles: ${row}")
+  endif()
+endforeach()
+
 # Bad usage: exit 2 with one line.
 expect_exit(2 sph --scenario nowhere)
 expect_exit(2 sph --scenario small --method no-such-method --frames 1)
