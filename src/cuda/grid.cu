@@ -829,10 +829,12 @@ class Grid final : public GpuMethod {
                        : cub::DeviceScan::InclusiveScan(temp, bytes, start_.data(), start_.data(),
                                                         op, count);
     };
-    // The temporary size depends on the length only: ask cub again only when it changes.
-    if (count != scan_shape_) {
+    // The temporary size depends on the length and the kind of scan only: ask cub again only
+    // when they change.
+    const std::uint64_t shape = (count << 1) | (exclusive ? 1 : 0);
+    if (shape != scan_shape_) {
       RAYCUT_CUDA_CHECK(run(nullptr, scan_temp_bytes_));
-      scan_shape_ = count;
+      scan_shape_ = shape;
     }
     std::size_t temp_bytes = scan_temp_bytes_;
     temp_.resize(std::max<std::size_t>(temp_bytes, 1));
