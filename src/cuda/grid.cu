@@ -721,8 +721,8 @@ class Grid final : public GpuMethod {
     int split = options_.x_split > 0 ? options_.x_split : default_x_split[std::min(k, 2)];
     for (;; split /= 2) {
       view_.xgrid = split > 1 ? make_cell_grid(lo, hi, cutoff, k * split) : grid_;
-      if (split == 1 || options_.x_split > 0 || options_.layout != 0 ||
-          cell_count() <= 8ull * n_ + 4096 || !fits_dense(grid_.cell_count()))
+      if (split == 1 || options_.x_split > 0 || options_.layout != 0 || few_cells(cell_count()) ||
+          !fits_dense(grid_.cell_count()))
         break;
     }
     view_.x_cells_per_cell = static_cast<float>(grid_.width * view_.xgrid.inverse_width);
@@ -739,8 +739,10 @@ class Grid final : public GpuMethod {
   // within 64 MiB (a sphere surface at alpha = 64: dense 0.15 ms, compact 0.22 ms; at alpha = 128,
   // 0.9 GB of table, compact wins 2x). Memory stays O(N) plus a constant.
   bool fits_dense(std::uint64_t cells) const {
-    return cells <= 8ull * n_ + 4096 || (cells <= 64ull * n_ && cells <= dense_cells_any_n);
+    return few_cells(cells) || (cells <= 64ull * n_ && cells <= dense_cells_any_n);
   }
+  // At most 8 cells per particle (plus a constant for tiny N): a dense table of <= 32 bytes each.
+  bool few_cells(std::uint64_t cells) const { return cells <= 8ull * n_ + 4096; }
 
   // Lanes per target (see thread_kernel_from).
   void choose_lanes() {
