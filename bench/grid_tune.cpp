@@ -4,14 +4,15 @@
 //   grid_tune --suite uniform --params 32 --ps 1,8,32 --variants k1,k2,k3,k2-nocull,k2-compact
 //
 // A variant is k<cells per cutoff>, optionally followed by -nocull (scan whole rows),
-// -dense or -compact (force the cell table), -counting, -radix or -oneblock (how the dense table is
-// built), -g<lanes per target>, -x<x split>; `paper` is grid-paper, `auto` the grid with its
-// automatic choices (auto-radix: with a suffix). One CSV row per (configuration, variant) on
-// stdout, CUDA-event medians in ms; `pairs` (count kernel) must be the same on every row of a
-// configuration.
+// -dense or -compact (force the cell table), -counting, -bycell, -radix or -oneblock (how the dense
+// table is built), -g<lanes per target>, -x<x split>; `paper` is grid-paper, `auto` the grid with
+// its automatic choices (auto-radix: with a suffix). One CSV row per (configuration, variant) on
+// stdout, CUDA-event medians in ms (build_host_ms: host clock around build + synchronise); `pairs`
+// (count kernel) must be the same on every row of a configuration.
 #include <cuda_runtime.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -46,6 +47,7 @@ std::unique_ptr<raycut::detail::Method> make_variant(const std::string& name) {
   if (name.find("-counting") != std::string::npos) o.dense_build = 1;
   if (name.find("-radix") != std::string::npos) o.dense_build = 2;
   if (name.find("-oneblock") != std::string::npos) o.dense_build = 3;
+  if (name.find("-bycell") != std::string::npos) o.dense_build = 4;
   if (const auto x = name.find("-x"); x != std::string::npos)
     o.x_split = std::stoi(name.substr(x + 2));
   if (const auto g = name.find("-g"); g != std::string::npos)
@@ -72,7 +74,7 @@ int main(int argc, char** argv) {
     if (a == "--variants") variants = split(v);
     if (a == "--reps") reps = std::stoi(v);
   }
-  std::cout << "suite,param,p,N,variant,pairs,build_ms,compute_ms,total_ms\n";
+  std::cout << "suite,param,p,N,variant,pairs,build_ms,compute_ms,total_ms,build_host_ms\n";
   for (const auto& param_s : params) {
     for (const auto& p_s : ps) {
       const int param = std::stoi(param_s), p = std::stoi(p_s);
@@ -90,18 +92,22 @@ int main(int argc, char** argv) {
           m->synchronize();
           unsigned long long pairs = 0;
           for (auto c : m->results().count) pairs += c;
-          std::vector<double> b, c, t;
+          std::vector<double> b, c, t, h;
           for (int r = 0; r < reps; ++r) {
+            const auto start = std::chrono::steady_clock::now();
             m->build(xyz, n, cloud.cutoff);
             m->synchronize();
+            h.push_back(
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start)
+                    .count());
             b.push_back(m->device_build_ms());
             m->compute(raycut::Kernel::lj, {});
             m->synchronize();
             c.push_back(m->device_compute_ms());
             t.push_back(b.back() + c.back());
           }
-          std::printf("%s,%d,%d,%zu,%s,%llu,%.4f,%.4f,%.4f\n", suite.c_str(), param, p, n,
-                      variant.c_str(), pairs, median(b), median(c), median(t));
+          std::printf("%s,%d,%d,%zu,%s,%llu,%.4f,%.4f,%.4f,%.4f\n", suite.c_str(), param, p, n,
+                      variant.c_str(), pairs, median(b), median(c), median(t), median(h));
           std::fflush(stdout);
         } catch (const std::exception& e) {
           std::printf("%s,%d,%d,%zu,%s,error: %s\n", suite.c_str(), param, p, n, variant.c_str(),

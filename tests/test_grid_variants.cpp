@@ -1,5 +1,6 @@
 // Every kernel and table path of the `grid` method (GridOptions: a thread per target or grouped
-// lanes; dense tables from a counting sort (in one block or several) or a radix sort; the compact
+// lanes; dense tables from a counting sort (in one block or several, placed by particle or by
+// cell) or a radix sort; the compact
 // table; reach 1 to 3) against the CPU brute force. The conformance suite runs `grid` with its
 // automatic choices, which at its sizes always take the grouped kernel; this file makes every path
 // meet the oracle.
@@ -41,7 +42,8 @@ const Variant variants[] = {
     {"thread_k1_compact", make(1, 1, 2, 0)},  {"group4_k2_counting", make(2, 4, 1, 1)},
     {"group8_k1_radix", make(1, 8, 1, 2)},    {"group16_k1_compact", make(1, 16, 2, 0)},
     {"group32_k3_radix", make(3, 32, 1, 2)},  {"group16_k2_oneblock", make(2, 16, 1, 3)},
-    {"thread_k1_oneblock", make(1, 1, 1, 3)},
+    {"thread_k1_oneblock", make(1, 1, 1, 3)}, {"thread_k1_bycell", make(1, 1, 1, 4)},
+    {"group8_k2_bycell", make(2, 8, 1, 4)},
 };
 
 const char* families[] = {"uniform",          "lattice-k2",     "coincident",
@@ -98,3 +100,27 @@ INSTANTIATE_TEST_SUITE_P(
     });
 
 }  // namespace
+
+// Positions at a 16-byte boundary are read as float4 by the bounding box, others one float at a
+// time: both must give the same grid, hence the same neighbours.
+TEST(GridBoundingBox, AnyAlignmentGivesTheSameNeighbours) {
+  int devices = 0;
+  if (cudaGetDeviceCount(&devices) != cudaSuccess || devices == 0) GTEST_SKIP() << "no CUDA device";
+  const raycut::PointCloud cloud = raycut::make_family("uniform", 3001, 0.37f, 7);
+  const std::size_t n = cloud.size(), bytes = cloud.xyz.size() * sizeof(float);
+  float* buffer = nullptr;
+  ASSERT_EQ(cudaMalloc(&buffer, bytes + 4 * sizeof(float)), cudaSuccess);
+  std::vector<std::vector<std::uint32_t>> counts;
+  for (int offset : {0, 1, 2, 3}) {  // floats past a 16-byte boundary
+    cudaMemcpy(buffer + offset, cloud.xyz.data(), bytes, cudaMemcpyHostToDevice);
+    auto grid = raycut::detail::cuda::make_grid();
+    grid->build(buffer + offset, n, cloud.cutoff);
+    grid->compute(Kernel::count, {});
+    counts.push_back(grid->results().count);
+  }
+  cudaFree(buffer);
+  for (int offset = 1; offset < 4; ++offset) EXPECT_EQ(counts[offset], counts[0]) << offset;
+  std::uint64_t pairs = 0;
+  for (auto c : counts[0]) pairs += c;
+  EXPECT_GT(pairs, 0u);
+}

@@ -221,8 +221,10 @@ std::vector<int> paper_aabb(const PointCloud& cloud, std::size_t i, PaperAabb va
       case PaperAabb::sorted:
         keep = d2 <= r2 && d2 >= 1e-16f;
         break;
-      case PaperAabb::self_by_index:
-        keep = j != i && raycut::in_range(d2, r2);
+      case PaperAabb::self_by_index:  // THE predicate, on d = source - target
+        keep = j != i &&
+               raycut::in_range(raycut::squared_distance(q[0] - x[0], q[1] - x[1], q[2] - x[2]),
+                                raycut::squared_cutoff(c));
         break;
     }
     count[j] += keep;

@@ -3,6 +3,8 @@
 // methods agree bit for bit, even for pairs exactly at the cutoff.
 #pragma once
 
+#include <cmath>
+
 #if defined(__CUDACC__)
 #define RAYCUT_HD __host__ __device__ __forceinline__
 #else
@@ -11,14 +13,15 @@
 
 namespace raycut {
 
-// |d|^2 with d = x_source - x_target, rounded the same way on host and device: the device path
-// uses explicit round-to-nearest intrinsics so nvcc cannot contract it into FMAs; the host build
-// compiles with -ffp-contract=off for the same reason.
+// |d|^2 with d = x_source - x_target, as fma(dz, dz, fma(dy, dy, dx * dx)) with explicit
+// roundings, so that host and device round it identically (the host build compiles with
+// -ffp-contract=off, and std::fma is the correctly rounded fused operation). Fused: 3
+// instructions instead of 5 in the hottest loop of every method.
 RAYCUT_HD float squared_distance(float dx, float dy, float dz) {
 #if defined(__CUDA_ARCH__)
-  return __fadd_rn(__fadd_rn(__fmul_rn(dx, dx), __fmul_rn(dy, dy)), __fmul_rn(dz, dz));
+  return __fmaf_rn(dz, dz, __fmaf_rn(dy, dy, __fmul_rn(dx, dx)));
 #else
-  return dx * dx + dy * dy + dz * dz;
+  return std::fma(dz, dz, std::fma(dy, dy, dx * dx));
 #endif
 }
 

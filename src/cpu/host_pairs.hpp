@@ -51,6 +51,7 @@ Results host_compute(std::size_t n, const float* xyz, float cutoff, Kernel kerne
           i, xyz, c2, visit, [&](std::size_t j, float dx, float dy, float dz, float r2) {
             k(acc, static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j), dx, dy, dz, r2);
           });
+      k.finish(acc);
       if constexpr (K::has_count) out.count[i] = acc.count;
       if constexpr (K::has_energy) out.energy[i] = acc.energy;
       if constexpr (K::has_force) {

@@ -47,7 +47,7 @@ __global__ void compute_kernel(const float* xyz, std::size_t n, float cutoff_squ
       xyz, n, cutoff_squared, i, [&](std::size_t j, float dx, float dy, float dz, float r2) {
         kernel(acc, static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(j), dx, dy, dz, r2);
       });
-  if (i < n) out.store<K>(i, acc);
+  if (i < n) out.store(i, acc, kernel);
 }
 
 __global__ void count_kernel(const float* xyz, std::size_t n, float cutoff_squared,

@@ -22,8 +22,10 @@ struct OutputView {
   float* energy = nullptr;
   float* force = nullptr;  // 3 per target
 
+  // The target's sums, after the kernel's finish().
   template <class K>
-  __device__ __forceinline__ void store(std::size_t i, const Accumulator& acc) const {
+  __device__ __forceinline__ void store(std::size_t i, Accumulator acc, const K& kernel) const {
+    kernel.finish(acc);
     if constexpr (K::has_count) count[i] = acc.count;
     if constexpr (K::has_energy) energy[i] = acc.energy;
     if constexpr (K::has_force) {

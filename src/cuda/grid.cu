@@ -58,9 +58,11 @@ constexpr int default_x_split[3] = {1, 2, 4};
 //   group kernel) so that small inputs still fill the GPU.
 constexpr std::size_t thread_kernel_from = 65536 + 1;
 constexpr std::size_t group_of_32_up_to = 8192;
-// - the dense table from a counting sort below this many particles, from a radix sort above:
-//   the counting sort's scattered atomics lose to the sort's streaming passes at large N.
-constexpr std::size_t counting_sort_below = std::size_t{1} << 20;
+// - the dense table from a counting sort up to this many particles, from a radix sort above: the
+//   counting sort's scattered atomics lose to the sort's streaming passes at large N. Placed cell
+//   by cell (one or two particles per cell) it wins up to 2^20 included (0.119 against 0.131 ms;
+//   2^21: 0.216 against 0.205); placed particle by particle, only below (2^20: 0.157 / 0.133).
+constexpr std::size_t counting_sort_up_to = std::size_t{1} << 20;
 // - the whole dense build in one block up to this many particles and cells + 1 (launches cost
 //   more than the work there);
 constexpr int small_build_block = 1024;
@@ -88,7 +90,7 @@ struct DenseTable {
     const std::uint64_t base = row * dims0;
     s0 = start[base + xa];
     s1 = start[base + xb + 1];
-    return s0 < s1;
+    return true;  // possibly empty (s0 == s1): deciding would wait for the loads
   }
 };
 
@@ -214,9 +216,11 @@ __device__ __forceinline__ void for_each_candidate(const float4* __restrict__ po
     const float dx = v.x - p.x, dy = v.y - p.y, dz = v.z - p.z;
     visit(v, dx, dy, dz, squared_distance(dx, dy, dz));
   };
-  // Four loads in flight, one bound check per four.
+  // Four loads in flight, one 32-bit count per four (a 64-bit pointer compare costs more); not
+  // unrolled further, which would leave more lanes waiting on the remainders.
   const auto scan = [&](const float4* q, const float4* last) {
-    for (; q + 4 <= last; q += 4) {
+#pragma unroll 1
+    for (int fours = static_cast<int>(last - q) / 4; fours > 0; --fours, q += 4) {
       float4 v[4];
 #pragma unroll
       for (int u = 0; u < 4; ++u) v[u] = __ldg(q + u);
@@ -225,17 +229,19 @@ __device__ __forceinline__ void for_each_candidate(const float4* __restrict__ po
     }
     for (; q < last; ++q) one(__ldg(q));
   };
+  const auto scan_row = [&](Slot s0, Slot s1) {
+    const float4 *first = pos + s0, *last = pos + s1;
+    if (self >= first && self < last) {
+      scan(first, self);
+      scan(self + 1, last);
+    } else {
+      scan(first, last);
+    }
+  };
   for (int dz = -reach; dz <= reach; ++dz) {
     for (int dy = -reach; dy <= reach; ++dy) {
       Slot s0, s1;
-      if (!row_range(view, table, c, dz, dy, s0, s1)) continue;
-      const float4 *first = pos + s0, *last = pos + s1;
-      if (self >= first && self < last) {
-        scan(first, self);
-        scan(self + 1, last);
-      } else {
-        scan(first, last);
-      }
+      if (row_range(view, table, c, dz, dy, s0, s1)) scan_row(s0, s1);
     }
   }
 }
@@ -254,13 +260,16 @@ __device__ __forceinline__ void for_each_pair(const float4* __restrict__ pos, Sl
 
 // acc += the pair's terms when `in`, by selects rather than a branch: the body is a few
 // instructions and some lane of a warp is in range at almost every step, so a branch only adds
-// its own cost (beta = 32, p = 32: 0.589 against 0.610 ms). The SPH force, which loads the
-// source's inputs, keeps the branch.
+// its own cost (beta = 32, p = 32: 0.589 against 0.610 ms). A kernel whose terms vanish at
+// r2 = +inf gets that instead of a select per term. The SPH force, which loads the source's
+// inputs, keeps the branch.
 template <class K>
 __device__ __forceinline__ void accumulate_if(bool in, const K& kernel, Accumulator& acc,
                                               std::uint32_t i, std::uint32_t j, float dx, float dy,
                                               float dz, float r2) {
-  if constexpr (std::is_same_v<K, SphForceKernel>) {
+  if constexpr (K::vanishes_at_infinity) {
+    kernel(acc, i, j, dx, dy, dz, in ? r2 : __int_as_float(0x7f800000));
+  } else if constexpr (std::is_same_v<K, SphForceKernel>) {
     if (in) kernel(acc, i, j, dx, dy, dz, r2);
   } else {
     Accumulator pair;
@@ -308,7 +317,7 @@ __global__ void __launch_bounds__(block_size)
                        accumulate_if(in_range(r2, cutoff_squared), kernel, acc, i,
                                      original_index(q), dx, dy, dz, r2);
                      });
-  out.store<K>(i, acc);
+  out.store(i, acc, kernel);
 }
 
 constexpr int max_rows = 49;  // (2 reach + 1)^2 rows for reach <= 3
@@ -401,7 +410,7 @@ __global__ void __launch_bounds__(block_size)
     acc.fy = group_sum<G>(acc.fy);
     acc.fz = group_sum<G>(acc.fz);
   }
-  if (active && lane == 0) out.store<K>(original_index(p), acc);
+  if (active && lane == 0) out.store(original_index(p), acc, kernel);
 }
 
 template <class Table>
@@ -539,6 +548,39 @@ __global__ void place_kernel(const float* __restrict__ xyz, const std::uint32_t*
   for (Slot s = first; s < last; ++s) rank += members[s] < i;
   pos[first + rank] = make_float4(xyz[3 * std::size_t{i}], xyz[3 * std::size_t{i} + 1],
                                   xyz[3 * std::size_t{i} + 2], __uint_as_float(i));
+}
+
+// Pass 4, by cell: a thread per cell lists its particles by index (a rank per particle among the
+// cell's few) and writes them to the cell's consecutive slots: the writes are coalesced and each
+// particle's position is read once, where place_kernel reads the table at random per particle
+// and writes at random. Cells of more than `warp_cell_from` particles are ranked by the whole
+// warp together, one cell after another (a cluster would leave one thread with m^2 steps).
+constexpr Slot warp_cell_from = 32;
+__global__ void place_by_cell_kernel(const float* __restrict__ xyz, const Slot* start,
+                                     const Slot* members, std::uint32_t cells, float4* pos) {
+  const std::uint32_t c = blockIdx.x * blockDim.x + threadIdx.x;
+  const int lane = threadIdx.x % 32;
+  Slot first = 0, last = 0;
+  if (c < cells) {
+    first = start[c];
+    last = start[c + 1];
+  }
+  const auto place = [&](Slot cell_first, Slot cell_last, Slot s) {
+    const Slot i = members[s];
+    Slot rank = 0;
+    for (Slot o = cell_first; o < cell_last; ++o) rank += members[o] < i;
+    pos[cell_first + rank] = make_float4(xyz[3 * std::size_t{i}], xyz[3 * std::size_t{i} + 1],
+                                         xyz[3 * std::size_t{i} + 2], __uint_as_float(i));
+  };
+  const bool large = last - first > warp_cell_from;
+  if (!large)
+    for (Slot s = first; s < last; ++s) place(first, last, s);
+  for (unsigned ballot = __ballot_sync(0xffffffffu, large); ballot != 0; ballot &= ballot - 1) {
+    const int owner = __ffs(ballot) - 1;
+    const Slot f = __shfl_sync(0xffffffffu, first, owner),
+               l = __shfl_sync(0xffffffffu, last, owner);
+    for (Slot s = f + lane; s < l; s += 32) place(f, l, s);
+  }
 }
 
 __global__ void gather_kernel(const float* __restrict__ xyz, const Slot* order, Slot n,
@@ -796,7 +838,14 @@ class Grid final : public GpuMethod {
       return;
     }
     RAYCUT_CUDA_CHECK(cudaMemsetAsync(start_.data(), 0, (cells + 1) * sizeof(Slot)));
-    if (options_.dense_build == 2 || (options_.dense_build == 0 && n_ >= counting_sort_below)) {
+    // One or two particles per cell: placed cell by cell (more per cell would serialise a
+    // thread's cell; more cells than particles would spend threads on empty ones).
+    const bool by_cell =
+        options_.dense_build == 4 || (options_.dense_build == 0 && cells <= n_ && 2 * cells >= n_);
+    const std::size_t counting_limit = by_cell ? counting_sort_up_to : counting_sort_up_to - 1;
+    const bool radix =
+        options_.dense_build == 2 || (options_.dense_build == 0 && n_ > counting_limit);
+    if (radix) {
       keys32_alt_.resize(n_);
       keys_kernel<<<blocks_for(n_, 256), 256>>>(xyz, n_, view_, keys32_.data(), index_.data());
       RAYCUT_CUDA_CHECK_LAUNCH();
@@ -817,8 +866,12 @@ class Grid final : public GpuMethod {
     scatter_cells_kernel<<<blocks_for(n_, 256), 256>>>(keys32_.data(), index_.data(), start_.data(),
                                                        n_, index_alt_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
-    place_kernel<<<blocks_for(n_, 256), 256>>>(xyz, keys32_.data(), start_.data(),
-                                               index_alt_.data(), n_, pos_.data());
+    if (by_cell)
+      place_by_cell_kernel<<<blocks_for(cells, 256), 256>>>(
+          xyz, start_.data(), index_alt_.data(), static_cast<std::uint32_t>(cells), pos_.data());
+    else
+      place_kernel<<<blocks_for(n_, 256), 256>>>(xyz, keys32_.data(), start_.data(),
+                                                 index_alt_.data(), n_, pos_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
 

@@ -88,7 +88,7 @@ __global__ void compute_kernel(SortedParticles p, std::uint32_t n, CellGrid grid
                 [&](std::uint32_t s, float dx, float dy, float dz, float r2) {
                   kernel(acc, i, p.index[s], dx, dy, dz, r2);
                 });
-  out.store<K>(i, acc);
+  out.store(i, acc, kernel);
 }
 
 __global__ void count_kernel(SortedParticles p, std::uint32_t n, CellGrid grid,

@@ -87,19 +87,19 @@ __device__ __forceinline__ void finish_target(const LaunchParams& p, const Targe
   const std::uint32_t caller = caller_index(p, s.target);
   switch (p.mode) {
     case RayMode::count:
-      p.out.store<CountKernel>(caller, s.acc);
+      p.out.store(caller, s.acc, CountKernel{});
       break;
     case RayMode::lj:
-      p.out.store<LennardJonesKernel>(caller, s.acc);
+      p.out.store(caller, s.acc, p.lj);
       break;
     case RayMode::smooth:
-      p.out.store<SmoothKernel>(caller, s.acc);
+      p.out.store(caller, s.acc, p.smooth);
       break;
     case RayMode::sph_density:
-      p.out.store<SphDensityKernel>(caller, s.acc);
+      p.out.store(caller, s.acc, p.sph_density);
       break;
     case RayMode::sph_force:
-      p.out.store<SphForceKernel>(caller, s.acc);
+      p.out.store(caller, s.acc, p.sph_force);
       break;
     case RayMode::list_count:
       p.list_counts[caller] = s.acc.count;
