@@ -11,6 +11,7 @@
 #include <iterator>
 #include <string>
 #include <tuple>
+#include <cstdint>
 #include <vector>
 
 #include "cuda/methods.hpp"
