@@ -8,10 +8,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <iterator>
 #include <string>
 #include <tuple>
-#include <cstdint>
 #include <vector>
 
 #include "cuda/methods.hpp"
