@@ -5,10 +5,11 @@
 //
 // A variant is k<cells per cutoff>, optionally followed by -nocull (scan whole rows),
 // -dense or -compact (force the cell table), -counting, -bycell, -radix or -oneblock (how the dense
-// table is built), -g<lanes per target>, -x<x split>; `paper` is grid-paper, `auto` the grid with
-// its automatic choices (auto-radix: with a suffix). One CSV row per (configuration, variant) on
-// stdout, CUDA-event medians in ms (build_host_ms: host clock around build + synchronise); `pairs`
-// (count kernel) must be the same on every row of a configuration.
+// table is built), -g<lanes per target>, -x<x split>, -regs<1|2> (the thread kernel's register
+// budget: the compiler's default, or as many as it wants); `paper` is grid-paper, `auto` the grid
+// with its automatic choices (auto-radix: with a suffix). One CSV row per (configuration, variant)
+// on stdout, CUDA-event medians in ms (build_host_ms: host clock around build + synchronise);
+// `pairs` (count kernel) must be the same on every row of a configuration.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -48,6 +49,8 @@ std::unique_ptr<raycut::detail::Method> make_variant(const std::string& name) {
   if (name.find("-radix") != std::string::npos) o.dense_build = 2;
   if (name.find("-oneblock") != std::string::npos) o.dense_build = 3;
   if (name.find("-bycell") != std::string::npos) o.dense_build = 4;
+  if (const auto r = name.find("-regs"); r != std::string::npos)
+    o.thread_registers = std::stoi(name.substr(r + 5));
   if (const auto x = name.find("-x"); x != std::string::npos)
     o.x_split = std::stoi(name.substr(x + 2));
   if (const auto g = name.find("-g"); g != std::string::npos)

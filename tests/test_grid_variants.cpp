@@ -28,8 +28,9 @@ struct Variant {
   GridOptions options;
 };
 
-GridOptions make(int k, int lanes, int layout, int dense_build) {
+GridOptions make(int k, int lanes, int layout, int dense_build, int registers = 0) {
   GridOptions o;
+  o.thread_registers = registers;
   o.cells_per_cutoff = k;
   o.lanes_per_target = lanes;
   o.layout = layout;
@@ -38,13 +39,21 @@ GridOptions make(int k, int lanes, int layout, int dense_build) {
 }
 
 const Variant variants[] = {
-    {"thread_k1_counting", make(1, 1, 1, 1)}, {"thread_k2_radix", make(2, 1, 1, 2)},
-    {"thread_k3_counting", make(3, 1, 1, 1)}, {"thread_k2_compact", make(2, 1, 2, 0)},
-    {"thread_k1_compact", make(1, 1, 2, 0)},  {"group4_k2_counting", make(2, 4, 1, 1)},
-    {"group8_k1_radix", make(1, 8, 1, 2)},    {"group16_k1_compact", make(1, 16, 2, 0)},
-    {"group32_k3_radix", make(3, 32, 1, 2)},  {"group16_k2_oneblock", make(2, 16, 1, 3)},
-    {"thread_k1_oneblock", make(1, 1, 1, 3)}, {"thread_k1_bycell", make(1, 1, 1, 4)},
+    {"thread_k1_counting", make(1, 1, 1, 1)},
+    {"thread_k2_radix", make(2, 1, 1, 2)},
+    {"thread_k3_counting", make(3, 1, 1, 1)},
+    {"thread_k2_compact", make(2, 1, 2, 0)},
+    {"thread_k1_compact", make(1, 1, 2, 0)},
+    {"group4_k2_counting", make(2, 4, 1, 1)},
+    {"group8_k1_radix", make(1, 8, 1, 2)},
+    {"group16_k1_compact", make(1, 16, 2, 0)},
+    {"group32_k3_radix", make(3, 32, 1, 2)},
+    {"group16_k2_oneblock", make(2, 16, 1, 3)},
+    {"thread_k1_oneblock", make(1, 1, 1, 3)},
+    {"thread_k1_bycell", make(1, 1, 1, 4)},
     {"group8_k2_bycell", make(2, 8, 1, 4)},
+    {"thread_k2_counting_regs1", make(2, 1, 1, 1, 1)},
+    {"thread_k1_compact_regs2", make(1, 1, 2, 0, 2)},
 };
 
 const char* families[] = {"uniform",          "lattice-k2",     "coincident",

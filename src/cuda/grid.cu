@@ -54,6 +54,12 @@ constexpr double fine_cells_density = 24.0;
 // - x cells 2 (C cells) or 4 (C/2 cells) times narrower than y and z cells: rows trimmed closer
 //   to the sphere, for one more sort bit or two;
 constexpr int default_x_split[3] = {1, 2, 4};
+// - the thread kernel with the registers it wants (52: fewer warps, each with more loads in
+//   flight) from this many particles per C-cell of the box on average, else within the
+//   compiler's default budget (42: more warps), by measurement: uniform beta=32 p=8, 32:
+//   0.065 / 0.068, 0.450 / 0.464 ms; sphere surfaces (sparse boxes) alpha=64 p=4: 0.201 / 0.195;
+//   alpha=128 p=1: 0.338 / 0.323;
+constexpr double many_registers_density = 8.0;
 // - a thread per target from this many targets on; below, G lanes share each target (the
 //   group kernel) so that small inputs still fill the GPU.
 constexpr std::size_t thread_kernel_from = 65536 + 1;
@@ -303,8 +309,8 @@ __device__ __forceinline__ std::uint32_t group_sum(std::uint32_t v) {
 }
 
 // One thread per target.
-template <class K, class Table>
-__global__ void __launch_bounds__(block_size)
+template <bool ManyRegisters, class K, class Table>
+__global__ void __launch_bounds__(block_size, ManyRegisters ? 1 : 0)
     thread_kernel(const float4* __restrict__ pos, Slot n, GridView view, Table table,
                   float cutoff_squared, K kernel, OutputView out) {
   const Slot t = blockIdx.x * block_size + threadIdx.x;
@@ -692,8 +698,12 @@ class Grid final : public GpuMethod {
         with_table([&](const auto& table) {
           switch (lanes_) {
             case 1:
-              thread_kernel<<<blocks_for(n_), block_size>>>(pos_.data(), n_, view_, table,
-                                                            cutoff_squared_, k, out);
+              if (many_registers_)
+                thread_kernel<true><<<blocks_for(n_), block_size>>>(pos_.data(), n_, view_, table,
+                                                                    cutoff_squared_, k, out);
+              else
+                thread_kernel<false><<<blocks_for(n_), block_size>>>(pos_.data(), n_, view_, table,
+                                                                     cutoff_squared_, k, out);
               break;
             case 4:
               launch_group<4>(table, k, out);
@@ -750,11 +760,11 @@ class Grid final : public GpuMethod {
 
   void choose_grid(const float lo[3], const float hi[3], float cutoff) {
     int k = options_.cells_per_cutoff;
-    if (k <= 0) {
-      const CellGrid coarse = make_cell_grid(lo, hi, cutoff, 1);
-      const double density = static_cast<double>(n_) / static_cast<double>(coarse.cell_count());
-      k = density >= fine_cells_density ? 2 : 1;
-    }
+    const CellGrid coarse = make_cell_grid(lo, hi, cutoff, 1);
+    const double density = static_cast<double>(n_) / static_cast<double>(coarse.cell_count());
+    if (k <= 0) k = density >= fine_cells_density ? 2 : 1;
+    many_registers_ = options_.thread_registers == 2 ||
+                      (options_.thread_registers == 0 && density >= many_registers_density);
     grid_ = make_cell_grid(lo, hi, cutoff, k);
     view_.grid = grid_;
     // Narrower x cells, unless they alone would push a dense table over 8 cells per particle
@@ -951,6 +961,7 @@ class Grid final : public GpuMethod {
   Slot n_ = 0;
   float cutoff_squared_ = 0;
   int lanes_ = 1;
+  bool many_registers_ = false;  // thread kernel: see many_registers_density
   CellGrid grid_;
   GridView view_{};
   bool dense_ = true;

@@ -1,4 +1,5 @@
 #include <algorithm>
+#include <atomic>
 #include <cfloat>
 #include <cstdint>
 
@@ -42,7 +43,7 @@ __device__ __forceinline__ void block_reduce(const float lo[3], const float hi[3
 // load took 18; other pointers one float at a time.
 __global__ void __launch_bounds__(bbox_block)
     bounding_box_kernel(const float* xyz, std::size_t n, float* partials, unsigned* counter,
-                        float* result) {
+                        BoxResult* result, unsigned sequence) {
   __shared__ bool last;
   float lo[3] = {FLT_MAX, FLT_MAX, FLT_MAX}, hi[3] = {-FLT_MAX, -FLT_MAX, -FLT_MAX};
   const std::size_t thread = blockIdx.x * std::size_t{bbox_block} + threadIdx.x;
@@ -93,8 +94,10 @@ __global__ void __launch_bounds__(bbox_block)
   }
   block_reduce(l, h, v);
   if (threadIdx.x == 0) {
-    for (int k = 0; k < 6; ++k) result[k] = v[k];
+    for (int a = 0; a < 3; ++a) result->lo[a] = v[a], result->hi[a] = v[3 + a];
     *counter = 0;  // ready for the next call
+    __threadfence_system();
+    *static_cast<volatile unsigned*>(&result->sequence) = sequence;  // the box is there
     __threadfence_system();
   }
 }
@@ -109,22 +112,35 @@ void BoundingBox::compute(const float* xyz, std::size_t n, float lo[3], float hi
                           cudaStream_t stream) {
   if (!result_) {
     RAYCUT_CUDA_CHECK(
-        cudaHostAlloc(reinterpret_cast<void**>(&result_), 6 * sizeof(float), cudaHostAllocMapped));
+        cudaHostAlloc(reinterpret_cast<void**>(&result_), sizeof(BoxResult), cudaHostAllocMapped));
+    result_->sequence = sequence_;
     counter_.resize(1);
     RAYCUT_CUDA_CHECK(cudaMemset(counter_.data(), 0, sizeof(unsigned)));
     partials_.resize(6 * bbox_max_blocks);
     RAYCUT_CUDA_CHECK(
         cudaHostGetDevicePointer(reinterpret_cast<void**>(&device_result_), result_, 0));
   }
+  const unsigned sequence = ++sequence_;
   const int blocks = static_cast<int>(std::max<std::size_t>(
       1, std::min<std::size_t>((n / 4 + bbox_block - 1) / bbox_block, bbox_max_blocks)));
   bounding_box_kernel<<<blocks, bbox_block, 0, stream>>>(xyz, n, partials_.data(), counter_.data(),
-                                                         device_result_);
+                                                         device_result_, sequence);
   RAYCUT_CUDA_CHECK_LAUNCH();
-  RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
+  // Poll the sequence number the kernel writes last; every few thousand polls ask the stream, so
+  // that a failed kernel raises its error instead of leaving us spinning.
+  const volatile unsigned* written = &result_->sequence;
+  for (unsigned polls = 1; *written != sequence; ++polls) {
+    if (polls % 4096 != 0) continue;
+    const cudaError_t status = cudaStreamQuery(stream);
+    if (status == cudaErrorNotReady) continue;
+    RAYCUT_CUDA_CHECK(status);
+    if (*written != sequence)
+      throw Error(ErrorCode::internal, "the bounding-box kernel finished without its result");
+  }
+  std::atomic_thread_fence(std::memory_order_acquire);
   for (int a = 0; a < 3; ++a) {
-    lo[a] = result_[a];
-    hi[a] = result_[3 + a];
+    lo[a] = result_->lo[a];
+    hi[a] = result_->hi[a];
   }
 }
 

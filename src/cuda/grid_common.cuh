@@ -11,8 +11,15 @@
 
 namespace raycut::detail::cuda {
 
+// What the bounding-box kernel leaves in mapped pinned memory; `sequence` is written last.
+struct BoxResult {
+  float lo[3], hi[3];
+  unsigned sequence;
+};
+
 // The axis-aligned bounding box of n >= 1 device positions, on the host. One kernel (the last
-// block finishes the reduction) and one stream synchronisation; buffers are kept between calls.
+// block finishes the reduction), awaited by polling its result in mapped memory (sooner than a
+// stream synchronisation); buffers are kept between calls.
 class BoundingBox {
  public:
   BoundingBox() = default;
@@ -24,10 +31,11 @@ class BoundingBox {
                cudaStream_t stream = nullptr);
 
  private:
-  DeviceBuffer<float> partials_;    // 6 per block
-  DeviceBuffer<unsigned> counter_;  // blocks done; the last one resets it to 0
-  float* result_ = nullptr;         // mapped pinned host memory: lo[3], hi[3]
-  float* device_result_ = nullptr;  // the same memory, as the device sees it
+  DeviceBuffer<float> partials_;        // 6 per block
+  DeviceBuffer<unsigned> counter_;      // blocks done; the last one resets it to 0
+  BoxResult* result_ = nullptr;         // mapped pinned host memory
+  BoxResult* device_result_ = nullptr;  // the same memory, as the device sees it
+  unsigned sequence_ = 0;               // of the last call
 };
 
 }  // namespace raycut::detail::cuda

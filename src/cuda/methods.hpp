@@ -21,6 +21,9 @@ struct GridOptions {
   int layout = 0;            // 0: automatic, 1: dense cell table, 2: compact (hashed rows)
   // 1: a thread per target; 4, 8, 16, 32: lanes sharing each target; 0: automatic.
   int lanes_per_target = 0;
+  // The thread kernel's registers: 0: automatic, 1: the compiler's default budget, 2: as many as
+  // it wants.
+  int thread_registers = 0;
   // The dense table from 0: automatic, 1: a counting sort placing particle by particle, 2: a
   // radix sort, 3: a counting sort in one block (small inputs), 4: a counting sort placing cell
   // by cell.
