@@ -456,11 +456,36 @@ __global__ void keys_kernel(const float* __restrict__ xyz, Slot n, GridView view
   index[i] = i;
 }
 
+// Particle i as the compute reads it: a float4 with w = i.
+__device__ __forceinline__ float4 particle(const float* __restrict__ xyz, Slot i) {
+  return make_float4(xyz[3 * std::size_t{i}], xyz[3 * std::size_t{i} + 1],
+                     xyz[3 * std::size_t{i} + 2], __uint_as_float(i));
+}
+
 __device__ __forceinline__ void gather_one(const float* __restrict__ xyz, const Slot* order, Slot s,
                                            float4* pos) {
-  const Slot i = order[s];
-  pos[s] = make_float4(xyz[3 * std::size_t{i}], xyz[3 * std::size_t{i} + 1],
-                       xyz[3 * std::size_t{i} + 2], __uint_as_float(i));
+  pos[s] = particle(xyz, order[s]);
+}
+
+// Counting sort, pass 1 for particle i: its cell key, counted in start[] by an atomic whose
+// return value is a provisional rank within the cell (its order varies from run to run).
+__device__ __forceinline__ void count_one(const float* __restrict__ xyz, Slot i,
+                                          const GridView& view, std::uint32_t* keys,
+                                          Slot* provisional, Slot* start) {
+  const auto key =
+      static_cast<std::uint32_t>(cell_key(view, xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]));
+  keys[i] = key;
+  provisional[i] = atomicAdd(&start[key], 1u);
+}
+
+// Counting sort, pass 4 for particle i of the cell whose particles are members[first, last): its
+// slot is first plus the number of them with a smaller index, exactly the layout of a stable sort
+// by cell, so every sum is the same from run to run.
+__device__ __forceinline__ void place_one(const float* __restrict__ xyz, const Slot* members,
+                                          Slot first, Slot last, Slot i, float4* pos) {
+  Slot rank = 0;
+  for (Slot s = first; s < last; ++s) rank += members[s] < i;
+  pos[first + rank] = particle(xyz, i);
 }
 
 // Dense, after a radix sort: the end of each cell's run, at entry key + 1 of start[] (zeroed,
@@ -475,16 +500,11 @@ __global__ void run_ends_kernel(const float* __restrict__ xyz, const std::uint32
 }
 
 // Dense, counting sort. Pass 1: each particle's cell, counted in start[] (zeroed, cells + 1
-// entries) by an atomic whose return value is a provisional rank within the cell; the order of
-// the atomics varies from run to run, pass 4 removes it.
+// entries); pass 4 removes the order of the atomics.
 __global__ void count_cells_kernel(const float* __restrict__ xyz, Slot n, GridView view,
                                    std::uint32_t* keys, Slot* provisional, Slot* start) {
   const Slot i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i >= n) return;
-  const auto key =
-      static_cast<std::uint32_t>(cell_key(view, xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]));
-  keys[i] = key;
-  provisional[i] = atomicAdd(&start[key], 1u);
+  if (i < n) count_one(xyz, i, view, keys, provisional, start);
 }
 
 // Dense, small inputs: the counting sort of passes 1 to 4 (count_cells_kernel .. place_kernel) in
@@ -500,12 +520,8 @@ __global__ void __launch_bounds__(small_build_block)
   const Slot entries = cells + 1;
   for (Slot c = threadIdx.x; c < entries; c += small_build_block) start[c] = 0;
   __syncthreads();
-  for (Slot i = threadIdx.x; i < n; i += small_build_block) {
-    const auto key =
-        static_cast<std::uint32_t>(cell_key(view, xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]));
-    keys[i] = key;
-    provisional[i] = atomicAdd(&start[key], 1u);
-  }
+  for (Slot i = threadIdx.x; i < n; i += small_build_block)
+    count_one(xyz, i, view, keys, provisional, start);
   __syncthreads();
   const Slot per_thread = (entries + small_build_block - 1) / small_build_block;
   const Slot first = threadIdx.x * per_thread, last = min(first + per_thread, entries);
@@ -522,14 +538,8 @@ __global__ void __launch_bounds__(small_build_block)
   for (Slot i = threadIdx.x; i < n; i += small_build_block)
     members[start[keys[i]] + provisional[i]] = i;
   __syncthreads();
-  for (Slot i = threadIdx.x; i < n; i += small_build_block) {
-    const std::uint32_t key = keys[i];
-    const Slot cell_first = start[key], cell_last = start[key + 1];
-    Slot rank = 0;
-    for (Slot s = cell_first; s < cell_last; ++s) rank += members[s] < i;
-    pos[cell_first + rank] = make_float4(xyz[3 * std::size_t{i}], xyz[3 * std::size_t{i} + 1],
-                                         xyz[3 * std::size_t{i} + 2], __uint_as_float(i));
-  }
+  for (Slot i = threadIdx.x; i < n; i += small_build_block)
+    place_one(xyz, members, start[keys[i]], start[keys[i] + 1], i, pos);
 }
 
 // Pass 2 is an exclusive scan of start[] in place. Pass 3: the particles of each cell, in the
@@ -540,20 +550,12 @@ __global__ void scatter_cells_kernel(const std::uint32_t* keys, const Slot* prov
   if (i < n) members[start[keys[i]] + provisional[i]] = i;
 }
 
-// Pass 4: the final slot is the cell's start plus the number of its particles with a smaller
-// index: exactly the layout of a stable sort by cell, so every sum is the same from run to run.
-// The scan of the cell costs less than the compute's own scan of it (every target tests every
-// particle of its own cell).
+// Pass 4, by particle (place_one). The scan of the cell costs less than the compute's own scan of
+// it (every target tests every particle of its own cell).
 __global__ void place_kernel(const float* __restrict__ xyz, const std::uint32_t* keys,
                              const Slot* start, const Slot* members, Slot n, float4* pos) {
   const Slot i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i >= n) return;
-  const std::uint32_t key = keys[i];
-  const Slot first = start[key], last = start[key + 1];
-  Slot rank = 0;
-  for (Slot s = first; s < last; ++s) rank += members[s] < i;
-  pos[first + rank] = make_float4(xyz[3 * std::size_t{i}], xyz[3 * std::size_t{i} + 1],
-                                  xyz[3 * std::size_t{i} + 2], __uint_as_float(i));
+  if (i < n) place_one(xyz, members, start[keys[i]], start[keys[i] + 1], i, pos);
 }
 
 // Pass 4, by cell: a thread per cell lists its particles by index (a rank per particle among the
@@ -571,21 +573,14 @@ __global__ void place_by_cell_kernel(const float* __restrict__ xyz, const Slot* 
     first = start[c];
     last = start[c + 1];
   }
-  const auto place = [&](Slot cell_first, Slot cell_last, Slot s) {
-    const Slot i = members[s];
-    Slot rank = 0;
-    for (Slot o = cell_first; o < cell_last; ++o) rank += members[o] < i;
-    pos[cell_first + rank] = make_float4(xyz[3 * std::size_t{i}], xyz[3 * std::size_t{i} + 1],
-                                         xyz[3 * std::size_t{i} + 2], __uint_as_float(i));
-  };
   const bool large = last - first > warp_cell_from;
   if (!large)
-    for (Slot s = first; s < last; ++s) place(first, last, s);
+    for (Slot s = first; s < last; ++s) place_one(xyz, members, first, last, members[s], pos);
   for (unsigned ballot = __ballot_sync(0xffffffffu, large); ballot != 0; ballot &= ballot - 1) {
     const int owner = __ffs(ballot) - 1;
     const Slot f = __shfl_sync(0xffffffffu, first, owner),
                l = __shfl_sync(0xffffffffu, last, owner);
-    for (Slot s = f + lane; s < l; s += 32) place(f, l, s);
+    for (Slot s = f + lane; s < l; s += 32) place_one(xyz, members, f, l, members[s], pos);
   }
 }
 
