@@ -6,8 +6,9 @@
 //   dense   when the box has at most 8 cells per particle (or 64 within 2^24 cells): start[c]
 //           for every cell c (+1 entry), so the particles of cells [a, b] of a row are slots
 //           [start[a], start[b + 1]). Built by a counting sort below 2^20 particles (atomics,
-//           then ranks by index within each cell; in one block up to 4096 particles), by a radix
-//           sort of (key, index) above;
+//           then ranks by index within each cell; in one block up to 4096 particles; placed cell
+//           by cell at one or two particles per cell, then up to 2^20 included), by a radix sort
+//           of (key, index) above;
 //   compact otherwise (a far outlier, a sphere surface at fine cells): a radix sort, the sorted
 //           unique cell keys with their first slots, and a hash table from row (y, z) to that
 //           row's run of unique cells; a row's [a, b] is then two binary searches in its run.
