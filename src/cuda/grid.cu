@@ -22,6 +22,7 @@
 // that they still fill the GPU. Culling is conservative by construction (slack far above float
 // round-off); the shared predicate decides every pair; self is excluded by slot. docs/grid.md
 // has the measurements behind each choice.
+#include <math_constants.h>
 #include <cub/block/block_scan.cuh>
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
@@ -97,7 +98,7 @@ struct DenseTable {
     const std::uint64_t base = row * dims0;
     s0 = start[base + xa];
     s1 = start[base + xb + 1];
-    return true;  // possibly empty (s0 == s1): deciding would wait for the loads
+    return true;  // possibly empty (s0 == s1): the scan then does nothing
   }
 };
 
@@ -182,7 +183,8 @@ __host__ __device__ __forceinline__ std::uint64_t cell_key(const GridView& view,
 }
 
 // The slots [s0, s1) of row (dz, dy) around the target, trimmed in x to the cells its sphere
-// can reach; false when the row is outside the grid, out of reach or empty.
+// can reach; false when the row is outside the grid or out of reach (an empty row may come back
+// as s0 == s1).
 template <class Table>
 __device__ __forceinline__ bool row_range(const GridView& view, const Table& table,
                                           const TargetCell& c, int dz, int dy, Slot& s0, Slot& s1) {
@@ -275,7 +277,7 @@ __device__ __forceinline__ void accumulate_if(bool in, const K& kernel, Accumula
                                               std::uint32_t i, std::uint32_t j, float dx, float dy,
                                               float dz, float r2) {
   if constexpr (K::vanishes_at_infinity) {
-    kernel(acc, i, j, dx, dy, dz, in ? r2 : __int_as_float(0x7f800000));
+    kernel(acc, i, j, dx, dy, dz, in ? r2 : CUDART_INF_F);
   } else if constexpr (std::is_same_v<K, SphForceKernel>) {
     if (in) kernel(acc, i, j, dx, dy, dz, r2);
   } else {
