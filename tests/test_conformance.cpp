@@ -155,8 +155,8 @@ TEST_P(Conformance, MatchesBruteForce) {
     }
     Engine oracle("brute-force");
     oracle.build({cloud.xyz.data(), n, MemorySpace::host}, c.cutoff);
-    const auto want_rho = oracle.compute(Kernel::sph_density, sph).energy;
-    const auto got_rho = engine.compute(Kernel::sph_density, sph).energy;
+    const auto want_rho = oracle.compute(Kernel::sph_density, sph).density;
+    const auto got_rho = engine.compute(Kernel::sph_density, sph).density;
     ASSERT_EQ(got_rho.size(), n);
     for (std::size_t i = 0; i < n; ++i)
       ASSERT_NEAR(got_rho[i], want_rho[i], 1e-5 * std::fabs(want_rho[i]) + 1e-30) << "target " << i;

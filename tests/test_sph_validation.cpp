@@ -112,7 +112,7 @@ TEST(SphValidation, ForcePassIsAConsistentPressureGradient) {
   KernelOptions density;
   density.sph_mass = params.particle_mass;
   engine.run(Kernel::sph_density, density);
-  const std::vector<float> rho_sum = engine.results().energy;
+  const std::vector<float> rho_sum = engine.results().density;
   const double self = params.particle_mass * 315.0 /
                       (64.0 * 3.14159265358979 * std::pow(double{params.smoothing_length}, 3));
   for (std::size_t i = 0; i < n; ++i) {

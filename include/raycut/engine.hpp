@@ -29,11 +29,14 @@ struct PositionsView {
   MemorySpace space = MemorySpace::host;
 };
 
-// Per-target results on the host; a vector is empty when the kernel does not produce it.
+// Per-target results on the host; a vector is empty when the kernel does not produce it
+// (raycut::produces(kernel) says which it does).
 struct Results {
-  std::vector<std::uint32_t> count;  // count kernel
-  std::vector<float> energy;         // lj, smooth
-  std::vector<float> force;          // smooth: 3 per target (fx fy fz)
+  std::vector<std::uint32_t> count;  // count
+  std::vector<float> energy;         // lj, lj_forces, smooth
+  std::vector<float> force;          // lj_forces, smooth, sph_force: 3 per target (fx fy fz)
+  std::vector<float> virial;         // lj_forces: 6 per target (xx yy zz xy xz yz)
+  std::vector<float> density;        // sph_density
 };
 
 // The results of the last run() where the method keeps them (Engine::space()), without a copy:
@@ -42,14 +45,89 @@ struct ResultsView {
   const std::uint32_t* count = nullptr;
   const float* energy = nullptr;
   const float* force = nullptr;
+  const float* virial = nullptr;
+  const float* density = nullptr;
   MemorySpace space = MemorySpace::host;
 };
 
-// Full neighbour list in CSR form: the in-range sources of target i are
-// indices[offsets[i] .. offsets[i+1]); their order within a row is unspecified.
+// Host neighbour list in CSR form: the in-range sources of target i are
+// indices[offsets[i] .. offsets[i+1]); their order within a row is unspecified. A copy of the
+// list a method builds where it works (NeighbourListBuffer).
 struct NeighbourList {
   std::vector<std::uint64_t> offsets;  // N + 1 entries
   std::vector<std::uint32_t> indices;
+  std::vector<float> distances;  // |r_ij| per entry, when asked
+  std::vector<float> vectors;    // r_ij = x_j - x_i per entry (3 floats), when asked
+};
+
+// What a neighbour list holds (spec/NEIGHBOURS.md section 5).
+struct ListOptions {
+  bool half = false;       // each unordered pair once, as (i, j) with i < j, in row i
+  bool distances = false;  // |r_ij| per entry
+  bool vectors = false;    // r_ij = x_j - x_i per entry
+};
+
+namespace detail {
+class ListStorage;
+class PaddedStorage;
+}  // namespace detail
+
+// A CSR neighbour list where the method works (device memory for GPU methods), in buffers that
+// are reused from call to call and only grow: in a step loop the list allocates once. Filled by
+// Engine::neighbours(buffer, options); the pointers stay valid until the next fill.
+class NeighbourListBuffer {
+ public:
+  NeighbourListBuffer();
+  ~NeighbourListBuffer();
+  NeighbourListBuffer(const NeighbourListBuffer&) = delete;
+  NeighbourListBuffer(NeighbourListBuffer&&) noexcept;
+  NeighbourListBuffer& operator=(NeighbourListBuffer&&) noexcept;
+
+  std::size_t size() const;                // N, the number of targets
+  std::uint64_t pairs() const;             // entries (offsets()[N])
+  const std::uint64_t* offsets() const;    // N + 1
+  const std::uint32_t* indices() const;    // pairs()
+  const float* distances() const;          // pairs(), or null when not asked
+  const float* vectors() const;            // 3 pairs(), or null when not asked
+  MemorySpace space() const;
+  const ListOptions& options() const;
+  std::size_t bytes() const;               // memory held
+  NeighbourList to_host() const;           // a copy on the host
+
+ private:
+  friend class Engine;
+  std::unique_ptr<detail::ListStorage> storage_;
+};
+
+// Rows past K of a padded list, never truncated silently.
+struct PaddedReport {
+  std::uint64_t overflowed_rows = 0;  // rows with more than K neighbours
+  std::uint32_t largest_count = 0;    // the largest row (grow K to this and retry)
+  bool overflowed() const { return overflowed_rows > 0; }
+};
+
+// A padded [N, K] neighbour matrix and per-row counts, where the method works (jax-md's and
+// LAMMPS's shape). Row i holds min(count_i, K) neighbours, then N (an invalid index) up to K.
+class PaddedNeighbourBuffer {
+ public:
+  PaddedNeighbourBuffer();
+  ~PaddedNeighbourBuffer();
+  PaddedNeighbourBuffer(PaddedNeighbourBuffer&&) noexcept;
+  PaddedNeighbourBuffer& operator=(PaddedNeighbourBuffer&&) noexcept;
+
+  std::size_t size() const;              // N
+  std::uint32_t width() const;           // K
+  const std::uint32_t* indices() const;  // N * K, row-major
+  const std::uint32_t* counts() const;   // N: the true number of neighbours of each row
+  MemorySpace space() const;
+  const PaddedReport& report() const;
+  // Host copies.
+  std::vector<std::uint32_t> indices_to_host() const;
+  std::vector<std::uint32_t> counts_to_host() const;
+
+ private:
+  friend class Engine;
+  std::unique_ptr<detail::PaddedStorage> storage_;
 };
 
 // Wall-clock milliseconds of the last build()/update() and run(), each phase synchronised.
@@ -116,7 +194,8 @@ bool cuda_device_available();
 
 namespace detail {
 class Method;
-}
+struct PairPass;
+}  // namespace detail
 
 class Engine {
  public:
@@ -124,6 +203,7 @@ class Engine {
   // unknown name, Error(unsupported) for a method not available here.
   explicit Engine(std::string_view method = "auto");
   ~Engine();
+  // A moved-from Engine throws Error(invalid_argument) from every call but method().
   Engine(Engine&&) noexcept;
   Engine& operator=(Engine&&) noexcept;
 
@@ -131,8 +211,14 @@ class Engine {
   // Where the method works: positions given there avoid a copy (and an untimed transfer).
   MemorySpace space() const;
 
-  // Validates (finite coordinates, cutoff finite and > 0) and builds the method's structure.
-  // Throws Error with the first bad index or the bad value, before any device work.
+  // The CUDA stream (a cudaStream_t) the engine's GPU work is queued on; null: the engine's own
+  // (the legacy default stream). Every call waits for its own work on this stream only.
+  void set_stream(void* cuda_stream);
+  void* stream() const { return stream_; }
+
+  // Validates (finite coordinates, cutoff finite and within the supported range) and builds
+  // the method's structure. Throws Error with the first bad index or the bad value, before any
+  // device work.
   void build(PositionsView positions, float cutoff);
 
   // New positions of the same N particles, cutoff unchanged: refit or rebuild per the policy.
@@ -141,32 +227,69 @@ class Engine {
 
   // Computes `kernel` for every target and keeps the results in the method's memory.
   void run(Kernel kernel, const KernelOptions& options = {});
-  // Copies the results of the last run() to the host.
+  // Copies the results of the last successful run() to the host.
   Results results() const;
   // The results of the last run() in place (no copy): what an integrator on the device reads.
   ResultsView results_view() const;
   // run() then results().
   Results compute(Kernel kernel, const KernelOptions& options = {});
 
-  // The full CSR neighbour list of the built positions.
-  NeighbourList neighbours();
+  // The CSR neighbour list of the built positions, where the method works (device memory for
+  // GPU methods), into reusable buffers: exact sizes by a count pass, a scan and a fill pass.
+  void neighbours(NeighbourListBuffer& list, const ListOptions& options = {});
+  // The same, copied to the host.
+  NeighbourList neighbours(const ListOptions& options = {});
+  // The padded [N, K] matrix in one pass. Overflowing rows are reported (and raise
+  // Error(capacity_exceeded) when `throw_on_overflow`), never truncated silently.
+  PaddedReport padded_neighbours(PaddedNeighbourBuffer& list, std::uint32_t k,
+                                 bool throw_on_overflow = false);
 
   const Timings& last_timings() const { return timings_; }
   std::size_t size() const { return size_; }
   float cutoff() const { return cutoff_; }
 
+  // What include/raycut/pairs.hpp and include/raycut/cuda/pairs.cuh run a user's functor
+  // through; not for other use.
+  detail::PairPass pair_pass() const;
+
  private:
   template <class F>
   void with_positions_in_method_space(const PositionsView& positions, F&& f);
+  detail::Method& impl(const char* call) const;
 
   std::string method_;
   std::unique_ptr<detail::Method> impl_;
+  void* stream_ = nullptr;
   std::size_t size_ = 0;
   float cutoff_ = 0;
   bool built_ = false;
-  Kernel last_kernel_ = Kernel::count;
   bool has_run_ = false;
   Timings timings_;
+};
+
+// A Verlet list: the list of every pair within cutoff + skin, rebuilt only when some particle
+// has moved more than skin / 2 since the last build (then no pair within the cutoff can be
+// missing from it). The displacement is checked where the positions are (on the device for GPU
+// methods: one reduction and a 4-byte flag read, no copy of positions). Kernels that use the
+// list filter by the cutoff themselves.
+class VerletList {
+ public:
+  VerletList(std::string_view method, float cutoff, float skin, const ListOptions& options = {});
+  // New positions (the same N after the first call); returns true when the list was rebuilt.
+  bool update(PositionsView positions);
+  const NeighbourListBuffer& list() const { return list_; }
+  Engine& engine() { return engine_; }
+  float cutoff() const { return cutoff_; }
+  float skin() const { return skin_; }
+  std::uint64_t rebuilds() const { return rebuilds_; }
+
+ private:
+  Engine engine_;
+  float cutoff_, skin_;
+  ListOptions options_;
+  NeighbourListBuffer list_;
+  std::shared_ptr<void> built_;  // positions at the last build, where the method works
+  std::uint64_t rebuilds_ = 0;
 };
 
 }  // namespace raycut

@@ -13,6 +13,7 @@ enum class ErrorCode {
   unsupported,       // not available in this build or on this machine (no GPU, no OptiX)
   io,                // a file could not be read or written, or is malformed (file:line)
   backend,           // CUDA or OptiX reported an error (the message carries its text)
+  capacity_exceeded,  // a fixed-size output (padded neighbour list) is too small: grow it
   internal,          // a broken invariant inside raycut: a bug, please report it
 };
 

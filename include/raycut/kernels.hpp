@@ -1,13 +1,32 @@
-// Built-in pair kernels: plain functors, callable on host and device. A method calls
-// kernel(acc, i, j, dx, dy, dz, r2) once per in-range (target i, source j) pair, i and j the
-// caller's particle indices, d = x_j - x_i and r2 = squared_distance(d), and writes acc out once
-// per target.
+// Pair functors: what a method runs for every in-range (target i, source j) pair, fused in its
+// own traversal. The built-in kernels below are ordinary functors; a user's own follows the same
+// shape (include/raycut/pairs.hpp runs one on the CPU methods, include/raycut/cuda/pairs.cuh on
+// the CUDA methods):
+//
+//   struct MyFunctor {
+//     using Accumulator = ...;             // per-target state, default-constructible
+//     RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3 r,
+//                               float r2) const;   // r = x_j - x_i, r2 = |r|^2 < C^2
+//     RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const;  // once per target: store
+//     // Optional:
+//     static constexpr bool vanishes_at_infinity = true;  // terms are 0 at r2 = +inf: the
+//                                                         // traversal may feed out-of-range
+//                                                         // candidates that instead of a branch
+//     RAYCUT_HD Accumulator init(std::uint32_t i) const;  // initial state (default: {})
+//     RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b);  // a += b: lets
+//                                    // several GPU lanes share one target (small inputs)
+//   };
+//
+// i and j are the caller's particle indices. The functor carries its outputs (pointers it writes
+// in finish) and its parameters; it is copied to the device by value, so it holds no host-only
+// state when run on a GPU method.
 #pragma once
 
 #include <cmath>
 #include <cstdint>
 #include <string>
 #include <string_view>
+#include <type_traits>
 
 #include "raycut/error.hpp"
 #include "raycut/predicate.hpp"
@@ -16,13 +35,15 @@ namespace raycut {
 
 enum class Kernel {
   count,        // number of in-range neighbours per target (exact integers)
-  lj,           // Lennard-Jones energy per target: sum 4 eps ((sigma/r)^12 - (sigma/r)^6)
+  lj,           // Lennard-Jones energy per target: sum_j 4 eps ((sigma/r)^12 - (sigma/r)^6)
+  lj_forces,    // Lennard-Jones energy, force and virial per target, in one pass
   smooth,       // w = C^2 - r^2; energy += w^2; force += w d (finite everywhere)
-  sph_density,  // energy = sum_{j != i} m W_poly6(r, h), h = the cutoff (self not included)
+  sph_density,  // density = sum_{j != i} m W_poly6(r, h), h = the cutoff (self not included)
   sph_force,    // force = pressure + viscosity force of Mueller et al. 2003 (not divided by rho_i)
 };
 
-// Parse "count" / "lj" / "smooth" / "sph_density" / "sph_force"; throws Error(invalid_argument).
+// Parse "count" / "lj" / "lj_forces" / "smooth" / "sph_density" / "sph_force"; throws
+// Error(invalid_argument).
 Kernel parse_kernel(std::string_view name);
 std::string to_string(Kernel kernel);
 
@@ -42,12 +63,36 @@ struct KernelOptions {
   SphInputs sph;
 };
 
-// What one target accumulates; each kernel touches only the fields it produces.
-struct Accumulator {
-  std::uint32_t count = 0;
-  float energy = 0.0f;
-  float fx = 0.0f, fy = 0.0f, fz = 0.0f;
+// Where the built-in kernels write, per target (the caller's index); null where not produced.
+struct KernelOutputs {
+  std::uint32_t* count = nullptr;  // 1 per target
+  float* energy = nullptr;         // 1 per target
+  float* force = nullptr;          // 3 per target: fx fy fz
+  float* virial = nullptr;         // 6 per target: xx yy zz xy xz yz
+  float* density = nullptr;        // 1 per target
 };
+
+// Which of KernelOutputs a built-in kernel writes.
+struct KernelProduces {
+  bool count = false, energy = false, force = false, virial = false, density = false;
+};
+constexpr KernelProduces produces(Kernel kernel) {
+  switch (kernel) {
+    case Kernel::count:
+      return {true, false, false, false, false};
+    case Kernel::lj:
+      return {false, true, false, false, false};
+    case Kernel::lj_forces:
+      return {false, true, true, true, false};
+    case Kernel::smooth:
+      return {false, true, true, false, false};
+    case Kernel::sph_density:
+      return {false, false, false, false, true};
+    case Kernel::sph_force:
+      return {false, false, true, false, false};
+  }
+  return {};
+}
 
 // 1 / b: on the device the hardware reciprocal (within 1 ulp; the IEEE division costs as much as
 // the rest of a Lennard-Jones pair), flushing denormal b to 0 (1 / b overflows either way):
@@ -63,63 +108,157 @@ RAYCUT_HD float fast_reciprocal(float b) {
 #endif
 }
 
-// A kernel adds each pair's terms to the target's Accumulator; finish() then applies, once per
-// target, the constant factors common to all its terms (an instruction less per pair in the
-// hottest loop). The geometric kernels ignore the indices.
+// ---- what the traversals ask of a functor (defaults for the optional members) ----------------
+
+template <class F, class = void>
+struct vanishes_at_infinity : std::false_type {};
+template <class F>
+struct vanishes_at_infinity<F, std::enable_if_t<F::vanishes_at_infinity>> : std::true_type {};
+
+template <class F, class = void>
+struct has_combine : std::false_type {};
+template <class F>
+struct has_combine<F, std::void_t<decltype(F::combine(std::declval<typename F::Accumulator&>(),
+                                                      std::declval<const typename F::Accumulator&>()))>>
+    : std::true_type {};
+
+template <class F, class = void>
+struct has_init : std::false_type {};
+template <class F>
+struct has_init<F, std::void_t<decltype(std::declval<const F&>().init(std::uint32_t{}))>>
+    : std::true_type {};
+
+// The initial state of target i.
+template <class F>
+RAYCUT_HD typename F::Accumulator initial_state(const F& f, std::uint32_t i) {
+  if constexpr (has_init<F>::value)
+    return f.init(i);
+  else
+    return typename F::Accumulator{};
+}
+
+// ---- built-in kernels ------------------------------------------------------------------------
+// Each adds a pair's terms to its Accumulator; finish() then applies, once per target, the
+// constant factors common to all terms (an instruction less per pair in the hottest loop).
+
 struct CountKernel {
-  static constexpr bool has_count = true, has_energy = false, has_force = false;
-  static constexpr bool vanishes_at_infinity = false;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float, float, float,
-                            float) const {
-    ++acc.count;
+  using Accumulator = std::uint32_t;
+  std::uint32_t* count;
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float) const {
+    ++acc;
   }
-  RAYCUT_HD void finish(Accumulator&) const {}
+  RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
+  RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { count[i] = acc; }
 };
 
 // 4 eps ((sigma/r)^12 - (sigma/r)^6) = 4 eps sigma^6 * w (sigma^6 w - 1) with w = r^-6: per pair
 // a reciprocal, two products and two fused operations; 4 eps sigma^6 once per target. Its terms
 // vanish at r2 = +inf (w = 0), so a pair out of range can be fed r2 = +inf instead of a branch.
 struct LennardJonesKernel {
-  static constexpr bool has_count = false, has_energy = true, has_force = false;
+  using Accumulator = float;
   static constexpr bool vanishes_at_infinity = true;
   float sigma6;               // sigma^6
   float four_epsilon_sigma6;  // 4 eps sigma^6
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float, float, float,
+  float* energy;
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3,
+                            float r2) const {
+    const float t = fast_reciprocal(r2);
+    const float w = t * t * t;
+    acc += w * (sigma6 * w - 1.0f);
+  }
+  RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
+  RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
+    energy[i] = acc * four_epsilon_sigma6;
+  }
+};
+
+// Energy, force and virial of Lennard-Jones in one pass. With t = 1/r^2 and w = t^3:
+//   energy_i = sum_j 4 eps sigma^6 w (sigma^6 w - 1)        (as `lj`: every pair, both sides)
+//   force_i  = -dU/dx_i = -24 eps sigma^6 sum_j t w (2 sigma^6 w - 1) r_ij   (r_ij = x_j - x_i)
+//   virial_i = -1/2 sum_j r_ij (x) force_i(j)  = 12 eps sigma^6 sum_j t w (2 sigma^6 w - 1) r r
+// so that sum_i virial_i is the system's virial sum_{i<j} (x_i - x_j) (x) f_ij (LAMMPS's per-atom
+// convention; positive under compression). Components xx yy zz xy xz yz. Vanishes at r2 = +inf.
+struct LennardJonesForceKernel {
+  struct Accumulator {
+    float energy = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0};
+  };
+  static constexpr bool vanishes_at_infinity = true;
+  float sigma6;                        // sigma^6
+  float four_epsilon_sigma6;           // 4 eps sigma^6
+  float* energy;                       // 1 per target
+  float* force;                        // 3 per target
+  float* virial;                       // 6 per target
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3 r,
                             float r2) const {
     const float t = fast_reciprocal(r2);
     const float w = t * t * t;
     acc.energy += w * (sigma6 * w - 1.0f);
+    const float g = t * w * (2.0f * sigma6 * w - 1.0f);  // force factor, times -6 (4 eps s^6)
+    const float gx = g * r.x, gy = g * r.y, gz = g * r.z;
+    acc.f[0] += gx;
+    acc.f[1] += gy;
+    acc.f[2] += gz;
+    acc.v[0] += gx * r.x;
+    acc.v[1] += gy * r.y;
+    acc.v[2] += gz * r.z;
+    acc.v[3] += gx * r.y;
+    acc.v[4] += gx * r.z;
+    acc.v[5] += gy * r.z;
   }
-  RAYCUT_HD void finish(Accumulator& acc) const { acc.energy *= four_epsilon_sigma6; }
+  RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) {
+    a.energy += b.energy;
+    for (int k = 0; k < 3; ++k) a.f[k] += b.f[k];
+    for (int k = 0; k < 6; ++k) a.v[k] += b.v[k];
+  }
+  RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
+    energy[i] = acc.energy * four_epsilon_sigma6;
+    const float fs = -6.0f * four_epsilon_sigma6, vs = 3.0f * four_epsilon_sigma6;
+    for (int k = 0; k < 3; ++k) force[3 * std::size_t{i} + k] = fs * acc.f[k];
+    for (int k = 0; k < 6; ++k) virial[6 * std::size_t{i} + k] = vs * acc.v[k];
+  }
 };
 
+// w = C^2 - r^2; energy += w^2; force += w d.
 struct SmoothKernel {
-  static constexpr bool has_count = false, has_energy = true, has_force = true;
-  static constexpr bool vanishes_at_infinity = false;
+  struct Accumulator {
+    float energy = 0, f[3] = {0, 0, 0};
+  };
   float cutoff_squared;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float dx, float dy,
-                            float dz, float r2) const {
+  float* energy;
+  float* force;
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3 r,
+                            float r2) const {
     const float w = cutoff_squared - r2;
     acc.energy += w * w;
-    acc.fx += w * dx;
-    acc.fy += w * dy;
-    acc.fz += w * dz;
+    acc.f[0] += w * r.x;
+    acc.f[1] += w * r.y;
+    acc.f[2] += w * r.z;
   }
-  RAYCUT_HD void finish(Accumulator&) const {}
+  RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) {
+    a.energy += b.energy;
+    for (int k = 0; k < 3; ++k) a.f[k] += b.f[k];
+  }
+  RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
+    energy[i] = acc.energy;
+    for (int k = 0; k < 3; ++k) force[3 * std::size_t{i} + k] = acc.f[k];
+  }
 };
 
 // rho_i contribution m W_poly6(r, h) = m 315 / (64 pi h^9) (h^2 - r^2)^3 (Mueller et al. 2003).
 struct SphDensityKernel {
-  static constexpr bool has_count = false, has_energy = true, has_force = false;
-  static constexpr bool vanishes_at_infinity = false;
+  using Accumulator = float;
   float mass_poly6;  // m 315 / (64 pi h^9)
   float h_squared;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, float, float, float,
+  float* density;
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3,
                             float r2) const {
     const float w = h_squared - r2;
-    acc.energy += w * w * w;
+    acc += w * w * w;
   }
-  RAYCUT_HD void finish(Accumulator& acc) const { acc.energy *= mass_poly6; }
+  RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
+  RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
+    density[i] = acc * mass_poly6;
+  }
 };
 
 // f_i = - sum_j m (p_i + p_j) / (2 rho_j) grad W_spiky + mu sum_j m (v_j - v_i) / rho_j lap W_visc
@@ -127,82 +266,76 @@ struct SphDensityKernel {
 // pushes i away from j) and lap W_visc = 45 / (pi h^6) (h - r). Coincident pairs (r = 0) have no
 // direction and get no pressure force.
 struct SphForceKernel {
-  static constexpr bool has_count = false, has_energy = false, has_force = true;
-  static constexpr bool vanishes_at_infinity = false;
+  struct Accumulator {
+    float f[3] = {0, 0, 0};
+  };
   float mass, h, spiky;  // spiky = 45 / (pi h^6)
   float viscosity;
   SphInputs in;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, float dx, float dy,
-                            float dz, float r2) const {
-    const float r = sqrtf(r2);
-    const float h_r = h - r;
+  float* force;
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3 r,
+                            float r2) const {
+    const float d = sqrtf(r2);
+    const float h_r = h - d;
     const float rho_j = in.density[j];
     if (r2 > 0.0f) {
       const float pressure =
-          -mass * (in.pressure[i] + in.pressure[j]) / (2.0f * rho_j) * spiky * h_r * h_r / r;
-      acc.fx += pressure * dx;
-      acc.fy += pressure * dy;
-      acc.fz += pressure * dz;
+          -mass * (in.pressure[i] + in.pressure[j]) / (2.0f * rho_j) * spiky * h_r * h_r / d;
+      acc.f[0] += pressure * r.x;
+      acc.f[1] += pressure * r.y;
+      acc.f[2] += pressure * r.z;
     }
     const float visc = viscosity * mass / rho_j * spiky * h_r;
-    acc.fx += visc * (in.velocity[3 * j] - in.velocity[3 * i]);
-    acc.fy += visc * (in.velocity[3 * j + 1] - in.velocity[3 * i + 1]);
-    acc.fz += visc * (in.velocity[3 * j + 2] - in.velocity[3 * i + 2]);
+    for (int k = 0; k < 3; ++k)
+      acc.f[k] += visc * (in.velocity[3 * std::size_t{j} + k] - in.velocity[3 * std::size_t{i} + k]);
   }
-  RAYCUT_HD void finish(Accumulator&) const {}
+  RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) {
+    for (int k = 0; k < 3; ++k) a.f[k] += b.f[k];
+  }
+  RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
+    for (int k = 0; k < 3; ++k) force[3 * std::size_t{i} + k] = acc.f[k];
+  }
 };
 
-// Which per-target outputs a kernel produces (without building its functor).
-struct KernelOutputs {
-  bool count, energy, force;
-};
-constexpr KernelOutputs outputs_of(Kernel kernel) {
-  switch (kernel) {
-    case Kernel::count:
-      return {true, false, false};
-    case Kernel::lj:
-    case Kernel::sph_density:
-      return {false, true, false};
-    case Kernel::smooth:
-      return {false, true, true};
-    case Kernel::sph_force:
-      return {false, false, true};
-  }
-  return {false, false, false};
-}
-
-// Calls f(kernel_functor) with the functor for `kernel`: one switch, shared by every method.
+// Calls f(functor) with the built-in functor for `kernel`, writing to `out`: one switch, shared
+// by every method. Throws Error(invalid_argument) when `out` lacks what the kernel writes.
 template <class F>
-void with_kernel(Kernel kernel, const KernelOptions& options, float cutoff_squared, F&& f) {
-  constexpr float pi = 3.14159265358979f;
+void with_kernel(Kernel kernel, const KernelOptions& options, float cutoff_squared,
+                 const KernelOutputs& out, F&& f) {
+  constexpr float pi = 3.14159265358979f;  // as every earlier result was computed
   const float h = std::sqrt(cutoff_squared);
+  const KernelProduces p = produces(kernel);
+  if ((p.count && !out.count) || (p.energy && !out.energy) || (p.force && !out.force) ||
+      (p.virial && !out.virial) || (p.density && !out.density))
+    throw Error(ErrorCode::invalid_argument,
+                "kernel " + to_string(kernel) + ": an output it writes has a null pointer");
+  const float sigma2 = options.lj_sigma * options.lj_sigma, sigma6 = sigma2 * sigma2 * sigma2;
+  const double h3 = static_cast<double>(h) * h * h;
   switch (kernel) {
     case Kernel::count:
-      f(CountKernel{});
+      f(CountKernel{out.count});
       break;
-    case Kernel::lj: {
-      const float sigma2 = options.lj_sigma * options.lj_sigma, sigma6 = sigma2 * sigma2 * sigma2;
-      f(LennardJonesKernel{sigma6, 4.0f * options.lj_epsilon * sigma6});
+    case Kernel::lj:
+      f(LennardJonesKernel{sigma6, 4.0f * options.lj_epsilon * sigma6, out.energy});
       break;
-    }
+    case Kernel::lj_forces:
+      f(LennardJonesForceKernel{sigma6, 4.0f * options.lj_epsilon * sigma6, out.energy, out.force,
+                                out.virial});
+      break;
     case Kernel::smooth:
-      f(SmoothKernel{cutoff_squared});
+      f(SmoothKernel{cutoff_squared, out.energy, out.force});
       break;
-    case Kernel::sph_density: {
-      const double h3 = static_cast<double>(h) * h * h;
+    case Kernel::sph_density:
       f(SphDensityKernel{static_cast<float>(options.sph_mass * 315.0 / (64.0 * pi * h3 * h3 * h3)),
-                         cutoff_squared});
+                         cutoff_squared, out.density});
       break;
-    }
-    case Kernel::sph_force: {
+    case Kernel::sph_force:
       if (!options.sph.velocity || !options.sph.density || !options.sph.pressure)
         throw Error(ErrorCode::invalid_argument,
                     "sph_force needs velocity, density and pressure inputs (KernelOptions::sph)");
-      const double h3 = static_cast<double>(h) * h * h;
       f(SphForceKernel{options.sph_mass, h, static_cast<float>(45.0 / (pi * h3 * h3)),
-                       options.sph_viscosity, options.sph});
+                       options.sph_viscosity, options.sph, out.force});
       break;
-    }
   }
 }
 

@@ -13,6 +13,11 @@
 
 namespace raycut {
 
+// A pair vector r = x_source - x_target (float, as every method computes it).
+struct Vec3 {
+  float x, y, z;
+};
+
 // |d|^2 with d = x_source - x_target, as fma(dz, dz, fma(dy, dy, dx * dx)) with explicit
 // roundings, so that host and device round it identically (the host build compiles with
 // -ffp-contract=off, and std::fma is the correctly rounded fused operation). Fused: 3

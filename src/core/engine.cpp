@@ -2,8 +2,10 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <vector>
 
+#include "core/list_storage.hpp"
 #include "core/method.hpp"
 #include "core/validation.hpp"
 #if defined(RAYCUT_HAVE_CUDA)
@@ -40,6 +42,9 @@ void validate_positions(const PositionsView& positions) {
     return;
   }
 #if defined(RAYCUT_HAVE_CUDA)
+  if (!detail::cuda::device_available())
+    throw Error(ErrorCode::unsupported,
+                "positions are in device memory but no CUDA device is usable in this process");
   const std::size_t bad = detail::cuda::first_non_finite(positions.xyz, positions.size);
   if (bad < positions.size) {
     float xyz[3];
@@ -89,13 +94,27 @@ Engine::Engine(std::string_view method) {
 }
 
 Engine::~Engine() = default;
-MemorySpace Engine::space() const {
-  return impl_->space();
-}
 Engine::Engine(Engine&&) noexcept = default;
 Engine& Engine::operator=(Engine&&) noexcept = default;
 
+detail::Method& Engine::impl(const char* call) const {
+  if (!impl_)
+    throw Error(ErrorCode::invalid_argument,
+                std::string("Engine::") + call + "() called on a moved-from Engine");
+  return *impl_;
+}
+
+MemorySpace Engine::space() const {
+  return impl("space").space();
+}
+
+void Engine::set_stream(void* cuda_stream) {
+  impl("set_stream").set_stream(cuda_stream);
+  stream_ = cuda_stream;
+}
+
 void Engine::build(PositionsView positions, float cutoff) {
+  detail::Method& m = impl("build");
   detail::validate_cutoff(cutoff);
   validate_positions(positions);
   built_ = false;
@@ -110,15 +129,16 @@ void Engine::build(PositionsView positions, float cutoff) {
 
   with_positions_in_method_space(positions, [&](const float* xyz) {
     const auto start = Clock::now();
-    impl_->build(xyz, size_, cutoff);
-    impl_->synchronize();
+    m.build(xyz, size_, cutoff);
+    m.synchronize();
     timings_.build_ms = elapsed_ms(start);
-    timings_.device_build_ms = impl_->device_build_ms();
+    timings_.device_build_ms = m.device_build_ms();
   });
   built_ = true;
 }
 
 void Engine::update(PositionsView positions) {
+  detail::Method& m = impl("update");
   if (!built_) throw Error(ErrorCode::invalid_argument, "Engine::update() called before build()");
   if (positions.size != size_)
     throw Error(ErrorCode::invalid_argument, "Engine::update() needs the " + std::to_string(size_) +
@@ -128,20 +148,23 @@ void Engine::update(PositionsView positions) {
   has_run_ = false;
   timings_ = {};
   if (size_ == 0) return;
+  built_ = false;  // until the method has its new structure
   with_positions_in_method_space(positions, [&](const float* xyz) {
     const auto start = Clock::now();
-    timings_.refit = impl_->update(xyz, size_, cutoff_);
-    impl_->synchronize();
+    timings_.refit = m.update(xyz, size_, cutoff_);
+    m.synchronize();
     timings_.build_ms = elapsed_ms(start);
-    timings_.device_build_ms = impl_->device_build_ms();
+    timings_.device_build_ms = m.device_build_ms();
   });
+  built_ = true;
 }
 
 void Engine::set_update_policy(const UpdatePolicy& policy) {
+  detail::Method& m = impl("set_update_policy");
   if (!(policy.skin >= 0) || !std::isfinite(policy.skin))
     throw Error(ErrorCode::invalid_argument,
                 "update skin must be finite and >= 0, got " + std::to_string(policy.skin));
-  impl_->set_update_policy(policy);
+  m.set_update_policy(policy);
 }
 
 template <class F>
@@ -172,29 +195,36 @@ void Engine::with_positions_in_method_space(const PositionsView& positions, F&& 
 }
 
 void Engine::run(Kernel kernel, const KernelOptions& options) {
+  detail::Method& m = impl("run");
   if (!built_) throw Error(ErrorCode::invalid_argument, "Engine::run() called before build()");
-  last_kernel_ = kernel;
+  has_run_ = false;  // a run that throws leaves no results behind
+  if (size_ > 0) {
+    const auto start = Clock::now();
+    m.compute(kernel, options);
+    m.synchronize();
+    timings_.compute_ms = elapsed_ms(start);
+    timings_.device_compute_ms = m.device_compute_ms();
+  }
   has_run_ = true;
-  if (size_ == 0) return;
-  const auto start = Clock::now();
-  impl_->compute(kernel, options);
-  impl_->synchronize();
-  timings_.compute_ms = elapsed_ms(start);
-  timings_.device_compute_ms = impl_->device_compute_ms();
 }
 
 Results Engine::results() const {
-  if (!has_run_) throw Error(ErrorCode::invalid_argument, "Engine::results() called before run()");
-  if (size_ > 0) return impl_->results();
-  Results empty;  // N = 0: the right (empty) vectors, none missing
+  const detail::Method& m = impl("results");
+  if (!has_run_)
+    throw Error(ErrorCode::invalid_argument,
+                "Engine::results() called before a successful run()");
+  if (size_ > 0) return m.results();
+  Results empty;  // N = 0: the kernel's vectors, empty
   return empty;
 }
 
 ResultsView Engine::results_view() const {
+  const detail::Method& m = impl("results_view");
   if (!has_run_)
-    throw Error(ErrorCode::invalid_argument, "Engine::results_view() called before run()");
-  if (size_ == 0) return ResultsView{nullptr, nullptr, nullptr, impl_->space()};
-  return impl_->results_view();
+    throw Error(ErrorCode::invalid_argument,
+                "Engine::results_view() called before a successful run()");
+  if (size_ == 0) return ResultsView{nullptr, nullptr, nullptr, nullptr, nullptr, m.space()};
+  return m.results_view();
 }
 
 Results Engine::compute(Kernel kernel, const KernelOptions& options) {
@@ -202,11 +232,190 @@ Results Engine::compute(Kernel kernel, const KernelOptions& options) {
   return results();
 }
 
-NeighbourList Engine::neighbours() {
+void Engine::neighbours(NeighbourListBuffer& list, const ListOptions& options) {
+  detail::Method& m = impl("neighbours");
   if (!built_)
     throw Error(ErrorCode::invalid_argument, "Engine::neighbours() called before build()");
-  if (size_ == 0) return NeighbourList{{0}, {}};
-  return impl_->neighbours();
+  if (!list.storage_ || list.storage_->space() != m.space()) list.storage_ = m.make_list_storage();
+  if (size_ == 0) {
+    list.storage_->set_empty(options);
+    return;
+  }
+  m.neighbours(*list.storage_, options);
+  m.synchronize();
+}
+
+NeighbourList Engine::neighbours(const ListOptions& options) {
+  NeighbourListBuffer list;
+  neighbours(list, options);
+  return list.to_host();
+}
+
+PaddedReport Engine::padded_neighbours(PaddedNeighbourBuffer& list, std::uint32_t k,
+                                       bool throw_on_overflow) {
+  detail::Method& m = impl("padded_neighbours");
+  if (!built_)
+    throw Error(ErrorCode::invalid_argument,
+                "Engine::padded_neighbours() called before build()");
+  if (!list.storage_ || list.storage_->space() != m.space())
+    list.storage_ = m.make_padded_storage();
+  if (k == 0 && size_ > 0)
+    throw Error(ErrorCode::invalid_argument, "padded neighbour list: K must be >= 1");
+  if (size_ == 0) {
+    list.storage_->n = 0;
+    list.storage_->k = k;
+    list.storage_->report = {};
+    return {};
+  }
+  m.padded_neighbours(*list.storage_, k, false);
+  m.synchronize();
+  detail::report_padded(*list.storage_, throw_on_overflow);
+  return list.storage_->report;
+}
+
+detail::PairPass Engine::pair_pass() const {
+  const detail::Method& m = impl("pair_pass");
+  if (!built_ || size_ == 0) return {};
+  detail::PairPass pass = m.pair_pass();
+  pass.method = method_.c_str();
+  return pass;
+}
+
+// ---- list buffers ------------------------------------------------------------------------------
+
+NeighbourListBuffer::NeighbourListBuffer() = default;
+NeighbourListBuffer::~NeighbourListBuffer() = default;
+NeighbourListBuffer::NeighbourListBuffer(NeighbourListBuffer&&) noexcept = default;
+NeighbourListBuffer& NeighbourListBuffer::operator=(NeighbourListBuffer&&) noexcept = default;
+
+namespace {
+const detail::ListStorage& filled(const std::unique_ptr<detail::ListStorage>& s) {
+  if (!s)
+    throw Error(ErrorCode::invalid_argument,
+                "NeighbourListBuffer read before Engine::neighbours() filled it");
+  return *s;
+}
+const detail::PaddedStorage& filled(const std::unique_ptr<detail::PaddedStorage>& s) {
+  if (!s)
+    throw Error(ErrorCode::invalid_argument,
+                "PaddedNeighbourBuffer read before Engine::padded_neighbours() filled it");
+  return *s;
+}
+}  // namespace
+
+std::size_t NeighbourListBuffer::size() const { return filled(storage_).n; }
+std::uint64_t NeighbourListBuffer::pairs() const { return filled(storage_).pairs; }
+const std::uint64_t* NeighbourListBuffer::offsets() const { return filled(storage_).offsets; }
+const std::uint32_t* NeighbourListBuffer::indices() const { return filled(storage_).indices; }
+const float* NeighbourListBuffer::distances() const { return filled(storage_).distances; }
+const float* NeighbourListBuffer::vectors() const { return filled(storage_).vectors; }
+MemorySpace NeighbourListBuffer::space() const { return filled(storage_).space(); }
+const ListOptions& NeighbourListBuffer::options() const { return filled(storage_).options; }
+std::size_t NeighbourListBuffer::bytes() const { return storage_ ? storage_->bytes() : 0; }
+NeighbourList NeighbourListBuffer::to_host() const { return filled(storage_).to_host(); }
+
+PaddedNeighbourBuffer::PaddedNeighbourBuffer() = default;
+PaddedNeighbourBuffer::~PaddedNeighbourBuffer() = default;
+PaddedNeighbourBuffer::PaddedNeighbourBuffer(PaddedNeighbourBuffer&&) noexcept = default;
+PaddedNeighbourBuffer& PaddedNeighbourBuffer::operator=(PaddedNeighbourBuffer&&) noexcept =
+    default;
+
+std::size_t PaddedNeighbourBuffer::size() const { return filled(storage_).n; }
+std::uint32_t PaddedNeighbourBuffer::width() const { return filled(storage_).k; }
+const std::uint32_t* PaddedNeighbourBuffer::indices() const { return filled(storage_).indices; }
+const std::uint32_t* PaddedNeighbourBuffer::counts() const { return filled(storage_).counts; }
+MemorySpace PaddedNeighbourBuffer::space() const { return filled(storage_).space(); }
+const PaddedReport& PaddedNeighbourBuffer::report() const { return filled(storage_).report; }
+std::vector<std::uint32_t> PaddedNeighbourBuffer::indices_to_host() const {
+  return filled(storage_).n ? filled(storage_).indices_to_host() : std::vector<std::uint32_t>{};
+}
+std::vector<std::uint32_t> PaddedNeighbourBuffer::counts_to_host() const {
+  return filled(storage_).n ? filled(storage_).counts_to_host() : std::vector<std::uint32_t>{};
+}
+
+// ---- Verlet list -------------------------------------------------------------------------------
+
+namespace {
+
+// Positions at the last build, in the caller's memory space.
+struct KeptPositions {
+  PositionsView view;
+  std::vector<float> host;
+#if defined(RAYCUT_HAVE_CUDA)
+  detail::cuda::DeviceMemory device;
+#endif
+};
+
+std::shared_ptr<void> keep_positions(const PositionsView& p, void* stream) {
+  auto kept = std::make_shared<KeptPositions>();
+  kept->view = p;
+  if (p.space == MemorySpace::host) {
+    kept->host.assign(p.xyz, p.xyz + 3 * p.size);
+    kept->view.xyz = kept->host.data();
+  } else {
+#if defined(RAYCUT_HAVE_CUDA)
+    kept->device = detail::cuda::copy_on_device(p.xyz, 3 * p.size * sizeof(float), stream);
+    kept->view.xyz = static_cast<const float*>(kept->device.get());
+#else
+    (void)stream;
+#endif
+  }
+  return kept;
+}
+
+// True when some particle of `now` is more than `distance` from where `then` has it: on the
+// device for device positions (a reduction, one flag read back), on the host otherwise.
+bool moved_beyond(const PositionsView& now, const KeptPositions& then, float distance,
+                  void* stream) {
+  const double limit = static_cast<double>(distance) * distance;
+  if (now.space == MemorySpace::host && then.view.space == MemorySpace::host) {
+    for (std::size_t k = 0; k < now.size; ++k) {
+      double d2 = 0;
+      for (int a = 0; a < 3; ++a) {
+        const double d = static_cast<double>(now.xyz[3 * k + a]) - then.view.xyz[3 * k + a];
+        d2 += d * d;
+      }
+      if (d2 > limit) return true;
+    }
+    return false;
+  }
+#if defined(RAYCUT_HAVE_CUDA)
+  if (now.space == MemorySpace::device && then.view.space == MemorySpace::device)
+    return detail::cuda::moved_beyond(now.xyz, then.view.xyz, now.size, distance, stream);
+#endif
+  (void)stream;
+  return true;  // the caller moved its positions to another memory space: rebuild
+}
+
+}  // namespace
+
+VerletList::VerletList(std::string_view method, float cutoff, float skin,
+                       const ListOptions& options)
+    : engine_(method), cutoff_(cutoff), skin_(skin), options_(options) {
+  detail::validate_cutoff(cutoff);
+  if (!(skin >= 0) || !std::isfinite(skin))
+    throw Error(ErrorCode::invalid_argument,
+                "Verlet skin must be finite and >= 0, got " + std::to_string(skin));
+  detail::validate_cutoff(cutoff + skin);
+}
+
+bool VerletList::update(PositionsView positions) {
+  const bool first = !built_;
+  if (!first) {
+    if (positions.size != engine_.size())
+      throw Error(ErrorCode::invalid_argument,
+                  "VerletList::update() needs the " + std::to_string(engine_.size()) +
+                      " particles of its first call, got " + std::to_string(positions.size));
+    validate_positions(positions);
+    if (!moved_beyond(positions, *static_cast<const KeptPositions*>(built_.get()), 0.5f * skin_ * (1.0f - 1e-5f),
+                      engine_.stream()))
+      return false;
+  }
+  engine_.build(positions, cutoff_ + skin_);
+  engine_.neighbours(list_, options_);
+  built_ = keep_positions(positions, engine_.stream());
+  ++rebuilds_;
+  return true;
 }
 
 }  // namespace raycut

@@ -1,4 +1,5 @@
-// The internal interface every interaction method implements: a build and a query. Everything
+// The internal interface every interaction method implements: a build, and the one pair pass
+// that runs every functor (kernels, list counting and filling, the caller's own). Everything
 // else (validation, timing, N = 0, host/device transfers of results) lives in the Engine.
 #pragma once
 
@@ -8,6 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "core/list_storage.hpp"
+#include "raycut/detail/pair_pass.hpp"
 #include "raycut/engine.hpp"
 
 namespace raycut::detail {
@@ -18,8 +21,10 @@ class Method {
 
   // Where the method wants its positions. The engine moves them there before build().
   virtual MemorySpace space() const = 0;
+  // The CUDA stream GPU methods queue their work on (a cudaStream_t; null: the default).
+  virtual void set_stream(void*) {}
 
-  // Build over n >= 1 validated positions (in space()), cutoff finite and > 0. The pointer is
+  // Build over n >= 1 validated positions (in space()), cutoff validated. The pointer is
   // valid only during the call: copy what you need.
   virtual void build(const float* xyz, std::size_t n, float cutoff) = 0;
 
@@ -32,11 +37,19 @@ class Method {
   virtual void set_update_policy(const UpdatePolicy&) {}
 
   // Compute `kernel` for every target; keep the results until the next compute()/build().
+  // A compute that throws leaves no results (results() then throws).
   virtual void compute(Kernel kernel, const KernelOptions& options) = 0;
   virtual Results results() const = 0;
   virtual ResultsView results_view() const = 0;
 
-  virtual NeighbourList neighbours() = 0;
+  // Lists, into storage of the method's memory space (made by the method).
+  virtual std::unique_ptr<ListStorage> make_list_storage() const = 0;
+  virtual std::unique_ptr<PaddedStorage> make_padded_storage() const = 0;
+  virtual void neighbours(ListStorage& list, const ListOptions& options) = 0;
+  virtual void padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half) = 0;
+
+  // The traversal a caller's functor runs through (kind none: the method cannot run one).
+  virtual PairPass pair_pass() const { return {}; }
 
   // Waits for the work queued by build()/compute() (GPU methods); CPU methods are synchronous.
   virtual void synchronize() {}

@@ -20,21 +20,27 @@ const char* to_string(ErrorCode code) noexcept {
       return "i/o error";
     case ErrorCode::backend:
       return "backend error";
+    case ErrorCode::capacity_exceeded:
+      return "capacity exceeded";
     case ErrorCode::internal:
       return "internal error";
   }
   return "error";
 }
 
+namespace {
+constexpr Kernel all_kernels[] = {Kernel::count,  Kernel::lj,          Kernel::lj_forces,
+                                  Kernel::smooth, Kernel::sph_density, Kernel::sph_force};
+}  // namespace
+
 Kernel parse_kernel(std::string_view name) {
-  if (name == "count") return Kernel::count;
-  if (name == "lj") return Kernel::lj;
-  if (name == "smooth") return Kernel::smooth;
-  if (name == "sph_density") return Kernel::sph_density;
-  if (name == "sph_force") return Kernel::sph_force;
-  throw Error(ErrorCode::invalid_argument, "unknown kernel '" + std::string(name) +
-                                               "' (known: count, lj, smooth, sph_density, "
-                                               "sph_force)");
+  std::string known;
+  for (Kernel k : all_kernels) {
+    if (name == to_string(k)) return k;
+    known += (known.empty() ? "" : ", ") + to_string(k);
+  }
+  throw Error(ErrorCode::invalid_argument,
+              "unknown kernel '" + std::string(name) + "' (known: " + known + ")");
 }
 
 std::string to_string(Kernel kernel) {
@@ -43,6 +49,8 @@ std::string to_string(Kernel kernel) {
       return "count";
     case Kernel::lj:
       return "lj";
+    case Kernel::lj_forces:
+      return "lj_forces";
     case Kernel::smooth:
       return "smooth";
     case Kernel::sph_density:

@@ -7,16 +7,16 @@
 #include <numeric>
 #include <vector>
 
-#include "core/cell_grid.hpp"
+#include "raycut/detail/cell_grid.hpp"
 #include "core/method.hpp"
-#include "cpu/host_pairs.hpp"
+#include "cpu/host_method.hpp"
 
 namespace raycut::detail {
 namespace {
 
-class CellListCpu final : public Method {
-  // Defined first: the public members use its deduced type. Candidates of target i are the
-  // particles of the non-empty cells around its own.
+class CellListCpu final : public HostMethod<CellListCpu> {
+ public:
+  // Candidates of target i: the particles of the non-empty cells around its own.
   auto candidates() const {
     return [this](std::size_t i, auto&& f) {
       const std::uint32_t c = cell_of_particle_[i];
@@ -28,12 +28,9 @@ class CellListCpu final : public Method {
     };
   }
 
- public:
-  MemorySpace space() const override { return MemorySpace::host; }
-
   void build(const float* xyz, std::size_t n, float cutoff) override {
     xyz_.assign(xyz, xyz + 3 * n);
-    cutoff_ = cutoff;
+    set_positions(xyz_.data(), n, cutoff);
     float lo[3], hi[3];
     bounding_box(lo, hi);
     grid_ = make_cell_grid(lo, hi, cutoff);
@@ -66,19 +63,6 @@ class CellListCpu final : public Method {
     }
     cell_start_.push_back(static_cast<std::uint32_t>(n));
     find_neighbour_cells();
-  }
-
-  void compute(Kernel kernel, const KernelOptions& options) override {
-    results_ = host_compute(size(), xyz_.data(), cutoff_, kernel, options, candidates());
-  }
-  Results results() const override {
-    return results_;
-  }
-  ResultsView results_view() const override {
-    return view_of(results_);
-  }
-  NeighbourList neighbours() override {
-    return host_neighbours(size(), xyz_.data(), cutoff_, candidates());
   }
 
  private:
@@ -128,7 +112,6 @@ class CellListCpu final : public Method {
   }
 
   std::vector<float> xyz_;
-  float cutoff_ = 0;
   CellGrid grid_;
   std::vector<std::uint32_t> order_;             // sorted slot -> particle index
   std::vector<float> sorted_xyz_;                // positions in sorted order
@@ -137,7 +120,6 @@ class CellListCpu final : public Method {
   std::vector<std::uint32_t> cell_of_particle_;  // particle index -> cell
   std::vector<std::uint64_t> neighbour_offsets_;
   std::vector<std::uint32_t> neighbour_cells_;
-  Results results_;
 };
 
 }  // namespace

@@ -7,7 +7,7 @@
 #include <utility>
 
 #include "core/validation.hpp"
-#include "cuda/check.cuh"
+#include "raycut/detail/cuda/check.cuh"
 
 namespace raycut::detail::cuda {
 

@@ -3,48 +3,58 @@
 
 #include <cub/device/device_scan.cuh>
 
+#include <string>
+
+#include "core/validation.hpp"
 #include "cuda/device_results.cuh"
 
 namespace raycut::detail::cuda {
+namespace {
 
-OutputView DeviceResults::prepare(Kernel kernel, std::size_t n) {
+template <class T>
+T* sized(DeviceBuffer<T>& buffer, std::size_t count, bool wanted) {
+  if (!wanted) return nullptr;
+  buffer.resize(count);
+  return buffer.data();
+}
+
+template <class T>
+void copy_to_host(std::vector<T>& host, const T* device, std::size_t count) {
+  host.resize(count);
+  if (count > 0)
+    RAYCUT_CUDA_CHECK(
+        cudaMemcpy(host.data(), device, count * sizeof(T), cudaMemcpyDeviceToHost));
+}
+
+}  // namespace
+
+KernelOutputs DeviceResults::prepare(Kernel kernel, std::size_t n) {
   kernel_ = kernel;
   n_ = n;
-  OutputView view;
-  const KernelOutputs produces = outputs_of(kernel);
-  if (produces.count) {
-    count_.resize(n);
-    view.count = count_.data();
-  }
-  if (produces.energy) {
-    energy_.resize(n);
-    view.energy = energy_.data();
-  }
-  if (produces.force) {
-    force_.resize(3 * n);
-    view.force = force_.data();
-  }
-  return view;
+  valid_ = false;
+  const KernelProduces p = produces(kernel);
+  return {sized(count_, n, p.count), sized(energy_, n, p.energy), sized(force_, 3 * n, p.force),
+          sized(virial_, 6 * n, p.virial), sized(density_, n, p.density)};
 }
 
 Results DeviceResults::to_host() const {
+  if (!valid_) throw Error(ErrorCode::internal, "no results: the last compute failed");
   Results out;
-  auto copy = [](auto& host, const auto& device, std::size_t count) {
-    host.resize(count);
-    RAYCUT_CUDA_CHECK(
-        cudaMemcpy(host.data(), device.data(), count * sizeof(host[0]), cudaMemcpyDeviceToHost));
-  };
-  const KernelOutputs produces = outputs_of(kernel_);
-  if (produces.count) copy(out.count, count_, n_);
-  if (produces.energy) copy(out.energy, energy_, n_);
-  if (produces.force) copy(out.force, force_, 3 * n_);
+  const KernelProduces p = produces(kernel_);
+  if (p.count) copy_to_host(out.count, count_.data(), n_);
+  if (p.energy) copy_to_host(out.energy, energy_.data(), n_);
+  if (p.force) copy_to_host(out.force, force_.data(), 3 * n_);
+  if (p.virial) copy_to_host(out.virial, virial_.data(), 6 * n_);
+  if (p.density) copy_to_host(out.density, density_.data(), n_);
   return out;
 }
 
 ResultsView DeviceResults::view() const {
-  const KernelOutputs produces = outputs_of(kernel_);
-  return {produces.count ? count_.data() : nullptr, produces.energy ? energy_.data() : nullptr,
-          produces.force ? force_.data() : nullptr, MemorySpace::device};
+  if (!valid_) throw Error(ErrorCode::internal, "no results: the last compute failed");
+  const KernelProduces p = produces(kernel_);
+  return {p.count ? count_.data() : nullptr,   p.energy ? energy_.data() : nullptr,
+          p.force ? force_.data() : nullptr,   p.virial ? virial_.data() : nullptr,
+          p.density ? density_.data() : nullptr, MemorySpace::device};
 }
 
 EventTimer::EventTimer() {
@@ -74,6 +84,45 @@ double EventTimer::elapsed_ms() const {
   return ms;
 }
 
+// ---- device lists ------------------------------------------------------------------------------
+
+std::size_t DeviceListStorage::bytes() const {
+  return counts_.bytes() + offsets_.bytes() + indices_.bytes() + distances_.bytes() +
+         vectors_.bytes() + scan_temp_.bytes();
+}
+
+NeighbourList DeviceListStorage::to_host() const {
+  NeighbourList list;
+  copy_to_host(list.offsets, offsets, n + 1);
+  allocate_indices(list, pairs);
+  if (pairs > 0)
+    RAYCUT_CUDA_CHECK(cudaMemcpy(list.indices.data(), indices, pairs * sizeof(std::uint32_t),
+                                 cudaMemcpyDeviceToHost));
+  if (options.distances) copy_to_host(list.distances, distances, pairs);
+  if (options.vectors) copy_to_host(list.vectors, vectors, 3 * pairs);
+  return list;
+}
+
+void DeviceListStorage::set_empty(const ListOptions& list_options) {
+  n = 0;
+  pairs = 0;
+  options = list_options;
+  offsets_.resize(1);
+  RAYCUT_CUDA_CHECK(cudaMemset(offsets_.data(), 0, sizeof(std::uint64_t)));
+  publish();
+}
+
+std::uint32_t* DeviceListStorage::prepare_counts(std::size_t targets,
+                                                 const ListOptions& list_options) {
+  n = targets;
+  options = list_options;
+  pairs = 0;
+  counts_.resize(targets);
+  offsets_.resize(targets + 1);
+  publish();
+  return counts_.data();
+}
+
 namespace {
 // Scanning n+1 inputs, the last a zero, writes the total into offsets[n] too.
 struct CountOrZero {
@@ -85,13 +134,83 @@ struct CountOrZero {
 };
 }  // namespace
 
-void exclusive_scan(const std::uint32_t* counts, std::uint64_t* offsets, std::size_t n) {
+std::uint64_t DeviceListStorage::scan_counts(cudaStream_t stream) {
   const auto input = thrust::make_transform_iterator(thrust::counting_iterator<std::size_t>(0),
-                                                     CountOrZero{counts, n});
+                                                     CountOrZero{counts_.data(), n});
   std::size_t temp_bytes = 0;
-  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, input, offsets, n + 1));
-  DeviceBuffer<unsigned char> temp(temp_bytes);
-  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(temp.data(), temp_bytes, input, offsets, n + 1));
+  RAYCUT_CUDA_CHECK(
+      cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, input, offsets_.data(), n + 1, stream));
+  scan_temp_.resize(std::max<std::size_t>(temp_bytes, 1));
+  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scan_temp_.data(), temp_bytes, input,
+                                                  offsets_.data(), n + 1, stream));
+  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(total_.device(), offsets_.data() + n, sizeof(std::uint64_t),
+                                    cudaMemcpyDeviceToDevice, stream));
+  RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
+  return total_.host();
+}
+
+ListFill DeviceListStorage::prepare_fill(std::uint64_t entries) {
+  pairs = entries;
+  const double per_pair = 4.0 + (options.distances ? 4.0 : 0.0) + (options.vectors ? 12.0 : 0.0);
+  const double held = static_cast<double>(indices_.bytes() + distances_.bytes() + vectors_.bytes());
+  const double need = per_pair * static_cast<double>(entries);
+  if (need > held) {
+    const std::string what = "a neighbour list of " + std::to_string(entries) + " pairs";
+    if (need >= 9.0e18) throw Error(ErrorCode::out_of_memory, "not enough device memory for " + what);
+    require_device_memory(static_cast<std::size_t>(need - held), what.c_str());
+  }
+  indices_.resize(std::max<std::uint64_t>(entries, 1));
+  if (options.distances) distances_.resize(std::max<std::uint64_t>(entries, 1));
+  if (options.vectors) vectors_.resize(std::max<std::uint64_t>(3 * entries, 1));
+  publish();
+  return {options.half, offsets_.data(), indices_.data(),
+          options.distances ? distances_.data() : nullptr,
+          options.vectors ? vectors_.data() : nullptr};
+}
+
+void DeviceListStorage::publish() {
+  offsets = offsets_.data();
+  indices = indices_.data();
+  distances = options.distances ? distances_.data() : nullptr;
+  vectors = options.vectors ? vectors_.data() : nullptr;
+}
+
+std::vector<std::uint32_t> DevicePaddedStorage::indices_to_host() const {
+  std::vector<std::uint32_t> host;
+  copy_to_host(host, indices, n * std::size_t{k});
+  return host;
+}
+
+std::vector<std::uint32_t> DevicePaddedStorage::counts_to_host() const {
+  std::vector<std::uint32_t> host;
+  copy_to_host(host, counts, n);
+  return host;
+}
+
+PaddedFill DevicePaddedStorage::prepare(std::size_t targets, std::uint32_t width, bool half,
+                                        cudaStream_t stream) {
+  n = targets;
+  k = width;
+  const double need = 4.0 * static_cast<double>(targets) * (static_cast<double>(width) + 1);
+  if (need > static_cast<double>(indices_.bytes() + counts_.bytes())) {
+    const std::string what = "a padded neighbour list of " + std::to_string(targets) + " x " +
+                             std::to_string(width);
+    if (need >= 9.0e18) throw Error(ErrorCode::out_of_memory, "not enough device memory for " + what);
+    require_device_memory(static_cast<std::size_t>(need), what.c_str());
+  }
+  indices_.resize(targets * std::size_t{width});
+  counts_.resize(targets);
+  indices = indices_.data();
+  counts = counts_.data();
+  overflow_.host() = {0, 0};
+  (void)stream;
+  return {half, width, static_cast<std::uint32_t>(targets), indices_.data(), counts_.data(),
+          overflow_.device()};
+}
+
+void DevicePaddedStorage::read_report(cudaStream_t stream) {
+  RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
+  report = {overflow_.host().rows, overflow_.host().largest};
 }
 
 }  // namespace raycut::detail::cuda

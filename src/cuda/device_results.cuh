@@ -1,53 +1,38 @@
-// Per-target outputs of GPU methods: allocation by kernel, the device-side store, the copy back,
-// the CUDA-event timer, the CSR assembly and the GpuMethod base. Shared by every CUDA and OptiX
-// method.
+// What every GPU method shares: per-target results on the device, the CUDA-event timers, the
+// stream, and the neighbour lists (count pass, scan, fill pass: written once here for every
+// CUDA and OptiX method, which only say how to run a functor over their pairs).
 #pragma once
 
 #include <cuda_runtime.h>
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
+#include "core/list_storage.hpp"
 #include "core/method.hpp"
-#include "cuda/check.cuh"
 #include "cuda/device_buffer.cuh"
+#include "raycut/detail/cuda/check.cuh"
 #include "raycut/engine.hpp"
 #include "raycut/kernels.hpp"
 
 namespace raycut::detail::cuda {
 
-// Raw pointers a kernel writes; null for what the kernel does not produce.
-struct OutputView {
-  std::uint32_t* count = nullptr;
-  float* energy = nullptr;
-  float* force = nullptr;  // 3 per target
-
-  // The target's sums, after the kernel's finish().
-  template <class K>
-  __device__ __forceinline__ void store(std::size_t i, Accumulator acc, const K& kernel) const {
-    kernel.finish(acc);
-    if constexpr (K::has_count) count[i] = acc.count;
-    if constexpr (K::has_energy) energy[i] = acc.energy;
-    if constexpr (K::has_force) {
-      force[3 * i] = acc.fx;
-      force[3 * i + 1] = acc.fy;
-      force[3 * i + 2] = acc.fz;
-    }
-  }
-};
-
 class DeviceResults {
  public:
-  // Sizes the buffers for `kernel` over n targets (nothing is cleared: every target is stored).
-  OutputView prepare(Kernel kernel, std::size_t n);
+  // Sizes the buffers for `kernel` over n targets and returns where the kernel writes (every
+  // target is written: nothing is cleared). The results are invalid until commit().
+  KernelOutputs prepare(Kernel kernel, std::size_t n);
+  void commit() { valid_ = true; }
   Results to_host() const;
   ResultsView view() const;
 
  private:
   Kernel kernel_ = Kernel::count;
   std::size_t n_ = 0;
+  bool valid_ = false;
   DeviceBuffer<std::uint32_t> count_;
-  DeviceBuffer<float> energy_, force_;
+  DeviceBuffer<float> energy_, force_, virial_, density_;
 };
 
 // A pair of CUDA events around work queued on a stream.
@@ -67,59 +52,135 @@ class EventTimer {
   bool started_ = false;
 };
 
+// A host value the device writes through mapped pinned memory (a count, a flag), read after the
+// stream has reached it.
+template <class T>
+class MappedValue {
+ public:
+  MappedValue() {
+    RAYCUT_CUDA_CHECK(cudaHostAlloc(reinterpret_cast<void**>(&host_), sizeof(T),
+                                    cudaHostAllocMapped));
+    RAYCUT_CUDA_CHECK(cudaHostGetDevicePointer(reinterpret_cast<void**>(&device_), host_, 0));
+  }
+  ~MappedValue() { cudaFreeHost(host_); }
+  MappedValue(const MappedValue&) = delete;
+  MappedValue& operator=(const MappedValue&) = delete;
+  T* device() const { return device_; }
+  T& host() { return *host_; }
+
+ private:
+  T* host_ = nullptr;
+  T* device_ = nullptr;
+};
+
+// A CSR list in device memory; buffers only grow.
+class DeviceListStorage final : public ListStorage {
+ public:
+  MemorySpace space() const override { return MemorySpace::device; }
+  std::size_t bytes() const override;
+  NeighbourList to_host() const override;
+  void set_empty(const ListOptions& options) override;
+
+  std::uint32_t* prepare_counts(std::size_t n, const ListOptions& options);
+  // offsets = exclusive scan of the counts (offsets[n] = total), then the total read back.
+  std::uint64_t scan_counts(cudaStream_t stream);
+  ListFill prepare_fill(std::uint64_t pairs);
+
+ private:
+  void publish();
+  DeviceBuffer<std::uint32_t> counts_;
+  DeviceBuffer<std::uint64_t> offsets_;
+  DeviceBuffer<std::uint32_t> indices_;
+  DeviceBuffer<float> distances_, vectors_;
+  DeviceBuffer<unsigned char> scan_temp_;
+  MappedValue<std::uint64_t> total_;
+};
+
+class DevicePaddedStorage final : public PaddedStorage {
+ public:
+  MemorySpace space() const override { return MemorySpace::device; }
+  std::vector<std::uint32_t> indices_to_host() const override;
+  std::vector<std::uint32_t> counts_to_host() const override;
+  PaddedFill prepare(std::size_t n, std::uint32_t k, bool half, cudaStream_t stream);
+  // After the pass: the overflow into `report`.
+  void read_report(cudaStream_t stream);
+
+ private:
+  DeviceBuffer<std::uint32_t> indices_, counts_;
+  MappedValue<PaddedOverflow> overflow_;
+};
+
 // What every GPU method shares: positions and results on the device, the results kept until the
-// next compute, the CUDA-event timers of build and compute, and the synchronisation.
+// next compute, the CUDA-event timers of build and compute, the stream, and the lists.
 class GpuMethod : public Method {
  public:
   MemorySpace space() const override { return MemorySpace::device; }
+  void set_stream(void* stream) override { stream_ = static_cast<cudaStream_t>(stream); }
   Results results() const override { return results_.to_host(); }
   ResultsView results_view() const override { return results_.view(); }
-  void synchronize() override { RAYCUT_CUDA_CHECK(cudaDeviceSynchronize()); }
+  void synchronize() override { RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream_)); }
   double device_build_ms() const override { return build_timer_.elapsed_ms(); }
   double device_compute_ms() const override { return compute_timer_.elapsed_ms(); }
-
- protected:
-  // Sizes the results for `kernel` over n targets, then times launch(out) as the compute.
-  template <class Launch>
-  void timed_compute(Kernel kernel, std::size_t n, Launch&& launch) {
-    const OutputView out = results_.prepare(kernel, n);
-    compute_timer_.start();
-    launch(out);
-    RAYCUT_CUDA_CHECK_LAUNCH();
-    compute_timer_.stop();
+  std::unique_ptr<ListStorage> make_list_storage() const override {
+    return std::make_unique<DeviceListStorage>();
+  }
+  std::unique_ptr<PaddedStorage> make_padded_storage() const override {
+    return std::make_unique<DevicePaddedStorage>();
   }
 
+ protected:
+  // Sizes the results for `kernel` over n targets, then times launch(outputs) as the compute.
+  template <class Launch>
+  void timed_compute(Kernel kernel, std::size_t n, Launch&& launch) {
+    const KernelOutputs out = results_.prepare(kernel, n);
+    compute_timer_.start(stream_);
+    launch(out);
+    RAYCUT_CUDA_CHECK_LAUNCH();
+    compute_timer_.stop(stream_);
+    results_.commit();
+  }
+
+  // The lists of every GPU method: run(f) must run functor f over every target's pairs.
+  template <class Run>
+  void device_neighbours(ListStorage& storage, std::size_t n, const ListOptions& options,
+                         Run&& run) {
+    auto& list = static_cast<DeviceListStorage&>(storage);
+    run(ListCount{options.half, list.prepare_counts(n, options)});
+    run(list.prepare_fill(list.scan_counts(stream_)));
+  }
+  template <class Run>
+  void device_padded(PaddedStorage& storage, std::size_t n, std::uint32_t k, bool half,
+                     Run&& run) {
+    auto& list = static_cast<DevicePaddedStorage&>(storage);
+    run(list.prepare(n, k, half, stream_));
+    list.read_report(stream_);
+  }
+
+  cudaStream_t stream_ = nullptr;
   DeviceResults results_;
   EventTimer build_timer_, compute_timer_;
 };
 
-// Assembles a CSR list: count(counts) must write each target's number of neighbours into
-// counts[0..n); fill(offsets, indices) must write target i's neighbours into
-// indices[offsets[i] ..). Both launch kernels on the default stream.
-template <class Count, class Fill>
-NeighbourList build_neighbour_list(std::size_t n, Count count, Fill fill);
+// A CUDA method whose pairs are walked by one traversal (Self::run(f) runs functor f through it):
+// the built-in kernels, the lists and the caller's functors all go through it.
+template <class Self>
+class CudaPairMethod : public GpuMethod {
+ public:
+  void compute(Kernel kernel, const KernelOptions& options) override {
+    timed_compute(kernel, self().size(), [&](const KernelOutputs& out) {
+      with_kernel(kernel, options, self().pair_pass().cutoff_squared, out,
+                  [&](const auto& f) { self().run(f); });
+    });
+  }
+  void neighbours(ListStorage& list, const ListOptions& options) override {
+    device_neighbours(list, self().size(), options, [&](const auto& f) { self().run(f); });
+  }
+  void padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half) override {
+    device_padded(list, self().size(), k, half, [&](const auto& f) { self().run(f); });
+  }
 
-// Exclusive prefix sum of counts[0..n) into offsets[0..n] (offsets[n] = total), on the device.
-void exclusive_scan(const std::uint32_t* counts, std::uint64_t* offsets, std::size_t n);
-
-template <class Count, class Fill>
-NeighbourList build_neighbour_list(std::size_t n, Count count, Fill fill) {
-  DeviceBuffer<std::uint32_t> counts(n);
-  DeviceBuffer<std::uint64_t> offsets(n + 1);
-  count(counts.data());
-  exclusive_scan(counts.data(), offsets.data(), n);
-  NeighbourList list;
-  list.offsets.resize(n + 1);
-  RAYCUT_CUDA_CHECK(cudaMemcpy(list.offsets.data(), offsets.data(), (n + 1) * sizeof(std::uint64_t),
-                               cudaMemcpyDeviceToHost));
-  const std::uint64_t total = list.offsets[n];
-  require_device_memory(total * sizeof(std::uint32_t), "the neighbour list");
-  DeviceBuffer<std::uint32_t> indices(total > 0 ? total : 1);
-  fill(static_cast<const std::uint64_t*>(offsets.data()), indices.data());
-  allocate_indices(list, total);
-  RAYCUT_CUDA_CHECK(cudaMemcpy(list.indices.data(), indices.data(), total * sizeof(std::uint32_t),
-                               cudaMemcpyDeviceToHost));
-  return list;
-}
+ private:
+  const Self& self() const { return static_cast<const Self&>(*this); }
+};
 
 }  // namespace raycut::detail::cuda

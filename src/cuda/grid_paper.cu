@@ -9,28 +9,19 @@
 #include <cstdint>
 #include <string>
 
-#include "core/cell_grid.hpp"
+#include "raycut/detail/cell_grid.hpp"
 #include "cuda/device_results.cuh"
 #include "cuda/grid_common.cuh"
 #include "cuda/methods.hpp"
+#include "raycut/detail/cuda/grid_paper_pass.cuh"
 #include "raycut/predicate.hpp"
 
 namespace raycut::detail::cuda {
 namespace {
 
-constexpr int paper_block = 128;  // the paper's block size
-
-// Particles in cell order, one array per coordinate as in the paper.
-struct SortedParticles {
-  const float* x;
-  const float* y;
-  const float* z;
-  const std::uint32_t* index;  // original index
-};
-
 __global__ void count_per_cell(const float* xyz, std::uint32_t n, CellGrid grid,
                                std::uint32_t* counts) {
-  const std::uint32_t i = blockIdx.x * paper_block + threadIdx.x;
+  const std::uint32_t i = blockIdx.x * paper_block_size + threadIdx.x;
   if (i >= n) return;
   atomicAdd(&counts[grid.key_of(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2])], 1u);
 }
@@ -38,7 +29,7 @@ __global__ void count_per_cell(const float* xyz, std::uint32_t n, CellGrid grid,
 __global__ void scatter_to_cells(const float* xyz, std::uint32_t n, CellGrid grid,
                                  const std::uint32_t* start, std::uint32_t* tickets, float* x,
                                  float* y, float* z, std::uint32_t* index) {
-  const std::uint32_t i = blockIdx.x * paper_block + threadIdx.x;
+  const std::uint32_t i = blockIdx.x * paper_block_size + threadIdx.x;
   if (i >= n) return;
   const float px = xyz[3 * i], py = xyz[3 * i + 1], pz = xyz[3 * i + 2];
   const std::uint64_t key = grid.key_of(px, py, pz);
@@ -49,70 +40,7 @@ __global__ void scatter_to_cells(const float* xyz, std::uint32_t n, CellGrid gri
   index[slot] = i;
 }
 
-// Calls on_pair(j, dx, dy, dz, r2) for every in-range source j of the target in slot t.
-template <class OnPair>
-__device__ __forceinline__ void for_each_pair(const SortedParticles& p, const CellGrid& grid,
-                                              const std::uint32_t* start, float cutoff_squared,
-                                              std::uint32_t t, OnPair&& on_pair) {
-  const float xt = p.x[t], yt = p.y[t], zt = p.z[t];
-  const std::int64_t cx = grid.coord(xt, 0), cy = grid.coord(yt, 1), cz = grid.coord(zt, 2);
-  const std::int64_t last_x = grid.dims[0] - 1, last_y = grid.dims[1] - 1,
-                     last_z = grid.dims[2] - 1;
-  for (std::int64_t iz = cz > 0 ? cz - 1 : 0; iz <= (cz < last_z ? cz + 1 : last_z); ++iz) {
-    for (std::int64_t iy = cy > 0 ? cy - 1 : 0; iy <= (cy < last_y ? cy + 1 : last_y); ++iy) {
-      for (std::int64_t ix = cx > 0 ? cx - 1 : 0; ix <= (cx < last_x ? cx + 1 : last_x); ++ix) {
-        const std::uint64_t key =
-            grid.key(static_cast<std::uint32_t>(ix), static_cast<std::uint32_t>(iy),
-                     static_cast<std::uint32_t>(iz));
-        const std::uint32_t end = start[key + 1];
-        for (std::uint32_t s = start[key]; s < end; ++s) {
-          if (s == t) continue;
-          const float dx = p.x[s] - xt, dy = p.y[s] - yt, dz = p.z[s] - zt;
-          const float r2 = squared_distance(dx, dy, dz);
-          if (in_range(r2, cutoff_squared)) on_pair(s, dx, dy, dz, r2);
-        }
-      }
-    }
-  }
-}
-
-template <class K>
-__global__ void compute_kernel(SortedParticles p, std::uint32_t n, CellGrid grid,
-                               const std::uint32_t* start, float cutoff_squared, K kernel,
-                               OutputView out) {
-  const std::uint32_t t = blockIdx.x * paper_block + threadIdx.x;
-  if (t >= n) return;
-  Accumulator acc;
-  const std::uint32_t i = p.index[t];
-  for_each_pair(p, grid, start, cutoff_squared, t,
-                [&](std::uint32_t s, float dx, float dy, float dz, float r2) {
-                  kernel(acc, i, p.index[s], dx, dy, dz, r2);
-                });
-  out.store(i, acc, kernel);
-}
-
-__global__ void count_kernel(SortedParticles p, std::uint32_t n, CellGrid grid,
-                             const std::uint32_t* start, float cutoff_squared,
-                             std::uint32_t* counts) {
-  const std::uint32_t t = blockIdx.x * paper_block + threadIdx.x;
-  if (t >= n) return;
-  std::uint32_t c = 0;
-  for_each_pair(p, grid, start, cutoff_squared, t,
-                [&](std::uint32_t, float, float, float, float) { ++c; });
-  counts[p.index[t]] = c;
-}
-
-__global__ void fill_kernel(SortedParticles p, std::uint32_t n, CellGrid grid,
-                            const std::uint32_t* start, float cutoff_squared,
-                            const std::uint64_t* offsets, std::uint32_t* indices) {
-  const std::uint32_t t = blockIdx.x * paper_block + threadIdx.x;
-  if (t >= n) return;
-  std::uint64_t slot = offsets[p.index[t]];
-  for_each_pair(p, grid, start, cutoff_squared, t,
-                [&](std::uint32_t s, float, float, float, float) { indices[slot++] = p.index[s]; });
-}
-
-class GridPaper final : public GpuMethod {
+class GridPaper final : public CudaPairMethod<GridPaper> {
  public:
   void build(const float* xyz, std::size_t n, float cutoff) override {
     if (n >= UINT32_MAX)
@@ -120,58 +48,49 @@ class GridPaper final : public GpuMethod {
                   "grid-paper handles at most 2^32 - 2 particles, got " + std::to_string(n));
     n_ = static_cast<std::uint32_t>(n);
     cutoff_squared_ = squared_cutoff(cutoff);
-    build_timer_.start();
+    build_timer_.start(stream_);
     float lo[3], hi[3];
-    box_.compute(xyz, n, lo, hi);
+    box_.compute(xyz, n, lo, hi, stream_);
     grid_ = make_cell_grid(lo, hi, cutoff);
     const std::uint64_t cells = grid_.cell_count();
     reserve(cells);
 
     // Count per cell, prefix sum, scatter with a ticket per cell (the paper's three loops).
     const std::size_t table = static_cast<std::size_t>(cells) + 1;
-    RAYCUT_CUDA_CHECK(cudaMemsetAsync(counts_.data(), 0, table * sizeof(std::uint32_t)));
-    count_per_cell<<<blocks(), paper_block>>>(xyz, n_, grid_, counts_.data());
+    RAYCUT_CUDA_CHECK(
+        cudaMemsetAsync(counts_.data(), 0, table * sizeof(std::uint32_t), stream_));
+    count_per_cell<<<blocks(), paper_block_size, 0, stream_>>>(xyz, n_, grid_, counts_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
     std::size_t temp_bytes = 0;
     RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, counts_.data(),
-                                                    start_.data(), std::int64_t(table)));
+                                                    start_.data(), std::int64_t(table), stream_));
     temp_.resize(temp_bytes);
     RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(temp_.data(), temp_bytes, counts_.data(),
-                                                    start_.data(), std::int64_t(table)));
-    RAYCUT_CUDA_CHECK(cudaMemsetAsync(counts_.data(), 0, table * sizeof(std::uint32_t)));
-    scatter_to_cells<<<blocks(), paper_block>>>(xyz, n_, grid_, start_.data(), counts_.data(),
+                                                    start_.data(), std::int64_t(table), stream_));
+    RAYCUT_CUDA_CHECK(
+        cudaMemsetAsync(counts_.data(), 0, table * sizeof(std::uint32_t), stream_));
+    scatter_to_cells<<<blocks(), paper_block_size, 0, stream_>>>(xyz, n_, grid_, start_.data(), counts_.data(),
                                                 x_.data(), y_.data(), z_.data(), index_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
-    build_timer_.stop();
+    build_timer_.stop(stream_);
   }
 
-  void compute(Kernel kernel, const KernelOptions& options) override {
-    timed_compute(kernel, n_, [&](const OutputView& out) {
-      with_kernel(kernel, options, cutoff_squared_, [&](auto k) {
-        compute_kernel<<<blocks(), paper_block>>>(sorted(), n_, grid_, start_.data(),
-                                                  cutoff_squared_, k, out);
-      });
-    });
+  std::size_t size() const { return n_; }
+  PairPass pair_pass() const override {
+    PairPass pass;
+    pass.kind = PassKind::grid_paper;
+    pass.n = n_;
+    pass.cutoff_squared = cutoff_squared_;
+    pass.grid_paper = {x_.data(), y_.data(), z_.data(), index_.data(), start_.data(), grid_};
+    return pass;
   }
-
-  NeighbourList neighbours() override {
-    return build_neighbour_list(
-        n_,
-        [&](std::uint32_t* counts) {
-          count_kernel<<<blocks(), paper_block>>>(sorted(), n_, grid_, start_.data(),
-                                                  cutoff_squared_, counts);
-          RAYCUT_CUDA_CHECK_LAUNCH();
-        },
-        [&](const std::uint64_t* offsets, std::uint32_t* indices) {
-          fill_kernel<<<blocks(), paper_block>>>(sorted(), n_, grid_, start_.data(),
-                                                 cutoff_squared_, offsets, indices);
-          RAYCUT_CUDA_CHECK_LAUNCH();
-        });
+  template <class F>
+  void run(const F& f) const {
+    run_grid_paper(pair_pass(), f, stream_);
   }
 
  private:
-  unsigned blocks() const { return (n_ + paper_block - 1) / paper_block; }
-  SortedParticles sorted() const { return {x_.data(), y_.data(), z_.data(), index_.data()}; }
+  unsigned blocks() const { return blocks_for(n_, paper_block_size); }
 
   // The dense grid's memory, checked against free memory before any allocation.
   void reserve(std::uint64_t cells) {

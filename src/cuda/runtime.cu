@@ -6,7 +6,7 @@
 #include <string>
 
 #include "core/validation.hpp"
-#include "cuda/check.cuh"
+#include "raycut/detail/cuda/check.cuh"
 #include "cuda/device_buffer.cuh"
 
 namespace raycut::detail::cuda {
@@ -72,6 +72,52 @@ DeviceMemory upload(const void* host, std::size_t bytes) {
 
 void download(void* host, const void* device, std::size_t bytes) {
   RAYCUT_CUDA_CHECK(cudaMemcpy(host, device, bytes, cudaMemcpyDeviceToHost));
+}
+
+DeviceMemory copy_on_device(const void* device, std::size_t bytes, void* stream) {
+  require_device_memory(bytes, "a copy of the positions");
+  void* p = nullptr;
+  RAYCUT_CUDA_CHECK(cudaMalloc(&p, bytes));
+  DeviceMemory owned(p);
+  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(p, device, bytes, cudaMemcpyDeviceToDevice,
+                                    static_cast<cudaStream_t>(stream)));
+  return owned;
+}
+
+namespace {
+__global__ void moved_beyond_kernel(const float* now, const float* then, std::size_t n,
+                                    float limit_squared, unsigned* moved) {
+  for (std::size_t i = blockIdx.x * std::size_t{blockDim.x} + threadIdx.x; i < n;
+       i += std::size_t{gridDim.x} * blockDim.x) {
+    float d2 = 0;
+    for (int a = 0; a < 3; ++a) {
+      const float d = now[3 * i + a] - then[3 * i + a];
+      d2 += d * d;
+    }
+    if (!(d2 <= limit_squared)) *moved = 1u;  // racing writes of the same value
+  }
+}
+}  // namespace
+
+bool moved_beyond(const float* now, const float* then, std::size_t n, float distance,
+                  void* stream) {
+  const auto s = static_cast<cudaStream_t>(stream);
+  // A pinned, mapped flag: the kernel writes it, the host reads it after the stream gets there.
+  static thread_local unsigned* flag = [] {
+    unsigned* p = nullptr;
+    RAYCUT_CUDA_CHECK(cudaHostAlloc(reinterpret_cast<void**>(&p), sizeof(unsigned),
+                                    cudaHostAllocMapped));
+    return p;
+  }();
+  *flag = 0;
+  unsigned* device_flag = nullptr;
+  RAYCUT_CUDA_CHECK(cudaHostGetDevicePointer(reinterpret_cast<void**>(&device_flag), flag, 0));
+  const unsigned blocks = static_cast<unsigned>(std::min<std::size_t>((n + 255) / 256, 4096));
+  if (n > 0) moved_beyond_kernel<<<blocks, 256, 0, s>>>(now, then, n, distance * distance,
+                                                         device_flag);
+  RAYCUT_CUDA_CHECK_LAUNCH();
+  RAYCUT_CUDA_CHECK(cudaStreamSynchronize(s));
+  return *flag != 0;
 }
 
 std::string device_name() {

@@ -5,17 +5,27 @@
 
 #include <optix.h>
 
+#include <new>
+#include <type_traits>
+
 #include "optix/launch_params.hpp"
 #include "raycut/kernels.hpp"
 #include "raycut/predicate.hpp"
 
 namespace raycut::detail::optix {
 
+// The per-target state of whichever functor the launch runs: its Accumulator, in place.
 struct TargetState {
-  Accumulator acc;
-  std::uint64_t slot;  // list_fill: next index to write
+  alignas(8) unsigned char storage[64];
   std::uint32_t target;
 };
+
+template <class F>
+__device__ __forceinline__ typename F::Accumulator& state_of(TargetState& s, const F&) {
+  static_assert(sizeof(typename F::Accumulator) <= sizeof(TargetState::storage),
+                "TargetState::storage too small for this functor's Accumulator");
+  return *reinterpret_cast<typename F::Accumulator*>(s.storage);
+}
 
 __device__ __forceinline__ std::uint32_t caller_index(const LaunchParams& p, std::uint32_t slot) {
   return p.origin ? p.origin[slot] : slot;
@@ -24,7 +34,10 @@ __device__ __forceinline__ std::uint32_t caller_index(const LaunchParams& p, std
 __device__ __forceinline__ TargetState begin_target(const LaunchParams& p, std::uint32_t i) {
   TargetState s;
   s.target = i;
-  s.slot = p.mode == RayMode::list_fill ? p.list_offsets[caller_index(p, i)] : 0;
+  with_functor(p, [&](const auto& f) {
+    using A = typename std::decay_t<decltype(f)>::Accumulator;
+    new (s.storage) A(initial_state(f, caller_index(p, i)));
+  });
   return s;
 }
 
@@ -56,57 +69,16 @@ __device__ __forceinline__ PairGeometry pair_geometry(const LaunchParams& p, std
   return g;
 }
 
-// One kept (target, source j) pair: accumulate by mode.
+// One kept (target, source j) pair: the launch's functor.
 __device__ __forceinline__ void accept_pair(const LaunchParams& p, TargetState& s, std::uint32_t j,
                                             const PairGeometry& g) {
   const std::uint32_t ci = caller_index(p, s.target), cj = caller_index(p, j);
-  switch (p.mode) {
-    case RayMode::count:
-    case RayMode::list_count:
-      CountKernel{}(s.acc, ci, cj, g.dx, g.dy, g.dz, g.r2);
-      break;
-    case RayMode::lj:
-      p.lj(s.acc, ci, cj, g.dx, g.dy, g.dz, g.r2);
-      break;
-    case RayMode::smooth:
-      p.smooth(s.acc, ci, cj, g.dx, g.dy, g.dz, g.r2);
-      break;
-    case RayMode::sph_density:
-      p.sph_density(s.acc, ci, cj, g.dx, g.dy, g.dz, g.r2);
-      break;
-    case RayMode::sph_force:
-      p.sph_force(s.acc, ci, cj, g.dx, g.dy, g.dz, g.r2);
-      break;
-    case RayMode::list_fill:
-      p.list_indices[s.slot++] = cj;
-      break;
-  }
+  with_functor(p, [&](const auto& f) { f(state_of(s, f), ci, cj, Vec3{g.dx, g.dy, g.dz}, g.r2); });
 }
 
-__device__ __forceinline__ void finish_target(const LaunchParams& p, const TargetState& s) {
-  const std::uint32_t caller = caller_index(p, s.target);
-  switch (p.mode) {
-    case RayMode::count:
-      p.out.store(caller, s.acc, CountKernel{});
-      break;
-    case RayMode::lj:
-      p.out.store(caller, s.acc, p.lj);
-      break;
-    case RayMode::smooth:
-      p.out.store(caller, s.acc, p.smooth);
-      break;
-    case RayMode::sph_density:
-      p.out.store(caller, s.acc, p.sph_density);
-      break;
-    case RayMode::sph_force:
-      p.out.store(caller, s.acc, p.sph_force);
-      break;
-    case RayMode::list_count:
-      p.list_counts[caller] = s.acc.count;
-      break;
-    case RayMode::list_fill:
-      break;
-  }
+__device__ __forceinline__ void finish_target(const LaunchParams& p, TargetState& s) {
+  const std::uint32_t ci = caller_index(p, s.target);
+  with_functor(p, [&](const auto& f) { f.finish(ci, state_of(s, f)); });
 }
 
 __device__ __forceinline__ float3 position(const LaunchParams& p, std::uint32_t i) {

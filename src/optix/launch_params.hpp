@@ -6,19 +6,23 @@
 
 #include <cstdint>
 
-#include "cuda/device_results.cuh"
+#include "core/list_functors.hpp"
 #include "raycut/kernels.hpp"
 
 namespace raycut::detail::optix {
 
+// Which functor a launch runs (the programs are compiled ahead, so the functor is chosen by a
+// mode among the library's own: kernels, list passes).
 enum class RayMode : int {
-  count,  // fused kernels
+  count,
   lj,
+  lj_forces,
   smooth,
   sph_density,
   sph_force,
   list_count,  // neighbour list, pass 1: neighbours per target
   list_fill,   // neighbour list, pass 2: write them at their offsets
+  padded,      // the padded [N, K] matrix
 };
 
 struct LaunchParams {
@@ -29,15 +33,43 @@ struct LaunchParams {
   float cutoff, cutoff_squared;
   float margin;  // e of src/geometry/ray_geometry.hpp
   RayMode mode;
-  // The functor of the fused mode (the others unused).
+  // The functor of the mode (the others unused); each writes its outputs by caller index.
+  CountKernel count;
   LennardJonesKernel lj;
+  LennardJonesForceKernel lj_forces;
   SmoothKernel smooth;
   SphDensityKernel sph_density;
   SphForceKernel sph_force;
-  cuda::OutputView out;               // indexed by the caller's particle index
-  std::uint32_t* list_counts;         // list_count: per caller index
-  const std::uint64_t* list_offsets;  // list_fill: per caller index
-  std::uint32_t* list_indices;
+  ListCount list_count;
+  ListFill list_fill;
+  PaddedFill padded;
 };
+
+// The launch's mode and functor; one overload per functor the programs know.
+inline void set_functor(LaunchParams& p, const CountKernel& f) { p.mode = RayMode::count; p.count = f; }
+inline void set_functor(LaunchParams& p, const LennardJonesKernel& f) { p.mode = RayMode::lj; p.lj = f; }
+inline void set_functor(LaunchParams& p, const LennardJonesForceKernel& f) { p.mode = RayMode::lj_forces; p.lj_forces = f; }
+inline void set_functor(LaunchParams& p, const SmoothKernel& f) { p.mode = RayMode::smooth; p.smooth = f; }
+inline void set_functor(LaunchParams& p, const SphDensityKernel& f) { p.mode = RayMode::sph_density; p.sph_density = f; }
+inline void set_functor(LaunchParams& p, const SphForceKernel& f) { p.mode = RayMode::sph_force; p.sph_force = f; }
+inline void set_functor(LaunchParams& p, const ListCount& f) { p.mode = RayMode::list_count; p.list_count = f; }
+inline void set_functor(LaunchParams& p, const ListFill& f) { p.mode = RayMode::list_fill; p.list_fill = f; }
+inline void set_functor(LaunchParams& p, const PaddedFill& f) { p.mode = RayMode::padded; p.padded = f; }
+
+// Calls visit(functor) with the functor of the launch's mode.
+template <class Visit>
+__host__ __device__ __forceinline__ void with_functor(const LaunchParams& p, Visit&& visit) {
+  switch (p.mode) {
+    case RayMode::count: visit(p.count); break;
+    case RayMode::lj: visit(p.lj); break;
+    case RayMode::lj_forces: visit(p.lj_forces); break;
+    case RayMode::smooth: visit(p.smooth); break;
+    case RayMode::sph_density: visit(p.sph_density); break;
+    case RayMode::sph_force: visit(p.sph_force); break;
+    case RayMode::list_count: visit(p.list_count); break;
+    case RayMode::list_fill: visit(p.list_fill); break;
+    case RayMode::padded: visit(p.padded); break;
+  }
+}
 
 }  // namespace raycut::detail::optix

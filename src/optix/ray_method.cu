@@ -6,7 +6,7 @@
 #include <cmath>
 #include <cstring>
 
-#include "core/cell_grid.hpp"
+#include "raycut/detail/cell_grid.hpp"
 #include "geometry/ray_geometry.hpp"
 
 namespace raycut::detail::optix {
@@ -160,53 +160,26 @@ LaunchParams RayTracingMethod::base_params() const {
   return p;
 }
 
-namespace {
-void set_kernel(LaunchParams& p, CountKernel) {
-  p.mode = RayMode::count;
+template <class F>
+void RayTracingMethod::launch(const F& f) {
+  LaunchParams p = base_params();
+  set_functor(p, f);
+  pipeline_.launch(&p, sizeof p, n_, stream_);
 }
-void set_kernel(LaunchParams& p, LennardJonesKernel k) {
-  p.mode = RayMode::lj;
-  p.lj = k;
-}
-void set_kernel(LaunchParams& p, SmoothKernel k) {
-  p.mode = RayMode::smooth;
-  p.smooth = k;
-}
-void set_kernel(LaunchParams& p, SphDensityKernel k) {
-  p.mode = RayMode::sph_density;
-  p.sph_density = k;
-}
-void set_kernel(LaunchParams& p, SphForceKernel k) {
-  p.mode = RayMode::sph_force;
-  p.sph_force = k;
-}
-}  // namespace
 
 void RayTracingMethod::compute(Kernel kernel, const KernelOptions& options) {
-  LaunchParams p = base_params();
-  with_kernel(kernel, options, p.cutoff_squared, [&](auto k) { set_kernel(p, k); });
-  timed_compute(kernel, n_, [&](const cuda::OutputView& out) {
-    p.out = out;
-    pipeline_.launch(&p, sizeof p, n_);
+  timed_compute(kernel, n_, [&](const KernelOutputs& out) {
+    with_kernel(kernel, options, squared_cutoff(cutoff_), out,
+                [&](const auto& f) { launch(f); });
   });
 }
 
-NeighbourList RayTracingMethod::neighbours() {
-  return cuda::build_neighbour_list(
-      n_,
-      [&](std::uint32_t* counts) {
-        LaunchParams p = base_params();
-        p.mode = RayMode::list_count;
-        p.list_counts = counts;
-        pipeline_.launch(&p, sizeof p, n_);
-      },
-      [&](const std::uint64_t* offsets, std::uint32_t* indices) {
-        LaunchParams p = base_params();
-        p.mode = RayMode::list_fill;
-        p.list_offsets = offsets;
-        p.list_indices = indices;
-        pipeline_.launch(&p, sizeof p, n_);
-      });
+void RayTracingMethod::neighbours(ListStorage& list, const ListOptions& options) {
+  device_neighbours(list, n_, options, [&](const auto& f) { launch(f); });
+}
+
+void RayTracingMethod::padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half) {
+  device_padded(list, n_, k, half, [&](const auto& f) { launch(f); });
 }
 
 }  // namespace raycut::detail::optix

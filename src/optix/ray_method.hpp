@@ -21,7 +21,8 @@ class RayTracingMethod : public cuda::GpuMethod {
   bool update(const float* xyz, std::size_t n, float cutoff) override;
   void set_update_policy(const UpdatePolicy& policy) override { policy_ = policy; }
   void compute(Kernel kernel, const KernelOptions& options) override;
-  NeighbourList neighbours() override;
+  void neighbours(ListStorage& list, const ListOptions& options) override;
+  void padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half) override;
 
  protected:
   RayTracingMethod(bool sorted, const PipelineSpec& programs);
@@ -33,6 +34,9 @@ class RayTracingMethod : public cuda::GpuMethod {
 
  private:
   LaunchParams base_params() const;
+  // One launch running functor f (one of the modes the programs know) for every target.
+  template <class F>
+  void launch(const F& f);
   // Positions into xyz_, in the method's order (the permutation of the last build, if sorted).
   void arrange(const float* xyz);
   // Largest displacement of any particle since the last full build.

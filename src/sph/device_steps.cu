@@ -2,7 +2,7 @@
 
 #include <cuda_runtime.h>
 
-#include "cuda/check.cuh"
+#include "raycut/detail/cuda/check.cuh"
 
 namespace raycut::sph::device {
 namespace {

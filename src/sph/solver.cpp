@@ -91,10 +91,10 @@ struct Solver::Impl {
     return device ? dfixed->data() : fixed.data();
   }
 
-  // Energy or force of the last run, where the method keeps them (no copy).
+  // Density or force of the last run, where the method keeps them (no copy).
   const float* result(bool force) const {
     const ResultsView view = engine.results_view();
-    return force ? view.force : view.energy;
+    return force ? view.force : view.density;
   }
 
   KernelOptions options() const {

@@ -1,0 +1,345 @@
+// The production grid's traversal (the table it walks is built by src/cuda/grid_build.cu): for
+// every target, the (2k+1)^2 rows of cells around it, rows out of reach of its actual position
+// skipped and each row trimmed to the x cells its sphere can touch, leaving one contiguous range
+// of float4 per row. Large inputs run a thread per target; small ones let 4-32 lanes share each
+// target so that they still fill the GPU. Culling is conservative by construction (slack far
+// above float round-off); the shared predicate decides every pair; self is excluded by slot.
+// Every functor runs through run_grid(): counting, list filling, the built-in kernels and the
+// caller's own. docs/grid.md has the measurements behind each choice. nvcc only.
+#pragma once
+
+#include <cuda_runtime.h>
+
+#include <cstdint>
+
+#include "raycut/detail/cuda/visit.cuh"
+#include "raycut/detail/pair_pass.hpp"
+
+namespace raycut::detail::cuda {
+
+using Slot = std::uint32_t;
+constexpr int grid_block_size = 128;
+constexpr std::uint64_t empty_row = ~std::uint64_t{0};
+
+struct DenseTable {
+  const Slot* start;
+  // Possibly empty (s0 == s1): the scan then does nothing.
+  __device__ __forceinline__ bool range(std::uint64_t row, std::uint32_t dims0, std::uint32_t xa,
+                                        std::uint32_t xb, Slot& s0, Slot& s1) const {
+    const std::uint64_t base = row * dims0;
+    s0 = start[base + xa];
+    s1 = start[base + xb + 1];
+    return true;
+  }
+};
+
+__host__ __device__ __forceinline__ std::uint64_t row_hash(std::uint64_t row, int shift) {
+  return (row * 0x9E3779B97F4A7C15ull) >> shift;
+}
+
+struct CompactTable {
+  CompactTablePass t;
+
+  __device__ __forceinline__ bool range(std::uint64_t row, std::uint32_t dims0, std::uint32_t xa,
+                                        std::uint32_t xb, Slot& s0, Slot& s1) const {
+    std::uint64_t h = row_hash(row, t.shift);
+    uint2 cells;
+    for (;;) {
+      const std::uint64_t k = t.row_keys[h];
+      if (k == row) {
+        cells = reinterpret_cast<const uint2*>(t.row_cells)[h];
+        break;
+      }
+      if (k == empty_row) return false;
+      h = (h + 1) & t.mask;
+    }
+    const std::uint64_t base = row * dims0;
+    const std::uint32_t lo = lower_bound(cells.x, cells.y, base + xa);
+    const std::uint32_t hi = lower_bound(lo, cells.y, base + xb + 1);
+    if (lo == hi) return false;
+    s0 = t.cell_start[lo];
+    s1 = t.cell_start[hi];
+    return true;
+  }
+
+  __device__ __forceinline__ std::uint32_t lower_bound(std::uint32_t first, std::uint32_t last,
+                                                       std::uint64_t key) const {
+    while (first < last) {
+      const std::uint32_t mid = first + (last - first) / 2;
+      if (t.cell_keys[mid] < key)
+        first = mid + 1;
+      else
+        last = mid;
+    }
+    return first;
+  }
+};
+
+// Distance, in cell units, from a target at fraction f of its cell to the slab d cells away.
+__device__ __forceinline__ float slab_distance(int d, float f) {
+  return d > 0 ? static_cast<float>(d) - f : (d < 0 ? f - static_cast<float>(d + 1) : 0.0f);
+}
+
+// Where a target sits: its cell and its fraction of the way across it, per axis.
+struct TargetCell {
+  int cell[3];
+  float frac[3];
+};
+
+__device__ __forceinline__ TargetCell locate(const GridGeometry& view, const float4& p) {
+  TargetCell c;
+  const float pc[3] = {p.x, p.y, p.z};
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    const CellGrid& g = a == 0 ? view.xgrid : view.grid;
+    c.cell[a] = static_cast<int>(g.coord(pc[a], a));
+    c.frac[a] = static_cast<float>((static_cast<double>(pc[a]) - g.origin[a]) * g.inverse_width -
+                                   c.cell[a]);
+  }
+  return c;
+}
+
+// Row-major key of the cell holding (x, y, z): the x cells of a row are consecutive keys.
+__host__ __device__ __forceinline__ std::uint64_t cell_key(const GridGeometry& view, float x,
+                                                           float y, float z) {
+  const CellGrid& g = view.grid;
+  return (static_cast<std::uint64_t>(g.coord(z, 2)) * g.dims[1] + g.coord(y, 1)) *
+             view.xgrid.dims[0] +
+         view.xgrid.coord(x, 0);
+}
+
+// The slots [s0, s1) of row (dz, dy) around the target, trimmed in x to the cells its sphere
+// can reach; false when the row is outside the grid or out of reach (an empty row may come back
+// as s0 == s1).
+template <class Table>
+__device__ __forceinline__ bool row_range(const GridGeometry& view, const Table& table,
+                                          const TargetCell& c, int dz, int dy, Slot& s0, Slot& s1) {
+  const CellGrid& g = view.grid;
+  const int jz = c.cell[2] + dz, jy = c.cell[1] + dy;
+  if (jz < 0 || jz >= static_cast<int>(g.dims[2]) || jy < 0 || jy >= static_cast<int>(g.dims[1]))
+    return false;
+  const int x_reach = view.xgrid.reach;
+  int xa = c.cell[0] - x_reach, xb = c.cell[0] + x_reach;
+  if (view.cull) {
+    const float rc = view.reach_cells, rc2 = rc * rc;
+    const float ez = slab_distance(dz, c.frac[2]), ey = slab_distance(dy, c.frac[1]);
+    const float e2 = ez * ez + ey * ey;
+    if (ez >= rc || ey >= rc || e2 >= rc2) return false;
+    const float rx = sqrtf(rc2 - e2) * view.x_cells_per_cell;
+    xa = max(xa, c.cell[0] + static_cast<int>(floorf(c.frac[0] - rx)));
+    xb = min(xb, c.cell[0] + static_cast<int>(floorf(c.frac[0] + rx)));
+  }
+  xa = max(xa, 0);
+  xb = min(xb, static_cast<int>(view.xgrid.dims[0]) - 1);
+  if (xa > xb) return false;
+  const std::uint64_t row = static_cast<std::uint64_t>(jz) * g.dims[1] + jy;
+  return table.range(row, view.xgrid.dims[0], xa, xb, s0, s1);
+}
+
+__device__ __forceinline__ std::uint32_t original_index(const float4& q) {
+  return __float_as_uint(q.w);
+}
+
+// Calls visit(q, r, r2) for every candidate source q (a float4, w = original index) of the
+// target p in slot t, self excluded: one thread per target, row after row. Self is excluded by
+// splitting its own row's range around it, not by a test per candidate, and the walk is by
+// pointer: the inner loop is a load and the distance.
+template <class Table, class Visit>
+__device__ __forceinline__ void for_each_candidate(const float4* __restrict__ pos, Slot t,
+                                                   const float4& p, const GridGeometry& view,
+                                                   const Table& table, Visit&& visit) {
+  const TargetCell c = locate(view, p);
+  const int reach = view.grid.reach;
+  const float4* const self = pos + t;
+  const auto one = [&](const float4& v) {
+    const Vec3 r{v.x - p.x, v.y - p.y, v.z - p.z};
+    visit(v, r, squared_distance(r.x, r.y, r.z));
+  };
+  // Four loads in flight, one 32-bit count per four (a 64-bit pointer compare costs more); not
+  // unrolled further, which would leave more lanes waiting on the remainders.
+  const auto scan = [&](const float4* q, const float4* last) {
+#pragma unroll 1
+    for (int fours = static_cast<int>(last - q) / 4; fours > 0; --fours, q += 4) {
+      float4 v[4];
+#pragma unroll
+      for (int u = 0; u < 4; ++u) v[u] = __ldg(q + u);
+#pragma unroll
+      for (int u = 0; u < 4; ++u) one(v[u]);
+    }
+    for (; q < last; ++q) one(__ldg(q));
+  };
+  const auto scan_row = [&](Slot s0, Slot s1) {
+    const float4 *first = pos + s0, *last = pos + s1;
+    if (self >= first && self < last) {
+      scan(first, self);
+      scan(self + 1, last);
+    } else {
+      scan(first, last);
+    }
+  };
+  for (int dz = -reach; dz <= reach; ++dz) {
+    for (int dy = -reach; dy <= reach; ++dy) {
+      Slot s0, s1;
+      if (row_range(view, table, c, dz, dy, s0, s1)) scan_row(s0, s1);
+    }
+  }
+}
+
+// One thread per target. ManyRegisters: the registers it wants (fewer warps, each with more
+// loads in flight), for dense boxes.
+template <bool ManyRegisters, class F, class Table>
+__global__ void __launch_bounds__(grid_block_size, ManyRegisters ? 1 : 0)
+    grid_thread_kernel(const float4* __restrict__ pos, Slot n, GridGeometry view, Table table,
+                       float cutoff_squared, F f) {
+  const Slot t = blockIdx.x * grid_block_size + threadIdx.x;
+  if (t >= n) return;
+  const float4 p = pos[t];
+  const std::uint32_t i = original_index(p);
+  typename F::Accumulator acc = initial_state(f, i);
+  for_each_candidate(pos, t, p, view, table, [&](const float4& q, Vec3 r, float r2) {
+    visit(f, acc, in_range(r2, cutoff_squared), i, original_index(q), r, r2);
+  });
+  f.finish(i, acc);
+}
+
+constexpr int grid_max_rows = 49;  // (2 reach + 1)^2 rows for reach <= 3
+
+// G lanes per target, over the target's candidates flattened into one list: the lanes find the
+// rows' ranges together (a block of rows each), a prefix sum over the group places them one after
+// the other, then lane g takes candidates g, g + G, ... of the whole list. Every lane does the
+// same work whatever the lengths of the rows, and neighbouring lanes read neighbouring sources.
+// The lanes' states are combined in a fixed order (combine_lanes): results do not change between
+// runs. Only for functors with a combine().
+template <int G, class F, class Table>
+__global__ void __launch_bounds__(grid_block_size)
+    grid_group_kernel(const float4* __restrict__ pos, Slot n, GridGeometry view, Table table,
+                      float cutoff_squared, F f) {
+  constexpr int groups = grid_block_size / G;
+  constexpr int rows_per_lane_max = (grid_max_rows + G - 1) / G;
+  __shared__ uint2 rows[groups][grid_max_rows];  // (first slot - first flat index, end flat index)
+  const int group = threadIdx.x / G, lane = threadIdx.x % G;
+  const Slot t = static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / G);
+  const bool active = t < n;  // no early return: every lane takes part in the shuffles
+  const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
+  const TargetCell c = locate(view, p);
+  const int reach = view.grid.reach, side = 2 * reach + 1, row_count = side * side;
+  const int rows_per_lane = (row_count + G - 1) / G;
+  const int first_row = lane * rows_per_lane;
+
+  Slot base[rows_per_lane_max], length[rows_per_lane_max];
+  Slot total = 0;
+#pragma unroll
+  for (int k = 0; k < rows_per_lane_max; ++k) {
+    const int r = first_row + k;
+    Slot s0 = 0, s1 = 0;
+    if (!(active && k < rows_per_lane && r < row_count &&
+          row_range(view, table, c, r / side - reach, r % side - reach, s0, s1)))
+      s0 = s1 = 0;
+    base[k] = s0;
+    length[k] = s1 - s0;
+    total += length[k];
+  }
+  Slot inclusive = total;
+#pragma unroll
+  for (int offset = 1; offset < G; offset *= 2) {
+    const Slot v = __shfl_up_sync(0xffffffffu, inclusive, offset, G);
+    if (lane >= offset) inclusive += v;
+  }
+  const Slot group_total = __shfl_sync(0xffffffffu, inclusive, G - 1, G);
+  Slot flat = inclusive - total;
+#pragma unroll
+  for (int k = 0; k < rows_per_lane_max; ++k) {
+    const int r = first_row + k;
+    if (k < rows_per_lane && r < row_count) {
+      rows[group][r] = make_uint2(base[k] - flat, flat + length[k]);
+      flat += length[k];
+    }
+  }
+  __syncwarp();
+
+  // Unrolled by U: the slots of U candidates first (the row walk only moves forward), then U
+  // independent loads in flight, then the U tests.
+  constexpr int U = 4;
+  const std::uint32_t i = original_index(p);
+  typename F::Accumulator acc{};
+  int r = 0;
+  uint2 row = rows[group][0];
+  for (Slot first = lane; first < group_total; first += U * G) {
+    Slot s[U];
+#pragma unroll
+    for (int u = 0; u < U; ++u) {
+      const Slot fl = first + u * G;
+      if (fl < group_total) {
+        while (fl >= row.y) row = rows[group][++r];
+        s[u] = row.x + fl;
+      } else {
+        s[u] = t;  // a valid slot; skipped below
+      }
+    }
+    float4 q[U];
+#pragma unroll
+    for (int u = 0; u < U; ++u) q[u] = pos[s[u]];
+#pragma unroll
+    for (int u = 0; u < U; ++u) {
+      const Vec3 d{q[u].x - p.x, q[u].y - p.y, q[u].z - p.z};
+      const float r2 = squared_distance(d.x, d.y, d.z);
+      visit(f, acc, in_range(r2, cutoff_squared) && s[u] != t, i, original_index(q[u]), d, r2);
+    }
+  }
+  combine_lanes<G, F>(acc);
+  if (active && lane == 0) {
+    typename F::Accumulator total_state = initial_state(f, i);
+    F::combine(total_state, acc);
+    f.finish(i, total_state);
+  }
+}
+
+// Runs functor f for every target of the grid pass `pass`, on `stream`.
+template <class F>
+void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
+  const GridPass& g = pass.grid;
+  const auto* pos = static_cast<const float4*>(g.particles);
+  const Slot n = static_cast<Slot>(pass.n);
+  const float c2 = pass.cutoff_squared;
+  const auto launch = [&](const auto& table) {
+    GridKernel kernel = g.kernel;
+    if constexpr (!has_combine<F>::value) kernel = kernel == GridKernel::thread_many_registers
+                                                       ? kernel
+                                                       : GridKernel::thread;
+    const auto group = [&](auto lanes) {
+      constexpr int G = decltype(lanes)::value;
+      if constexpr (has_combine<F>::value)
+        grid_group_kernel<G><<<blocks_for(std::uint64_t{n} * G, grid_block_size), grid_block_size,
+                               0, stream>>>(pos, n, g.geometry, table, c2, f);
+    };
+    switch (kernel) {
+      case GridKernel::thread:
+        grid_thread_kernel<false><<<blocks_for(n, grid_block_size), grid_block_size, 0, stream>>>(
+            pos, n, g.geometry, table, c2, f);
+        break;
+      case GridKernel::thread_many_registers:
+        grid_thread_kernel<true><<<blocks_for(n, grid_block_size), grid_block_size, 0, stream>>>(
+            pos, n, g.geometry, table, c2, f);
+        break;
+      case GridKernel::lanes4:
+        group(std::integral_constant<int, 4>{});
+        break;
+      case GridKernel::lanes8:
+        group(std::integral_constant<int, 8>{});
+        break;
+      case GridKernel::lanes16:
+        group(std::integral_constant<int, 16>{});
+        break;
+      case GridKernel::lanes32:
+        group(std::integral_constant<int, 32>{});
+        break;
+    }
+  };
+  if (g.dense)
+    launch(DenseTable{g.dense_table.start});
+  else
+    launch(CompactTable{g.compact_table});
+  RAYCUT_CUDA_CHECK_LAUNCH();
+}
+
+}  // namespace raycut::detail::cuda

@@ -1,0 +1,101 @@
+// What a built method exposes so that a functor compiled by the caller runs through the
+// method's own traversal (include/raycut/pairs.hpp, include/raycut/cuda/pairs.cuh): plain data,
+// passed to kernels by value. Not a stable interface: it follows the methods' internals.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "raycut/detail/cell_grid.hpp"
+
+namespace raycut::detail {
+
+enum class PassKind {
+  none,             // nothing built (N = 0), or a method without a pass users can run (OptiX)
+  host,             // CPU methods: a candidate walk per target
+  brute_force_gpu,  // every target against every source
+  grid_paper,       // the paper's dense grid, 27 cells
+  grid,             // the production grid: dense or compact table, culled rows
+};
+
+// CPU methods: walk(method, i, sink, context) calls sink(context, j, xyz + 3 j) for every
+// candidate source j of target i (j == i included), each at most once.
+using CandidateSink = void (*)(void* context, std::size_t j, const float* xyz_j);
+struct HostPass {
+  const void* method = nullptr;
+  void (*walk)(const void* method, std::size_t i, CandidateSink sink, void* context) = nullptr;
+  const float* xyz = nullptr;  // (N, 3), the caller's order
+};
+
+struct BruteForcePass {
+  const float* xyz = nullptr;  // (N, 3) on the device
+};
+
+// Particles in cell order, one array per coordinate as in the paper.
+struct GridPaperPass {
+  const float* x = nullptr;
+  const float* y = nullptr;
+  const float* z = nullptr;
+  const std::uint32_t* index = nullptr;  // slot -> caller's index
+  const std::uint32_t* start = nullptr;  // cells + 1 entries
+  CellGrid grid;
+};
+
+// The production grid (src/cuda/grid_build.cu builds it; detail/cuda/grid_pass.cuh walks it).
+// Cells are anisotropic: `grid` gives the y and z cells (C/k wide), `xgrid` the x cells,
+// x_split times narrower; a row of x cells is one range of slots whatever their width.
+struct GridGeometry {
+  CellGrid grid, xgrid;
+  float x_cells_per_cell;  // xgrid cells per grid cell, along x
+  float reach_cells;       // the cutoff in cell units, inflated so that culling stays conservative
+  bool cull;
+};
+
+// The particles of cells [xa, xb] of row `row` are slots [start[row * dims0 + xa],
+// start[row * dims0 + xb + 1]).
+struct DenseTablePass {
+  const std::uint32_t* start = nullptr;  // cell_count + 1 entries
+};
+
+// Non-empty cells only: sorted keys with their first slots, and a hash table from row to the
+// row's run of unique cells.
+struct CompactTablePass {
+  const std::uint64_t* cell_keys = nullptr;  // non-empty cells, ascending
+  const std::uint32_t* cell_start = nullptr;  // runs + 1 entries
+  const std::uint64_t* row_keys = nullptr;    // hash table: row id, or ~0
+  const std::uint32_t* row_cells = nullptr;   // hash table: the row's unique cells [x, y), pairs
+  std::uint64_t mask = 0;
+  int shift = 0;
+};
+
+// How the grid's kernels are launched, chosen at build (src/cuda/grid_policy.hpp).
+enum class GridKernel {
+  thread,                 // a thread per target, within the compiler's register budget
+  thread_many_registers,  // a thread per target with the registers it wants (dense boxes)
+  lanes4,                 // 4, 8, 16 or 32 lanes share each target (small inputs)
+  lanes8,
+  lanes16,
+  lanes32,
+};
+
+struct GridPass {
+  const void* particles = nullptr;  // float4 per slot, in cell order: x y z, w = caller's index
+  GridGeometry geometry;
+  bool dense = true;
+  DenseTablePass dense_table;
+  CompactTablePass compact_table;
+  GridKernel kernel = GridKernel::thread;
+};
+
+struct PairPass {
+  PassKind kind = PassKind::none;
+  const char* method = "";
+  std::size_t n = 0;
+  float cutoff_squared = 0;
+  HostPass host;
+  BruteForcePass brute_force;
+  GridPaperPass grid_paper;
+  GridPass grid;
+};
+
+}  // namespace raycut::detail

@@ -1,0 +1,81 @@
+// Runs a caller's pair functor (include/raycut/kernels.hpp says its shape) through the traversal
+// of a built CPU method, fused: no list in between. GPU methods: include/raycut/cuda/pairs.cuh.
+//
+//   struct Coulomb { using Accumulator = float; const float* q; float* energy; ... };
+//   raycut::Engine engine("cell-list");
+//   engine.build(positions, cutoff);
+//   raycut::for_each_pair(engine, Coulomb{q, energy.data()});
+//
+// Also the one CPU pair loop of the library's own methods (src/cpu/host_method.hpp).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "raycut/detail/pair_pass.hpp"
+#include "raycut/engine.hpp"
+#include "raycut/kernels.hpp"
+#include "raycut/predicate.hpp"
+
+namespace raycut {
+namespace detail {
+
+// Calls on_pair(j, r, r2) for every in-range candidate j != i of target i, r = x_j - x_i.
+// walk(i, f) calls f(j, xyz_j) for every candidate source j of target i, each at most once.
+template <class Walk, class OnPair>
+void for_each_in_range(std::size_t i, const float* xyz, float cutoff_squared, const Walk& walk,
+                       OnPair&& on_pair) {
+  const float xi = xyz[3 * i], yi = xyz[3 * i + 1], zi = xyz[3 * i + 2];
+  walk(i, [&](std::size_t j, const float* xj) {
+    if (j == i) return;
+    const Vec3 r{xj[0] - xi, xj[1] - yi, xj[2] - zi};
+    const float r2 = squared_distance(r.x, r.y, r.z);
+    if (in_range(r2, cutoff_squared)) on_pair(j, r, r2);
+  });
+}
+
+// Runs functor f for every target, in parallel over targets (OpenMP).
+template <class Walk, class F>
+void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk& walk,
+              const F& f) {
+#pragma omp parallel for schedule(dynamic, 256)
+  for (std::size_t t = 0; t < n; ++t) {
+    const auto i = static_cast<std::uint32_t>(t);
+    typename F::Accumulator acc = initial_state(f, i);
+    for_each_in_range(t, xyz, cutoff_squared, walk, [&](std::size_t j, Vec3 r, float r2) {
+      f(acc, i, static_cast<std::uint32_t>(j), r, r2);
+    });
+    f.finish(i, acc);
+  }
+}
+
+// A HostPass's function-pointer walk as a walk callable.
+struct HostPassWalk {
+  const HostPass& pass;
+  template <class OnCandidate>
+  void operator()(std::size_t i, OnCandidate&& on_candidate) const {
+    using C = std::remove_reference_t<OnCandidate>;
+    pass.walk(
+        pass.method, i,
+        [](void* context, std::size_t j, const float* xj) { (*static_cast<C*>(context))(j, xj); },
+        &on_candidate);
+  }
+};
+
+}  // namespace detail
+
+// Runs f for every target of the built engine, on the host. The engine's method must work on the
+// host (Engine::space() == host); GPU methods: raycut::cuda::for_each_pair (pairs.cuh, nvcc).
+template <class F>
+void for_each_pair(const Engine& engine, const F& f) {
+  const detail::PairPass& pass = engine.pair_pass();
+  if (pass.kind == detail::PassKind::none && engine.size() == 0) return;
+  if (pass.kind != detail::PassKind::host)
+    throw Error(ErrorCode::unsupported,
+                "raycut::for_each_pair: method '" + engine.method() +
+                    "' works on the GPU: use raycut::cuda::for_each_pair from "
+                    "<raycut/cuda/pairs.cuh>, compiled by nvcc");
+  detail::run_host(pass.n, pass.host.xyz, pass.cutoff_squared, detail::HostPassWalk{pass.host}, f);
+}
+
+}  // namespace raycut

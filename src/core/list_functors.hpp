@@ -1,0 +1,95 @@
+// Neighbour lists as functors of the one pair pass (host and device): a count pass, a fill pass
+// at offsets from the scan of the counts, and the padded matrix in one pass. Every method builds
+// its lists with these.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+
+#include "raycut/kernels.hpp"
+#include "raycut/predicate.hpp"
+
+namespace raycut::detail {
+
+// Half lists keep (i, j) with i < j only (no periodic images yet, so i == j never occurs).
+RAYCUT_HD bool keeps(bool half, std::uint32_t i, std::uint32_t j) {
+  return !half || i < j;
+}
+
+struct ListCount {
+  using Accumulator = std::uint32_t;
+  bool half;
+  std::uint32_t* counts;
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3,
+                            float) const {
+    acc += keeps(half, i, j) ? 1u : 0u;
+  }
+  RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
+  RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { counts[i] = acc; }
+};
+
+// Row i written from offsets[i]; distances and vectors where asked (null otherwise).
+struct ListFill {
+  using Accumulator = std::uint64_t;  // the next entry of the row
+  bool half;
+  const std::uint64_t* offsets;
+  std::uint32_t* indices;
+  float* distances;
+  float* vectors;
+  RAYCUT_HD Accumulator init(std::uint32_t i) const { return offsets[i]; }
+  RAYCUT_HD void operator()(Accumulator& slot, std::uint32_t i, std::uint32_t j, Vec3 r,
+                            float r2) const {
+    if (!keeps(half, i, j)) return;
+    indices[slot] = j;
+    if (distances) distances[slot] = sqrtf(r2);
+    if (vectors) {
+      vectors[3 * slot] = r.x;
+      vectors[3 * slot + 1] = r.y;
+      vectors[3 * slot + 2] = r.z;
+    }
+    ++slot;
+  }
+  RAYCUT_HD void finish(std::uint32_t, Accumulator&) const {}
+};
+
+// What a padded pass reports, in the method's memory: rows over K, the largest count.
+struct PaddedOverflow {
+  unsigned long long rows;
+  std::uint32_t largest;
+};
+
+// Row i of the [N, K] matrix: its first K neighbours, then `n` (an invalid index) to the end;
+// counts[i] the true count, and the overflow recorded, never hidden.
+struct PaddedFill {
+  using Accumulator = std::uint32_t;
+  bool half;
+  std::uint32_t k;
+  std::uint32_t n;
+  std::uint32_t* indices;
+  std::uint32_t* counts;
+  PaddedOverflow* overflow;
+  RAYCUT_HD void operator()(Accumulator& count, std::uint32_t i, std::uint32_t j, Vec3,
+                            float) const {
+    if (!keeps(half, i, j)) return;
+    if (count < k) indices[std::uint64_t{i} * k + count] = j;
+    ++count;
+  }
+  RAYCUT_HD void finish(std::uint32_t i, Accumulator& count) const {
+    counts[i] = count;
+    for (std::uint32_t c = count; c < k; ++c) indices[std::uint64_t{i} * k + c] = n;
+    if (count > k) {
+#if defined(__CUDA_ARCH__)
+      atomicAdd(&overflow->rows, 1ull);
+      atomicMax(&overflow->largest, count);
+#else
+      __atomic_fetch_add(&overflow->rows, 1ull, __ATOMIC_RELAXED);
+      std::uint32_t seen = __atomic_load_n(&overflow->largest, __ATOMIC_RELAXED);
+      while (seen < count && !__atomic_compare_exchange_n(&overflow->largest, &seen, count, true,
+                                                          __ATOMIC_RELAXED, __ATOMIC_RELAXED)) {
+      }
+#endif
+    }
+  }
+};
+
+}  // namespace raycut::detail

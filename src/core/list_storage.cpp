@@ -1,0 +1,90 @@
+#include "core/list_storage.hpp"
+
+#include <string>
+
+#include "core/validation.hpp"
+
+namespace raycut::detail {
+namespace {
+template <class T>
+const T* data_or_null(const std::vector<T>& v) {
+  return v.empty() ? nullptr : v.data();
+}
+}  // namespace
+
+std::size_t HostListStorage::bytes() const {
+  return offsets_.capacity() * sizeof(std::uint64_t) + indices_.capacity() * sizeof(std::uint32_t) +
+         (distances_.capacity() + vectors_.capacity()) * sizeof(float);
+}
+
+NeighbourList HostListStorage::to_host() const {
+  NeighbourList list;
+  list.offsets.assign(offsets, offsets + n + 1);
+  list.indices.assign(indices_.begin(), indices_.begin() + pairs);
+  if (options.distances) list.distances.assign(distances_.begin(), distances_.begin() + pairs);
+  if (options.vectors) list.vectors.assign(vectors_.begin(), vectors_.begin() + 3 * pairs);
+  return list;
+}
+
+void HostListStorage::set_empty(const ListOptions& list_options) {
+  prepare_offsets(0, list_options)[0] = 0;
+  pairs = 0;
+  publish();
+}
+
+std::uint64_t* HostListStorage::prepare_offsets(std::size_t targets,
+                                                const ListOptions& list_options) {
+  n = targets;
+  options = list_options;
+  offsets_.resize(targets + 1);
+  publish();
+  return offsets_.data();
+}
+
+ListFill HostListStorage::prepare_fill(std::uint64_t entries, bool half) {
+  pairs = entries;
+  // Sized on demand (no shrinking: the buffers are reused by the next fill).
+  try {
+    if (indices_.size() < entries) indices_.resize(entries);
+    if (options.distances && distances_.size() < entries) distances_.resize(entries);
+    if (options.vectors && vectors_.size() < 3 * entries) vectors_.resize(3 * entries);
+  } catch (const std::bad_alloc&) {
+    const double per_pair = 4.0 + (options.distances ? 4.0 : 0.0) + (options.vectors ? 12.0 : 0.0);
+    throw Error(ErrorCode::out_of_memory,
+                "not enough host memory for a neighbour list of " + std::to_string(entries) +
+                    " pairs (" + format_bytes(per_pair * static_cast<double>(entries)) + ")");
+  }
+  publish();
+  return {half, offsets_.data(), indices_.data(), options.distances ? distances_.data() : nullptr,
+          options.vectors ? vectors_.data() : nullptr};
+}
+
+void HostListStorage::publish() {
+  offsets = offsets_.data();
+  indices = data_or_null(indices_);
+  distances = options.distances ? data_or_null(distances_) : nullptr;
+  vectors = options.vectors ? data_or_null(vectors_) : nullptr;
+}
+
+PaddedFill HostPaddedStorage::prepare(std::size_t targets, std::uint32_t width, bool half,
+                                      PaddedOverflow* overflow) {
+  n = targets;
+  k = width;
+  indices_.resize(targets * std::size_t{width});
+  counts_.resize(targets);
+  indices = data_or_null(indices_);
+  counts = data_or_null(counts_);
+  return {half, width, static_cast<std::uint32_t>(targets), indices_.data(), counts_.data(),
+          overflow};
+}
+
+void report_padded(const PaddedStorage& storage, bool throw_on_overflow) {
+  if (!throw_on_overflow || !storage.report.overflowed()) return;
+  throw Error(ErrorCode::capacity_exceeded,
+              "padded neighbour list: " + std::to_string(storage.report.overflowed_rows) +
+                  " rows have more than K = " + std::to_string(storage.k) +
+                  " neighbours (the largest has " + std::to_string(storage.report.largest_count) +
+                  "): grow K and retry");
+}
+
+}  // namespace raycut::detail

@@ -1,0 +1,81 @@
+// What NeighbourListBuffer and PaddedNeighbourBuffer hold: the buffers of a list where its
+// method works. Methods make the storage of their memory space and fill it; buffers only grow.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include "core/list_functors.hpp"
+#include "raycut/engine.hpp"
+
+namespace raycut::detail {
+
+class ListStorage {
+ public:
+  virtual ~ListStorage() = default;
+  virtual MemorySpace space() const = 0;
+  virtual std::size_t bytes() const = 0;
+  virtual NeighbourList to_host() const = 0;
+  // The list of N = 0: offsets = {0}.
+  virtual void set_empty(const ListOptions& options) = 0;
+
+  std::size_t n = 0;
+  std::uint64_t pairs = 0;
+  ListOptions options;
+  const std::uint64_t* offsets = nullptr;
+  const std::uint32_t* indices = nullptr;
+  const float* distances = nullptr;
+  const float* vectors = nullptr;
+};
+
+class PaddedStorage {
+ public:
+  virtual ~PaddedStorage() = default;
+  virtual MemorySpace space() const = 0;
+  virtual std::vector<std::uint32_t> indices_to_host() const = 0;
+  virtual std::vector<std::uint32_t> counts_to_host() const = 0;
+
+  std::size_t n = 0;
+  std::uint32_t k = 0;
+  PaddedReport report;
+  const std::uint32_t* indices = nullptr;
+  const std::uint32_t* counts = nullptr;
+};
+
+// Host memory (the CPU methods).
+class HostListStorage final : public ListStorage {
+ public:
+  MemorySpace space() const override { return MemorySpace::host; }
+  std::size_t bytes() const override;
+  NeighbourList to_host() const override;
+  void set_empty(const ListOptions& options) override;
+  // Sizes the arrays for n targets and `pairs` entries (offsets already hold the scan) and
+  // returns the fill functor writing them.
+  ListFill prepare_fill(std::uint64_t pairs, bool half);
+  // Only the offsets, for n targets (the count pass writes n counts into offsets + 1).
+  std::uint64_t* prepare_offsets(std::size_t n, const ListOptions& options);
+
+ private:
+  void publish();
+  std::vector<std::uint64_t> offsets_;
+  std::vector<std::uint32_t> indices_;
+  std::vector<float> distances_, vectors_;
+};
+
+class HostPaddedStorage final : public PaddedStorage {
+ public:
+  MemorySpace space() const override { return MemorySpace::host; }
+  std::vector<std::uint32_t> indices_to_host() const override { return indices_; }
+  std::vector<std::uint32_t> counts_to_host() const override { return counts_; }
+  // Sizes the matrix [n, k] and returns the functor filling it (overflow in `overflow`).
+  PaddedFill prepare(std::size_t n, std::uint32_t k, bool half, PaddedOverflow* overflow);
+
+ private:
+  std::vector<std::uint32_t> indices_, counts_;
+};
+
+// Throws Error(capacity_exceeded) for an overflowing padded list when asked to.
+void report_padded(const PaddedStorage& storage, bool throw_on_overflow);
+
+}  // namespace raycut::detail

@@ -1,0 +1,107 @@
+// What every CPU method shares: results, lists and the caller's functors all run through the one
+// CPU pair loop (raycut/pairs.hpp) over the candidates the method names. A method derives from
+// HostMethod<Self> and provides:
+//   build(xyz, n, cutoff)  (storing what candidates() needs, and calling set_positions)
+//   candidates()           a callable walk(i, f) that calls f(j, xyz_j) for every candidate
+//                          source j of target i (j == i allowed), each at most once.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/list_storage.hpp"
+#include "core/method.hpp"
+#include "core/validation.hpp"
+#include "raycut/engine.hpp"
+#include "raycut/kernels.hpp"
+#include "raycut/pairs.hpp"
+
+namespace raycut::detail {
+
+// Host results as the pointers a kernel writes, sized for `kernel` over n targets.
+KernelOutputs prepare_host_results(Results& results, Kernel kernel, std::size_t n);
+ResultsView view_of(const Results& results);
+
+template <class Self>
+class HostMethod : public Method {
+ public:
+  MemorySpace space() const override { return MemorySpace::host; }
+
+  void compute(Kernel kernel, const KernelOptions& options) override {
+    results_ = {};
+    Results fresh;
+    const KernelOutputs out = prepare_host_results(fresh, kernel, n_);
+    with_kernel(kernel, options, cutoff_squared_, out, [&](const auto& f) { run(f); });
+    results_ = std::move(fresh);
+  }
+  Results results() const override { return results_; }
+  ResultsView results_view() const override { return view_of(results_); }
+
+  std::unique_ptr<ListStorage> make_list_storage() const override {
+    return std::make_unique<HostListStorage>();
+  }
+  std::unique_ptr<PaddedStorage> make_padded_storage() const override {
+    return std::make_unique<HostPaddedStorage>();
+  }
+
+  // Two passes (count, then fill) so the list is exactly sized and built in parallel.
+  void neighbours(ListStorage& storage, const ListOptions& options) override {
+    auto& list = static_cast<HostListStorage&>(storage);
+    std::uint64_t* offsets = list.prepare_offsets(n_, options);
+    // The count pass writes counts[i] at offsets[i + 1], then a running sum makes the offsets.
+    std::vector<std::uint32_t> counts(n_);
+    run(ListCount{options.half, counts.data()});
+    offsets[0] = 0;
+    for (std::size_t i = 0; i < n_; ++i) offsets[i + 1] = offsets[i] + counts[i];
+    run(list.prepare_fill(offsets[n_], options.half));
+  }
+
+  void padded_neighbours(PaddedStorage& storage, std::uint32_t k, bool half) override {
+    auto& list = static_cast<HostPaddedStorage&>(storage);
+    PaddedOverflow overflow{0, 0};
+    run(list.prepare(n_, k, half, &overflow));
+    list.report = {overflow.rows, overflow.largest};
+  }
+
+  PairPass pair_pass() const override {
+    PairPass pass;
+    pass.kind = PassKind::host;
+    pass.n = n_;
+    pass.cutoff_squared = cutoff_squared_;
+    pass.host.method = this;
+    pass.host.xyz = xyz_;
+    pass.host.walk = [](const void* method, std::size_t i, CandidateSink sink, void* context) {
+      static_cast<const Self*>(method)->candidates()(
+          i, [&](std::size_t j, const float* xj) { sink(context, j, xj); });
+    };
+    return pass;
+  }
+
+ protected:
+  // The positions candidates() reads targets from (caller's order), and the cutoff.
+  void set_positions(const float* xyz, std::size_t n, float cutoff) {
+    if (n >= UINT32_MAX)
+      throw Error(ErrorCode::invalid_argument,
+                  "CPU methods index particles with 32 bits: at most 2^32 - 2 particles, got " +
+                      std::to_string(n));
+    xyz_ = xyz;
+    n_ = n;
+    cutoff_squared_ = squared_cutoff(cutoff);
+  }
+
+ private:
+  template <class F>
+  void run(const F& f) const {
+    run_host(n_, xyz_, cutoff_squared_, static_cast<const Self*>(this)->candidates(), f);
+  }
+
+  const float* xyz_ = nullptr;
+  std::size_t n_ = 0;
+  float cutoff_squared_ = 0;
+  Results results_;
+};
+
+}  // namespace raycut::detail
