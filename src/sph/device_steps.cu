@@ -2,10 +2,25 @@
 
 #include <cuda_runtime.h>
 
-#include "cuda/check.cuh"
+#include <string>
+
+#include "raycut/error.hpp"
 
 namespace raycut::sph::device {
 namespace {
+
+// The SPH library sees the engine's public API only: its own small check of CUDA calls, throwing
+// raycut::Error as the engine's methods do (out_of_memory for a failed allocation, else backend).
+void check(cudaError_t status, const char* call, int line) {
+  if (status == cudaSuccess) return;
+  const ErrorCode code =
+      status == cudaErrorMemoryAllocation ? ErrorCode::out_of_memory : ErrorCode::backend;
+  throw Error(code, std::string("CUDA error '") + cudaGetErrorString(status) + "' in " + call +
+                        " at " + __FILE__ + ":" + std::to_string(line));
+}
+#define SPH_CUDA_CHECK(call) check((call), #call, __LINE__)
+// After a kernel launch: launch-configuration errors surface here, not at the next sync.
+#define SPH_CUDA_CHECK_LAUNCH() SPH_CUDA_CHECK(cudaGetLastError())
 
 constexpr unsigned block = 256;
 
@@ -51,23 +66,23 @@ void density_and_pressure(const float* neighbour_density, float* rho, float* p, 
                           const StepConstants& c) {
   if (n == 0) return;
   density_and_pressure_kernel<<<blocks_for(n), block>>>(neighbour_density, rho, p, n, c);
-  RAYCUT_CUDA_CHECK_LAUNCH();
+  SPH_CUDA_CHECK_LAUNCH();
 }
 
 void integrate(float* x, float* v, const float* force, const float* rho, const float* fixed,
                std::size_t n, const StepConstants& c) {
   if (n == 0) return;
   integrate_kernel<<<blocks_for(n), block>>>(x, v, force, rho, fixed, n, c);
-  RAYCUT_CUDA_CHECK_LAUNCH();
+  SPH_CUDA_CHECK_LAUNCH();
 }
 
 void copy_to_host(float* host, const float* device_values, std::size_t n) {
   if (n == 0) return;
-  RAYCUT_CUDA_CHECK(cudaMemcpy(host, device_values, n * sizeof(float), cudaMemcpyDeviceToHost));
+  SPH_CUDA_CHECK(cudaMemcpy(host, device_values, n * sizeof(float), cudaMemcpyDeviceToHost));
 }
 
 void synchronize() {
-  RAYCUT_CUDA_CHECK(cudaDeviceSynchronize());
+  SPH_CUDA_CHECK(cudaDeviceSynchronize());
 }
 
 }  // namespace raycut::sph::device
