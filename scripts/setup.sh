@@ -9,6 +9,6 @@ export DEBIAN_FRONTEND=noninteractive
 $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq --no-install-recommends \
   cmake ninja-build g++ make git \
-  libgtest-dev libgmock-dev libcli11-dev \
+  libgtest-dev libgmock-dev libcli11-dev libpng-dev \
   clang-format python3 python3-numpy python3-matplotlib
 echo "raycut: dependencies installed"

@@ -13,9 +13,9 @@
 
 #include "raycut/engine.hpp"
 #include "raycut/error.hpp"
+#include "raycut/sph/scenario.hpp"
+#include "raycut/sph/solver.hpp"
 #include "sph/physics.hpp"
-#include "sph/scenario.hpp"
-#include "sph/solver.hpp"
 
 namespace raycut::sph {
 namespace {

@@ -1,6 +1,6 @@
 // The solver-independent parts of the SPH module: the article's scenario exactly as spec/SPH.md
 // states it, the small CI scenario, ParaView output read back by a minimal parser, and PNG files
-// decoded by a minimal decoder (CRCs, stored deflate blocks and Adler-32 recomputed here).
+// read back by libpng.
 #include <gtest/gtest.h>
 
 #include <unistd.h>
@@ -16,14 +16,15 @@
 #include <regex>
 #include <set>
 #include <sstream>
-#include <stdexcept>
 #include <string>
 #include <vector>
 
+#include <png.h>
+
 #include "raycut/error.hpp"
-#include "sph/render.hpp"
-#include "sph/scenario.hpp"
-#include "sph/vtk.hpp"
+#include "raycut/sph/render.hpp"
+#include "raycut/sph/scenario.hpp"
+#include "raycut/sph/vtk.hpp"
 
 namespace raycut::sph {
 namespace {
@@ -362,157 +363,32 @@ TEST_F(SphIo, VtkErrorsNameThePath) {
 // --- PNG
 // ------------------------------------------------------------------------------------------
 
-std::uint32_t be32(const std::uint8_t* p) {
-  return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) |
-         std::uint32_t{p[3]};
-}
-
-// Bitwise CRC-32, independent of the encoder's table.
-std::uint32_t reference_crc32(const std::uint8_t* data, std::size_t size) {
-  std::uint32_t c = 0xFFFFFFFFu;
-  for (std::size_t i = 0; i < size; ++i) {
-    c ^= data[i];
-    for (int k = 0; k < 8; ++k) c = (c >> 1) ^ (0xEDB88320u & (0u - (c & 1u)));
-  }
-  return ~c;
-}
-
 struct DecodedPng {
   std::uint32_t width = 0, height = 0;
   std::vector<std::uint8_t> rgb;
 };
 
-// A minimal inflate (RFC 1951) for the block types encode_png may write: stored and fixed
-// Huffman. Starts after the 2-byte zlib header; `end` gets the offset of the byte after the last
-// block.
-class BitReader {
- public:
-  BitReader(const std::vector<std::uint8_t>& data, std::size_t byte)
-      : data_(data), bit_(8 * byte) {}
-  std::uint32_t bits(int count) {  // least-significant bit first
-    std::uint32_t value = 0;
-    for (int i = 0; i < count; ++i, ++bit_) {
-      if (bit_ / 8 >= data_.size()) throw std::runtime_error("deflate data ends early");
-      value |= ((data_[bit_ / 8] >> (bit_ % 8)) & 1u) << i;
-    }
-    return value;
-  }
-  std::uint32_t code_bit() { return bits(1); }  // Huffman codes arrive most-significant bit first
-  void align() { bit_ = (bit_ + 7) / 8 * 8; }
-  std::size_t byte() const { return bit_ / 8; }
-
- private:
-  const std::vector<std::uint8_t>& data_;
-  std::size_t bit_;
-};
-
-int fixed_literal_length(BitReader& in) {
-  std::uint32_t code = 0;
-  for (int i = 0; i < 7; ++i) code = (code << 1) | in.code_bit();
-  if (code <= 0x17) return 256 + static_cast<int>(code);
-  code = (code << 1) | in.code_bit();
-  if (code >= 0x30 && code <= 0xBF) return static_cast<int>(code - 0x30);
-  if (code >= 0xC0 && code <= 0xC7) return 280 + static_cast<int>(code - 0xC0);
-  code = (code << 1) | in.code_bit();
-  return 144 + static_cast<int>(code - 0x190);
-}
-
-std::vector<std::uint8_t> inflate(const std::vector<std::uint8_t>& zlib, std::size_t& end) {
-  static constexpr int length_base[29] = {3,  4,  5,  6,   7,   8,   9,   10,  11, 13,
-                                          15, 17, 19, 23,  27,  31,  35,  43,  51, 59,
-                                          67, 83, 99, 115, 131, 163, 195, 227, 258};
-  static constexpr int distance_base[30] = {
-      1,   2,   3,   4,   5,   7,    9,    13,   17,   25,   33,   49,   65,    97,    129,
-      193, 257, 385, 513, 769, 1025, 1537, 2049, 3073, 4097, 6145, 8193, 12289, 16385, 24577};
-  const auto length_extra = [](int i) { return i < 8 || i == 28 ? 0 : (i - 4) / 4; };
-  const auto distance_extra = [](int i) { return i < 4 ? 0 : (i - 2) / 2; };
-  std::vector<std::uint8_t> out;
-  BitReader in(zlib, 2);
-  for (bool final_block = false; !final_block;) {
-    final_block = in.bits(1);
-    const std::uint32_t type = in.bits(2);
-    if (type == 0) {
-      in.align();
-      const std::uint32_t len = in.bits(16), nlen = in.bits(16);
-      EXPECT_EQ(len ^ 0xFFFFu, nlen);
-      for (std::uint32_t i = 0; i < len; ++i) out.push_back(static_cast<std::uint8_t>(in.bits(8)));
-      continue;
-    }
-    if (type != 1) throw std::runtime_error("unexpected deflate block type");
-    for (;;) {
-      const int symbol = fixed_literal_length(in);
-      if (symbol < 256) {
-        out.push_back(static_cast<std::uint8_t>(symbol));
-        continue;
-      }
-      if (symbol == 256) break;
-      const int l = symbol - 257;
-      if (l >= 29) throw std::runtime_error("bad length symbol");
-      const int length = length_base[l] + static_cast<int>(in.bits(length_extra(l)));
-      std::uint32_t d = 0;
-      for (int i = 0; i < 5; ++i) d = (d << 1) | in.code_bit();
-      if (d >= 30) throw std::runtime_error("bad distance symbol");
-      const std::size_t distance = distance_base[d] + in.bits(distance_extra(static_cast<int>(d)));
-      if (distance > out.size() || distance > 32768) throw std::runtime_error("bad distance");
-      for (int k = 0; k < length; ++k) out.push_back(out[out.size() - distance]);
-    }
-  }
-  in.align();
-  end = in.byte();
-  return out;
-}
-
-// Reads a PNG as encode_png writes it: checks every chunk CRC, inflates the deflate stream,
-// checks the Adler-32 and the filter bytes.
+// Reads a PNG back with libpng (which checks the chunk CRCs and the zlib stream): it must be 8-bit
+// RGB, as encode_png writes it.
 DecodedPng decode_png(const std::string& path) {
   const std::string file = read_all(path);
-  const auto* bytes = reinterpret_cast<const std::uint8_t*>(file.data());
   DecodedPng png;
-  const std::uint8_t signature[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1A, '\n'};
-  EXPECT_TRUE(file.size() > 8 && std::memcmp(bytes, signature, 8) == 0);
-  std::vector<std::uint8_t> zlib;
-  std::vector<std::string> order;
-  for (std::size_t at = 8; at + 12 <= file.size();) {
-    const std::uint32_t length = be32(bytes + at);
-    const std::string type(file.data() + at + 4, 4);
-    EXPECT_LE(at + 12 + length, file.size());
-    EXPECT_EQ(be32(bytes + at + 8 + length), reference_crc32(bytes + at + 4, 4 + length))
-        << "CRC of chunk " << type;
-    const std::uint8_t* data = bytes + at + 8;
-    if (type == "IHDR") {
-      EXPECT_EQ(length, 13u);
-      png.width = be32(data);
-      png.height = be32(data + 4);
-      EXPECT_EQ(data[8], 8);   // bit depth
-      EXPECT_EQ(data[9], 2);   // truecolour
-      EXPECT_EQ(data[12], 0);  // not interlaced
-    } else if (type == "IDAT") {
-      zlib.insert(zlib.end(), data, data + length);
-    }
-    order.push_back(type);
-    at += 12 + length;
+  png_image image{};
+  image.version = PNG_IMAGE_VERSION;
+  if (!png_image_begin_read_from_memory(&image, file.data(), file.size())) {
+    ADD_FAILURE() << path << ": libpng: " << image.message;
+    return png;
   }
-  EXPECT_EQ(order.front(), "IHDR");
-  EXPECT_EQ(order.back(), "IEND");
-  EXPECT_GE(zlib.size(), 2u + 5u + 4u);
-  EXPECT_EQ((zlib[0] * 256u + zlib[1]) % 31u, 0u);
-  EXPECT_EQ(zlib[0] & 0x0F, 8);  // deflate
-  std::size_t at = 0;
-  const std::vector<std::uint8_t> raw = inflate(zlib, at);
-  std::uint32_t a = 1, b = 0;
-  for (std::uint8_t v : raw) {
-    a = (a + v) % 65521;
-    b = (b + a) % 65521;
+  EXPECT_EQ(image.format, PNG_FORMAT_RGB) << path << " is not 8-bit RGB";
+  image.format = PNG_FORMAT_RGB;
+  png.width = image.width;
+  png.height = image.height;
+  png.rgb.resize(PNG_IMAGE_SIZE(image));
+  if (!png_image_finish_read(&image, nullptr, png.rgb.data(), 0, nullptr)) {
+    ADD_FAILURE() << path << ": libpng: " << image.message;
+    png.rgb.clear();
   }
-  EXPECT_EQ(be32(zlib.data() + at), (b << 16) | a);  // at: the byte after the deflate data
-  EXPECT_EQ(at + 4, zlib.size());
-  const std::size_t row = 3 * std::size_t{png.width};
-  EXPECT_EQ(raw.size(), (row + 1) * png.height);
-  for (std::uint32_t y = 0; y < png.height && raw.size() == (row + 1) * png.height; ++y) {
-    EXPECT_EQ(raw[y * (row + 1)], 0) << "filter byte of row " << y;
-    png.rgb.insert(png.rgb.end(), raw.begin() + y * (row + 1) + 1,
-                   raw.begin() + (y + 1) * (row + 1));
-  }
+  EXPECT_EQ(image.warning_or_error, 0u) << path << ": libpng: " << image.message;
   return png;
 }
 
@@ -624,6 +500,17 @@ TEST(SphRender, ViridisEndsAndBadViews) {
   EXPECT_THROW(render(nullptr, nullptr, 1, 0.0f, 1.0f, view), Error);
   EXPECT_THROW(write_png("/nonexistent-dir/x.png", render(xyz, nullptr, 1, 0.0f, 1.0f, view)),
                Error);
+  try {
+    write_png("/nonexistent-dir/x.png", render(xyz, nullptr, 1, 0.0f, 1.0f, view));
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ErrorCode::io);
+    EXPECT_NE(std::string(e.what()).find("/nonexistent-dir/x.png"), std::string::npos) << e.what();
+  }
+  RgbImage wrong;
+  wrong.width = 2;
+  wrong.height = 2;
+  wrong.rgb.resize(3);
+  EXPECT_THROW(encode_png(wrong), Error);
 }
 
 }  // namespace

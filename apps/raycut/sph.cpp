@@ -18,10 +18,10 @@
 
 #include "commands.hpp"
 #include "raycut/engine.hpp"
-#include "sph/render.hpp"
-#include "sph/scenario.hpp"
-#include "sph/solver.hpp"
-#include "sph/vtk.hpp"
+#include "raycut/sph/render.hpp"
+#include "raycut/sph/scenario.hpp"
+#include "raycut/sph/solver.hpp"
+#include "raycut/sph/vtk.hpp"
 
 namespace raycut::cli {
 namespace {

@@ -1,13 +1,15 @@
 // Splatting, not ray casting: each particle's sphere covers a few pixels at the default view, so
 // projecting it and filling its disc is O(pixels covered) and stays well under a second for the
 // article's 131,072 particles. Depth is the view-space distance along the camera axis.
-#include "sph/render.hpp"
+#include "raycut/sph/render.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <limits>
 #include <numbers>
+
+#include <png.h>
 
 #include "raycut/error.hpp"
 
@@ -187,177 +189,31 @@ void draw_box(const Camera& camera, Canvas& canvas, const RenderView& view) {
   }
 }
 
-// CRC-32 (ISO 3309, as PNG chunks use) with the usual reflected table.
-class Crc32 {
- public:
-  Crc32() {
-    for (std::uint32_t n = 0; n < 256; ++n) {
-      std::uint32_t c = n;
-      for (int k = 0; k < 8; ++k) c = (c & 1) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
-      table_[n] = c;
-    }
+// PNG bytes through libpng's simplified API, which keeps libpng's setjmp/longjmp error handling
+// inside libpng: a failure comes back as a zero return and a message, thrown here as Error.
+std::vector<std::uint8_t> encode_with_libpng(const RgbImage& image, const std::string& what) {
+  const std::size_t row_bytes = 3 * static_cast<std::size_t>(image.width);
+  if (image.width < 1 || image.height < 1 ||
+      row_bytes > static_cast<std::size_t>(std::numeric_limits<png_int_32>::max()) ||
+      image.rgb.size() != row_bytes * static_cast<std::size_t>(image.height)) {
+    throw Error(ErrorCode::invalid_argument, what + ": image size does not match its pixels");
   }
-  std::uint32_t operator()(const std::uint8_t* data, std::size_t size) const {
-    std::uint32_t c = 0xFFFFFFFFu;
-    for (std::size_t i = 0; i < size; ++i) c = table_[(c ^ data[i]) & 0xFFu] ^ (c >> 8);
-    return c ^ 0xFFFFFFFFu;
+  png_image png{};
+  png.version = PNG_IMAGE_VERSION;
+  png.width = static_cast<png_uint_32>(image.width);
+  png.height = static_cast<png_uint_32>(image.height);
+  png.format = PNG_FORMAT_RGB;  // 8-bit sRGB truecolour, no alpha
+  // An upper bound of the encoded size (the pixels stored, plus chunk overheads); one pass.
+  std::vector<std::uint8_t> bytes(PNG_IMAGE_PNG_SIZE_MAX(png));
+  png_alloc_size_t size = bytes.size();
+  if (!png_image_write_to_memory(&png, bytes.data(), &size, 0, image.rgb.data(),
+                                 static_cast<png_int_32>(row_bytes), nullptr)) {
+    const std::string message = png.message;
+    png_image_free(&png);
+    throw Error(ErrorCode::io, what + ": libpng: " + message);
   }
-
- private:
-  std::uint32_t table_[256];
-};
-
-std::uint32_t adler32(const std::uint8_t* data, std::size_t size) {
-  constexpr std::uint32_t modulus = 65521;
-  // 5552 bytes is the longest run before the 32-bit sums could overflow (zlib's NMAX).
-  constexpr std::size_t run = 5552;
-  std::uint32_t a = 1, b = 0;
-  while (size > 0) {
-    const std::size_t chunk = std::min(size, run);
-    for (std::size_t i = 0; i < chunk; ++i) {
-      a += data[i];
-      b += a;
-    }
-    a %= modulus;
-    b %= modulus;
-    data += chunk;
-    size -= chunk;
-  }
-  return (b << 16) | a;
-}
-
-// Deflate (RFC 1951) with the fixed Huffman codes, one final block: a greedy LZ77 over a 32 KiB
-// window finds the long runs of background (distance 3) and repeated rows (distance = row bytes),
-// which is where a render's redundancy is, in a few lines and without zlib.
-class BitWriter {
- public:
-  explicit BitWriter(std::vector<std::uint8_t>& out) : out_(out) {}
-  // Deflate packs values least-significant bit first.
-  void bits(std::uint32_t value, int count) {
-    buffer_ |= static_cast<std::uint64_t>(value) << filled_;
-    filled_ += count;
-    while (filled_ >= 8) {
-      out_.push_back(static_cast<std::uint8_t>(buffer_ & 0xFF));
-      buffer_ >>= 8;
-      filled_ -= 8;
-    }
-  }
-  // Huffman codes are defined most-significant bit first.
-  void code(std::uint32_t code, int length) {
-    std::uint32_t reversed = 0;
-    for (int i = 0; i < length; ++i) reversed |= ((code >> i) & 1u) << (length - 1 - i);
-    bits(reversed, length);
-  }
-  void flush() {
-    if (filled_ > 0) bits(0, 8 - filled_);
-  }
-
- private:
-  std::vector<std::uint8_t>& out_;
-  std::uint64_t buffer_ = 0;
-  int filled_ = 0;
-};
-
-// The fixed literal/length code of RFC 1951 section 3.2.6.
-void put_symbol(BitWriter& writer, int symbol) {
-  if (symbol < 144) {
-    writer.code(0x30 + symbol, 8);
-  } else if (symbol < 256) {
-    writer.code(0x190 + (symbol - 144), 9);
-  } else if (symbol < 280) {
-    writer.code(symbol - 256, 7);
-  } else {
-    writer.code(0xC0 + (symbol - 280), 8);
-  }
-}
-
-constexpr int length_base[29] = {3,  4,  5,  6,  7,  8,  9,  10, 11,  13,  15,  17,  19,  23, 27,
-                                 31, 35, 43, 51, 59, 67, 83, 99, 115, 131, 163, 195, 227, 258};
-constexpr int length_extra[29] = {0, 0, 0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2,
-                                  2, 3, 3, 3, 3, 4, 4, 4, 4, 5, 5, 5, 5, 0};
-constexpr int distance_base[30] = {1,    2,    3,    4,    5,    7,    9,    13,    17,    25,
-                                   33,   49,   65,   97,   129,  193,  257,  385,   513,   769,
-                                   1025, 1537, 2049, 3073, 4097, 6145, 8193, 12289, 16385, 24577};
-constexpr int distance_extra[30] = {0, 0, 0, 0, 1, 1, 2, 2,  3,  3,  4,  4,  5,  5,  6,
-                                    6, 7, 7, 8, 8, 9, 9, 10, 10, 11, 11, 12, 12, 13, 13};
-
-void put_match(BitWriter& writer, int length, int distance) {
-  int l = 28;
-  while (length_base[l] > length) --l;
-  put_symbol(writer, 257 + l);
-  writer.bits(static_cast<std::uint32_t>(length - length_base[l]), length_extra[l]);
-  int d = 29;
-  while (distance_base[d] > distance) --d;
-  writer.code(static_cast<std::uint32_t>(d), 5);  // fixed distance codes: 5 bits each
-  writer.bits(static_cast<std::uint32_t>(distance - distance_base[d]), distance_extra[d]);
-}
-
-void deflate_fixed(const std::vector<std::uint8_t>& data, std::vector<std::uint8_t>& out) {
-  constexpr int window = 32768, min_match = 3, max_match = 258, max_chain = 16;
-  constexpr int hash_bits = 15;
-  const std::size_t size = data.size();
-  std::vector<std::int64_t> head(std::size_t{1} << hash_bits, -1);
-  std::vector<std::int64_t> previous(size, -1);
-  const auto hash_at = [&](std::size_t i) {
-    const std::uint32_t v = data[i] | (data[i + 1] << 8) | (data[i + 2] << 16);
-    return (v * 2654435761u) >> (32 - hash_bits);
-  };
-  const auto insert = [&](std::size_t i) {
-    if (i + min_match > size) return;
-    const std::uint32_t h = hash_at(i);
-    previous[i] = head[h];
-    head[h] = static_cast<std::int64_t>(i);
-  };
-
-  BitWriter writer(out);
-  writer.bits(1, 1);  // BFINAL
-  writer.bits(1, 2);  // BTYPE = 01, fixed Huffman codes
-  std::size_t i = 0;
-  while (i < size) {
-    int best_length = 0;
-    std::size_t best_distance = 0;
-    if (i + min_match <= size) {
-      const std::size_t limit = std::min<std::size_t>(max_match, size - i);
-      std::int64_t candidate = head[hash_at(i)];
-      for (int chain = 0; chain < max_chain && candidate >= 0; ++chain) {
-        const std::size_t c = static_cast<std::size_t>(candidate);
-        if (i - c > window) break;
-        std::size_t length = 0;
-        while (length < limit && data[c + length] == data[i + length]) ++length;
-        if (static_cast<int>(length) > best_length) {
-          best_length = static_cast<int>(length);
-          best_distance = i - c;
-          if (length == limit) break;
-        }
-        candidate = previous[c];
-      }
-    }
-    if (best_length >= min_match) {
-      put_match(writer, best_length, static_cast<int>(best_distance));
-      for (int k = 0; k < best_length; ++k) insert(i + k);
-      i += static_cast<std::size_t>(best_length);
-    } else {
-      put_symbol(writer, data[i]);
-      insert(i);
-      ++i;
-    }
-  }
-  put_symbol(writer, 256);  // end of block
-  writer.flush();
-}
-
-void put_u32_be(std::vector<std::uint8_t>& out, std::uint32_t v) {
-  for (int shift = 24; shift >= 0; shift -= 8) out.push_back(static_cast<std::uint8_t>(v >> shift));
-}
-
-void put_chunk(std::vector<std::uint8_t>& out, const char type[4],
-               const std::vector<std::uint8_t>& data, const Crc32& crc) {
-  put_u32_be(out, static_cast<std::uint32_t>(data.size()));
-  const std::size_t type_at = out.size();
-  out.insert(out.end(), type, type + 4);
-  out.insert(out.end(), data.begin(), data.end());
-  // The CRC covers the type and the data, not the length.
-  put_u32_be(out, crc(out.data() + type_at, out.size() - type_at));
+  bytes.resize(size);
+  return bytes;
 }
 
 }  // namespace
@@ -414,39 +270,11 @@ RgbImage render(const float* xyz, const float* colour_value, std::size_t n, floa
 }
 
 std::vector<std::uint8_t> encode_png(const RgbImage& image) {
-  const std::size_t row_bytes = 3 * static_cast<std::size_t>(image.width);
-  if (image.width < 1 || image.height < 1 ||
-      image.rgb.size() != row_bytes * static_cast<std::size_t>(image.height)) {
-    throw Error(ErrorCode::invalid_argument, "encode_png: image size does not match its pixels");
-  }
-  // The filtered scanlines: filter type 0 (None) then the row's bytes.
-  std::vector<std::uint8_t> raw;
-  raw.reserve((row_bytes + 1) * image.height);
-  for (int y = 0; y < image.height; ++y) {
-    raw.push_back(0);
-    const auto row = image.rgb.begin() + static_cast<std::ptrdiff_t>(y * row_bytes);
-    raw.insert(raw.end(), row, row + static_cast<std::ptrdiff_t>(row_bytes));
-  }
-  // zlib stream: header (deflate, 32 KiB window, check bits), one deflate block, Adler-32.
-  std::vector<std::uint8_t> zlib = {0x78, 0x01};
-  deflate_fixed(raw, zlib);
-  put_u32_be(zlib, adler32(raw.data(), raw.size()));
-
-  static const Crc32 crc;
-  std::vector<std::uint8_t> png = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1A, '\n'};
-  std::vector<std::uint8_t> header;
-  put_u32_be(header, static_cast<std::uint32_t>(image.width));
-  put_u32_be(header, static_cast<std::uint32_t>(image.height));
-  header.insert(header.end(),
-                {8, 2, 0, 0, 0});  // 8 bits, truecolour, deflate, filter 0, no interlace
-  put_chunk(png, "IHDR", header, crc);
-  put_chunk(png, "IDAT", zlib, crc);
-  put_chunk(png, "IEND", {}, crc);
-  return png;
+  return encode_with_libpng(image, "encode_png");
 }
 
 void write_png(const std::string& path, const RgbImage& image) {
-  const std::vector<std::uint8_t> png = encode_png(image);
+  const std::vector<std::uint8_t> png = encode_with_libpng(image, path);
   std::ofstream file(path, std::ios::binary | std::ios::trunc);
   if (!file) throw Error(ErrorCode::io, path + ": cannot open for writing");
   file.write(reinterpret_cast<const char*>(png.data()), static_cast<std::streamsize>(png.size()));

@@ -1,6 +1,6 @@
 // Scenario construction follows the HIP RT sample (HIPRTSDK tutorials/16_fluid_simulation,
 // main.cpp) arithmetic in float, so hiprt_drop's coordinates are the sample's bit for bit.
-#include "sph/scenario.hpp"
+#include "raycut/sph/scenario.hpp"
 
 #include <algorithm>
 #include <cmath>

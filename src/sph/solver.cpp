@@ -1,4 +1,4 @@
-#include "sph/solver.hpp"
+#include "raycut/sph/solver.hpp"
 
 #include <chrono>
 #include <cmath>

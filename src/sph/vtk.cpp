@@ -1,7 +1,7 @@
 // The appended-raw layout: each array is a UInt64 byte count followed by its bytes, and an array's
 // offset attribute counts from the first byte after the '_' that opens <AppendedData>. Binary data
 // are written in the host's byte order, declared as LittleEndian below.
-#include "sph/vtk.hpp"
+#include "raycut/sph/vtk.hpp"
 
 #include <bit>
 #include <charconv>

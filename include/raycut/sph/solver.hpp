@@ -9,7 +9,7 @@
 // The state (x, v, rho, p) lives where the method works (Engine::space()): on the device for the
 // GPU methods, read and written there by small CUDA kernels, with the engine's results read in
 // place (no host round trip per step); on the host for the CPU methods, with OpenMP loops. Both
-// run the same per-particle arithmetic (sph/physics.hpp).
+// run the same per-particle arithmetic (src/sph/physics.hpp, internal).
 #pragma once
 
 #include <cstddef>
@@ -19,7 +19,7 @@
 #include <vector>
 
 #include "raycut/engine.hpp"
-#include "sph/scenario.hpp"
+#include "raycut/sph/scenario.hpp"
 
 namespace raycut::sph {
 

@@ -1,6 +1,6 @@
 // A small software renderer so users can look at an SPH run without ParaView: particles as shaded,
 // z-buffered spheres coloured through a viridis colormap, the pool's edges as thin lines, written
-// as PNG by a self-contained encoder (deflate with fixed Huffman codes: no zlib dependency).
+// as PNG by libpng.
 #pragma once
 
 #include <array>
@@ -44,10 +44,11 @@ struct RgbImage {
 RgbImage render(const float* xyz, const float* colour_value, std::size_t n, float value_min,
                 float value_max, const RenderView& view = {});
 
-// PNG bytes of an RGB image: 8-bit truecolour, filter None, one fixed-Huffman deflate block.
+// PNG bytes of an RGB image (8-bit sRGB truecolour, by libpng). Throws raycut::Error:
+// invalid_argument when the pixels do not match the size, io when libpng fails.
 std::vector<std::uint8_t> encode_png(const RgbImage& image);
 
-// encode_png to a file. Throws raycut::Error (io) naming the path.
+// encode_png to a file. Throws raycut::Error naming the path (io: libpng or the file failed).
 void write_png(const std::string& path, const RgbImage& image);
 
 // render then write_png.
