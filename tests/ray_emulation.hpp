@@ -57,6 +57,42 @@ inline bool crosses_triangle(const Ray& ray, const float v[9]) {
   return in_closed_triangle_yz(ray.o[1], ray.o[2], v);
 }
 
+// The same three hit tests evaluated in float, in a textbook order of operations (OptiX's own are
+// undocumented): where the geometry leaves float's range (squares of radii or triangle edges
+// beyond FLT_MAX, cancellation), these lose hits that the exact tests keep. Box tests are
+// comparisons of floats, exact either way.
+inline bool sphere_entry_float(const Ray& ray, const float q[3], float r) {
+  float oc[3], b = 0, c = 0;
+  for (int a = 0; a < 3; ++a) {
+    oc[a] = static_cast<float>(ray.o[a]) - q[a];
+    b += oc[a] * static_cast<float>(ray.dir[a]);
+    c += oc[a] * oc[a];
+  }
+  c -= r * r;
+  if (!(c > 0)) return false;  // inside or on (or NaN): nothing reported
+  const float disc = b * b - c;
+  if (!(disc >= 0)) return false;
+  const float t = -b - std::sqrt(disc);
+  return t >= 0 && t <= static_cast<float>(ray.length);
+}
+
+inline bool crosses_triangle_float(const Ray& ray, const float v[9]) {
+  const float t = v[0] - static_cast<float>(ray.o[0]);
+  if (!(t >= 0 && t <= static_cast<float>(ray.length))) return false;
+  const float py = static_cast<float>(ray.o[1]), pz = static_cast<float>(ray.o[2]);
+  auto edge = [&](int a, int b) {
+    const float ab_y = v[3 * b + 1] - v[3 * a + 1], ab_z = v[3 * b + 2] - v[3 * a + 2];
+    const float ap_y = py - v[3 * a + 1], ap_z = pz - v[3 * a + 2];
+    const float first = ab_y * ap_z, second = ab_z * ap_y;
+    return first - second;
+  };
+  const float e0 = edge(0, 1), e1 = edge(1, 2), e2 = edge(2, 0);
+  return (e0 >= 0 && e1 >= 0 && e2 >= 0) || (e0 <= 0 && e1 <= 0 && e2 <= 0);
+}
+
+// How the emulation decides hits: exactly (double, on the float primitives) or in float.
+enum class Arithmetic { exact, float32 };
+
 inline float largest_magnitude(const PointCloud& cloud) {
   float m = 0;
   for (float x : cloud.xyz) m = std::max(m, std::fabs(x));
@@ -66,7 +102,9 @@ inline float largest_magnitude(const PointCloud& cloud) {
 enum class Method { spheres, triangles, aabb };
 
 // How many times our method's filter keeps (i, j), for every j, by emulated traversal.
-inline std::vector<int> kept(Method method, const PointCloud& cloud, std::size_t i, float e) {
+inline std::vector<int> kept(Method method, const PointCloud& cloud, std::size_t i, float e,
+                             Arithmetic arithmetic = Arithmetic::exact) {
+  const bool exact = arithmetic == Arithmetic::exact;
   const float cutoff = cloud.cutoff, c2 = raycut::squared_cutoff(cutoff);
   const std::size_t n = cloud.size();
   const float* x = &cloud.xyz[3 * i];
@@ -84,9 +122,10 @@ inline std::vector<int> kept(Method method, const PointCloud& cloud, std::size_t
       ray.o[k] = static_cast<float>(ray.o[k]);
       for (std::size_t j = 0; j < n; ++j) {
         float d[3];
-        if (sphere_entry(ray, &cloud.xyz[3 * j], rays.radius) && pair(j, d) &&
-            geo::sphere_axis(d[0], d[1], d[2]) == k)
-          ++count[j];
+        const float* q = &cloud.xyz[3 * j];
+        const bool hit =
+            exact ? sphere_entry(ray, q, rays.radius) : sphere_entry_float(ray, q, rays.radius);
+        if (hit && pair(j, d) && geo::sphere_axis(d[0], d[1], d[2]) == k) ++count[j];
       }
     }
   } else if (method == Method::triangles) {
@@ -99,7 +138,8 @@ inline std::vector<int> kept(Method method, const PointCloud& cloud, std::size_t
           float v[9], d[3];
           const float* q = &cloud.xyz[3 * j];
           geo::face_triangle(q[0], q[1], q[2], face, cutoff, e, v);
-          if (crosses_triangle(ray, v) && pair(j, d) && geo::kept_corner(d[1], d[2]) == corner &&
+          const bool hit = exact ? crosses_triangle(ray, v) : crosses_triangle_float(ray, v);
+          if (hit && pair(j, d) && geo::kept_corner(d[1], d[2]) == corner &&
               geo::kept_face(d[0]) == face)
             ++count[j];
         }

@@ -4,12 +4,21 @@
 // primitives so that CI (no GPU) proves the filters exactly-once on every input family.
 //
 // Every method widens its primitives by a margin e = C 2^-10 + M 2^-20 (M the largest coordinate
-// magnitude): far above float round-off of positions, vertices and hit tests, so a hit the
-// filter needs is always reported. Widening only adds candidates; the filter uses positions.
+// magnitude, in the local frame below): far above float round-off of positions, vertices and hit
+// tests, so a hit the filter needs is always reported. Widening only adds candidates; the filter
+// uses positions.
+//
+// Local frame and valid domain (docs/methods.md, "Valid domain of each ray-tracing method"): the
+// host shifts the positions by a per-axis origin c chosen so that x - c is EXACT in float for
+// every particle (exact_shift), which leaves every pair vector d = x_j - x_i bit for bit what the
+// caller's floats give, and refuses scenes whose extent from c, in cutoffs, exceeds the bound of
+// the method's geometry (max_scene_cutoffs).
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 
 #include "raycut/predicate.hpp"
 
@@ -89,6 +98,53 @@ RAYCUT_HD int kept_face(float dx) {
 // A source is a box of half-width C + e; a target casts one zero-length ray from its position.
 RAYCUT_HD float aabb_half_width(float cutoff, float e) {
   return cutoff + e;
+}
+
+// ---- local frame and valid domain (host only) -------------------------------------------------
+enum class Shape { spheres, triangles, aabb };
+
+// Does x - c round exactly, for every float x in [lo, hi]? Every float of magnitude >= m is a
+// multiple of g = 2^(exponent(m) - 23); when [lo, hi] and c lie on one side of 0, with m the
+// smallest magnitude there, x - c is a multiple of g of magnitude <= 2^24 g, so it has at most 24
+// significant bits: exact. (Sterbenz's lemma is the case hi <= 2 lo.) c = 0 is always exact.
+inline bool shift_is_exact(float lo, float hi, float c) {
+  if (c == 0) return true;
+  const double a = std::fmin(lo, c), b = std::fmax(hi, c);
+  if (!(a > 0 || b < 0)) return false;  // the range and c must not straddle 0
+  const double m = std::fmin(std::fabs(a), std::fabs(b));
+  // Below FLT_MIN the floats are the multiples of 2^-149.
+  const int exponent = std::max(std::ilogb(m), std::numeric_limits<float>::min_exponent - 1);
+  const double grid = std::ldexp(1.0, exponent - 23);
+  return std::fmax(std::fabs(double{lo} - c), std::fabs(double{hi} - c)) <= std::ldexp(grid, 24);
+}
+
+// The local origin of one axis whose floats span [lo, hi]: the centre rounded to a float when the
+// shift is exact for the whole range (a compact cloud far from 0), else 0 (the range holds 0 or
+// reaches near it: there |x| <= 2 (hi - lo) already, and centring would gain at most a factor 4).
+inline float exact_shift(float lo, float hi) {
+  const float c = static_cast<float>(0.5 * (double{lo} + double{hi}));
+  return shift_is_exact(lo, hi, c) ? c : 0.0f;
+}
+
+// The largest coordinate magnitude S in the local frame, |x - c| over the box (exact in double).
+inline double local_magnitude(const float lo[3], const float hi[3], const float c[3]) {
+  double s = 0;
+  for (int a = 0; a < 3; ++a)
+    s = std::fmax(s, std::fmax(std::fabs(double{lo[a]} - c[a]), std::fabs(double{hi[a]} - c[a])));
+  return s;
+}
+
+// The largest S / C each geometry supports: the margin e = C 2^-10 + S 2^-20 may grow the
+// primitive's cutoff-sized dimension by at most a quarter. Spheres: e <= r0 / 4, r0 = C sqrt(2/3).
+// Triangles: the half-extent h = C/2 + 2e, so 2e <= (C/2) / 4. Boxes: e <= C / 4. Beyond, errors
+// proportional to S (float rounding in OptiX's BVH, traversal and intersectors, which OptiX does
+// not bound) need a margin that is no longer small against C, and the cost grows as ((C+e)/C)^3
+// to O(N) candidates per target (docs/methods.md, "Valid domain of each ray-tracing method").
+inline double max_scene_cutoffs(Shape shape) {
+  const double growth = shape == Shape::spheres     ? 0.81649658 / 4
+                        : shape == Shape::triangles ? 1.0 / 16
+                                                    : 1.0 / 4;
+  return (growth - 0x1p-10) * 0x1p20;
 }
 
 }  // namespace raycut::detail::geometry

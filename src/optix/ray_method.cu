@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 
 #include "raycut/detail/cell_grid.hpp"
@@ -33,14 +34,24 @@ __global__ void morton_keys(const float* xyz, std::uint32_t n, CellGrid grid, st
   ids[i] = i;
 }
 
+// Positions in the local frame: x - shift, exact (geometry::exact_shift), so every pair vector
+// d = x_j - x_i the programs compute is the caller's bit for bit.
 __global__ void gather_positions(const float* xyz, const std::uint32_t* ids, std::uint32_t n,
-                                 float* sorted) {
+                                 float3 shift, float* sorted) {
   const std::uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
   if (s >= n) return;
   const std::uint32_t i = ids[s];
-  sorted[3 * s] = xyz[3 * i];
-  sorted[3 * s + 1] = xyz[3 * i + 1];
-  sorted[3 * s + 2] = xyz[3 * i + 2];
+  sorted[3 * s] = xyz[3 * i] - shift.x;
+  sorted[3 * s + 1] = xyz[3 * i + 1] - shift.y;
+  sorted[3 * s + 2] = xyz[3 * i + 2] - shift.z;
+}
+
+__global__ void shift_positions(const float* xyz, std::uint32_t n, float3 shift, float* out) {
+  const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
+  if (i >= n) return;
+  out[3 * i] = xyz[3 * i] - shift.x;
+  out[3 * i + 1] = xyz[3 * i + 1] - shift.y;
+  out[3 * i + 2] = xyz[3 * i + 2] - shift.z;
 }
 
 // Squared displacements are >= 0, so their float bits order like unsigned integers.
@@ -62,16 +73,18 @@ void RayTracingMethod::build(const float* xyz, std::size_t n, float cutoff) {
   if (n > 0x7fffffffu)
     throw Error(ErrorCode::invalid_argument,
                 "ray-tracing methods take at most 2^31-1 particles, got " + std::to_string(n));
+  build_timer_.start();
+  // The local frame, the valid domain and the margin need the box; the sort needs it too.
+  float lo[3], hi[3], shift[3];
+  bbox_.compute(xyz, n, lo, hi);
+  for (int a = 0; a < 3; ++a) shift[a] = geometry::exact_shift(lo[a], hi[a]);
+  // The skin widens the magnitude so refitted positions stay covered (and in the domain).
+  const double magnitude = geometry::local_magnitude(lo, hi, shift) + policy_.skin;
+  check_domain(magnitude, cutoff);  // before any launch of the method; the last build stays
   n_ = static_cast<std::uint32_t>(n);
   cutoff_ = cutoff;
-  build_timer_.start();
-  // The margin needs the largest coordinate magnitude; the sort needs the box too.
-  float lo[3], hi[3];
-  bbox_.compute(xyz, n, lo, hi);
-  float largest = 0;
-  for (int a = 0; a < 3; ++a) largest = std::max({largest, std::fabs(lo[a]), std::fabs(hi[a])});
-  // The skin widens the margin's magnitude term so refitted positions stay covered.
-  margin_ = geometry::margin(cutoff, largest + policy_.skin);
+  std::copy(shift, shift + 3, shift_);
+  margin_ = geometry::margin(cutoff, static_cast<float>(magnitude));
 
   xyz_.resize(3 * n);
   if (sorted_) {
@@ -90,11 +103,8 @@ void RayTracingMethod::build(const float* xyz, std::size_t n, float cutoff) {
     if (ids.Current() != ids_.data())  // the sorted ids live at the front of the buffer
       RAYCUT_CUDA_CHECK(cudaMemcpyAsync(ids_.data(), ids.Current(), n * sizeof(std::uint32_t),
                                         cudaMemcpyDeviceToDevice));
-    gather_positions<<<blocks_for(n), block_size>>>(xyz, ids_.data(), n_, xyz_.data());
-    RAYCUT_CUDA_CHECK_LAUNCH();
-  } else {
-    arrange(xyz);
   }
+  arrange(xyz);
   const bool refits = policy_.skin > 0;
   if (refits) {
     built_xyz_.resize(3 * n);
@@ -107,9 +117,28 @@ void RayTracingMethod::build(const float* xyz, std::size_t n, float cutoff) {
   build_timer_.stop();
 }
 
+void RayTracingMethod::check_domain(double magnitude, float cutoff) const {
+  const double cutoffs = magnitude / cutoff, bound = geometry::max_scene_cutoffs(shape());
+  if (cutoffs <= bound) return;
+  char text[400];
+  std::snprintf(
+      text, sizeof text,
+      "%s: the scene extends %.3g cutoffs from its local origin (largest |x - origin| / C, "
+      "skin included), beyond the %.0f this method supports: its float ray-tracing "
+      "geometry cannot resolve the cutoff at that extent (docs/methods.md, \"Valid "
+      "domain of each ray-tracing method\"). Use the grid method (\"grid\", or "
+      "\"cell-list\" on the CPU), exact at any extent",
+      name(), cutoffs, bound);
+  throw Error(ErrorCode::unsupported, text);
+}
+
 void RayTracingMethod::arrange(const float* xyz) {
+  const float3 shift = make_float3(shift_[0], shift_[1], shift_[2]);
   if (sorted_) {
-    gather_positions<<<blocks_for(n_), block_size>>>(xyz, ids_.data(), n_, xyz_.data());
+    gather_positions<<<blocks_for(n_), block_size>>>(xyz, ids_.data(), n_, shift, xyz_.data());
+    RAYCUT_CUDA_CHECK_LAUNCH();
+  } else if (shift.x != 0 || shift.y != 0 || shift.z != 0) {
+    shift_positions<<<blocks_for(n_), block_size>>>(xyz, n_, shift, xyz_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
   } else {
     RAYCUT_CUDA_CHECK(cudaMemcpyAsync(xyz_.data(), xyz, 3 * std::size_t{n_} * sizeof(float),
@@ -130,13 +159,22 @@ float RayTracingMethod::max_displacement(const float* xyz) {
   return std::sqrt(squared);
 }
 
+bool RayTracingMethod::shift_stays_exact(const float* xyz) {
+  if (shift_[0] == 0 && shift_[1] == 0 && shift_[2] == 0) return true;
+  float lo[3], hi[3];
+  bbox_.compute(xyz, n_, lo, hi);
+  for (int a = 0; a < 3; ++a)
+    if (!geometry::shift_is_exact(lo[a], hi[a], shift_[a])) return false;
+  return true;
+}
+
 bool RayTracingMethod::update(const float* xyz, std::size_t n, float cutoff) {
   // Refit keeps the tree of the last build and moves its boxes with the particles: exact, but
   // the tree degrades as particles wander, hence the rebuild beyond half the skin. The margin of
   // the last build stays (it covers round-off up to the coordinates seen then, plus the skin).
   const bool can_refit = policy_.skin > 0 && n == n_ && cutoff == cutoff_ && handle_ != 0 &&
                          built_xyz_.size() == 3 * n;
-  if (!can_refit || max_displacement(xyz) > 0.5f * policy_.skin) {
+  if (!can_refit || max_displacement(xyz) > 0.5f * policy_.skin || !shift_stays_exact(xyz)) {
     build(xyz, n, cutoff);
     return false;
   }

@@ -10,6 +10,7 @@
 #include "core/method.hpp"
 #include "cuda/device_results.cuh"
 #include "cuda/grid_common.cuh"
+#include "geometry/ray_geometry.hpp"
 #include "optix/context.hpp"
 #include "optix/launch_params.hpp"
 
@@ -28,9 +29,13 @@ class RayTracingMethod : public cuda::GpuMethod {
   RayTracingMethod(bool sorted, const PipelineSpec& programs);
 
   // Fills the method's primitive buffers from the (maybe sorted) positions and describes them.
-  // The build input's pointers must stay valid until the next call.
+  // The build input's pointers must stay valid until the next call. The positions are in the
+  // local frame (x - the exact shift of build()), as the programs see them in LaunchParams::xyz.
   virtual OptixBuildInput primitives(const float* xyz, std::uint32_t n, float cutoff,
                                      float margin) = 0;
+  // The method's name and geometry, for the valid-domain check of build().
+  virtual const char* name() const = 0;
+  virtual geometry::Shape shape() const = 0;
 
  private:
   LaunchParams base_params() const;
@@ -41,6 +46,11 @@ class RayTracingMethod : public cuda::GpuMethod {
   void arrange(const float* xyz);
   // Largest displacement of any particle since the last full build.
   float max_displacement(const float* xyz);
+  // Throws Error(unsupported) when the local magnitude S (in cutoffs) is beyond the geometry's
+  // bound (geometry::max_scene_cutoffs), naming the method, S / C and the bound.
+  void check_domain(double magnitude, float cutoff) const;
+  // Whether x - shift_ is still exact for new positions (else update() rebuilds).
+  bool shift_stays_exact(const float* xyz);
 
   bool sorted_;
   UpdatePolicy policy_;
@@ -49,6 +59,9 @@ class RayTracingMethod : public cuda::GpuMethod {
   OptixTraversableHandle handle_ = 0;
   std::uint32_t n_ = 0;
   float cutoff_ = 0, margin_ = 0;
+  // Local origin per axis: xyz_ holds x - shift_, exact in float (geometry::exact_shift), so the
+  // pair vectors, hence the shared predicate and every kernel, are the caller's bit for bit.
+  float shift_[3] = {0, 0, 0};
   cuda::DeviceBuffer<float> xyz_;
   cuda::DeviceBuffer<float> built_xyz_;        // caller's order, at the last full build
   cuda::DeviceBuffer<unsigned> displacement_;  // float bits of the largest squared move

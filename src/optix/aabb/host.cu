@@ -27,9 +27,14 @@ class AabbMethod final : public RayTracingMethod {
                                   2,
                                   0,
                                   OPTIX_PRIMITIVE_TYPE_FLAGS_CUSTOM,
-                                  "params"}) {}
+                                  "params"}),
+        name_(fused    ? "optix-aabb-fused"
+              : sorted ? "optix-aabb-sorted"
+                       : "optix-aabb") {}
 
  private:
+  const char* name() const override { return name_; }
+  geometry::Shape shape() const override { return geometry::Shape::aabb; }
   OptixBuildInput primitives(const float* xyz, std::uint32_t n, float cutoff,
                              float margin) override {
     boxes_.resize(n);
@@ -46,6 +51,7 @@ class AabbMethod final : public RayTracingMethod {
     return input;
   }
 
+  const char* name_;
   cuda::DeviceBuffer<OptixAabb> boxes_;
   CUdeviceptr box_pointer_ = 0;
   const unsigned flags_ = OPTIX_GEOMETRY_FLAG_REQUIRE_SINGLE_ANYHIT_CALL;

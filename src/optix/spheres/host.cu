@@ -22,6 +22,8 @@ class SpheresMethod final : public RayTracingMethod {
                                  OPTIX_PRIMITIVE_TYPE_SPHERE}) {}
 
  private:
+  const char* name() const override { return "optix-spheres"; }
+  geometry::Shape shape() const override { return geometry::Shape::spheres; }
   OptixBuildInput primitives(const float* xyz, std::uint32_t n, float cutoff,
                              float margin) override {
     radius_ = geometry::sphere_rays(cutoff, margin).radius;

@@ -31,6 +31,8 @@ class TrianglesMethod final : public RayTracingMethod {
                                  "params"}) {}
 
  private:
+  const char* name() const override { return "optix-triangles"; }
+  geometry::Shape shape() const override { return geometry::Shape::triangles; }
   OptixBuildInput primitives(const float* xyz, std::uint32_t n, float cutoff,
                              float margin) override {
     vertices_.resize(18 * std::size_t{n});
