@@ -1,4 +1,4 @@
-// Measures the alternatives of the `grid` method (src/cuda/grid.cu, GridOptions) side by side,
+// Measures the alternatives of the `grid` method (src/cuda/grid.cu, GridPolicy) side by side,
 // through the internal Method interface: the numbers behind the defaults in docs/grid.md.
 //
 //   grid_tune --suite uniform --params 32 --ps 1,8,32 --variants k1,k2,k3,k2-nocull,k2-compact
@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "cuda/grid_policy.hpp"
 #include "cuda/methods.hpp"
 #include "raycut/generators.hpp"
 
@@ -37,24 +38,24 @@ std::vector<std::string> split(const std::string& s) {
 std::unique_ptr<raycut::detail::Method> make_variant(const std::string& name) {
   namespace cuda = raycut::detail::cuda;
   if (name == "paper") return cuda::make_grid_paper();
-  cuda::GridOptions o;
+  cuda::GridPolicy o;
   if (name.size() >= 2 && name[0] == 'k')
-    o.cells_per_cutoff = std::stoi(name.substr(1));
+    o.cell_width = static_cast<cuda::CellWidth>(std::stoi(name.substr(1)));
   else if (name.rfind("auto", 0) != 0)
     throw std::runtime_error("bad variant " + name);
   if (name.find("-nocull") != std::string::npos) o.cull = false;
-  if (name.find("-dense") != std::string::npos) o.layout = 1;
-  if (name.find("-compact") != std::string::npos) o.layout = 2;
-  if (name.find("-counting") != std::string::npos) o.dense_build = 1;
-  if (name.find("-radix") != std::string::npos) o.dense_build = 2;
-  if (name.find("-oneblock") != std::string::npos) o.dense_build = 3;
-  if (name.find("-bycell") != std::string::npos) o.dense_build = 4;
+  if (name.find("-dense") != std::string::npos) o.layout = cuda::TableLayout::dense;
+  if (name.find("-compact") != std::string::npos) o.layout = cuda::TableLayout::compact;
+  if (name.find("-counting") != std::string::npos) o.dense_build = cuda::DenseBuild::counting_by_particle;
+  if (name.find("-radix") != std::string::npos) o.dense_build = cuda::DenseBuild::radix;
+  if (name.find("-oneblock") != std::string::npos) o.dense_build = cuda::DenseBuild::one_block;
+  if (name.find("-bycell") != std::string::npos) o.dense_build = cuda::DenseBuild::counting_by_cell;
   if (const auto r = name.find("-regs"); r != std::string::npos)
-    o.thread_registers = std::stoi(name.substr(r + 5));
+    o.registers = static_cast<cuda::RegisterBudget>(std::stoi(name.substr(r + 5)));
   if (const auto x = name.find("-x"); x != std::string::npos)
     o.x_split = std::stoi(name.substr(x + 2));
   if (const auto g = name.find("-g"); g != std::string::npos)
-    o.lanes_per_target = std::stoi(name.substr(g + 2));
+    o.lanes = cuda::lanes_per_target(std::stoi(name.substr(g + 2)));
   return cuda::make_grid_with(o);
 }
 

@@ -14,27 +14,32 @@
 #include <tuple>
 #include <vector>
 
+#include "cuda/grid_policy.hpp"
 #include "cuda/methods.hpp"
+#include "raycut/compare.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/generators.hpp"
 
 namespace {
 
 using raycut::Kernel;
-using raycut::detail::cuda::GridOptions;
+namespace grid = raycut::detail::cuda;
+using grid::GridPolicy;
 
 struct Variant {
   const char* name;
-  GridOptions options;
+  GridPolicy policy;
 };
 
-GridOptions make(int k, int lanes, int layout, int dense_build, int registers = 0) {
-  GridOptions o;
-  o.thread_registers = registers;
-  o.cells_per_cutoff = k;
-  o.lanes_per_target = lanes;
-  o.layout = layout;
-  o.dense_build = dense_build;
+// k: cells C/k wide; lanes per target; layout 1 dense, 2 compact; dense_build and registers as
+// numbered in grid::DenseBuild and grid::RegisterBudget (0: automatic).
+GridPolicy make(int k, int lanes, int layout, int dense_build, int registers = 0) {
+  GridPolicy o;
+  o.registers = static_cast<grid::RegisterBudget>(registers);
+  o.cell_width = static_cast<grid::CellWidth>(k);
+  o.lanes = grid::lanes_per_target(lanes);
+  o.layout = static_cast<grid::TableLayout>(layout);
+  o.dense_build = static_cast<grid::DenseBuild>(dense_build);
   return o;
 }
 
@@ -73,17 +78,36 @@ TEST_P(GridVariants, MatchBruteForce) {
   oracle.build({cloud.xyz.data(), n, raycut::MemorySpace::host}, cloud.cutoff);
   const auto want_count = oracle.compute(Kernel::count).count;
   const auto want_lj = oracle.compute(Kernel::lj).energy;
+  const raycut::Results want_forces = oracle.compute(Kernel::lj_forces);
+  const raycut::NeighbourList want_list = oracle.neighbours();
 
   float* xyz = nullptr;
   ASSERT_EQ(cudaMalloc(&xyz, cloud.xyz.size() * sizeof(float)), cudaSuccess);
   cudaMemcpy(xyz, cloud.xyz.data(), cloud.xyz.size() * sizeof(float), cudaMemcpyHostToDevice);
-  auto grid = raycut::detail::cuda::make_grid_with(v.options);
+  auto grid = raycut::detail::cuda::make_grid_with(v.policy);
   grid->build(xyz, n, cloud.cutoff);
   grid->compute(Kernel::count, {});
   const auto got_count = grid->results().count;
   grid->compute(Kernel::lj, {});
   const auto got_lj = grid->results().energy;
+  grid->compute(Kernel::lj_forces, {});
+  const raycut::Results got_forces = grid->results();
+  auto storage = grid->make_list_storage();
+  grid->neighbours(*storage, {});
+  const raycut::NeighbourList got_list = storage->to_host();
   cudaFree(xyz);
+
+  const auto diff = raycut::compare_neighbours(got_list, want_list);
+  ASSERT_TRUE(diff.equal()) << v.name << " " << family << ": " << diff.first_difference;
+  ASSERT_EQ(got_forces.force.size(), 3 * n);
+  ASSERT_EQ(got_forces.virial.size(), 6 * n);
+  for (std::size_t k = 0; k < 3 * n; ++k) {
+    const float want = want_forces.force[k];
+    if (std::isfinite(want)) {
+      ASSERT_NEAR(got_forces.force[k], want, 1e-4f * std::abs(want) + 1e-3f)
+          << v.name << " " << family << " force " << k;
+    }
+  }
 
   ASSERT_EQ(got_count.size(), n);
   ASSERT_EQ(got_lj.size(), n);

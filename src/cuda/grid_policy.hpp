@@ -34,6 +34,24 @@ struct GridPolicy {
   RegisterBudget registers = RegisterBudget::automatic;
 };
 
+// 1, 4, 8, 16, 32 lanes as a LanesPerTarget (0 or anything else: automatic).
+inline LanesPerTarget lanes_per_target(int lanes) {
+  switch (lanes) {
+    case 1:
+      return LanesPerTarget::one;
+    case 4:
+      return LanesPerTarget::four;
+    case 8:
+      return LanesPerTarget::eight;
+    case 16:
+      return LanesPerTarget::sixteen;
+    case 32:
+      return LanesPerTarget::thirty_two;
+    default:
+      return LanesPerTarget::automatic;
+  }
+}
+
 // The automatic choices' thresholds (docs/grid.md, "The choices and their measurements").
 struct GridThresholds {
   // Cells C/2 wide (reach 2) from this many particles per C-cell of the box, else C wide.

@@ -307,10 +307,11 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
                                                        ? kernel
                                                        : GridKernel::thread;
     const auto group = [&](auto lanes) {
-      constexpr int G = decltype(lanes)::value;
-      if constexpr (has_combine<F>::value)
+      if constexpr (has_combine<F>::value) {
+        constexpr int G = decltype(lanes)::value;
         grid_group_kernel<G><<<blocks_for(std::uint64_t{n} * G, grid_block_size), grid_block_size,
                                0, stream>>>(pos, n, g.geometry, table, c2, f);
+      }
     };
     switch (kernel) {
       case GridKernel::thread:
