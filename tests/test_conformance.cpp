@@ -105,6 +105,61 @@ TEST_P(Conformance, MatchesBruteForce) {
   ASSERT_TRUE(diff.equal()) << diff.differing_targets << " of " << n << " targets differ; first "
                             << diff.first_difference;
 
+  // 1b. The other list visitors of the same pass: the half list is the full list halved
+  //     (i < j kept), distances and vectors belong to their pairs, the padded matrix holds every
+  //     row when K is the largest row and reports the overflow when it is one less.
+  {
+    raycut::NeighbourListBuffer buffer;
+    engine.neighbours(buffer, {/*half=*/true, /*distances=*/true, /*vectors=*/true});
+    ASSERT_EQ(buffer.space(), engine.space());
+    const NeighbourList half = buffer.to_host();
+    const Rows half_rows = sorted_rows(half);
+    ASSERT_EQ(half.distances.size(), half.indices.size());
+    ASSERT_EQ(half.vectors.size(), 3 * half.indices.size());
+    std::size_t largest = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      std::vector<std::uint32_t> upper;
+      for (std::uint32_t j : ref.rows[i])
+        if (j > i) upper.push_back(j);
+      ASSERT_EQ(half_rows[i], upper) << "half list, target " << i;
+      largest = std::max(largest, ref.rows[i].size());
+      for (std::uint64_t e = half.offsets[i]; e < half.offsets[i + 1]; ++e) {
+        const std::uint32_t j = half.indices[e];
+        float d2 = 0;
+        for (int a = 0; a < 3; ++a) {
+          const float d = cloud.xyz[3 * j + a] - cloud.xyz[3 * i + a];
+          ASSERT_EQ(half.vectors[3 * e + a], d) << "vector of pair " << i << "," << j;
+          d2 += d * d;
+        }
+        ASSERT_NEAR(half.distances[e], std::sqrt(d2), 1e-6f * std::sqrt(d2))
+            << "distance of pair " << i << "," << j;
+      }
+    }
+    raycut::PaddedNeighbourBuffer padded;
+    const auto k = static_cast<std::uint32_t>(std::max<std::size_t>(largest, 1));
+    EXPECT_FALSE(engine.padded_neighbours(padded, k).overflowed());
+    if (n > 0) {
+      const auto counts = padded.counts_to_host();
+      const auto matrix = padded.indices_to_host();
+      for (std::size_t i = 0; i < n; ++i) {
+        ASSERT_EQ(counts[i], ref.rows[i].size()) << "padded count, target " << i;
+        std::vector<std::uint32_t> row(matrix.begin() + i * k, matrix.begin() + i * k + counts[i]);
+        std::sort(row.begin(), row.end());
+        ASSERT_EQ(row, ref.rows[i]) << "padded row " << i;
+        for (std::size_t c = counts[i]; c < k; ++c) ASSERT_EQ(matrix[i * k + c], n);
+      }
+    }
+    if (largest >= 2) {
+      std::uint64_t over = 0;
+      for (const auto& row : ref.rows) over += row.size() > largest - 1;
+      const raycut::PaddedReport report = engine.padded_neighbours(padded, k - 1);
+      EXPECT_EQ(report.overflowed_rows, over);
+      EXPECT_EQ(report.largest_count, largest);
+      EXPECT_THROW(engine.padded_neighbours(padded, k - 1, /*throw_on_overflow=*/true),
+                   raycut::Error);
+    }
+  }
+
   // 2. The fused count kernel gives the same numbers.
   const auto counts = engine.compute(Kernel::count).count;
   ASSERT_EQ(counts.size(), n);
@@ -173,24 +228,41 @@ TEST_P(Conformance, MatchesBruteForce) {
     }
   }
 
-  // 5. Lennard-Jones where it is finite.
+  // 5. Lennard-Jones energy, and energy + force + virial in one pass, where finite, against
+  //    double-precision sums over the reference pairs (virial_i = -1/2 sum_j r (x) f_i(j)).
   if (!family_has_singular_lj(c.family)) {
     const auto lj = engine.compute(Kernel::lj);
+    const auto full = engine.compute(Kernel::lj_forces);
     ASSERT_EQ(lj.energy.size(), n);
+    ASSERT_EQ(full.force.size(), 3 * n);
+    ASSERT_EQ(full.virial.size(), 6 * n);
     for (std::size_t i = 0; i < n; ++i) {
-      double e = 0, scale = 0;
+      double e = 0, scale = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0}, fscale = 0;
       for (std::uint32_t j : ref.rows[i]) {
-        double r2 = 0;
+        double d[3], r2 = 0;
         for (int a = 0; a < 3; ++a) {
-          const double d = cloud.xyz[3 * j + a] - cloud.xyz[3 * i + a];
-          r2 += d * d;
+          d[a] = static_cast<double>(cloud.xyz[3 * j + a]) - cloud.xyz[3 * i + a];
+          r2 += d[a] * d[a];
         }
         const double s6 = 1.0 / (r2 * r2 * r2);
         e += 4 * (s6 * s6 - s6);
         scale += 4 * (s6 * s6 + s6);
+        const double g = -24 * s6 * (2 * s6 - 1) / r2;  // f_i = g r, r = x_j - x_i
+        const double fi[3] = {g * d[0], g * d[1], g * d[2]};
+        for (int a = 0; a < 3; ++a) f[a] += fi[a];
+        const int pa[6] = {0, 1, 2, 0, 0, 1}, pb[6] = {0, 1, 2, 1, 2, 2};
+        for (int k = 0; k < 6; ++k) v[k] += -0.5 * d[pa[k]] * fi[pb[k]];
+        fscale += 24 * s6 * (2 * s6 + 1) / std::sqrt(r2);
       }
       if (std::isfinite(scale) && scale < 1e30) {
         ASSERT_NEAR(lj.energy[i], e, 1e-4 * scale + 1e-30) << "target " << i;
+        ASSERT_EQ(full.energy[i], lj.energy[i]) << "lj_forces energy, target " << i;
+        for (int a = 0; a < 3; ++a)
+          ASSERT_NEAR(full.force[3 * i + a], f[a], 1e-4 * fscale + 1e-30)
+              << "force " << a << " of target " << i;
+        for (int k = 0; k < 6; ++k)
+          ASSERT_NEAR(full.virial[6 * i + k], v[k], 1e-4 * fscale * c.cutoff + 1e-30)
+              << "virial " << k << " of target " << i;
       }
     }
   }

@@ -1,0 +1,134 @@
+// The list API around the one pair pass, on every available method: reusable buffers, the Verlet
+// list (skin reuse gives every pair a rebuild gives), N = 0, a moved-from Engine, a failed run.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "raycut/compare.hpp"
+#include "raycut/engine.hpp"
+#include "raycut/generators.hpp"
+
+namespace {
+
+using raycut::Engine;
+using raycut::Kernel;
+using raycut::MemorySpace;
+
+std::vector<std::string> available_methods() {
+  std::vector<std::string> names;
+  for (const auto& m : raycut::list_methods())
+    if (m.available) names.push_back(m.name);
+  return names;
+}
+
+class Lists : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(Lists, PreparedBufferAllocatesOnce) {
+  const raycut::PointCloud cloud = raycut::make_family("uniform", 3000, 1.0f, 5);
+  Engine engine(GetParam());
+  engine.build({cloud.xyz.data(), cloud.size(), MemorySpace::host}, 1.0f);
+  raycut::NeighbourListBuffer buffer;
+  engine.neighbours(buffer, {false, true, true});
+  const std::size_t bytes = buffer.bytes();
+  const auto first = buffer.to_host();
+  engine.neighbours(buffer, {false, true, true});
+  EXPECT_EQ(buffer.bytes(), bytes);
+  EXPECT_EQ(buffer.to_host().indices, first.indices);
+  EXPECT_EQ(buffer.size(), cloud.size());
+  EXPECT_EQ(buffer.pairs(), first.indices.size());
+  EXPECT_GT(buffer.pairs(), 0u);
+}
+
+TEST_P(Lists, EmptyAndSingleParticle) {
+  for (std::size_t n : {0, 1}) {
+    const std::vector<float> xyz(3 * n, 0.5f);
+    Engine engine(GetParam());
+    engine.build({xyz.data(), n, MemorySpace::host}, 1.0f);
+    raycut::NeighbourListBuffer buffer;
+    engine.neighbours(buffer, {true, true, true});
+    const raycut::NeighbourList list = buffer.to_host();
+    ASSERT_EQ(list.offsets, std::vector<std::uint64_t>(n + 1, 0));
+    EXPECT_TRUE(list.indices.empty());
+    raycut::PaddedNeighbourBuffer padded;
+    EXPECT_FALSE(engine.padded_neighbours(padded, 4).overflowed());
+    EXPECT_EQ(padded.counts_to_host(), std::vector<std::uint32_t>(n, 0));
+  }
+}
+
+// A Verlet list built at C + skin keeps every pair within C while no particle moved more than
+// skin / 2, and rebuilds once one has.
+TEST_P(Lists, VerletSkinReuseKeepsEveryPairWithinTheCutoff) {
+  const float cutoff = 1.0f, skin = 0.3f;
+  raycut::PointCloud cloud = raycut::make_family("uniform", 2000, cutoff, 11);
+  raycut::VerletList verlet(GetParam(), cutoff, skin);
+  EXPECT_TRUE(verlet.update({cloud.xyz.data(), cloud.size(), MemorySpace::host}));
+  std::uint64_t rebuilt_at = 0;
+  for (int step = 1; step <= 12; ++step) {
+    // Every particle moves 0.04 a step along a fixed direction: skin / 2 = 0.15 is passed at
+    // step 4 (0.16 from the build).
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      const float angle = 0.7f * static_cast<float>(i);
+      cloud.xyz[3 * i] += 0.04f * std::cos(angle);
+      cloud.xyz[3 * i + 1] += 0.04f * std::sin(angle);
+    }
+    const bool rebuilt = verlet.update({cloud.xyz.data(), cloud.size(), MemorySpace::host});
+    if (rebuilt && rebuilt_at == 0) rebuilt_at = step;
+    // Every pair within C now is in the list (the list may hold more: it is at C + skin).
+    Engine exact("brute-force");
+    exact.build({cloud.xyz.data(), cloud.size(), MemorySpace::host}, cutoff);
+    const raycut::NeighbourList want = exact.neighbours();
+    const raycut::NeighbourList have = verlet.list().to_host();
+    for (std::size_t i = 0; i < cloud.size(); ++i) {
+      std::vector<std::uint32_t> row(have.indices.begin() + have.offsets[i],
+                                     have.indices.begin() + have.offsets[i + 1]);
+      std::sort(row.begin(), row.end());
+      for (std::uint64_t e = want.offsets[i]; e < want.offsets[i + 1]; ++e)
+        ASSERT_TRUE(std::binary_search(row.begin(), row.end(), want.indices[e]))
+            << "step " << step << ": pair " << i << "," << want.indices[e] << " missing";
+    }
+    if (rebuilt) {  // just rebuilt: exactly the list at C + skin
+      Engine wide("brute-force");
+      wide.build({cloud.xyz.data(), cloud.size(), MemorySpace::host}, cutoff + skin);
+      const auto diff = raycut::compare_neighbours(have, wide.neighbours());
+      ASSERT_TRUE(diff.equal()) << "step " << step << ": " << diff.first_difference;
+    }
+  }
+  EXPECT_EQ(rebuilt_at, 4u);
+  EXPECT_GE(verlet.rebuilds(), 3u);  // at steps 4, 8, 12
+  EXPECT_LE(verlet.rebuilds(), 4u);
+}
+
+TEST_P(Lists, FailedRunLeavesNoResults) {
+  const raycut::PointCloud cloud = raycut::make_family("uniform", 500, 1.0f, 5);
+  Engine engine(GetParam());
+  engine.build({cloud.xyz.data(), cloud.size(), MemorySpace::host}, 1.0f);
+  engine.run(Kernel::count);
+  EXPECT_THROW(engine.run(Kernel::sph_force), raycut::Error);  // no SPH inputs
+  EXPECT_THROW(engine.results(), raycut::Error);
+  EXPECT_THROW(engine.results_view(), raycut::Error);
+}
+
+INSTANTIATE_TEST_SUITE_P(Methods, Lists, ::testing::ValuesIn(available_methods()),
+                         [](const auto& info) {
+                           std::string name = info.param;
+                           std::replace(name.begin(), name.end(), '-', '_');
+                           return name;
+                         });
+
+TEST(Engine, MovedFromThrowsInsteadOfCrashing) {
+  Engine a("brute-force");
+  Engine b(std::move(a));
+  const float xyz[3] = {0, 0, 0};
+  EXPECT_THROW(a.build({xyz, 1, MemorySpace::host}, 1.0f), raycut::Error);  // NOLINT(bugprone-use-after-move)
+  EXPECT_THROW(a.neighbours(), raycut::Error);
+  EXPECT_THROW((void)a.space(), raycut::Error);
+  EXPECT_THROW(a.set_update_policy({}), raycut::Error);
+  EXPECT_THROW(a.run(Kernel::count), raycut::Error);
+  b.build({xyz, 1, MemorySpace::host}, 1.0f);
+  EXPECT_EQ(b.compute(Kernel::count).count, std::vector<std::uint32_t>{0});
+}
+
+}  // namespace
