@@ -1,8 +1,10 @@
 // Method 0, the oracle: every pair, the shared predicate, nothing clever.
+#include <string>
 #include <vector>
 
 #include "core/method.hpp"
 #include "cpu/host_pairs.hpp"
+#include "raycut/error.hpp"
 
 namespace raycut::detail {
 namespace {
@@ -20,6 +22,11 @@ class BruteForceCpu final : public Method {
   MemorySpace space() const override { return MemorySpace::host; }
 
   void build(const float* xyz, std::size_t n, float cutoff) override {
+    if (n >= (std::size_t{1} << 32))  // NeighbourList::indices is uint32
+      throw Error(ErrorCode::invalid_argument,
+                  "brute-force supports fewer than 2^32 = 4294967296 particles (32-bit "
+                  "indices), got N = " +
+                      std::to_string(n));
     xyz_.assign(xyz, xyz + 3 * n);
     cutoff_ = cutoff;
   }
