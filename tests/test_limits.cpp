@@ -191,4 +191,32 @@ TEST(CellList, FarOutlierCostsNothing) {
   }
 }
 
+TEST(CompareValues, NaNAndOneSidedInfinityAreMismatches) {
+  constexpr float inf = std::numeric_limits<float>::infinity();
+  constexpr float nan = std::numeric_limits<float>::quiet_NaN();
+  using raycut::max_scaled_difference;
+  using raycut::scaled_difference;
+  EXPECT_DOUBLE_EQ(scaled_difference(1.5, 1.0, 2.0), 0.25);
+  EXPECT_EQ(scaled_difference(nan, 1.0, 1.0), HUGE_VAL);
+  EXPECT_EQ(scaled_difference(1.0, nan, 1.0), HUGE_VAL);
+  EXPECT_EQ(scaled_difference(nan, nan, 1.0), HUGE_VAL);
+  EXPECT_EQ(scaled_difference(inf, 1.0, 1.0), HUGE_VAL);
+  EXPECT_EQ(scaled_difference(1.0, -inf, 1.0), HUGE_VAL);
+  EXPECT_EQ(scaled_difference(inf, -inf, 1.0), HUGE_VAL);
+  EXPECT_EQ(scaled_difference(inf, inf, 1.0), 0.0);
+  EXPECT_EQ(scaled_difference(1.0, 2.0, 0.0), HUGE_VAL);
+  const std::vector<double> unit(3, 1.0);
+  // A NaN after a larger finite error, or first: either way the result is a failure (what
+  // std::max(worst, NaN) used to swallow).
+  EXPECT_EQ(max_scaled_difference({1, 5, nan}, {1, 1, 1}, unit), HUGE_VAL);
+  EXPECT_EQ(max_scaled_difference({nan, 5, 1}, {1, 1, 1}, unit), HUGE_VAL);
+  EXPECT_EQ(max_scaled_difference({1, 1, 1}, {1, inf, 1}, unit), HUGE_VAL);
+  EXPECT_DOUBLE_EQ(max_scaled_difference({1, 3, 1}, {1, 1, 1}, unit), 2.0);
+  EXPECT_EQ(max_scaled_difference({1, 1}, {1, 1, 1}, unit), HUGE_VAL);
+  EXPECT_EQ(max_scaled_difference({}, {}, {}), 0.0);
+  // Stride: one scale per 3 force components.
+  EXPECT_DOUBLE_EQ(max_scaled_difference({0, 0, 4, 0, 0, 0}, {0, 0, 0, 0, 0, 0}, {2.0, 1.0}, 3),
+                   2.0);
+}
+
 }  // namespace
