@@ -158,7 +158,16 @@ TEST(GeneratorsFamilies, NamesInOrder) {
                                              "gaussian-outlier",
                                              "offset-1e3",
                                              "offset-1e5",
-                                             "large-cutoff"};
+                                             "large-cutoff",
+                                             "tiny-scale",
+                                             "huge-scale",
+                                             "offset-1e7",
+                                             "offset-1e15",
+                                             "cauchy",
+                                             "groups-far",
+                                             "sheet-flat",
+                                             "sheet-thin",
+                                             "rod-1e6"};
   EXPECT_EQ(family_names(), expected);
 }
 
@@ -169,7 +178,10 @@ TEST(GeneratorsFamilies, EverySizeIncludingZeroOneTwo) {
       EXPECT_EQ(cloud.size(), expected_size(family, n)) << family << " n=" << n;
       EXPECT_EQ(cloud.xyz.size() % 3, 0u);
       EXPECT_EQ(cloud.name, family);
-      EXPECT_EQ(cloud.cutoff, 1.0f);
+      const float scale = family == "tiny-scale"   ? 0x1p-50f
+                          : family == "huge-scale" ? 0x1p50f
+                                                   : 1.0f;  // cutoff scaled with the cloud
+      EXPECT_EQ(cloud.cutoff, scale);
       for (float v : cloud.xyz) ASSERT_TRUE(std::isfinite(v)) << family << " n=" << n;
     }
   }
