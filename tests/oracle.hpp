@@ -33,7 +33,7 @@ struct DoubleOracle {
   std::vector<float> xyz;
   double cutoff = 0;
   double band = 1e-5;
-  double in_below2 = 0, out_above2 = 0;  // (C (1 - band))^2, (C (1 + band))^2
+  double in_below2 = 0, out_above2 = 0;       // (C (1 - band))^2, (C (1 + band))^2
   std::vector<std::uint32_t> in, band_count;  // per target
   std::uint64_t in_pairs = 0, band_pairs = 0;
 
@@ -168,8 +168,7 @@ inline std::string missing_in_pair(const DoubleOracle& o, std::size_t i,
         !std::binary_search(row.begin(), row.end(), static_cast<std::uint32_t>(j))) {
       std::ostringstream s;
       s.precision(9);
-      s << "missing " << j << " (d / C = " << std::sqrt(o.squared_distance(i, j)) / o.cutoff
-        << ")";
+      s << "missing " << j << " (d / C = " << std::sqrt(o.squared_distance(i, j)) / o.cutoff << ")";
       return s.str();
     }
   }
@@ -238,9 +237,8 @@ inline OracleCheck check_counts(const std::vector<std::uint32_t>& count, const D
   for (std::size_t i = 0; i < count.size(); ++i) {
     r.listed += count[i];
     if (count[i] < o.in[i] || count[i] > o.in[i] + o.band_count[i]) {
-      r.fail("target " + std::to_string(i) + ": count " + std::to_string(count[i]) +
-             ", oracle: " + std::to_string(o.in[i]) + " in + " +
-             std::to_string(o.band_count[i]) + " band");
+      r.fail("target " + std::to_string(i) + ": count " + std::to_string(count[i]) + ", oracle: " +
+             std::to_string(o.in[i]) + " in + " + std::to_string(o.band_count[i]) + " band");
     }
   }
   return r;
