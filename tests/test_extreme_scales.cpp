@@ -158,6 +158,10 @@ std::string test_name(const ::testing::TestParamInfo<ExtremeScales::ParamType>& 
   const auto& [method, c] = info.param;
   char cutoff[32];
   std::snprintf(cutoff, sizeof cutoff, "%g", c.cutoff);
+  for (char& ch : cutoff) {
+    if (ch == '-') ch = 'm';  // 1e-30 and 1e+30 must not give the same name
+    if (ch == '+') ch = 'p';
+  }
   std::string name = method + "_" + c.family + "_n" + std::to_string(c.n) + "_c" + cutoff;
   for (char& ch : name)
     if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
