@@ -13,6 +13,8 @@
 #include "raycut/compare.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/generators.hpp"
+#include "sph/scenario.hpp"
+#include "sph/solver.hpp"
 
 namespace {
 
@@ -150,6 +152,24 @@ TEST(KernelRange, TheReportedCases) {
   KernelOptions huge_sigma;
   huge_sigma.lj_sigma = 1e7f;
   expect_invalid([&] { validate_kernel_range(Kernel::lj, huge_sigma, 1.0f); }, "sigma^6");
+}
+
+// The SPH solver's own scenarios stay inside the kernels' range (Engine::run will refuse what
+// validate_kernel_range refuses).
+TEST(KernelRange, TheSphScenariosAreInRange) {
+  using raycut::detail::validate_kernel_range;
+  for (const auto& scenario :
+       {raycut::sph::hiprt_drop(), raycut::sph::small_drop(), raycut::sph::wcsph_scenario({})}) {
+    const auto& p = scenario.params;
+    KernelOptions density;
+    density.sph_mass = p.particle_mass;
+    density.sph_viscosity = p.viscosity;
+    EXPECT_NO_THROW(validate_kernel_range(Kernel::sph_density, density, p.smoothing_length))
+        << scenario.name;
+    EXPECT_NO_THROW(validate_kernel_range(Kernel::sph_force, raycut::sph::force_pass_options(p),
+                                          p.smoothing_length))
+        << scenario.name;
+  }
 }
 
 // 2^32 particles do not fit 32-bit indices: refused before the positions are read.
