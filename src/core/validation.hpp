@@ -27,7 +27,7 @@ void validate_cutoff(float cutoff);
 // m 45 / (pi h^6) h^2 (pressure, per unit p / rho) and mu m 45 / (pi h^6) h (viscosity, per unit
 // v / rho)), lj (4 eps sigma^6 and sigma^6; no cutoff-dependent bound: its growth as r -> 0 is
 // the physics). count never throws. Everything is evaluated in double from the formulas of
-// include/raycut/kernels.hpp. Engine::run calls it before any work.
+// include/raycut/kernels.hpp. For Engine::run to call before any work.
 void validate_kernel_range(Kernel kernel, const KernelOptions& options, float cutoff);
 
 // Index of the first particle with a non-finite coordinate in host memory, or n if none.
