@@ -530,6 +530,11 @@ PointCloud make_family(std::string_view name, std::size_t n, float cutoff, std::
     const int exponent = name == "tiny-scale" ? -50 : 50;
     cloud.xyz = scaled(uniform_cloud(n, c, seed), exponent);
     cloud.cutoff = std::ldexp(cutoff, exponent);
+    if (!std::isfinite(cloud.cutoff) || !(cloud.cutoff > 0)) {
+      throw Error(ErrorCode::invalid_argument, std::string(name) + " scales the cutoff by 2^" +
+                                                   std::to_string(exponent) + ": " +
+                                                   std::to_string(cutoff) + " leaves float range");
+    }
   } else if (name == "offset-1e7") {
     cloud.xyz = far_offset(n, c, 1e7, seed);
   } else if (name == "offset-1e15") {
