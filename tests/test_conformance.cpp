@@ -278,6 +278,9 @@ std::vector<std::string> methods_under_test() {
 std::vector<Case> cases() {
   std::vector<Case> out;
   for (const auto& family : raycut::family_names()) {
+    // Families that rescale their cutoff (tiny-scale, huge-scale) are checked against a
+    // double oracle by test_extreme_scales.cpp.
+    if (raycut::make_family(family, 1, 1.0f, 0).cutoff != 1.0f) continue;
     for (std::size_t n : {0, 1, 2, 1000, 4000}) out.push_back({family, n, 1.0f});
     out.push_back({family, 3000, 0.37f});
   }
@@ -329,7 +332,11 @@ TEST(Oracle, AgreesWithDoublePrecisionAwayFromTheCutoffBand) {
         ++checked;
       }
     }
-    EXPECT_GT(checked, 0u) << family;
+    // At 1e15 every pair lies within this test's widened band (1e-6 of 1e15): tests/oracle.hpp
+    // checks that family exactly (test_extreme_scales.cpp).
+    if (family != "offset-1e15") {
+      EXPECT_GT(checked, 0u) << family;
+    }
   }
 }
 

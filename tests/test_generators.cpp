@@ -158,7 +158,16 @@ TEST(GeneratorsFamilies, NamesInOrder) {
                                              "gaussian-outlier",
                                              "offset-1e3",
                                              "offset-1e5",
-                                             "large-cutoff"};
+                                             "large-cutoff",
+                                             "tiny-scale",
+                                             "huge-scale",
+                                             "offset-1e7",
+                                             "offset-1e15",
+                                             "cauchy",
+                                             "groups-far",
+                                             "sheet-flat",
+                                             "sheet-thin",
+                                             "rod-1e6"};
   EXPECT_EQ(family_names(), expected);
 }
 
@@ -169,7 +178,10 @@ TEST(GeneratorsFamilies, EverySizeIncludingZeroOneTwo) {
       EXPECT_EQ(cloud.size(), expected_size(family, n)) << family << " n=" << n;
       EXPECT_EQ(cloud.xyz.size() % 3, 0u);
       EXPECT_EQ(cloud.name, family);
-      EXPECT_EQ(cloud.cutoff, 1.0f);
+      const float scale = family == "tiny-scale"   ? 0x1p-50f
+                          : family == "huge-scale" ? 0x1p50f
+                                                   : 1.0f;  // cutoff scaled with the cloud
+      EXPECT_EQ(cloud.cutoff, scale);
       for (float v : cloud.xyz) ASSERT_TRUE(std::isfinite(v)) << family << " n=" << n;
     }
   }
@@ -211,6 +223,60 @@ TEST(GeneratorsFamilies, RejectBadCutoff) {
   for (float cutoff : {0.0f, -1.0f, std::nanf(""), std::numeric_limits<float>::infinity()}) {
     error_message([&] { make_family("uniform", 10, cutoff, 1); }, ErrorCode::invalid_argument);
   }
+}
+
+// The scaled families scale the cutoff exactly (a power of two), and refuse to leave float.
+TEST(GeneratorsFamilies, ScaledFamiliesAreExactCopies) {
+  const PointCloud plain = make_family("uniform", 500, 0.75f, 3);
+  const PointCloud tiny = make_family("tiny-scale", 500, 0.75f, 3);
+  const PointCloud huge = make_family("huge-scale", 500, 0.75f, 3);
+  ASSERT_EQ(tiny.size(), plain.size());
+  ASSERT_EQ(huge.size(), plain.size());
+  EXPECT_EQ(tiny.cutoff, std::ldexp(0.75f, -50));
+  EXPECT_EQ(huge.cutoff, std::ldexp(0.75f, 50));
+  for (std::size_t k = 0; k < plain.xyz.size(); ++k) {
+    ASSERT_EQ(tiny.xyz[k], std::ldexp(plain.xyz[k], -50));
+    ASSERT_EQ(huge.xyz[k], std::ldexp(plain.xyz[k], 50));
+  }
+  error_message([] { make_family("tiny-scale", 10, 1e-40f, 1); }, ErrorCode::invalid_argument);
+  error_message([] { make_family("huge-scale", 10, 1e30f, 1); }, ErrorCode::invalid_argument);
+}
+
+// The far families: sheets exactly flat along their far axis, offsets rounded once, a rod of
+// the announced shape, and a heavy tail.
+TEST(GeneratorsFamilies, ExtremeShapes) {
+  const PointCloud groups = make_family("groups-far", 4000, 1.0f, 2);
+  ASSERT_EQ(groups.size(), 4000u);
+  const std::size_t cube = 4000 - 3 * 1000;
+  for (std::size_t g = 0; g < 3; ++g) {
+    const float far = static_cast<float>(std::pow(10.0, 10.0 * (g + 1)));
+    for (std::size_t i = cube + g * 1000; i < cube + (g + 1) * 1000; ++i)
+      ASSERT_EQ(groups.xyz[3 * i + g], far) << "group " << g + 1 << " point " << i;
+  }
+  const PointCloud flat = make_family("sheet-flat", 1000, 1.0f, 2);
+  for (std::size_t i = 0; i < flat.size(); ++i) ASSERT_EQ(flat.xyz[3 * i + 2], 0.0f);
+  const PointCloud thin = make_family("sheet-thin", 1000, 1.0f, 2);
+  for (std::size_t i = 0; i < thin.size(); ++i) {
+    ASSERT_GE(thin.xyz[3 * i + 2], 0.0f);
+    ASSERT_LE(thin.xyz[3 * i + 2], 1e-6f);
+  }
+  const PointCloud rod = make_family("rod-1e6", 1000, 2.0f, 2);
+  float longest = 0;
+  for (std::size_t i = 0; i < rod.size(); ++i) {
+    ASSERT_LE(rod.xyz[3 * i], 2.0f);
+    ASSERT_LE(rod.xyz[3 * i + 1], 2.0f);
+    ASSERT_LE(rod.xyz[3 * i + 2], 2e6f);
+    longest = std::max(longest, rod.xyz[3 * i + 2]);
+  }
+  EXPECT_GT(longest, 1e6f);
+  for (const char* f : {"offset-1e7", "offset-1e15"}) {
+    const float by = f == std::string("offset-1e7") ? 1e7f : 1e15f;
+    for (float v : make_family(f, 1000, 1.0f, 2).xyz) ASSERT_GE(v, by) << f;
+  }
+  const PointCloud tail = make_family("cauchy", 4000, 1.0f, 2);
+  float farthest = 0;
+  for (float v : tail.xyz) farthest = std::max(farthest, std::fabs(v));
+  EXPECT_GT(farthest, 1e3f);  // ~n cube sides away: a heavy tail
 }
 
 TEST(GeneratorsFamilies, LatticeSpacingCPutsPairsExactlyAtTheCutoff) {

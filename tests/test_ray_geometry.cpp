@@ -28,8 +28,9 @@ using raycut::emulation::method_name;
 class RayGeometry : public ::testing::TestWithParam<std::tuple<Method, std::string, float>> {};
 
 TEST_P(RayGeometry, KeepsEveryInRangePairExactlyOnce) {
-  const auto& [method, family, cutoff] = GetParam();
-  const PointCloud cloud = raycut::make_family(family, 700, cutoff, 11);
+  const auto& [method, family, family_cutoff] = GetParam();
+  const PointCloud cloud = raycut::make_family(family, 700, family_cutoff, 11);
+  const float cutoff = cloud.cutoff;  // tiny-scale and huge-scale rescale it with the cloud
   const float e = geo::margin(cutoff, largest_magnitude(cloud));
   const float c2 = raycut::squared_cutoff(cutoff);
   std::size_t pairs = 0;
@@ -45,7 +46,8 @@ TEST_P(RayGeometry, KeepsEveryInRangePairExactlyOnce) {
     }
   }
   // Lattices of spacing C have no pair in range (all at or beyond the cutoff).
-  if (cloud.size() > 2 && family.find("-k1") == std::string::npos) {
+  // So has the rod (10^6 C long: ~0.0014 neighbours per point at 700 points).
+  if (cloud.size() > 2 && family.find("-k1") == std::string::npos && family != "rod-1e6") {
     EXPECT_GT(pairs, 0u);
   }
 }

@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "raycut/engine.hpp"
 
@@ -21,5 +22,17 @@ struct NeighbourComparison {
 
 // Per-target comparison as multisets (order within a row ignored; a duplicate is a difference).
 NeighbourComparison compare_neighbours(const NeighbourList& got, const NeighbourList& expected);
+
+// |got - want| / scale, NaN-aware, for comparing kernel results: +inf (a failure at every
+// tolerance) when either value is NaN, when exactly one is infinite, or when they are infinities
+// of opposite signs; 0 when both are the same infinity. So a NaN is never swallowed by a max()
+// and an overflow on one side only is a mismatch.
+double scaled_difference(double got, double want, double scale);
+
+// The largest scaled_difference(got[k], want[k], scale[k / stride]) over all k (stride: values
+// per scale, e.g. 3 for forces with one scale per target); +inf when the sizes differ, 0 when
+// both are empty.
+double max_scaled_difference(const std::vector<float>& got, const std::vector<float>& want,
+                             const std::vector<double>& scale, std::size_t stride = 1);
 
 }  // namespace raycut

@@ -55,6 +55,24 @@ std::vector<std::string> family_names();
 //                       not depend on n) and, last, one point 1e5 C away on a diagonal.
 //   offset-1e3/-1e5     the uniform cloud (same seed) plus 1e3 / 1e5 on every coordinate.
 //   large-cutoff        uniform in a cube of side C/4: every pair is in range.
+// Extreme scales (spec NEIGHBOURS.md, 1; docs/limits.md), all exactly n points:
+//   tiny-scale          the uniform cloud times 2^-50 (~8.9e-16), and the cloud's cutoff too
+//                       (PointCloud::cutoff = C 2^-50): exactly uniform's pairs, tiny numbers.
+//   huge-scale          the same times 2^50 (~1.1e15). With C = 1 both lie well inside the
+//                       supported cutoffs [2^-60, 2^60]; C = 2^-10 / 2^10 puts them at its edges.
+//   offset-1e7/-1e15    uniform points + 1e7 / 1e15 on every coordinate, rounded to float once;
+//                       the cube is widened to cbrt(n/4) float spacings where that is wider, so
+//                       ~4 points at most share a float site. There the float spacing (1 at 1e7,
+//                       2^26 at 1e15) reaches or exceeds C: most pairs are coincident or exactly
+//                       one spacing apart (at the cutoff when C = 1).
+//   cauchy              multivariate Cauchy around the origin (~25 neighbours at the centre): a
+//                       heavy tail, the farthest points ~n cube-sides away.
+//   groups-far          a uniform cube at the origin (n - 3 floor(n/4) points) and three square
+//                       sheets of floor(n/4) points (~20 neighbours) at x = 1e10 C, y = 1e20 C,
+//                       z = 1e30 C (capped at 1e36), each exactly flat along its far axis.
+//   sheet-flat          a square sheet, ~20 neighbours, z = 0 exactly.
+//   sheet-thin          the same with z uniform in [0, 1e-6 C).
+//   rod-1e6             uniform in a box C x C x 10^6 C (few neighbours; a 10^6-cell grid).
 // Throws Error(invalid_argument) for an unknown name (naming the known ones) and for a cutoff
 // that is not finite and > 0.
 PointCloud make_family(std::string_view name, std::size_t n, float cutoff, std::uint64_t seed);

@@ -63,6 +63,16 @@ struct KernelOptions {
   SphInputs sph;
 };
 
+// Throws Error(invalid_argument), naming the kernel, the cutoff and why, when `kernel` cannot be
+// evaluated in float at this cutoff (and these options) without overflow or underflow of its
+// largest single-pair term: smooth (energy C^4, force C^3), sph_density (the factor
+// m 315 / (64 pi h^9) and the raw term h^6), sph_force (the factor 45 / (pi h^6) and the terms
+// m 45 / (pi h^6) h^2 (pressure, per unit p / rho) and mu m 45 / (pi h^6) h (viscosity, per unit
+// v / rho)), lj (4 eps sigma^6 and sigma^6; no cutoff-dependent bound: its growth as r -> 0 is
+// the physics). count never throws. Everything is evaluated in double from the formulas of
+// include/raycut/kernels.hpp. Engine::run calls it before any work (docs/limits.md).
+void validate_kernel_range(Kernel kernel, const KernelOptions& options, float cutoff);
+
 // Where the built-in kernels write, per target (the caller's index); null where not produced.
 struct KernelOutputs {
   std::uint32_t* count = nullptr;  // 1 per target

@@ -1,7 +1,9 @@
 #include "raycut/compare.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <iterator>
+#include <limits>
 #include <sstream>
 #include <vector>
 
@@ -48,6 +50,27 @@ NeighbourComparison compare_neighbours(const NeighbourList& got, const Neighbour
     if (g != w && c.differing_targets++ == 0) c.first_difference = describe(i, g, w);
   }
   return c;
+}
+
+double scaled_difference(double got, double want, double scale) {
+  constexpr double failure = std::numeric_limits<double>::infinity();
+  if (std::isnan(got) || std::isnan(want)) return failure;
+  if (std::isinf(got) || std::isinf(want)) return got == want ? 0.0 : failure;
+  const double d = std::fabs(got - want) / scale;
+  return std::isnan(d) ? failure : d;  // a NaN or zero scale
+}
+
+double max_scaled_difference(const std::vector<float>& got, const std::vector<float>& want,
+                             const std::vector<double>& scale, std::size_t stride) {
+  if (got.size() != want.size() || scale.size() * stride < want.size())
+    return std::numeric_limits<double>::infinity();
+  double worst = 0;
+  for (std::size_t k = 0; k < want.size(); ++k) {
+    const double d =
+        got[k] == want[k] ? 0.0 : scaled_difference(got[k], want[k], scale[k / stride]);
+    if (!(d <= worst)) worst = d;  // NaN-safe max (d is never NaN here)
+  }
+  return worst;
 }
 
 }  // namespace raycut

@@ -198,6 +198,7 @@ void Engine::run(Kernel kernel, const KernelOptions& options) {
   detail::Method& m = impl("run");
   if (!built_) throw Error(ErrorCode::invalid_argument, "Engine::run() called before build()");
   has_run_ = false;  // a run that throws leaves no results behind
+  validate_kernel_range(kernel, options, cutoff_);
   if (size_ > 0) {
     const auto start = Clock::now();
     m.compute(kernel, options);

@@ -313,6 +313,108 @@ std::vector<float> large_cutoff(std::size_t n, double cutoff, std::uint64_t seed
   return xyz;
 }
 
+// ---- extreme scales (spec NEIGHBOURS.md, 1) ----------------------------------------------------
+
+// The uniform cloud times a power of two (exact: the same float mantissas, so the same pairs).
+std::vector<float> scaled(std::vector<float> xyz, int exponent) {
+  for (float& v : xyz) v = std::ldexp(v, exponent);
+  return xyz;
+}
+
+// Spacing of floats at `value` (> 0).
+double float_ulp(double value) {
+  const auto f = static_cast<float>(value);
+  return static_cast<double>(std::nextafter(f, std::numeric_limits<float>::infinity())) - f;
+}
+
+// Uniform points offset by `by` on every coordinate, rounded to float once. The cube's side is
+// the uniform family's, or cbrt(n / 4) float spacings at `by` where that is wider, so that on
+// average at most ~4 points fall on one float site (beyond that the float grid is coarser than
+// the cutoff and every point of a site is coincident with the others).
+std::vector<float> far_offset(std::size_t n, double cutoff, double by, std::uint64_t seed) {
+  SplitMix64 rng = stream_for(seed, 20);
+  const double side =
+      std::max(uniform_side(n, cutoff), std::cbrt(static_cast<double>(n) / 4.0) * float_ulp(by));
+  std::vector<float> xyz;
+  xyz.reserve(3 * n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Point p = uniform_in_cube(rng, side);
+    push(xyz, by + p.x, by + p.y, by + p.z);
+  }
+  return xyz;
+}
+
+// Multivariate Cauchy (Student t, 1 degree of freedom): a g / |w|, g standard normal in 3D, w
+// standard normal, scale a such that about 25 points lie within C of the centre. Its tail is
+// heavy: the farthest of n points is ~n a away (|w| is floored at 1e-12).
+std::vector<float> cauchy(std::size_t n, double cutoff, std::uint64_t seed) {
+  SplitMix64 rng = stream_for(seed, 21);
+  // Density at the centre n / (pi^2 a^3); times (4/3) pi C^3 = 25 neighbours.
+  const double a = cutoff * std::cbrt(static_cast<double>(n) * (4.0 / 3.0 * std::numbers::pi) /
+                                      (25.0 * std::numbers::pi * std::numbers::pi));
+  const double scale = std::max(a, cutoff);
+  std::vector<float> xyz;
+  xyz.reserve(3 * n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double x = rng.normal(), y = rng.normal(), z = rng.normal();
+    const double w = std::max(std::fabs(rng.normal()), 1e-12);
+    push(xyz, scale * x / w, scale * y / w, scale * z / w);
+  }
+  return xyz;
+}
+
+// Side of a square in which n points have about 20 neighbours: n pi C^2 / side^2 = 20.
+double sheet_side(std::size_t n, double cutoff) {
+  return std::max(cutoff, cutoff * std::sqrt(static_cast<double>(n) * std::numbers::pi / 20.0));
+}
+
+// A square sheet of n points, side sheet_side, normal to `axis`, at `height` + [0, thickness)
+// along it.
+void push_sheet(std::vector<float>& xyz, SplitMix64& rng, std::size_t n, double cutoff, int axis,
+                double height, double thickness) {
+  const double side = sheet_side(n, cutoff);
+  for (std::size_t i = 0; i < n; ++i) {
+    double p[3];
+    p[(axis + 1) % 3] = rng.uniform_double() * side;
+    p[(axis + 2) % 3] = rng.uniform_double() * side;
+    p[axis] = height + rng.uniform_double() * thickness;
+    push(xyz, p[0], p[1], p[2]);
+  }
+}
+
+// Four groups of ~n/4 points: a uniform cube at the origin and three square sheets, at
+// x = 1e10 C, y = 1e20 C and z = 1e30 C (at most 1e36, so that C up to 1e18 stays finite). A
+// sheet keeps its far coordinate exactly equal on all its points, and its other two near 0,
+// where floats are fine: far groups without the loss of resolution a far cube would have.
+std::vector<float> groups_far(std::size_t n, double cutoff, std::uint64_t seed) {
+  SplitMix64 rng = stream_for(seed, 22);
+  std::vector<float> xyz;
+  xyz.reserve(3 * n);
+  const std::size_t cube = n - 3 * (n / 4);
+  const double side = uniform_side(cube, cutoff);
+  for (std::size_t i = 0; i < cube; ++i) {
+    const Point p = uniform_in_cube(rng, side);
+    push(xyz, p.x, p.y, p.z);
+  }
+  for (int g = 1; g <= 3; ++g) {
+    const double far = std::min(std::pow(10.0, 10.0 * g) * cutoff, 1e36);
+    push_sheet(xyz, rng, n / 4, cutoff, g - 1, far, 0.0);
+  }
+  return xyz;
+}
+
+// Uniform in a box C x C x 10^6 C.
+std::vector<float> rod(std::size_t n, double cutoff, std::uint64_t seed) {
+  SplitMix64 rng = stream_for(seed, 24);
+  std::vector<float> xyz;
+  xyz.reserve(3 * n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double x = rng.uniform_double() * cutoff, y = rng.uniform_double() * cutoff;
+    push(xyz, x, y, rng.uniform_double() * 1e6 * cutoff);
+  }
+  return xyz;
+}
+
 }  // namespace
 
 // ---- benchmark suites ----------------------------------------------------------------------
@@ -379,7 +481,16 @@ std::vector<std::string> family_names() {
           "gaussian-outlier",
           "offset-1e3",
           "offset-1e5",
-          "large-cutoff"};
+          "large-cutoff",
+          "tiny-scale",
+          "huge-scale",
+          "offset-1e7",
+          "offset-1e15",
+          "cauchy",
+          "groups-far",
+          "sheet-flat",
+          "sheet-thin",
+          "rod-1e6"};
 }
 
 PointCloud make_family(std::string_view name, std::size_t n, float cutoff, std::uint64_t seed) {
@@ -415,6 +526,29 @@ PointCloud make_family(std::string_view name, std::size_t n, float cutoff, std::
     cloud.xyz = offset(uniform_cloud(n, c, seed), 1e5f);
   } else if (name == "large-cutoff") {
     cloud.xyz = large_cutoff(n, c, seed);
+  } else if (name == "tiny-scale" || name == "huge-scale") {
+    const int exponent = name == "tiny-scale" ? -50 : 50;
+    cloud.xyz = scaled(uniform_cloud(n, c, seed), exponent);
+    cloud.cutoff = std::ldexp(cutoff, exponent);
+    if (!std::isfinite(cloud.cutoff) || !(cloud.cutoff > 0)) {
+      throw Error(ErrorCode::invalid_argument, std::string(name) + " scales the cutoff by 2^" +
+                                                   std::to_string(exponent) + ": " +
+                                                   std::to_string(cutoff) + " leaves float range");
+    }
+  } else if (name == "offset-1e7") {
+    cloud.xyz = far_offset(n, c, 1e7, seed);
+  } else if (name == "offset-1e15") {
+    cloud.xyz = far_offset(n, c, 1e15, seed);
+  } else if (name == "cauchy") {
+    cloud.xyz = cauchy(n, c, seed);
+  } else if (name == "groups-far") {
+    cloud.xyz = groups_far(n, c, seed);
+  } else if (name == "sheet-flat" || name == "sheet-thin") {
+    SplitMix64 rng = stream_for(seed, 23);
+    cloud.xyz.reserve(3 * n);
+    push_sheet(cloud.xyz, rng, n, c, 2, 0.0, name == "sheet-flat" ? 0.0 : 1e-6 * c);
+  } else if (name == "rod-1e6") {
+    cloud.xyz = rod(n, c, seed);
   } else {
     throw Error(ErrorCode::invalid_argument, "unknown input family '" + std::string(name) +
                                                  "' (known: " + join(family_names()) + ")");

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <new>
 #include <stdexcept>
 #include <string>
@@ -10,11 +11,25 @@
 
 namespace raycut::detail {
 
+// A value in messages: three significant digits.
+std::string number(double value) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3g", value);
+  return buf;
+}
+
 void validate_cutoff(float cutoff) {
   if (!std::isfinite(cutoff) || !(cutoff > 0.0f))
     throw Error(ErrorCode::invalid_argument,
-                "cutoff must be finite and > 0, got " + std::to_string(cutoff));
+                "cutoff must be finite and > 0, got " + number(cutoff));
+  if (cutoff < min_cutoff || cutoff > max_cutoff)
+    throw Error(ErrorCode::invalid_argument,
+                "cutoff " + number(cutoff) + " is outside the supported range [2^-60, 2^60] = [" +
+                    number(min_cutoff) + ", " + number(max_cutoff) +
+                    "]: beyond it the squared cutoff is not a normal float and the float "
+                    "predicate would be wrong (scale your coordinates and cutoff into it)");
 }
+
 
 std::size_t first_non_finite_host(const float* xyz, std::size_t n) {
   std::size_t first = n;
@@ -63,3 +78,72 @@ std::string format_bytes(double bytes) {
 }
 
 }  // namespace raycut::detail
+
+namespace raycut {
+
+using detail::number;
+
+void validate_kernel_range(Kernel kernel, const KernelOptions& options, float cutoff) {
+  constexpr double pi = 3.14159265358979;  // as kernels.hpp (its float pi, widened)
+  constexpr double float_max = std::numeric_limits<float>::max();
+  constexpr double float_min = std::numeric_limits<float>::min();  // smallest normal
+  const std::string name = to_string(kernel);
+  // `value` must be a finite float and, unless it is legitimately zero, not below the smallest
+  // normal float (a subnormal or zero largest term has lost its relative precision).
+  auto require = [&](const char* what, double value, bool may_be_zero) {
+    const double magnitude = std::fabs(value);
+    const bool overflows = !(magnitude <= float_max);
+    const bool underflows = !overflows && magnitude < float_min && !(may_be_zero && value == 0);
+    if (!overflows && !underflows) return;
+    throw Error(ErrorCode::invalid_argument,
+                "kernel " + name + " cannot be evaluated in float at cutoff " + number(cutoff) +
+                    ": its " + what + " = " + number(value) +
+                    (overflows ? " overflows" : " underflows") + " float (range [" +
+                    number(float_min) + ", " + number(float_max) + "])" +
+                    (kernel == Kernel::smooth
+                         ? "; smooth supports cutoffs in [" + number(std::pow(float_min, 0.25)) +
+                               ", " + number(std::pow(float_max, 0.25)) + "]"
+                         : std::string()));
+  };
+  // What the kernels see: the squared cutoff rounded to float, h its float square root.
+  const double c2 = static_cast<float>(static_cast<double>(cutoff) * cutoff);
+  const double h = std::sqrt(static_cast<float>(c2));
+  const double mass = options.sph_mass;
+  switch (kernel) {
+    case Kernel::count:
+      return;
+    case Kernel::lj: {
+      const double sigma6 = std::pow(static_cast<double>(options.lj_sigma), 6);
+      const bool zero = options.lj_sigma == 0.0f || options.lj_epsilon == 0.0f;
+      require("sigma^6", sigma6, options.lj_sigma == 0.0f);
+      require("factor 4 eps sigma^6", 4.0 * options.lj_epsilon * sigma6, zero);
+      return;
+    }
+    case Kernel::smooth:
+      require("largest energy term (C^2)^2", c2 * c2, false);
+      require("largest force term C^2 * C", c2 * cutoff, false);
+      return;
+    case Kernel::sph_density: {
+      const double factor = mass * 315.0 / (64.0 * pi * std::pow(h, 9));
+      require("factor m 315 / (64 pi h^9)", factor, mass == 0);
+      require("largest raw term (h^2)^3", c2 * c2 * c2, false);
+      require("largest pair term m 315 / (64 pi h^9) h^6", factor * c2 * c2 * c2, mass == 0);
+      return;
+    }
+    case Kernel::sph_force: {
+      const double spiky = 45.0 / (pi * std::pow(h, 6));
+      const double viscosity = options.sph_viscosity;
+      require("factor 45 / (pi h^6)", spiky, false);
+      require("pressure factor per unit p / rho, m 45 / (pi h^6)", mass * spiky, mass == 0);
+      require("viscosity factor per unit v / rho, mu m 45 / (pi h^6)", viscosity * mass * spiky,
+              viscosity * mass == 0);
+      require("largest pressure term per unit p / rho, m 45 / (pi h^6) h^2", mass * spiky * c2,
+              mass == 0);
+      require("largest viscosity term per unit v / rho, mu m 45 / (pi h^6) h",
+              viscosity * mass * spiky * h, viscosity * mass == 0);
+      return;
+    }
+  }
+}
+
+}  // namespace raycut

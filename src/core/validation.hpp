@@ -9,7 +9,15 @@
 
 namespace raycut::detail {
 
-// Throws Error(invalid_argument) unless the cutoff is finite and > 0.
+// The cutoffs raycut supports: [2^-60, 2^60] (about [8.7e-19, 1.2e18]). Inside it C*C is a
+// normal float with 6 binades to spare on either side, so the shared float predicate
+// fma(dz, dz, fma(dy, dy, dx * dx)) < C*C agrees with the real-number answer for every pair
+// whose distance is not within ~3e-7 relative of C (docs/limits.md gives the argument).
+inline constexpr float min_cutoff = 0x1p-60f;
+inline constexpr float max_cutoff = 0x1p60f;
+
+// Throws Error(invalid_argument) unless the cutoff is finite and in [min_cutoff, max_cutoff];
+// the message names the supported range.
 void validate_cutoff(float cutoff);
 
 // Index of the first particle with a non-finite coordinate in host memory, or n if none.
@@ -21,6 +29,9 @@ std::size_t first_non_finite_host(const float* xyz, std::size_t n);
 // Sizes list.indices for `pairs` entries; throws Error(out_of_memory) saying how much a list
 // that does not fit in host memory would need, instead of std::bad_alloc.
 void allocate_indices(NeighbourList& list, std::uint64_t pairs);
+
+// A value in messages: three significant digits.
+std::string number(double value);
 
 // "1.50 GiB", "12.0 MiB": for memory messages.
 std::string format_bytes(double bytes);

@@ -16,6 +16,7 @@ class BruteForceCpu final : public HostMethod<BruteForceCpu> {
   }
 
   void build(const float* xyz, std::size_t n, float cutoff) override {
+    require_indexable(n, "brute-force");
     xyz_.assign(xyz, xyz + 3 * n);
     set_positions(xyz_.data(), n, cutoff);
   }

@@ -2,17 +2,51 @@
 // only non-empty cells are stored (sorted keys + start offsets), so a far outlier or a sphere
 // surface never allocates a dense grid. Each cell's up-to-27 non-empty neighbours are found
 // once, by binary search, at build time.
+//
+// Cells are never coarsened: the key of a cell is its three unbounded axis coordinates (see
+// CellKey), not a row-major index into a bounded box, so one particle at 1e9 cutoffs does not
+// widen the cells of all the others (which made the list O(N^2): counting 100k uniform points
+// plus one at 1e9 took 10-17 s instead of 0.01 s).
 #include <algorithm>
+#include <bit>
+#include <cmath>
+#include <compare>
 #include <cstdint>
 #include <numeric>
+#include <string>
 #include <vector>
 
-#include "raycut/detail/cell_grid.hpp"
 #include "core/method.hpp"
 #include "cpu/host_method.hpp"
 
 namespace raycut::detail {
 namespace {
+
+// One label per axis, from the particle's float coordinate x and the cell width w (C plus a
+// relative margin of 1e-4):
+// - near: |floor(x / w)| < 2^30: the cell index floor(x / w) computed in double (relative error
+//   ~1e-16, far inside the margin, so a pair the float predicate calls in range is at most one
+//   cell apart), biased by 2^31 so that labels are unsigned and ordered like the index;
+// - far: beyond, where adjacent floats are more than 16 C apart, so a pair in range has exactly
+//   equal coordinates on this axis: the label is the float's bit pattern with the top bit set
+//   (never equal to a near label), and the cell has no neighbour cells along this axis.
+// Every float gets a label (|x / w| <= 2^128 / 2^-60 fits a double), with no box, no clamping and
+// no coarsening; keys compare lexicographically (z, y, x), so near cells sort row-major.
+struct CellKey {
+  std::uint64_t z, y, x;
+  auto operator<=>(const CellKey&) const = default;
+};
+
+constexpr double near_limit = 0x1p30;
+constexpr std::uint64_t near_bias = std::uint64_t{1} << 31;
+constexpr std::uint64_t far_tag = std::uint64_t{1} << 63;
+
+std::uint64_t axis_label(float x, double inverse_width) {
+  const double u = std::floor(static_cast<double>(x) * inverse_width);
+  if (std::fabs(u) < near_limit)
+    return static_cast<std::uint64_t>(static_cast<std::int64_t>(u)) + near_bias;
+  return far_tag | std::bit_cast<std::uint32_t>(x);
+}
 
 class CellListCpu final : public HostMethod<CellListCpu> {
  public:
@@ -29,22 +63,28 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   }
 
   void build(const float* xyz, std::size_t n, float cutoff) override {
+    // Particle indices, slots and cell numbers are 32-bit (NeighbourList::indices is uint32).
+    require_indexable(n, "cell-list");
     xyz_.assign(xyz, xyz + 3 * n);
     set_positions(xyz_.data(), n, cutoff);
-    float lo[3], hi[3];
-    bounding_box(lo, hi);
-    grid_ = make_cell_grid(lo, hi, cutoff);
+    inverse_width_ = 1.0 / (static_cast<double>(cutoff) * (1.0 + width_margin));
 
-    // Sort particles by cell key.
-    std::vector<std::uint64_t> keys(n);
+    // Sort particles by (cell key, index): the entries themselves, not indices into them.
+    struct Entry {
+      CellKey key;
+      std::uint32_t index;
+      auto operator<=>(const Entry&) const = default;
+    };
+    std::vector<Entry> entries(n);
 #pragma omp parallel for schedule(static)
     for (std::size_t i = 0; i < n; ++i)
-      keys[i] = grid_.key_of(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]);
+      entries[i] = {
+          {axis_label(xyz[3 * i + 2], inverse_width_), axis_label(xyz[3 * i + 1], inverse_width_),
+           axis_label(xyz[3 * i], inverse_width_)},
+          static_cast<std::uint32_t>(i)};
+    std::sort(entries.begin(), entries.end());
     order_.resize(n);
-    std::iota(order_.begin(), order_.end(), 0u);
-    std::sort(order_.begin(), order_.end(), [&](std::uint32_t a, std::uint32_t b) {
-      return keys[a] < keys[b] || (keys[a] == keys[b] && a < b);
-    });
+    for (std::size_t s = 0; s < n; ++s) order_[s] = entries[s].index;
     sorted_xyz_.resize(3 * n);
     for (std::size_t s = 0; s < n; ++s)
       std::copy_n(&xyz[3 * std::size_t{order_[s]}], 3, &sorted_xyz_[3 * s]);
@@ -54,7 +94,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     cell_start_.clear();
     cell_of_particle_.resize(n);
     for (std::size_t s = 0; s < n; ++s) {
-      const std::uint64_t k = keys[order_[s]];
+      const CellKey k = entries[s].key;
       if (cell_keys_.empty() || cell_keys_.back() != k) {
         cell_keys_.push_back(k);
         cell_start_.push_back(static_cast<std::uint32_t>(s));
@@ -70,33 +110,20 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     return order_.size();
   }
 
-  void bounding_box(float lo[3], float hi[3]) const {
-    for (int a = 0; a < 3; ++a) lo[a] = hi[a] = xyz_[a];
-    for (std::size_t i = 0; i < xyz_.size(); i += 3) {
-      for (int a = 0; a < 3; ++a) {
-        lo[a] = std::min(lo[a], xyz_[i + a]);
-        hi[a] = std::max(hi[a], xyz_[i + a]);
-      }
-    }
-  }
-
   // CSR over cells: the non-empty cells within `reach` of each cell (itself included).
   void find_neighbour_cells() {
     const std::size_t cells = cell_keys_.size();
     std::vector<std::vector<std::uint32_t>> per_cell(cells);
 #pragma omp parallel for schedule(dynamic, 64)
     for (std::size_t c = 0; c < cells; ++c) {
-      const std::uint64_t k = cell_keys_[c];
-      const std::int64_t ix = static_cast<std::int64_t>(k % grid_.dims[0]);
-      const std::int64_t iy = static_cast<std::int64_t>((k / grid_.dims[0]) % grid_.dims[1]);
-      const std::int64_t iz = static_cast<std::int64_t>(k / grid_.dims[0] / grid_.dims[1]);
-      for (std::int64_t z = iz - 1; z <= iz + 1; ++z)
-        for (std::int64_t y = iy - 1; y <= iy + 1; ++y)
-          for (std::int64_t x = ix - 1; x <= ix + 1; ++x) {
-            if (x < 0 || y < 0 || z < 0 || x >= grid_.dims[0] || y >= grid_.dims[1] ||
-                z >= grid_.dims[2])
-              continue;
-            const std::uint64_t nk = grid_.key(x, y, z);
+      const CellKey k = cell_keys_[c];
+      // A far label has no neighbours along its axis (offset 0 only).
+      const int rz = (k.z & far_tag) ? 0 : 1, ry = (k.y & far_tag) ? 0 : 1,
+                rx = (k.x & far_tag) ? 0 : 1;
+      for (int dz = -rz; dz <= rz; ++dz)
+        for (int dy = -ry; dy <= ry; ++dy)
+          for (int dx = -rx; dx <= rx; ++dx) {
+            const CellKey nk{k.z + dz, k.y + dy, k.x + dx};
             auto it = std::lower_bound(cell_keys_.begin(), cell_keys_.end(), nk);
             if (it != cell_keys_.end() && *it == nk)
               per_cell[c].push_back(static_cast<std::uint32_t>(it - cell_keys_.begin()));
@@ -112,10 +139,11 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   }
 
   std::vector<float> xyz_;
-  CellGrid grid_;
+  static constexpr double width_margin = 1e-4;  // as CellGrid: far above predicate round-off
+  double inverse_width_ = 1;                     // cells per unit length
   std::vector<std::uint32_t> order_;             // sorted slot -> particle index
   std::vector<float> sorted_xyz_;                // positions in sorted order
-  std::vector<std::uint64_t> cell_keys_;         // non-empty cells, ascending
+  std::vector<CellKey> cell_keys_;               // non-empty cells, ascending
   std::vector<std::uint32_t> cell_start_;        // cell c holds slots [start[c], start[c+1])
   std::vector<std::uint32_t> cell_of_particle_;  // particle index -> cell
   std::vector<std::uint64_t> neighbour_offsets_;

@@ -81,12 +81,15 @@ class HostMethod : public Method {
   }
 
  protected:
+  // Lists index particles with 32 bits: called first by build(), before any copy.
+  static void require_indexable(std::size_t n, const char* method) {
+    if (n >= (std::size_t{1} << 32))
+      throw Error(ErrorCode::invalid_argument,
+                  std::string(method) + " supports fewer than 2^32 = 4294967296 particles " +
+                      "(32-bit indices), got N = " + std::to_string(n));
+  }
   // The positions candidates() reads targets from (caller's order), and the cutoff.
   void set_positions(const float* xyz, std::size_t n, float cutoff) {
-    if (n >= UINT32_MAX)
-      throw Error(ErrorCode::invalid_argument,
-                  "CPU methods index particles with 32 bits: at most 2^32 - 2 particles, got " +
-                      std::to_string(n));
     xyz_ = xyz;
     n_ = n;
     cutoff_squared_ = squared_cutoff(cutoff);
