@@ -240,7 +240,12 @@ PointCloud read_xyz(const std::string& path) {
     fail(path, 2, "missing comment line");
   }
   const std::size_t pos_column = xyz_position_column(line, path, reader.number());
-  cloud.xyz.reserve(3 * std::min<std::size_t>(count, std::size_t{1} << 24));
+  // The count is only a claim: reserve no more than the file can hold (a particle line has at
+  // least 6 bytes, "0 0 0\n"), so that a 10-byte file saying 10^9 allocates nothing large.
+  std::error_code size_error;
+  const auto bytes = std::filesystem::file_size(path, size_error);
+  const std::size_t fits = size_error ? 4096 : static_cast<std::size_t>(bytes / 6 + 1);
+  cloud.xyz.reserve(3 * std::min(count, fits));
   for (std::size_t i = 0; i < count; ++i) {
     if (!reader.next(line)) {
       fail(path, reader.number() + 1,
