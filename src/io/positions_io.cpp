@@ -503,14 +503,13 @@ OutputFile::~OutputFile() {
   if (!committed_ && !temp_.empty()) ::unlink(temp_.c_str());
 }
 
+// Closes and removes the temporary file (the target is left as it was), then throws.
 void OutputFile::fail(const std::string& what) {
-  const int saved = errno;
   if (fd_ >= 0) ::close(fd_);
   fd_ = -1;
   if (!temp_.empty()) ::unlink(temp_.c_str());
   temp_.clear();
   buffer_.clear();
-  errno = saved;
   raycut::fail(path_, what);
 }
 
@@ -541,10 +540,7 @@ void OutputFile::commit() {
     fail(std::string("write failed: ") + std::strerror(errno));
   const int fd = fd_;
   fd_ = -1;
-  if (::close(fd) != 0) {
-    fd_ = -1;
-    fail(std::string("write failed (close): ") + std::strerror(errno));
-  }
+  if (::close(fd) != 0) fail(std::string("write failed (close): ") + std::strerror(errno));
   if (!temp_.empty() && ::rename(temp_.c_str(), target_.c_str()) != 0)
     fail(std::string("cannot rename the finished file into place: ") + std::strerror(errno));
   committed_ = true;

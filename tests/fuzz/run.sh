@@ -46,5 +46,6 @@ if [ "$#" -gt 0 ]; then
 fi
 mkdir -p "$work/corpus"
 # Lines are capped at 1 MiB (tests/test_io.cpp covers that); short inputs explore the parsers.
+# libFuzzer logs every new input; a failure's report (and the crash-* path) comes last.
 "$binary" -max_total_time="$seconds" -rss_limit_mb=2048 -max_len=8192 -timeout=10 \
-  -artifact_prefix="$work/" -print_final_stats=1 "$work/corpus" "$here/corpus"
+  -artifact_prefix="$work/" -print_final_stats=1 "$work/corpus" "$here/corpus" 2>&1 | tail -n 100
