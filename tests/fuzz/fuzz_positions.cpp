@@ -16,8 +16,8 @@ namespace {
 
 std::string scratch_path(const char* extension) {
   const char* dir = std::getenv("RAYCUT_FUZZ_SCRATCH");
-  return std::string(dir != nullptr ? dir : "/tmp") + "/raycut-fuzz-" +
-         std::to_string(::getpid()) + extension;
+  return std::string(dir != nullptr ? dir : "/tmp") + "/raycut-fuzz-" + std::to_string(::getpid()) +
+         extension;
 }
 
 }  // namespace
