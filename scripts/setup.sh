@@ -10,5 +10,6 @@ $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq --no-install-recommends \
   cmake ninja-build g++ make git \
   libgtest-dev libgmock-dev libcli11-dev libpng-dev \
-  clang-format python3 python3-numpy python3-matplotlib
+  clang-format python3 python3-numpy python3-matplotlib \
+  clang libclang-rt-14-dev  # the readers' fuzz test (tests/fuzz: libFuzzer, sanitizers)
 echo "raycut: dependencies installed"

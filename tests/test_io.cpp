@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <unistd.h>
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -12,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "io/files.hpp"
 #include "raycut/error.hpp"
 #include "raycut/generators.hpp"
 #include "raycut/io.hpp"
@@ -229,6 +231,156 @@ TEST_F(PositionsIo, XyzErrorsNameFileAndLine) {
 TEST_F(PositionsIo, UnwritablePathNamesThePath) {
   const std::string file = path("no/such/dir/out.csv");
   EXPECT_TRUE(contains(io_error([&] { write_csv(file, PointCloud{}); }), file));
+}
+
+// Issue 12: hostile inputs give clear errors, never a crash, a hang or a silent misreading.
+
+TEST_F(PositionsIo, XyzHugePropertiesCountIsAnError) {
+  const std::string file = write_file(
+      "huge.xyz", "1\nProperties=species:S:1:mass:R:18446744073709551614:pos:R:3\nH 1 2 3 4\n");
+  const std::string message = io_error([&] { read_positions(file); });
+  EXPECT_TRUE(contains(message, file + ":2:")) << message;
+  EXPECT_TRUE(contains(message, "too large")) << message;
+  const std::string sum =
+      write_file("sum.xyz", "1\nProperties=a:R:500000:b:R:500000:c:R:500000:pos:R:3\nH 1 2 3\n");
+  EXPECT_TRUE(contains(io_error([&] { read_positions(sum); }), sum + ":2:"));
+}
+
+TEST_F(PositionsIo, LineWithoutEndIsCappedNotRead) {
+  const std::string big = write_file("big.csv", std::string(3 << 20, '7'));
+  const std::string message = io_error([&] { read_positions(big); });
+  EXPECT_TRUE(contains(message, big + ":1: line longer than 1 MiB")) << message;
+  const std::string zero = path("zero.xyz");
+  fs::create_symlink("/dev/zero", zero);
+  EXPECT_TRUE(contains(io_error([&] { read_positions(zero); }), zero + ":1: contains a NUL"));
+  const std::string zero_csv = path("zero.csv");
+  fs::create_symlink("/dev/zero", zero_csv);
+  EXPECT_TRUE(contains(io_error([&] { read_positions(zero_csv); }), zero_csv + ":1:"));
+}
+
+TEST_F(PositionsIo, OneLineCsvWithoutHeaderIsData) {
+  const std::vector<float> expected = {1, 2, 3};
+  EXPECT_EQ(read_positions(write_file("one.csv", "1,2,3")).xyz, expected);
+  EXPECT_EQ(read_positions(write_file("one_nl.csv", "1,2,3\n")).xyz, expected);
+  // Not a header: a line without commas, or with a number in it, is data and must parse.
+  const std::string spaces = write_file("spaces.csv", "1 2 3\n");
+  EXPECT_TRUE(contains(io_error([&] { read_positions(spaces); }), spaces + ":1: expected 3"));
+  const std::string half = write_file("half.csv", "x,2,z\n");
+  EXPECT_TRUE(contains(io_error([&] { read_positions(half); }), half + ":1:"));
+  EXPECT_EQ(read_positions(write_file("header.csv", "x,y,z\n")).size(), 0u);
+}
+
+TEST_F(PositionsIo, XyzMoreAtomsThanTheCountIsAnError) {
+  const std::string file = write_file("two.xyz", "1\nc\nH 0 0 0\nH 1 1 1\n");
+  const std::string message = io_error([&] { read_positions(file); });
+  EXPECT_TRUE(contains(message, file + ":4:")) << message;
+  EXPECT_TRUE(contains(message, "line 1 says 1 particles")) << message;
+  // Blank lines after the frame, and a next frame, are fine.
+  EXPECT_EQ(read_positions(write_file("blank.xyz", "1\nc\nH 0 0 0\n\n  \n")).size(), 1u);
+  EXPECT_EQ(
+      read_positions(write_file("frames.xyz", "1\nc\nH 0 0 0\n\n2\nc\nH 1 1 1\nH 2 2 2\n")).size(),
+      1u);
+}
+
+TEST_F(PositionsIo, ByteOrderMarkIsSkipped) {
+  const std::vector<float> expected = {1, 2, 3};
+  EXPECT_EQ(read_positions(write_file("bom.csv", "\xEF\xBB\xBFx,y,z\n1,2,3\n")).xyz, expected);
+  EXPECT_EQ(read_positions(write_file("bom_data.csv",
+                                      "\xEF\xBB\xBF"
+                                      "1,2,3\n"))
+                .xyz,
+            expected);
+  EXPECT_EQ(read_positions(write_file("bom.xyz",
+                                      "\xEF\xBB\xBF"
+                                      "1\nc\nH 1 2 3\n"))
+                .xyz,
+            expected);
+}
+
+TEST_F(PositionsIo, MessagesEscapeAndShortenTokens) {
+  const std::string control = write_file("ctl.csv", std::string("1,2,\x01z\x1b[31m\n", 12));
+  const std::string message = io_error([&] { read_positions(control); });
+  EXPECT_TRUE(contains(message, "'\\x01z\\x1B[31m'")) << message;
+  const std::string nul_token = write_file("nul.xyz", std::string("1\nc\nH 1 2 3\x00\n", 15));
+  EXPECT_TRUE(contains(io_error([&] { read_positions(nul_token); }), nul_token + ":3: contains"));
+  const std::string long_token = write_file("long.csv", "1,2," + std::string(900000, 'q') + "\n");
+  const std::string long_message = io_error([&] { read_positions(long_token); });
+  EXPECT_LT(long_message.size(), 400u) << long_message.substr(0, 400);
+  EXPECT_TRUE(contains(long_message, "... (900000 bytes)")) << long_message.substr(0, 400);
+  EXPECT_EQ(io::printable("a\nb\tc"), "a\\nb\\tc");
+  EXPECT_EQ(io::printable("\xC3\xA9\xC3\xA9", 3), "\xC3\xA9... (4 bytes)");  // whole characters
+}
+
+TEST_F(PositionsIo, WritePositionsPicksTheFormatCaseInsensitively) {
+  PointCloud cloud;
+  cloud.xyz = {1, 2, 3};
+  write_positions(path("upper.CSV"), cloud);
+  std::ifstream in(path("upper.CSV"));
+  std::string header;
+  std::getline(in, header);
+  EXPECT_EQ(header, "x,y,z");
+  write_positions(path("upper.XYZ"), cloud);
+  EXPECT_EQ(read_positions(path("upper.XYZ")).xyz, cloud.xyz);
+  EXPECT_TRUE(contains(io_error([&] { write_positions(path("out.txt"), cloud); }), ".txt"));
+  EXPECT_FALSE(fs::exists(path("out.txt")));
+}
+
+// No file in the folder but these: no temporary file is left behind.
+std::vector<std::string> names_in(const fs::path& dir) {
+  std::vector<std::string> names;
+  for (const auto& entry : fs::directory_iterator(dir)) names.push_back(entry.path().filename());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+TEST_F(PositionsIo, WriteToAFullDeviceFails) {
+  PointCloud cloud = make_family("uniform", 1000, 1.0f, 3);
+  for (const auto& write : {write_csv, write_xyz}) {
+    const std::string message = io_error([&] { write("/dev/full", cloud); });
+    EXPECT_TRUE(contains(message, "/dev/full: write failed: No space left")) << message;
+  }
+  write_csv("/dev/null", cloud);  // a device is written in place
+}
+
+TEST_F(PositionsIo, WriteToAnUnwritableFolderFailsAndLeavesNothing) {
+  const PointCloud cloud = make_family("uniform", 10, 1.0f, 3);
+  for (const std::string& file : {path("missing/out.csv"), std::string("/proc/raycut-out.csv")}) {
+    const std::string message = io_error([&] { write_csv(file, cloud); });
+    EXPECT_TRUE(contains(message, file + ": cannot write in")) << message;
+  }
+  const std::string directory = path("folder.xyz");
+  fs::create_directories(directory);
+  EXPECT_TRUE(contains(io_error([&] { write_xyz(directory, cloud); }), "is a directory"));
+}
+
+TEST_F(PositionsIo, OutputFileAppearsWholeOrNotAtAll) {
+  const std::string file = write_file("keep.csv", "old\n");
+  {
+    io::OutputFile out(file);
+    out.write("new\n");
+    out.flush();
+    EXPECT_EQ(names_in(path("")).size(), 2u);  // the file and the temporary file
+  }                                            // no commit: an error happened
+  std::ifstream in(file);
+  std::string line;
+  std::getline(in, line);
+  EXPECT_EQ(line, "old");
+  EXPECT_EQ(names_in(path("")), std::vector<std::string>{"keep.csv"});
+  {
+    io::OutputFile out(file, io::OutputFile::Mode::append);
+    EXPECT_FALSE(out.was_empty());
+    out.write("more\n");
+    out.commit();
+  }
+  std::ifstream again(file);
+  std::string all((std::istreambuf_iterator<char>(again)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(all, "old\nmore\n");
+  // A symbolic link is followed: its target is replaced, the link stays.
+  fs::create_symlink("keep.csv", path("link.csv"));
+  write_csv(path("link.csv"), PointCloud{});
+  EXPECT_TRUE(fs::is_symlink(path("link.csv")));
+  EXPECT_EQ(read_positions(file).size(), 0u);
+  EXPECT_EQ(names_in(path("")), (std::vector<std::string>{"keep.csv", "link.csv"}));
 }
 
 }  // namespace

@@ -7,7 +7,6 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <memory>
 #include <optional>
@@ -16,6 +15,7 @@
 #include <unistd.h>
 
 #include "commands.hpp"
+#include "io/files.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/generators.hpp"
 
@@ -78,10 +78,10 @@ std::vector<std::string> run_paper_binary(const std::string& binary, const std::
 
   // (boxDiv, N) -> per-repetition (init, compute) milliseconds.
   std::map<std::pair<int, std::size_t>, std::vector<std::pair<double, double>>> runs;
-  std::ifstream in(results);
+  io::LineReader in(results.string());
   std::string line;
-  std::getline(in, line);  // header
-  while (std::getline(in, line)) {
+  in.next(line);  // header
+  while (in.next(line)) {
     std::vector<std::string> f;
     std::stringstream ss(line);
     for (std::string cell; std::getline(ss, cell, ',');) f.push_back(cell);
@@ -118,10 +118,12 @@ std::vector<std::string> run_paper_binary(const std::string& binary, const std::
 constexpr double noisy_spread = 1.5;
 
 // Warm-up (and the pair count), then o.reps timed build + run (o.large_reps above o.large_n
-// particles); one CSV row per timer, whose reps column says how many were timed.
-void bench_method(const BenchOptions& o, const std::string& method, Kernel kernel,
-                  const PointCloud& cloud, int param, int p, std::optional<DeviceArray>& on_device,
-                  const std::string& environment, std::ofstream& csv) {
+// particles); returns one CSV row per timer, whose reps column says how many were timed (written
+// by the caller, so that a failing output is not mistaken for a failing method).
+std::string bench_method(const BenchOptions& o, const std::string& method, Kernel kernel,
+                         const PointCloud& cloud, int param, int p,
+                         std::optional<DeviceArray>& on_device, const std::string& environment) {
+  std::string rows;
   Engine engine(method);
   PositionsView view{cloud.xyz.data(), cloud.size(), MemorySpace::host};
   if (engine.space() == MemorySpace::device) {
@@ -153,9 +155,8 @@ void bench_method(const BenchOptions& o, const std::string& method, Kernel kerne
         static_cast<unsigned long long>(pairs), median(s.build), median(s.compute), median(s.total),
         *std::min_element(s.total.begin(), s.total.end()),
         *std::max_element(s.total.begin(), s.total.end()), reps, timer, environment.c_str());
-    csv << line;
+    rows += line;
   }
-  csv.flush();
   std::fprintf(stderr, "      build %.3f + compute %.3f ms (host, median)\n", median(host.build),
                median(host.compute));
   // Lent machines have moments where one configuration runs several times slower: say so, so
@@ -167,6 +168,7 @@ void bench_method(const BenchOptions& o, const std::string& method, Kernel kerne
                  "      warning: noisy: the slowest repetition took %.1fx the fastest; rerun this "
                  "configuration before trusting its median\n",
                  slowest / fastest);
+  return rows;
 }
 
 int run_bench(const BenchOptions& o) {
@@ -180,31 +182,36 @@ int run_bench(const BenchOptions& o) {
   const std::string environment = environment_columns(sys, true);
   const std::string gpu = environment.substr(0, environment.find(','));
 
-  std::ofstream csv(o.out);
-  if (!csv) throw Error(ErrorCode::io, o.out + ": cannot open for writing");
-  csv << "suite,method,param,p,N,cutoff,pairs,build_ms,compute_ms,total_ms,total_ms_min,"
-         "total_ms_max,reps,timer,gpu,driver,cuda,optix\n";
+  io::OutputFile csv(o.out);  // before the run: an unwritable path fails now, not at the end
+  csv.write(
+      "suite,method,param,p,N,cutoff,pairs,build_ms,compute_ms,total_ms,total_ms_min,"
+      "total_ms_max,reps,timer,gpu,driver,cuda,optix\n");
   std::fprintf(stderr, "raycut bench: %s suite, kernel %s, %d reps, on %s -> %s\n", o.suite.c_str(),
                o.kernel.c_str(), o.reps, gpu.c_str(), o.out.c_str());
 
   std::size_t configs = 0, done = 0;
   for (int param : params)
     for (int p : o.ps)
-      if (o.max_n == 0 || suite_size(param, p) <= o.max_n) ++configs;
+      if (o.max_n == 0 || suite_particles(param, p) <= o.max_n) ++configs;
 
   for (int param : params) {
     for (int p : o.ps) {
-      if (o.max_n != 0 && suite_size(param, p) > o.max_n) continue;
-      const PointCloud cloud = suite_cloud(o.suite, param, p, o.seed);
+      if (o.max_n != 0 && suite_particles(param, p) > o.max_n) continue;
+      // Host memory from below: positions and the pair counts, 16 bytes a particle (a GPU method's
+      // structures are on the device, which the engine checks itself).
+      const PointCloud cloud = suite_cloud(o.suite, param, p, o.seed, 16);
       std::optional<DeviceArray> on_device;
       for (const auto& method : methods) {
+        std::string rows;
         try {
-          bench_method(o, method, kernel, cloud, param, p, on_device, environment, csv);
+          rows = bench_method(o, method, kernel, cloud, param, p, on_device, environment);
         } catch (const Error& e) {  // e.g. a dense grid that does not fit: say so, go on
           std::fprintf(stderr, "  [%zu/%zu] %s param=%d p=%d N=%zu %s: skipped: %s\n", done + 1,
                        configs, o.suite.c_str(), param, p, cloud.size(), method.c_str(), e.what());
           continue;
         }
+        csv.write(rows);
+        csv.flush();  // into the temporary file: a run killed half-way keeps its rows there
         std::fprintf(stderr, "  [%zu/%zu] %s param=%d p=%d N=%zu %s: done\n", done + 1, configs,
                      o.suite.c_str(), param, p, cloud.size(), method.c_str());
       }
@@ -214,8 +221,10 @@ int run_bench(const BenchOptions& o) {
   if (!o.paper_binary.empty()) {
     for (const auto& row :
          run_paper_binary(o.paper_binary, o.suite, environment_columns(sys, false)))
-      csv << row;
+      csv.write(row);
   }
+  csv.commit();
+  std::fprintf(stderr, "wrote %s\n", o.out.c_str());
   return 0;
 }
 
@@ -234,19 +243,21 @@ Command add_bench(CLI::App& app) {
   cmd->add_option("--param", o->params,
                   "beta (uniform; default 2,4,8,16,32) or alpha (surface; default 2..128)")
       ->delimiter(',')
-      ->check(CLI::PositiveNumber);
+      ->check(positive_integer());
   cmd->add_option("--p", o->ps, "Mean particles per cell (default 1,2,4,8,16,32)")
       ->delimiter(',')
-      ->check(CLI::PositiveNumber);
+      ->check(positive_integer());
   cmd->add_option("-k,--kernel", o->kernel, "count, lj or smooth")
       ->check(CLI::IsMember({"count", "lj", "smooth"}));
   cmd->add_option("-r,--reps", o->reps, "Timed repetitions after one warm-up")
       ->check(CLI::Range(1, 1000));
-  cmd->add_option("--max-n", o->max_n, "Skip configurations with more particles than this");
+  cmd->add_option("--max-n", o->max_n, "Skip configurations with more particles than this")
+      ->check(count_option());
   cmd->add_option("-o,--out", o->out, "CSV file to write");
   cmd->add_option("--seed", o->seed, "Random seed");
   cmd->add_option("--large-n", o->large_n,
-                  "Above this many particles, time --large-reps repetitions instead of --reps");
+                  "Above this many particles, time --large-reps repetitions instead of --reps")
+      ->check(count_option());
   cmd->add_option("--large-reps", o->large_reps, "Repetitions above --large-n")
       ->check(CLI::Range(1, 1000));
   cmd->add_option("--paper-binary", o->paper_binary,

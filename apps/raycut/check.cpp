@@ -63,8 +63,12 @@ int run_check(const CheckOptions& o) {
     std::vector<std::string> families = o.families;
     if (std::find(families.begin(), families.end(), "all") != families.end())
       families = family_names();
+    // Positions, the oracle's neighbour list and every method's results: ~128 bytes a particle.
     for (const auto& f : families)
-      for (std::size_t n : o.sizes) inputs.push_back(make_family(f, n, o.cutoff, o.seed));
+      for (std::size_t n : o.sizes) {
+        require_particles_fit(n, 128, "check: family " + f);
+        inputs.push_back(make_family(f, n, o.cutoff, o.seed));
+      }
   }
 
   std::printf("%-18s %8s %7s  %-16s %12s %10s %10s  %s\n", "input", "N", "cutoff", "method",
@@ -124,14 +128,20 @@ Command add_check(CLI::App& app) {
          "non-oracle methods, GPU ones only when there is a GPU; all = every available one)")
       ->delimiter(',');
   cmd->add_option("-f,--family", o->families, family_help)->delimiter(',');
-  cmd->add_option("-n,--n", o->sizes, "Particle counts (comma-separated)")->delimiter(',');
-  cmd->add_option("-c,--cutoff", o->cutoff, "Cutoff radius")->check(CLI::PositiveNumber);
+  cmd->add_option("-n,--n", o->sizes, "Particle counts (comma-separated)")
+      ->delimiter(',')
+      ->check(count_option());
+  cmd->add_option("-c,--cutoff", o->cutoff, "Cutoff radius")->check(positive_finite());
   cmd->add_option("--seed", o->seed, "Random seed of the families");
   cmd->add_option("-i,--input", o->input, "Positions file (.csv, .xyz) instead of families")
       ->check(CLI::ExistingFile);
+  // Only the brute forces are references: a faster method checked against itself (or another
+  // method under test) would prove nothing.
   cmd->add_option("--oracle", o->oracle,
                   "auto (GPU brute force above 20,000 particles when there is a GPU), "
-                  "brute-force or brute-force-gpu");
+                  "brute-force or brute-force-gpu")
+      ->check(one_of({"auto", "brute-force", "brute-force-gpu"},
+                     "the oracles; the methods under test are not references"));
   return [o] { return run_check(*o); };
 }
 

@@ -23,8 +23,25 @@ Command add_sph(CLI::App& app);
 // Expands "all" / "default" and checks the names; throws raycut::Error for unknown ones.
 std::vector<std::string> resolve_methods(const std::vector<std::string>& names);
 
-// A configuration of the "uniform" or "surface" suite.
-PointCloud suite_cloud(const std::string& suite, int param, int p, std::uint64_t seed);
+// A configuration of the "uniform" or "surface" suite, refused (Error) when p * param^3 does not
+// fit in 64 bits or its particles do not fit in host memory (bytes_per_particle: the
+// subcommand's estimate of what it holds per particle).
+PointCloud suite_cloud(const std::string& suite, int param, int p, std::uint64_t seed,
+                       double bytes_per_particle);
+// p * param^3, the suite's particle count, in checked 64-bit arithmetic: Error(invalid_argument)
+// when it overflows.
+std::uint64_t suite_particles(int param, int p);
+// Refuses (Error(out_of_memory)) `n` particles at `bytes_per_particle` each when that is more than
+// the available host memory; `what` names the run ("check: family uniform").
+void require_particles_fit(std::uint64_t n, double bytes_per_particle, const std::string& what);
+
+// Option checks whose messages say what is wanted and quote what was given (CLI11's ranges
+// print 310 digits): "--cutoff: must be a finite number > 0, got '0.1abc'".
+CLI::Validator positive_finite();      // a float, finite and > 0
+CLI::Validator non_negative_finite();  // a float, finite and >= 0
+CLI::Validator positive_integer();     // 1 .. 2^31 - 1
+CLI::Validator count_option();         // a whole number >= 0 (no sign, no exponent)
+CLI::Validator one_of(std::vector<std::string> names, std::string what);
 
 // The median of samples (mean of the middle two for an even count).
 double median(std::vector<double> samples);

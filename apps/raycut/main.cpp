@@ -1,11 +1,19 @@
 // raycut: particle interactions within a cutoff on CPU and GPU. Subcommands: methods, check,
-// bench, generate. Errors are one line on stderr and exit code 2.
+// bench, update-bench, sph, generate. Every error (bad usage, a bad input file, an output file
+// that cannot be written in full, not enough memory) is one line on stderr and exit code 2; a
+// check that finds a mismatch exits 1.
 #include <algorithm>
+#include <charconv>
+#include <cmath>
 #include <cstdio>
 #include <iostream>
+#include <limits>
 #include <map>
+#include <new>
 
 #include "commands.hpp"
+#include "core/host_memory.hpp"
+#include "io/files.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/generators.hpp"
 #include "raycut/io.hpp"
@@ -34,8 +42,100 @@ std::vector<std::string> resolve_methods(const std::vector<std::string>& names) 
   return out;
 }
 
-PointCloud suite_cloud(const std::string& suite, int param, int p, std::uint64_t seed) {
+std::uint64_t suite_particles(int param, int p) {
+  std::uint64_t n = 0;
+  const auto side = static_cast<std::uint64_t>(param);
+  if (param < 1 || p < 1 || __builtin_mul_overflow(side, side, &n) ||
+      __builtin_mul_overflow(n, side, &n) ||
+      __builtin_mul_overflow(n, static_cast<std::uint64_t>(p), &n))
+    throw Error(ErrorCode::invalid_argument,
+                "suite param = " + std::to_string(param) + ", p = " + std::to_string(p) +
+                    ": p * param^3 particles is not a count raycut can hold (needs param, p >= 1 "
+                    "and p * param^3 < 2^64)");
+  return n;
+}
+
+void require_particles_fit(std::uint64_t n, double bytes_per_particle, const std::string& what) {
+  detail::require_host_memory(static_cast<double>(n) * bytes_per_particle,
+                              what + ": N = " + std::to_string(n) + " particles (~" +
+                                  std::to_string(static_cast<int>(bytes_per_particle)) +
+                                  " bytes each)");
+}
+
+PointCloud suite_cloud(const std::string& suite, int param, int p, std::uint64_t seed,
+                       double bytes_per_particle) {
+  require_particles_fit(
+      suite_particles(param, p), bytes_per_particle,
+      suite + " suite param=" + std::to_string(param) + " p=" + std::to_string(p));
   return suite == "uniform" ? uniform_suite(param, p, seed) : surface_suite(param, p, seed);
+}
+
+namespace {
+
+// The option's text as a float, whole: false for "0.1abc", "", or a value out of float range.
+bool parse_float_option(const std::string& text, float& value) {
+  const char* end = text.data() + text.size();
+  const auto [ptr, ec] = std::from_chars(text.data(), end, value);
+  return !text.empty() && ec == std::errc() && ptr == end && std::isfinite(value);
+}
+
+CLI::Validator validator(std::function<bool(const std::string&)> ok, std::string wanted) {
+  return CLI::Validator(
+      [ok = std::move(ok), wanted](std::string& text) -> std::string {
+        if (ok(text)) return "";
+        return "must be " + wanted + ", got '" + io::printable(text) + "'";
+      },
+      wanted, "");
+}
+
+}  // namespace
+
+CLI::Validator positive_finite() {
+  return validator(
+      [](const std::string& t) {
+        float v = 0;
+        return parse_float_option(t, v) && v > 0;
+      },
+      "a finite number > 0");
+}
+
+CLI::Validator non_negative_finite() {
+  return validator(
+      [](const std::string& t) {
+        float v = 0;
+        return parse_float_option(t, v) && v >= 0;
+      },
+      "a finite number >= 0");
+}
+
+CLI::Validator positive_integer() {
+  return validator(
+      [](const std::string& t) {
+        int v = 0;
+        const auto [ptr, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
+        return !t.empty() && ec == std::errc() && ptr == t.data() + t.size() && v > 0;
+      },
+      "a whole number in [1, 2147483647]");
+}
+
+CLI::Validator count_option() {
+  return validator(
+      [](const std::string& t) {
+        std::uint64_t v = 0;
+        const auto [ptr, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
+        return !t.empty() && ec == std::errc() && ptr == t.data() + t.size();
+      },
+      "a whole number >= 0");
+}
+
+CLI::Validator one_of(std::vector<std::string> names, std::string what) {
+  std::string list;
+  for (const auto& name : names) list += (list.empty() ? "" : ", ") + name;
+  return validator(
+      [names = std::move(names)](const std::string& t) {
+        return std::find(names.begin(), names.end(), t) != names.end();
+      },
+      "one of " + list + " (" + what + ")");
 }
 
 double median(std::vector<double> v) {
@@ -68,22 +168,37 @@ Command add_generate(CLI::App& app) {
     std::uint64_t seed = 1;
   };
   auto o = std::make_shared<Options>();
-  cmd->add_option("--family", o->family, "Test family (see `raycut check --help`)");
+  cmd->add_option("-f,--family", o->family, "Test family (see `raycut check --help`)");
   cmd->add_option("--suite", o->suite, "Benchmark suite instead of a family")
       ->check(CLI::IsMember({"uniform", "surface"}));
-  cmd->add_option("-n,--n", o->n, "Number of particles (families)");
-  cmd->add_option("--cutoff", o->cutoff, "Cutoff the family is made for");
-  cmd->add_option("--param", o->param, "beta (uniform) or alpha (surface)");
-  cmd->add_option("--p", o->p, "Mean particles per cell");
+  cmd->add_option("-n,--n", o->n, "Number of particles (families)")->check(count_option());
+  cmd->add_option("-c,--cutoff", o->cutoff, "Cutoff the family is made for")
+      ->check(positive_finite());
+  cmd->add_option("--param", o->param, "beta (uniform) or alpha (surface)")
+      ->check(positive_integer());
+  cmd->add_option("--p", o->p, "Mean particles per cell")->check(positive_integer());
   cmd->add_option("--seed", o->seed, "Random seed");
-  cmd->add_option("-o,--out", o->out, "Output file (.csv or .xyz)")->required();
+  cmd->add_option("-o,--out", o->out, "Output file (.csv or .xyz, any case)")->required();
   return [o] {
-    const PointCloud cloud = o->suite == "uniform" ? uniform_suite(o->param, o->p, o->seed)
-                             : o->suite == "surface"
-                                 ? surface_suite(o->param, o->p, o->seed)
-                                 : make_family(o->family, o->n, o->cutoff, o->seed);
-    const bool csv = o->out.size() >= 4 && o->out.compare(o->out.size() - 4, 4, ".csv") == 0;
-    csv ? write_csv(o->out, cloud) : write_xyz(o->out, cloud);
+    check_positions_extension(o->out);
+    // Positions, and the text written from them in chunks: ~16 bytes a particle.
+    constexpr double bytes_per_particle = 16;
+    if (o->suite.empty()) require_particles_fit(o->n, bytes_per_particle, "generate " + o->family);
+    const PointCloud cloud =
+        !o->suite.empty() ? suite_cloud(o->suite, o->param, o->p, o->seed, bytes_per_particle)
+                          : make_family(o->family, o->n, o->cutoff, o->seed);
+    const auto bad =
+        std::find_if(cloud.xyz.begin(), cloud.xyz.end(), [](float x) { return !std::isfinite(x); });
+    if (bad != cloud.xyz.end()) {
+      char cutoff[32];
+      std::snprintf(cutoff, sizeof cutoff, "%g", static_cast<double>(o->cutoff));
+      throw Error(ErrorCode::invalid_argument,
+                  "generate: family " + o->family + " at --cutoff " + cutoff +
+                      " gives non-finite coordinates (particle index " +
+                      std::to_string((bad - cloud.xyz.begin()) / 3) +
+                      "): its domain does not fit in float; use a smaller cutoff");
+    }
+    write_positions(o->out, cloud);
     std::printf("wrote %zu particles (cutoff %g) to %s\n", cloud.size(), cloud.cutoff,
                 o->out.c_str());
     return 0;
@@ -103,6 +218,14 @@ int main(int argc, char** argv) {
       {"methods", add_methods(app)}, {"check", add_check(app)},
       {"bench", add_bench(app)},     {"update-bench", add_update_bench(app)},
       {"sph", add_sph(app)},         {"generate", add_generate(app)}};
+  // CLI11 says only "A subcommand is required" for a misspelt one: name it.
+  if (argc > 1 && argv[1][0] != '-' && commands.count(argv[1]) == 0) {
+    std::string known;
+    for (const auto& [name, command] : commands) known += (known.empty() ? "" : ", ") + name;
+    std::cerr << "raycut: unknown subcommand '" << raycut::io::printable(argv[1])
+              << "' (known: " << known << "; see --help)\n";
+    return 2;
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::CallForHelp& e) {
@@ -117,6 +240,10 @@ int main(int argc, char** argv) {
     return commands.at(app.get_subcommands().front()->get_name())();
   } catch (const raycut::Error& e) {
     std::cerr << "raycut: " << raycut::to_string(e.code()) << ": " << e.what() << "\n";
+    return 2;
+  } catch (const std::bad_alloc&) {
+    std::cerr << "raycut: out of memory: a host allocation failed (std::bad_alloc); try fewer "
+                 "particles\n";
     return 2;
   } catch (const std::exception& e) {
     std::cerr << "raycut: " << e.what() << "\n";

@@ -9,7 +9,6 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <memory>
 #include <optional>
 #include <string>
@@ -17,6 +16,7 @@
 #include <vector>
 
 #include "commands.hpp"
+#include "io/files.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/sph/render.hpp"
 #include "raycut/sph/scenario.hpp"
@@ -99,13 +99,12 @@ struct Profile {
     }
     ++samples;
   }
-  void write(const std::string& path, double from, double to) const {
+  void write(io::OutputFile& out, double from, double to) const {
     const double height = layers * c.dx();
     const double rho0 = c.rest_density, g = c.gravity;
-    std::ofstream out(path);
-    if (!out) throw Error(ErrorCode::io, path + ": cannot open for writing");
-    out << "layer,y,y_now,count,p_mean,rho_mean,rho_min,rho_max,p_hydrostatic,p_rel_error,"
-           "rho_rel_dev\n";
+    out.write(
+        "layer,y,y_now,count,p_mean,rho_mean,rho_min,rho_max,p_hydrostatic,p_rel_error,"
+        "rho_rel_dev\n");
     double worst_p = 0, worst_rho = 0, sum_p = 0;
     int counted = 0;
     for (int k = 0; k < layers; ++k) {
@@ -118,7 +117,7 @@ struct Profile {
       std::snprintf(line, sizeof line, "%d,%.6f,%.6f,%.2f,%.4f,%.4f,%.4f,%.4f,%.4f,%.6f,%.6f\n", k,
                     y0[k], y, static_cast<double>(count[k]) / samples, pm, rm, rmin[k], rmax[k], ph,
                     err, dev);
-      out << line;
+      out.write(line);
       if (k < layers - 2) {  // below the top two particle layers
         worst_p = std::max(worst_p, std::abs(err));
         worst_rho = std::max(worst_rho, std::abs(dev));
@@ -132,7 +131,8 @@ struct Profile {
         "(mean %.2f %%), max |rho_mean / rho0 - 1| = %.3f %% (%d layers)\n",
         height, layers, samples, from, to, 100 * worst_p, counted ? 100 * sum_p / counted : 0.0,
         100 * worst_rho, counted);
-    std::printf("wrote %s\n", path.c_str());
+    out.commit();
+    std::printf("wrote %s\n", out.path().c_str());
   }
 };
 
@@ -164,22 +164,21 @@ double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
-void append_csv(const std::string& path, const std::string& scenario, const sph::Solver& solver,
+// `csv` was opened in append mode before the run (its old rows are already copied).
+void append_csv(io::OutputFile& csv, const std::string& scenario, const sph::Solver& solver,
                 int frames, double steps_per_s, const sph::StepTimes& mean) {
-  const bool fresh = !std::filesystem::exists(path) || std::filesystem::file_size(path) == 0;
-  std::ofstream csv(path, std::ios::app);
-  if (!csv) throw Error(ErrorCode::io, path + ": cannot open for writing");
-  if (fresh)
-    csv << "scenario,method,N,frames,steps_per_s,update_ms,density_ms,force_ms,integrate_ms,gpu,"
-           "driver,cuda,optix\n";
+  if (csv.was_empty())
+    csv.write(
+        "scenario,method,N,frames,steps_per_s,update_ms,density_ms,force_ms,integrate_ms,gpu,"
+        "driver,cuda,optix\n");
   const SystemInfo sys = system_info();
   char line[512];
   std::snprintf(line, sizeof line, "%s,%s,%zu,%d,%.1f,%.4f,%.4f,%.4f,%.4f,%s,%s,%s,%s\n",
                 scenario.c_str(), solver.method().c_str(), solver.size(), frames, steps_per_s,
                 mean.update_ms, mean.density_ms, mean.force_ms, mean.integrate_ms, sys.gpu.c_str(),
                 sys.driver.c_str(), sys.cuda.c_str(), sys.optix.c_str());
-  csv << line;
-  if (!csv) throw Error(ErrorCode::io, path + ": write failed");
+  csv.write(line);
+  csv.commit();
 }
 
 int run_sph(const SphOptions& o) {
@@ -206,6 +205,11 @@ int run_sph(const SphOptions& o) {
                               : o.scenario == "hiprt-drop" ? sph::hiprt_drop()
                                                            : sph::small_drop(o.n);
   const int frames = o.frames >= 0 ? o.frames : scenario.frames;
+  // Output files are opened (temporary files created) before the run, so that an unwritable path
+  // fails now rather than after it; each appears whole, or not at all, at the end.
+  std::optional<io::OutputFile> csv_out, result_out;
+  if (!o.csv.empty()) csv_out.emplace(o.csv, io::OutputFile::Mode::append);
+  if (!o.result_csv.empty()) result_out.emplace(o.result_csv);
   sph::Solver solver(scenario, o.method, o.skin);
   const std::size_t n = solver.size();
   const float rho0 = solver.parameters().rest_density;
@@ -342,7 +346,10 @@ int run_sph(const SphOptions& o) {
   if (series)
     std::printf("wrote %d frames to %s%s\n", saved, series->pvd_path().c_str(),
                 o.png ? " (+ PNG)" : "");
-  if (!o.csv.empty()) append_csv(o.csv, scenario.name, solver, frames, steps_per_s, mean);
+  if (csv_out) {
+    append_csv(*csv_out, scenario.name, solver, frames, steps_per_s, mean);
+    std::printf("wrote %s\n", o.csv.c_str());
+  }
   if (wcsph) {
     solver.copy_state(fx, fv, frho, fp);
     double ke = 0;
@@ -355,22 +362,22 @@ int run_sph(const SphOptions& o) {
                 solver.time(), ke, max_mach);
     if (config.scenario == "hydrostatic") {
       if (profile.samples == 0) profile.add(fx, frho, fp);
-      if (!o.result_csv.empty())
-        profile.write(o.result_csv, profile_first < 0 ? solver.time() : profile_first,
+      if (result_out)
+        profile.write(*result_out, profile_first < 0 ? solver.time() : profile_first,
                       solver.time());
     } else {
       const FrontSample& f = fronts.back();
       std::printf("dam-break: T = %.3f, Z = %.3f (x_front = %.4f m)\n", f.T, f.Z, f.x_front);
-      if (!o.result_csv.empty()) {
-        std::ofstream out(o.result_csv);
-        if (!out) throw Error(ErrorCode::io, o.result_csv + ": cannot open for writing");
-        out << "t,T,x_front,Z,max_speed,kinetic_energy\n";
+      if (result_out) {
+        io::OutputFile& out = *result_out;
+        out.write("t,T,x_front,Z,max_speed,kinetic_energy\n");
         char line[200];
         for (const FrontSample& s : fronts) {
           std::snprintf(line, sizeof line, "%.6f,%.5f,%.6f,%.5f,%.4f,%.6g\n", s.t, s.T, s.x_front,
                         s.Z, s.max_speed, s.kinetic_energy);
-          out << line;
+          out.write(line);
         }
+        out.commit();
         std::printf("wrote %s (%zu samples)\n", o.result_csv.c_str(), fronts.size());
       }
     }
@@ -414,23 +421,25 @@ Command add_sph(CLI::App& app) {
   key("--column-height", "column_height", "wcsph: H in m (default 2 a)");
   key("--tank-length", "tank_length", "wcsph: the tank's length in m (default 5 a / a)");
   key("--end-time", "end_time", "wcsph: simulated seconds (default T = 3.3 / 0.5 s)");
-  key("--damping", "damping", "wcsph: settling damping rate in 1/s (default c0 / H, hydrostatic)");
-  key("--damping-time", "damping_time", "wcsph: damp while t < this (default 0.3 s, hydrostatic)");
+  key("--damping", "damping",
+      "wcsph: settling damping rate in 1/s, >= 0 (default c0 / H, hydrostatic; 0: none)");
+  key("--damping-time", "damping_time",
+      "wcsph: damp while t < this, >= 0 s (default 0.3 s, hydrostatic)");
   cmd->add_option("--result-csv", o->result_csv,
                   "wcsph: write the pressure profile (hydrostatic) or the surge front (dam-break)");
-  cmd->add_option("-n,--n", o->n, "Particles of the small scenario")->check(CLI::PositiveNumber);
+  cmd->add_option("-n,--n", o->n, "Particles of the small scenario")->check(positive_integer());
   cmd->add_option("-m,--method", o->method, "Interaction method, or auto");
   cmd->add_option("--frames", o->frames, "Steps to run (default: the scenario's, 200)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(count_option());
   cmd->add_option("--every", o->every, "Save every k-th frame (with --out)")
-      ->check(CLI::PositiveNumber);
+      ->check(positive_integer());
   cmd->add_option("-o,--out", o->out, "Folder for frames.pvd, the .vtp frames and PNGs");
   cmd->add_flag("--png", o->png, "Also render saved frames to PNG (needs --out)");
   cmd->add_option("--colour", o->colour, "PNG colouring: density or speed")
       ->check(CLI::IsMember({"density", "speed"}));
   cmd->add_option("--skin", o->skin,
                   "Refit skin in m for the OptiX methods (default h; 0 rebuilds every step)")
-      ->check(CLI::NonNegativeNumber);
+      ->check(non_negative_finite());
   cmd->add_option("--csv", o->csv, "Append a result row to this CSV file");
   cmd->add_flag("-q,--quiet", o->quiet, "No progress lines");
   return [o, scenario_option] {

@@ -1,30 +1,48 @@
 // CSV and extended-XYZ positions. Numbers are written in the shortest form that reads back to
 // the same float (std::to_chars), and read with std::from_chars, so a write/read round trip is
-// bit-exact. Every error names the file, and the line where there is one.
+// bit-exact. Every error names the file, and the line where there is one. Also the file helpers
+// of src/io/files.hpp (capped line reader, whole-or-nothing output file) that every reader and
+// writer of raycut uses.
 #include "raycut/io.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cctype>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string_view>
 #include <system_error>
 #include <vector>
 
+#include "io/files.hpp"
 #include "raycut/error.hpp"
 
 namespace raycut {
 namespace {
 
 [[noreturn]] void fail(const std::string& path, const std::string& what) {
-  throw Error(ErrorCode::io, path + ": " + what);
+  throw Error(ErrorCode::io, io::printable(path, 4096) + ": " + what);
 }
 [[noreturn]] void fail(const std::string& path, std::size_t line, const std::string& what) {
-  throw Error(ErrorCode::io, path + ":" + std::to_string(line) + ": " + what);
+  throw Error(ErrorCode::io, io::printable(path, 4096) + ":" + std::to_string(line) + ": " + what);
+}
+
+// A token of the file, quoted for a message: escaped and cut short.
+std::string quote_token(std::string_view token) {
+  std::string quoted = "'";
+  quoted += io::printable(token);
+  quoted += '\'';
+  return quoted;
 }
 
 std::string lowercase(std::string_view text) {
@@ -78,70 +96,61 @@ float parse_coordinate(std::string_view token, const std::string& path, std::siz
     case Parse::ok:
       return value;
     case Parse::out_of_range:
-      fail(path, line, "'" + std::string(token) + "' (" + column + ") is out of float range");
+      fail(path, line, quote_token(token) + " (" + column + ") is out of float range");
     case Parse::not_a_number:
       break;
   }
-  fail(path, line, "cannot parse '" + std::string(token) + "' (" + column + ") as a number");
+  fail(path, line, "cannot parse " + quote_token(token) + " (" + column + ") as a number");
+}
+
+// A whole token as a non-negative integer (an XYZ count).
+bool parse_count(std::string_view token, std::size_t& value) {
+  const auto [ptr, ec] = std::from_chars(token.data(), token.data() + token.size(), value);
+  return !token.empty() && ec == std::errc() && ptr == token.data() + token.size();
 }
 
 constexpr const char* axis_names[3] = {"x", "y", "z"};
 
-// Lines of a file, numbered from 1, without their line terminator.
-class LineReader {
- public:
-  explicit LineReader(const std::string& path) : path_(path), in_(path, std::ios::binary) {
-    if (!in_) fail(path, std::string("cannot open for reading: ") + std::strerror(errno));
-    // Linux opens a directory for reading; only the first read fails.
-    std::error_code ignored;
-    if (std::filesystem::is_directory(path, ignored)) fail(path, "is a directory, not a file");
+std::vector<std::string_view> split_commas(std::string_view text) {
+  std::vector<std::string_view> fields;
+  for (std::size_t begin = 0;;) {
+    const std::size_t comma = text.find(',', begin);
+    fields.push_back(trim(text.substr(begin, comma - begin)));
+    if (comma == std::string_view::npos) break;
+    begin = comma + 1;
   }
-  bool next(std::string& line) {
-    if (!std::getline(in_, line)) {
-      if (in_.bad()) fail(path_, number_ + 1, "read error");
-      return false;
-    }
-    ++number_;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    return true;
-  }
-  std::size_t number() const { return number_; }
+  return fields;
+}
 
- private:
-  std::string path_;
-  std::ifstream in_;
-  std::size_t number_ = 0;
-};
+// A CSV header is a first content line of exactly 3 fields, none of them a number ("x,y,z").
+// Anything else is data, so a headerless one-line file is one particle, and "1 2 3" (no commas)
+// is an error, not a header.
+bool is_csv_header(const std::vector<std::string_view>& fields) {
+  if (fields.size() != 3) return false;
+  float ignored = 0;
+  return std::none_of(fields.begin(), fields.end(), [&](std::string_view f) {
+    return f.empty() || parse_float(f, ignored) != Parse::not_a_number;
+  });
+}
 
 PointCloud read_csv(const std::string& path) {
   PointCloud cloud;
   cloud.name = path;
-  LineReader reader(path);
+  io::LineReader reader(path);
   std::string line;
   bool first_content_line = true;
-  std::vector<std::string_view> fields;
   while (reader.next(line)) {
     const std::string_view text = trim(line);
     if (text.empty() || text.front() == '#') continue;
-    fields.clear();
-    for (std::size_t begin = 0;;) {
-      const std::size_t comma = text.find(',', begin);
-      fields.push_back(trim(text.substr(begin, comma - begin)));
-      if (comma == std::string_view::npos) break;
-      begin = comma + 1;
-    }
+    const std::vector<std::string_view> fields = split_commas(text);
     if (first_content_line) {
       first_content_line = false;
-      float ignored = 0;
-      const bool any_number = std::any_of(fields.begin(), fields.end(), [&](std::string_view f) {
-        return parse_float(f, ignored) == Parse::ok;
-      });
-      if (!any_number) continue;  // a header such as "x,y,z"
+      if (is_csv_header(fields)) continue;
     }
     if (fields.size() != 3) {
       fail(path, reader.number(),
            "expected 3 comma-separated numbers (x,y,z), found " + std::to_string(fields.size()) +
-               " fields");
+               (fields.size() == 1 ? " field " + quote_token(fields[0]) : " fields"));
     }
     for (int k = 0; k < 3; ++k) {
       cloud.xyz.push_back(parse_coordinate(fields[k], path, reader.number(), axis_names[k]));
@@ -181,16 +190,21 @@ std::size_t xyz_position_column(std::string_view comment, const std::string& pat
     begin = colon + 1;
   }
   if (parts.size() % 3 != 0) {
-    fail(path, line,
-         "malformed Properties '" + std::string(value) + "' (expected name:type:count)");
+    fail(path, line, "malformed Properties " + quote_token(value) + " (expected name:type:count)");
   }
+  // A line holds at most max_line bytes, so at most max_line / 2 columns: a larger count cannot
+  // describe a line of this file (and would overflow the column index).
+  constexpr std::size_t max_columns = io::LineReader::max_line / 2;
   std::size_t column = 0;
   for (std::size_t i = 0; i < parts.size(); i += 3) {
     std::size_t count = 0;
-    const auto [ptr, ec] =
-        std::from_chars(parts[i + 2].data(), parts[i + 2].data() + parts[i + 2].size(), count);
-    if (ec != std::errc() || ptr != parts[i + 2].data() + parts[i + 2].size()) {
-      fail(path, line, "malformed Properties count '" + std::string(parts[i + 2]) + "'");
+    if (!parse_count(parts[i + 2], count)) {
+      fail(path, line, "malformed Properties count " + quote_token(parts[i + 2]));
+    }
+    if (count > max_columns) {
+      fail(path, line,
+           "Properties count " + quote_token(parts[i + 2]) + " of " + quote_token(parts[i]) +
+               " is too large (a line has at most " + std::to_string(max_columns) + " columns)");
     }
     if (lowercase(parts[i]) == "pos") {
       if (lowercase(parts[i + 1]) != "r" || count != 3) {
@@ -199,30 +213,39 @@ std::size_t xyz_position_column(std::string_view comment, const std::string& pat
       return column;
     }
     column += count;
+    if (column > max_columns) {
+      fail(path, line,
+           "Properties describe more than " + std::to_string(max_columns) +
+               " columns before pos (a line has at most that many)");
+    }
   }
   fail(path, line, "Properties has no pos:R:3 field");
 }
 
-// The first frame of an (extended) XYZ file; later frames are ignored.
+// The first frame of an (extended) XYZ file. What follows it, blank lines aside, must be the
+// count line of a next frame (a trajectory; not read), or nothing: a count smaller than the
+// atoms that follow is an error, not a silent truncation.
 PointCloud read_xyz(const std::string& path) {
   PointCloud cloud;
   cloud.name = path;
-  LineReader reader(path);
+  io::LineReader reader(path);
   std::string line;
   if (!reader.next(line)) fail(path, 1, "empty file, expected the particle count");
-  const std::string_view count_text = trim(line);
   std::size_t count = 0;
-  const auto [ptr, ec] =
-      std::from_chars(count_text.data(), count_text.data() + count_text.size(), count);
-  if (count_text.empty() || ec != std::errc() || ptr != count_text.data() + count_text.size()) {
-    fail(path, 1, "expected the particle count, found '" + std::string(count_text) + "'");
+  if (!parse_count(trim(line), count)) {
+    fail(path, 1, "expected the particle count, found " + quote_token(trim(line)));
   }
   if (!reader.next(line)) {
     if (count == 0) return cloud;
     fail(path, 2, "missing comment line");
   }
   const std::size_t pos_column = xyz_position_column(line, path, reader.number());
-  cloud.xyz.reserve(3 * std::min<std::size_t>(count, std::size_t{1} << 24));
+  // The count is only a claim: reserve no more than the file can hold (a particle line has at
+  // least 6 bytes, "0 0 0\n"), so that a 10-byte file saying 10^9 allocates nothing large.
+  std::error_code size_error;
+  const auto bytes = std::filesystem::file_size(path, size_error);
+  const std::size_t fits = size_error ? 4096 : static_cast<std::size_t>(bytes / 6 + 1);
+  cloud.xyz.reserve(3 * std::min(count, fits));
   for (std::size_t i = 0; i < count; ++i) {
     if (!reader.next(line)) {
       fail(path, reader.number() + 1,
@@ -240,6 +263,15 @@ PointCloud read_xyz(const std::string& path) {
           parse_coordinate(tokens[pos_column + k], path, reader.number(), axis_names[k]));
     }
   }
+  while (reader.next(line)) {
+    const std::string_view text = trim(line);
+    if (text.empty()) continue;
+    std::size_t next_count = 0;
+    if (parse_count(text, next_count)) break;  // the next frame's count line
+    fail(path, reader.number(),
+         "expected the end of the file or the count line of a next frame, found " +
+             quote_token(text) + " (line 1 says " + std::to_string(count) + " particles)");
+  }
   return cloud;
 }
 
@@ -250,40 +282,14 @@ std::string extension_of(const std::string& path) {
   return lowercase(std::string_view(path).substr(dot));
 }
 
-// Buffered text output that reports failures with the path.
-class Writer {
- public:
-  explicit Writer(const std::string& path) : path_(path), out_(path, std::ios::binary) {
-    if (!out_) fail(path, std::string("cannot open for writing: ") + std::strerror(errno));
-    buffer_.reserve(buffer_limit + 256);
-  }
-  void text(std::string_view s) {
-    buffer_.append(s);
-    if (buffer_.size() >= buffer_limit) flush();
-  }
-  // Shortest representation that reads back to the same float.
-  void number(float value) {
-    char digits[64];
-    const auto result = std::to_chars(digits, digits + sizeof digits, value);
-    text(std::string_view(digits, static_cast<std::size_t>(result.ptr - digits)));
-  }
-  void close() {
-    flush();
-    out_.close();
-    if (!out_) fail(path_, "write failed");
-  }
+enum class Format { csv, xyz };
 
- private:
-  static constexpr std::size_t buffer_limit = std::size_t{1} << 20;
-  void flush() {
-    out_.write(buffer_.data(), static_cast<std::streamsize>(buffer_.size()));
-    if (!out_) fail(path_, std::string("write failed: ") + std::strerror(errno));
-    buffer_.clear();
-  }
-  std::string path_;
-  std::ofstream out_;
-  std::string buffer_;
-};
+Format format_of(const std::string& path) {
+  const std::string extension = extension_of(path);
+  if (extension == ".csv") return Format::csv;
+  if (extension == ".xyz" || extension == ".extxyz") return Format::xyz;
+  fail(path, "unknown extension " + quote_token(extension) + " (known: .csv, .xyz, .extxyz)");
+}
 
 void require_whole_points(const std::string& path, const PointCloud& cloud) {
   if (cloud.xyz.size() % 3 != 0) {
@@ -293,44 +299,252 @@ void require_whole_points(const std::string& path, const PointCloud& cloud) {
   }
 }
 
+// Shortest representation that reads back to the same float.
+void write_number(io::OutputFile& out, float value) {
+  char digits[64];
+  const auto result = std::to_chars(digits, digits + sizeof digits, value);
+  out.write(std::string_view(digits, static_cast<std::size_t>(result.ptr - digits)));
+}
+
 }  // namespace
 
 PointCloud read_positions(const std::string& path) {
-  const std::string extension = extension_of(path);
-  if (extension == ".csv") return read_csv(path);
-  if (extension == ".xyz" || extension == ".extxyz") return read_xyz(path);
-  fail(path, "unknown extension '" + extension + "' (known: .csv, .xyz, .extxyz)");
+  return format_of(path) == Format::csv ? read_csv(path) : read_xyz(path);
 }
 
 void write_csv(const std::string& path, const PointCloud& cloud) {
   require_whole_points(path, cloud);
-  Writer out(path);
-  out.text("x,y,z\n");
+  io::OutputFile out(path);
+  out.write("x,y,z\n");
   for (std::size_t i = 0; i < cloud.size(); ++i) {
-    out.number(cloud.xyz[3 * i]);
-    out.text(",");
-    out.number(cloud.xyz[3 * i + 1]);
-    out.text(",");
-    out.number(cloud.xyz[3 * i + 2]);
-    out.text("\n");
+    write_number(out, cloud.xyz[3 * i]);
+    out.write(",");
+    write_number(out, cloud.xyz[3 * i + 1]);
+    out.write(",");
+    write_number(out, cloud.xyz[3 * i + 2]);
+    out.write("\n");
   }
-  out.close();
+  out.commit();
 }
 
 void write_xyz(const std::string& path, const PointCloud& cloud) {
   require_whole_points(path, cloud);
-  Writer out(path);
-  out.text(std::to_string(cloud.size()) + "\nProperties=species:S:1:pos:R:3\n");
+  io::OutputFile out(path);
+  out.write(std::to_string(cloud.size()) + "\nProperties=species:S:1:pos:R:3\n");
   for (std::size_t i = 0; i < cloud.size(); ++i) {
-    out.text("X ");
-    out.number(cloud.xyz[3 * i]);
-    out.text(" ");
-    out.number(cloud.xyz[3 * i + 1]);
-    out.text(" ");
-    out.number(cloud.xyz[3 * i + 2]);
-    out.text("\n");
+    out.write("X ");
+    write_number(out, cloud.xyz[3 * i]);
+    out.write(" ");
+    write_number(out, cloud.xyz[3 * i + 1]);
+    out.write(" ");
+    write_number(out, cloud.xyz[3 * i + 2]);
+    out.write("\n");
   }
-  out.close();
+  out.commit();
 }
 
+void write_positions(const std::string& path, const PointCloud& cloud) {
+  format_of(path) == Format::csv ? write_csv(path, cloud) : write_xyz(path, cloud);
+}
+
+void check_positions_extension(const std::string& path) {
+  format_of(path);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Files in and out (src/io/files.hpp).
+namespace io {
+
+std::string printable(std::string_view text, std::size_t limit) {
+  std::size_t used = std::min(text.size(), limit);
+  // Do not cut a UTF-8 character in half: back off over continuation bytes.
+  if (used < text.size())
+    while (used > 0 && (static_cast<unsigned char>(text[used]) & 0xC0) == 0x80) --used;
+  std::string out;
+  out.reserve(used + 24);
+  for (std::size_t i = 0; i < used; ++i) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    if (c == '\n') {
+      out += "\\n";
+    } else if (c == '\r') {
+      out += "\\r";
+    } else if (c == '\t') {
+      out += "\\t";
+    } else if (c < 0x20 || c == 0x7F) {
+      char hex[8];
+      std::snprintf(hex, sizeof hex, "\\x%02X", static_cast<unsigned>(c));
+      out += hex;
+    } else {
+      out += static_cast<char>(c);
+    }
+  }
+  if (used < text.size()) out += "... (" + std::to_string(text.size()) + " bytes)";
+  return out;
+}
+
+LineReader::LineReader(const std::string& path) : path_(path) {
+  std::error_code ignored;
+  // Linux opens a directory for reading; only the first read fails.
+  if (std::filesystem::is_directory(path, ignored)) fail(path, "is a directory, not a file");
+  in_.open(path, std::ios::binary);
+  if (!in_) fail(path, std::string("cannot open for reading: ") + std::strerror(errno));
+}
+
+// Appends the next chunk of the file to the unread text (moved to the front of buffer_);
+// false at the end of the file.
+bool LineReader::fill() {
+  if (at_ > 0) {
+    buffer_.erase(0, at_);
+    at_ = 0;
+  }
+  if (eof_) return false;
+  constexpr std::size_t chunk = std::size_t{1} << 16;
+  const std::size_t old = buffer_.size();
+  buffer_.resize(old + chunk);
+  in_.read(buffer_.data() + old, static_cast<std::streamsize>(chunk));
+  const auto got = static_cast<std::size_t>(in_.gcount());
+  buffer_.resize(old + got);
+  if (in_.bad()) fail(path_, number_ + 1, "read error");
+  if (got < chunk) eof_ = true;
+  return got > 0;
+}
+
+bool LineReader::next(std::string& line) {
+  std::size_t scanned = at_;  // buffer_[at_, scanned) holds neither a newline nor a NUL
+  std::size_t end = 0;
+  for (;;) {
+    const std::size_t newline = buffer_.find('\n', scanned);
+    end = newline == std::string::npos ? buffer_.size() : newline;
+    if (std::memchr(buffer_.data() + scanned, '\0', end - scanned) != nullptr) {
+      fail(path_, number_ + 1, "contains a NUL byte: not a text file");
+    }
+    if (end - at_ > max_line) {
+      fail(path_, number_ + 1,
+           "line longer than " + std::to_string(max_line >> 20) + " MiB: not a text file");
+    }
+    if (newline != std::string::npos) break;
+    const std::size_t unread = buffer_.size() - at_;
+    if (!fill()) {  // the last line has no newline, or there is none left
+      if (buffer_.empty()) return false;
+      end = buffer_.size();
+      break;
+    }
+    scanned = unread;
+  }
+  line.assign(buffer_, at_, end - at_);
+  at_ = std::min(end + 1, buffer_.size());
+  if (number_ == 0 && line.rfind("\xEF\xBB\xBF", 0) == 0) line.erase(0, 3);  // UTF-8 BOM
+  ++number_;
+  if (!line.empty() && line.back() == '\r') line.pop_back();
+  return true;
+}
+
+namespace {
+
+// The permissions a new file gets (0666 less the umask), read without changing the umask.
+mode_t new_file_mode() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line)) {
+    if (line.rfind("Umask:", 0) == 0) {
+      return 0666 & ~static_cast<mode_t>(std::strtoul(line.c_str() + 6, nullptr, 8));
+    }
+  }
+  return 0644;
+}
+
+}  // namespace
+
+OutputFile::OutputFile(std::string path, Mode mode) : path_(std::move(path)), target_(path_) {
+  namespace fs = std::filesystem;
+  if (path_.empty()) throw Error(ErrorCode::io, "empty output path");
+  struct stat st {};
+  const bool exists = ::stat(path_.c_str(), &st) == 0;
+  if (exists && S_ISDIR(st.st_mode)) raycut::fail(path_, "is a directory, not a file");
+  if (exists && !S_ISREG(st.st_mode)) {
+    // A device or a pipe: written in place, every write still checked.
+    fd_ = ::open(path_.c_str(), O_WRONLY | O_CLOEXEC | (mode == Mode::append ? O_APPEND : O_TRUNC));
+    if (fd_ < 0)
+      raycut::fail(path_, std::string("cannot open for writing: ") + std::strerror(errno));
+    buffer_.reserve(std::size_t{1} << 20);
+    return;
+  }
+  std::error_code ec;
+  if (exists && fs::is_symlink(path_, ec)) {
+    const fs::path real = fs::canonical(path_, ec);
+    if (!ec) target_ = real.string();
+  }
+  was_empty_ = !exists || st.st_size == 0;
+  const fs::path target(target_);
+  const std::string dir = target.has_parent_path() ? target.parent_path().string() : ".";
+  std::string name = dir;  // dir/.name.tmp-XXXXXX, hidden, on the same file system
+  name += "/.";
+  name += target.filename().string();
+  name += ".tmp-XXXXXX";
+  fd_ = ::mkstemp(name.data());
+  if (fd_ < 0)
+    raycut::fail(path_, std::string("cannot write in ") + io::printable(dir, 4096) + ": " +
+                            std::strerror(errno));
+  temp_ = name;
+  ::fchmod(fd_, exists ? (st.st_mode & 07777) : new_file_mode());
+  buffer_.reserve(std::size_t{1} << 20);
+  if (mode == Mode::append && exists && st.st_size > 0) {
+    std::ifstream old(target_, std::ios::binary);
+    if (!old) fail(std::string("cannot open for reading: ") + std::strerror(errno));
+    std::vector<char> chunk(std::size_t{1} << 16);
+    while (old.read(chunk.data(), static_cast<std::streamsize>(chunk.size())) || old.gcount() > 0)
+      write_all(chunk.data(), static_cast<std::size_t>(old.gcount()));
+    if (old.bad()) fail("read error while copying the existing file");
+  }
+}
+
+OutputFile::~OutputFile() {
+  if (fd_ >= 0) ::close(fd_);
+  if (!committed_ && !temp_.empty()) ::unlink(temp_.c_str());
+}
+
+// Closes and removes the temporary file (the target is left as it was), then throws.
+void OutputFile::fail(const std::string& what) {
+  if (fd_ >= 0) ::close(fd_);
+  fd_ = -1;
+  if (!temp_.empty()) ::unlink(temp_.c_str());
+  temp_.clear();
+  buffer_.clear();
+  raycut::fail(path_, what);
+}
+
+void OutputFile::write_all(const char* data, std::size_t size) {
+  if (fd_ < 0) fail("write after an error or after commit");
+  while (size > 0) {
+    const ssize_t n = ::write(fd_, data, size);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) fail(std::string("write failed: ") + std::strerror(n < 0 ? errno : EIO));
+    data += n;
+    size -= static_cast<std::size_t>(n);
+  }
+}
+
+void OutputFile::write(std::string_view text) {
+  buffer_.append(text);
+  if (buffer_.size() >= (std::size_t{1} << 20)) flush();
+}
+
+void OutputFile::flush() {
+  write_all(buffer_.data(), buffer_.size());
+  buffer_.clear();
+}
+
+void OutputFile::commit() {
+  flush();
+  if (!temp_.empty() && ::fsync(fd_) != 0)
+    fail(std::string("write failed: ") + std::strerror(errno));
+  const int fd = fd_;
+  fd_ = -1;
+  if (::close(fd) != 0) fail(std::string("write failed (close): ") + std::strerror(errno));
+  if (!temp_.empty() && ::rename(temp_.c_str(), target_.c_str()) != 0)
+    fail(std::string("cannot rename the finished file into place: ") + std::strerror(errno));
+  committed_ = true;
+}
+
+}  // namespace io
 }  // namespace raycut

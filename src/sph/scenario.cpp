@@ -4,15 +4,22 @@
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
+#include <cstdio>
 #include <limits>
 #include <string>
 #include <utility>
 
+#include "core/host_memory.hpp"
+#include "io/files.hpp"
 #include "raycut/error.hpp"
 
 namespace raycut::sph {
 namespace {
+
+// Host bytes a weakly compressible run holds per particle, an estimate from below: the scenario
+// (position, velocity, fixed: 28), the solver's state (x, v, rho, p, fixed: 36), the kernels'
+// results and the neighbour search's sorted copy (about 64), the CLI's copies of the state (64).
+constexpr double run_bytes_per_particle = 192;
 
 constexpr float pool_side = 1.0f;           // the pool is [-0.5, 0.5] x [0, 1] x [-0.5, 0.5]
 constexpr float article_block_side = 0.6f;  // the article's water cube
@@ -292,30 +299,33 @@ void set_wcsph_key(WcsphConfig& c, const std::string& key, const std::string& va
     c.clamp_negative_pressure = value == "clamp";
   } else if (key == "end_time") {
     c.end_time = number();
-  } else if (key == "damping") {
-    c.damping = number();
-  } else if (key == "damping_time") {
-    c.damping_time = number();
+  } else if (key == "damping" || key == "damping_time") {
+    // Negative values are the struct's "the scenario's default"; given explicitly they are a
+    // mistake, not a request for the default.
+    const float f = number();
+    require(std::isfinite(f) && f >= 0.0f, ErrorCode::invalid_argument,
+            key + " must be a finite number >= 0 (" +
+                (key == "damping" ? "1/s; 0: no damping" : "s; 0: no damping") + "), got " + value);
+    (key == "damping" ? c.damping : c.damping_time) = f;
   } else {
     throw Error(ErrorCode::invalid_argument, "unknown scenario key '" + key + "'");
   }
 }
 
 WcsphConfig read_wcsph_config(const std::string& path, WcsphConfig base) {
-  std::ifstream in(path);
-  if (!in) throw Error(ErrorCode::io, path + ": cannot open");
+  io::LineReader in(path);  // a directory, /dev/zero or a binary file: Error(io)
   std::string line;
-  int number = 0;
-  while (std::getline(in, line)) {
-    ++number;
+  while (in.next(line)) {
+    const std::size_t number = in.number();
     const auto hash = line.find('#');
     if (hash != std::string::npos) line.resize(hash);
     line = trim(line);
     if (line.empty()) continue;
     const auto eq = line.find('=');
     if (eq == std::string::npos)
-      throw Error(ErrorCode::invalid_argument,
-                  path + ":" + std::to_string(number) + ": expected key = value");
+      throw Error(ErrorCode::invalid_argument, path + ":" + std::to_string(number) +
+                                                   ": expected key = value, found '" +
+                                                   io::printable(line) + "'");
     try {
       set_wcsph_key(base, trim(line.substr(0, eq)), trim(line.substr(eq + 1)));
     } catch (const Error& e) {
@@ -355,6 +365,19 @@ SphScenario wcsph_scenario(const WcsphConfig& c) {
   const double dx = c.dx();
   const float h = c.h_over_dx * c.dx();
   const float c0 = c.c0();
+  {
+    // Sized in double before any int conversion or allocation, and refused when it cannot fit.
+    const double L = c.boundary_layers, n = c.resolution;
+    const double ny = std::round(c.height() / dx), nx_tank = std::round(c.length() / dx);
+    const double fluid = n * ny * n;
+    const double boundary = (nx_tank + 2 * L) * (ny + 2 + L) * (n + 2 * L) - nx_tank * (ny + 2) * n;
+    char what[200];
+    std::snprintf(what, sizeof what, "scenario %s: %.4g particles (%.4g fluid + %.4g boundary)",
+                  c.scenario.c_str(), fluid + boundary, fluid, boundary);
+    detail::require_host_memory((fluid + boundary) * run_bytes_per_particle, what);
+    require(fluid + boundary < 2e9, ErrorCode::invalid_argument,
+            std::string(what) + ": more than 2e9, too many for one run");
+  }
   const int nx_fluid = c.resolution;
   const int ny_fluid = static_cast<int>(std::lround(c.height() / dx));
   const int nz = c.resolution;
