@@ -13,7 +13,7 @@
 #include <string>
 #include <vector>
 
-#include "io/files.hpp"
+#include "raycut/files.hpp"
 #include "raycut/error.hpp"
 #include "raycut/generators.hpp"
 #include "raycut/io.hpp"

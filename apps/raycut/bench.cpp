@@ -15,7 +15,7 @@
 #include <unistd.h>
 
 #include "commands.hpp"
-#include "io/files.hpp"
+#include "raycut/files.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/generators.hpp"
 

@@ -12,8 +12,8 @@
 #include <new>
 
 #include "commands.hpp"
-#include "core/host_memory.hpp"
-#include "io/files.hpp"
+#include "raycut/host_memory.hpp"
+#include "raycut/files.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/generators.hpp"
 #include "raycut/io.hpp"
@@ -56,7 +56,7 @@ std::uint64_t suite_particles(int param, int p) {
 }
 
 void require_particles_fit(std::uint64_t n, double bytes_per_particle, const std::string& what) {
-  detail::require_host_memory(static_cast<double>(n) * bytes_per_particle,
+  require_host_memory(static_cast<double>(n) * bytes_per_particle,
                               what + ": N = " + std::to_string(n) + " particles (~" +
                                   std::to_string(static_cast<int>(bytes_per_particle)) +
                                   " bytes each)");

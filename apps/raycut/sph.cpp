@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "commands.hpp"
-#include "io/files.hpp"
+#include "raycut/files.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/sph/render.hpp"
 #include "raycut/sph/scenario.hpp"

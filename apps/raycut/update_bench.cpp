@@ -9,7 +9,7 @@
 #include <optional>
 
 #include "commands.hpp"
-#include "io/files.hpp"
+#include "raycut/files.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/generators.hpp"
 

@@ -1,3 +1,6 @@
+#include <unistd.h>
+
+#include <fstream>
 #include "core/validation.hpp"
 
 #include <cmath>
@@ -8,6 +11,7 @@
 #include <string>
 
 #include "raycut/error.hpp"
+#include "raycut/host_memory.hpp"
 
 namespace raycut::detail {
 
@@ -29,7 +33,6 @@ void validate_cutoff(float cutoff) {
                     "]: beyond it the squared cutoff is not a normal float and the float "
                     "predicate would be wrong (scale your coordinates and cutoff into it)");
 }
-
 
 std::size_t first_non_finite_host(const float* xyz, std::size_t n) {
   std::size_t first = n;
@@ -82,6 +85,27 @@ std::string format_bytes(double bytes) {
 namespace raycut {
 
 using detail::number;
+
+double available_host_memory() {
+  std::ifstream meminfo("/proc/meminfo");
+  std::string key, unit;
+  double kib = 0;
+  while (meminfo >> key >> kib >> unit)
+    if (key == "MemAvailable:") return kib * 1024.0;
+  const long page = ::sysconf(_SC_PAGESIZE);
+  const long available = ::sysconf(_SC_AVPHYS_PAGES);
+  if (page > 0 && available > 0) return static_cast<double>(available) * page;
+  const long physical = ::sysconf(_SC_PHYS_PAGES);
+  return page > 0 && physical > 0 ? static_cast<double>(physical) * page : 1e300;
+}
+
+void require_host_memory(double bytes, const std::string& what) {
+  const double available = available_host_memory();
+  if (bytes > available)
+    throw Error(ErrorCode::out_of_memory, what + " needs " + detail::format_bytes(bytes) +
+                                              " of host memory, " +
+                                              detail::format_bytes(available) + " is available");
+}
 
 void validate_kernel_range(Kernel kernel, const KernelOptions& options, float cutoff) {
   constexpr double pi = 3.14159265358979;  // as kernels.hpp (its float pi, widened)

@@ -24,7 +24,7 @@
 #include <system_error>
 #include <vector>
 
-#include "io/files.hpp"
+#include "raycut/files.hpp"
 #include "raycut/error.hpp"
 
 namespace raycut {

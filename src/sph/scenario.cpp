@@ -9,8 +9,8 @@
 #include <string>
 #include <utility>
 
-#include "core/host_memory.hpp"
-#include "io/files.hpp"
+#include "raycut/host_memory.hpp"
+#include "raycut/files.hpp"
 #include "raycut/error.hpp"
 
 namespace raycut::sph {
@@ -374,7 +374,7 @@ SphScenario wcsph_scenario(const WcsphConfig& c) {
     char what[200];
     std::snprintf(what, sizeof what, "scenario %s: %.4g particles (%.4g fluid + %.4g boundary)",
                   c.scenario.c_str(), fluid + boundary, fluid, boundary);
-    detail::require_host_memory((fluid + boundary) * run_bytes_per_particle, what);
+    require_host_memory((fluid + boundary) * run_bytes_per_particle, what);
     require(fluid + boundary < 2e9, ErrorCode::invalid_argument,
             std::string(what) + ": more than 2e9, too many for one run");
   }
