@@ -43,7 +43,9 @@ std::string first_difference(const std::vector<float>& a, const std::vector<floa
 
 template <class Body>
 void for_each_case(Body&& body) {
-  const raycut::KernelOptions options{1.5f, 0.35f};  // not the defaults: the parameters matter
+  raycut::KernelOptions options;
+  options.lj_epsilon = 1.5f;
+  options.lj_sigma = 0.35f;  // not the defaults: the parameters matter
   for (const char* method : cpu_methods)
     for (const char* family : families)
       for (std::size_t n : {2u, 257u, 3000u}) {
@@ -185,7 +187,7 @@ TEST(Functors, LennardJonesForcesAndVirialAgainstDoublePrecision) {
   const std::vector<float> xyz = jittered_lattice(6, 1.05, 0.12);
   const std::size_t n = xyz.size() / 3;
   const auto pairs = pairs_in_range(xyz, cutoff);
-  ASSERT_GT(pairs.size(), 20 * n);
+  ASSERT_GT(pairs.size(), 10 * n);
 
   // Total energy in double, particle k moved by h along axis a.
   const auto total_energy = [&](std::size_t k, int a, double h) {

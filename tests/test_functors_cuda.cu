@@ -106,7 +106,9 @@ const char* const families[] = {
 template <class Body>
 void for_each_case(const std::string& method, std::initializer_list<std::size_t> sizes,
                    Body&& body) {
-  const raycut::KernelOptions options{1.5f, 0.35f};
+  raycut::KernelOptions options;
+  options.lj_epsilon = 1.5f;
+  options.lj_sigma = 0.35f;
   for (const char* family : families)
     for (std::size_t n : sizes) {
       const float cutoff = 0.5f;
