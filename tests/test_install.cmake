@@ -17,14 +17,22 @@ run(${WORK}/build/consumer)
 run(${WORK}/build/consumer_sph)
 message(STATUS "install: find_package(raycut) consumer built and ran")
 
-# The example, with the CUDA compiler and architectures raycut was built with.
-load_cache(${BUILD} READ_WITH_PREFIX raycut_ CMAKE_CUDA_COMPILER CMAKE_CUDA_ARCHITECTURES)
+# The example, with the nvcc (and the architectures, when set on the command line) raycut was
+# built with: raycut's CMakeLists picks /usr/local/cuda/bin/nvcc without caching it.
+load_cache(${BUILD} READ_WITH_PREFIX raycut_ CMAKE_CUDA_COMPILER CUDAToolkit_NVCC_EXECUTABLE
+           CMAKE_CUDA_ARCHITECTURES)
 file(GLOB config ${WORK}/prefix/lib*/cmake/raycut/raycutConfig.cmake)
 file(STRINGS ${config} cuda_line REGEX "set\\(raycut_HAVE_CUDA ON\\)")
 set(cuda_args)
 if(cuda_line)
-  set(cuda_args -DCMAKE_CUDA_COMPILER=${raycut_CMAKE_CUDA_COMPILER}
-      -DCMAKE_CUDA_ARCHITECTURES=${raycut_CMAKE_CUDA_ARCHITECTURES})
+  if(raycut_CMAKE_CUDA_COMPILER)
+    list(APPEND cuda_args -DCMAKE_CUDA_COMPILER=${raycut_CMAKE_CUDA_COMPILER})
+  elseif(raycut_CUDAToolkit_NVCC_EXECUTABLE)
+    list(APPEND cuda_args -DCMAKE_CUDA_COMPILER=${raycut_CUDAToolkit_NVCC_EXECUTABLE})
+  endif()
+  if(raycut_CMAKE_CUDA_ARCHITECTURES)
+    list(APPEND cuda_args -DCMAKE_CUDA_ARCHITECTURES=${raycut_CMAKE_CUDA_ARCHITECTURES})
+  endif()
 endif()
 run(${CMAKE_COMMAND} -S ${SOURCE}/examples/coulomb -B ${WORK}/coulomb
     -DCMAKE_PREFIX_PATH=${WORK}/prefix -DCMAKE_BUILD_TYPE=Release ${cuda_args})
