@@ -119,7 +119,8 @@ FloatInput float_input(nb::handle obj, const char* name) {
                                                    "them in your framework first)"
                                                  : ""));
   std::int64_t expected = 1;
-  for (std::size_t d = array.ndim(); d-- > 0;) {
+  const bool empty = array.size() == 0;  // no elements: strides mean nothing
+  for (std::size_t d = array.ndim(); !empty && d-- > 0;) {
     if (array.shape(d) > 1 && array.stride(d) != expected)
       value_error(std::string(name) + " must be C-contiguous (arrays are read in place)");
     expected *= static_cast<std::int64_t>(array.shape(d));
