@@ -64,6 +64,10 @@ def assert_same_pairs(i, j, x, cutoff, half=False):
     assert found - edge == inside - edge
 
 
+def pytest_report_header(config):
+    return [f"raycut: {raycut.__file__}", f"raycut methods here: {', '.join(AVAILABLE)}"]
+
+
 @pytest.fixture(params=AVAILABLE)
 def method(request):
     return request.param
