@@ -4,7 +4,8 @@
 # library). GPU and OptiX tests skip (and say why) where there is no GPU or no OptiX headers.
 #
 # The Python used: $RAYCUT_PYTHON, else .venv/bin/python (scripts/setup.sh), else python3; it
-# needs nanobind, numpy and pytest (python/requirements.txt). RAYCUT_PYTHON_TESTS=OFF skips the
+# needs nanobind, numpy and pytest (python/requirements.txt); without them and without .venv,
+# .venv is created as scripts/setup.sh does. RAYCUT_PYTHON_TESTS=OFF skips the
 # Python package. RAYCUT_TEST_WHEEL=1 also runs `pip install --no-build-isolation .` into that
 # Python (a second, full build of the library) and the tests on the installed package.
 set -euo pipefail
@@ -16,6 +17,13 @@ python="${RAYCUT_PYTHON:-}"
 [ -z "$python" ] && python="$(command -v python3 || echo python3)"
 python_args=(-DRAYCUT_BUILD_PYTHON=OFF)
 if [ "$python_tests" != OFF ]; then
+  if [ -z "${RAYCUT_PYTHON:-}" ] && [ ! -e .venv ] &&
+     ! "$python" -c "import nanobind, numpy, pytest" 2>/dev/null; then
+    echo "raycut: no .venv: creating it (python/requirements.txt, from PyPI)" >&2
+    if python3 -m venv .venv && .venv/bin/python -m pip install -q -r python/requirements.txt; then
+      python="$PWD/.venv/bin/python"
+    fi
+  fi
   if ! "$python" -c "import nanobind, numpy, pytest" 2>/dev/null; then
     echo "raycut: $python lacks nanobind, numpy or pytest: run scripts/setup.sh (it creates" \
          ".venv), or set RAYCUT_PYTHON to a Python that has them (RAYCUT_PYTHON_TESTS=OFF" \

@@ -1,4 +1,8 @@
 """Shared inputs and the brute-force reference of the Python tests."""
+import os
+
+os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")  # JAX: leave the GPU to others
+
 import numpy as np
 import pytest
 
