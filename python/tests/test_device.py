@@ -127,14 +127,6 @@ def test_torch_input_errors():
         raycut.neighbor_list("ij", bad, CUTOFF)
 
 
-def test_torch_cpu_tensors_stay_on_cpu():
-    torch = pytest.importorskip("torch", reason="PyTorch is not installed")
-    x = uniform(300)
-    i, j = raycut.neighbor_list("ij", torch.from_numpy(x), CUTOFF)
-    assert isinstance(i, torch.Tensor) and i.device.type == "cpu"
-    assert pair_set(i.numpy(), j.numpy()) == pair_set(*raycut.neighbor_list("ij", x, CUTOFF))
-
-
 @pytest.mark.parametrize("method", METHODS)
 def test_cupy_equals_host(method):
     cupy = cupy_cuda()
