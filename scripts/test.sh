@@ -38,7 +38,7 @@ if [ "$python_tests" != OFF ]; then
   case "$build" in /*) build_path="$build" ;; *) build_path="$PWD/$build" ;; esac
   PYTHONPATH="$build_path/python" "$python" -m pytest -q -rs -p no:cacheprovider python/tests
   if [ "${RAYCUT_TEST_WHEEL:-0}" = 1 ]; then
-    "$python" -m pip install -q --no-build-isolation .
+    "$python" -m pip install -q --no-build-isolation --no-index .
     (cd python/tests && "$python" -m pytest -q -rs -p no:cacheprovider .)
   fi
 fi
