@@ -239,20 +239,23 @@ nb::tuple pairs(raycut::Engine& engine, bool half, bool distances, bool vectors,
   const std::size_t count = list->pairs();
   if (list->space() == MemorySpace::device && !to_host) {
 #if defined(RAYCUT_PY_CUDA)
-    void* ij = raycut_py::device_alloc(2 * count * sizeof(std::int64_t));
-    std::shared_ptr<const void> owner(ij, [](const void* p) {
-      raycut_py::device_free(const_cast<void*>(p));
-    });
-    auto* i = static_cast<std::int64_t*>(ij);
+    // Two allocations (not one split in two): each array aligned as its own allocation, as
+    // some consumers (JAX) want.
+    auto device_int64 = [](std::size_t size) {
+      return std::shared_ptr<std::int64_t>(
+          static_cast<std::int64_t*>(raycut_py::device_alloc(size * sizeof(std::int64_t))),
+          [](std::int64_t* p) { raycut_py::device_free(p); });
+    };
+    auto i = device_int64(count), j = device_int64(count);
     {
       nb::gil_scoped_release release;
-      raycut_py::csr_to_coo(list->offsets(), list->indices(), n, count, i, i + count,
+      raycut_py::csr_to_coo(list->offsets(), list->indices(), n, count, i.get(), j.get(),
                             engine.stream());
     }
     const MemorySpace space = MemorySpace::device;
     return nb::make_tuple(
-        wrap(i, {count}, dtype_of<std::int64_t>(), owner, space),
-        wrap(i + count, {count}, dtype_of<std::int64_t>(), owner, space),
+        wrap(i.get(), {count}, dtype_of<std::int64_t>(), i, space),
+        wrap(j.get(), {count}, dtype_of<std::int64_t>(), j, space),
         distances ? wrap(list->distances(), {count}, dtype_of<float>(), list, space) : nb::none(),
         vectors ? wrap(list->vectors(), {count, 3}, dtype_of<float>(), list, space) : nb::none());
 #else
