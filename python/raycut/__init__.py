@@ -235,6 +235,10 @@ class Engine:
 _QUANTITIES = "ijdDS"
 
 
+def _requires_grad(positions: Any) -> bool:
+    return _arrays.framework_of(positions) == "torch" and bool(positions.requires_grad)
+
+
 def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = None,
                   pbc: Any = None, batch: Any = None, half: bool = False,
                   method: str = "auto") -> Any:
@@ -250,7 +254,9 @@ def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = No
     - ``"S"``: shifts, for periodic boxes: not supported yet (ValueError).
 
     ``positions``: (N, 3) float32 (NumPy: any float, converted). The outputs are of the
-    positions' framework and device (CUDA tensors in: CUDA tensors out, zero-copy).
+    positions' framework and device (CUDA tensors in: CUDA tensors out, zero-copy). For PyTorch
+    positions that require grad, ``d`` and ``D`` are computed in PyTorch from the pairs
+    (``x[j] - x[i]``), so that gradients flow back to the positions.
     ``cell``/``pbc``: periodic boxes are not supported yet (ValueError unless None or all
     False); ``batch``: not supported yet (ValueError unless None). ``method``: a name from
     ``methods()`` or ``"auto"``.
@@ -267,6 +273,14 @@ def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = No
     engine = Engine(method)
     engine.build(positions, cutoff)
     i, j, d, v = engine._pairs(half, "d" in quantities, "D" in quantities)
+    if ("d" in quantities or "D" in quantities) and _requires_grad(positions):
+        # PyTorch autograd: d and D recomputed in the framework from the pairs, so gradients flow
+        # to the positions (the same float32 values as the library's x_j - x_i).
+        v = positions.index_select(0, j) - positions.index_select(0, i)
+        if "d" in quantities:
+            import torch
+
+            d = torch.linalg.vector_norm(v, dim=1)
     found = {"i": i, "j": j, "d": d, "D": v}
     out = tuple(found[letter] for letter in quantities)
     return out[0] if len(out) == 1 else out

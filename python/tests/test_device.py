@@ -193,3 +193,10 @@ def test_all_methods_agree_on_device():
                                                                          method=method)))
         ref = pairs if ref is None else ref
         assert pairs == ref, method
+
+
+def test_torch_cuda_gradients():
+    from test_frameworks import check_torch_gradients
+
+    torch = torch_cuda()
+    check_torch_gradients(torch, torch.from_numpy(uniform(1000)).cuda())

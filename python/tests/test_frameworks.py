@@ -36,3 +36,22 @@ def test_jax_cpu_arrays_stay_on_cpu():
     engine.build(jax.device_put(x, cpu), CUTOFF)
     out = engine.compute("lj_forces")
     assert isinstance(out["force"], jax.Array) and out["force"].shape == (200, 3)
+
+
+def check_torch_gradients(torch, x):
+    """d and D of positions that require grad: autograd flows to the positions."""
+    x = x.detach().clone().requires_grad_()
+    i, j, d, D = raycut.neighbor_list("ijdD", x, CUTOFF)
+    assert d.requires_grad and D.requires_grad
+    ref_i, ref_j, ref_d, ref_D = raycut.neighbor_list("ijdD", x.detach(), CUTOFF)
+    torch.testing.assert_close(D.detach(), ref_D, rtol=0, atol=0)
+    torch.testing.assert_close(d.detach(), ref_d, rtol=1e-6, atol=1e-7)
+    (grad,) = torch.autograd.grad(d.sum(), x)
+    u = (D / d[:, None]).detach()
+    want = torch.zeros_like(x).index_add_(0, j, u).index_add_(0, i, -u)
+    torch.testing.assert_close(grad, want, rtol=1e-4, atol=1e-5)
+
+
+def test_torch_cpu_gradients():
+    torch = pytest.importorskip("torch", reason="PyTorch is not installed")
+    check_torch_gradients(torch, torch.from_numpy(uniform(300)))
