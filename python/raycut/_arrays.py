@@ -48,7 +48,12 @@ def prepare(x: Any, name: str = "positions", points: bool = True) -> tuple[Any, 
     """The object the extension reads (in place) and where the caller's outputs go."""
     framework = framework_of(x)
     if framework == "numpy":
-        array = np.ascontiguousarray(np.asarray(x), dtype=np.float32)
+        try:
+            array = np.ascontiguousarray(np.asarray(x), dtype=np.float32)
+        except (TypeError, ValueError) as e:
+            raise TypeError(f"{name} must be a NumPy array, an array like, or an array with "
+                            f"__dlpack__ or __cuda_array_interface__; got {type(x).__name__} "
+                            f"({e})") from None
         if points and array.size == 0 and array.ndim < 2:
             array = array.reshape(0, 3)  # [] -> no particles
         return array, HOST

@@ -207,3 +207,25 @@ def test_errors():
     if unavailable:
         with pytest.raises(NotImplementedError, match="not available"):
             raycut.Engine(unavailable[0])
+
+
+def test_other_framework_host_dlpack():
+    x = uniform(300)
+
+    class Foreign:  # an unknown framework's host array, known only through DLPack
+        def __init__(self, a):
+            self.a = a
+
+        def __dlpack__(self, **kwargs):
+            return self.a.__dlpack__(**kwargs)
+
+        def __dlpack_device__(self):
+            return self.a.__dlpack_device__()
+
+    i, j = raycut.neighbor_list("ij", Foreign(x), CUTOFF)
+    assert isinstance(i, np.ndarray)
+    assert pair_set(i, j) == pair_set(*raycut.neighbor_list("ij", x, CUTOFF))
+    with pytest.raises(ValueError, match="float32"):
+        raycut.neighbor_list("ij", Foreign(x.astype(np.float64)), CUTOFF)
+    with pytest.raises(TypeError, match="__dlpack__"):
+        raycut.Engine().build(object(), CUTOFF)
