@@ -1,8 +1,12 @@
 #!/usr/bin/env bash
-# Installs everything raycut needs on a fresh Debian 12 machine, from Debian's packages.
+# Installs everything raycut needs on a fresh Debian 12 machine, from Debian's packages, then the
+# Python package's build and test requirements (python/requirements.txt, from PyPI) into a
+# virtual environment in the repository, .venv (ignored by git; Debian's own Python refuses
+# `pip install` outside one, PEP 668). scripts/test.sh uses it.
 # The CUDA toolkit is optional and not a Debian package here: when nvcc is on the machine
 # (/usr/local/cuda), the CUDA methods are built; otherwise the CPU methods only.
 set -euo pipefail
+cd "$(dirname "$0")/.."
 SUDO=""
 [ "$(id -u)" -eq 0 ] || SUDO="sudo"
 export DEBIAN_FRONTEND=noninteractive
@@ -10,6 +14,9 @@ $SUDO apt-get update -qq
 $SUDO apt-get install -y -qq --no-install-recommends \
   cmake ninja-build g++ make git \
   libgtest-dev libgmock-dev libcli11-dev libpng-dev \
-  clang-format python3 python3-numpy python3-matplotlib \
+  clang-format python3 python3-dev python3-venv python3-numpy python3-matplotlib \
   clang libclang-rt-14-dev  # the readers' fuzz test (tests/fuzz: libFuzzer, sanitizers)
-echo "raycut: dependencies installed"
+[ -x .venv/bin/python ] || python3 -m venv .venv
+.venv/bin/python -m pip install -q --upgrade pip
+.venv/bin/python -m pip install -q -r python/requirements.txt
+echo "raycut: dependencies installed (Python: $PWD/.venv)"

@@ -1,0 +1,154 @@
+"""Arrays in and out of the extension: which framework and device an input lives on, and the
+same framework and device for the outputs.
+
+Inputs are read in place (DLPack or ``__cuda_array_interface__``); only NumPy inputs (and array
+likes: lists, tuples) are converted on the host, to float32 C-contiguous, with a copy when they
+are not already. Outputs come back from the extension as NumPy arrays (host) or DLPack-capable
+arrays wrapping device memory the library allocated (device); here they become arrays of the
+caller's framework through its own ``from_dlpack``, without a copy.
+"""
+from __future__ import annotations
+
+import contextlib
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+# DLPack device types (dlpack.h): kDLCPU, kDLCUDAHost.
+_DLPACK_HOST = (1, 3)
+
+
+@dataclass(frozen=True)
+class Like:
+    """Where the caller's arrays live: outputs follow it."""
+
+    framework: str  # "numpy", "torch", "cupy", "jax" or "other"
+    device: Any = None  # the framework's device object (torch.device, cupy device id, jax Device)
+    host: bool = True  # the outputs are wanted in host memory
+
+
+HOST = Like("numpy")
+
+
+def framework_of(x: Any) -> str:
+    if isinstance(x, np.ndarray):
+        return "numpy"
+    module = type(x).__module__.split(".", 1)[0]
+    if module in ("torch", "cupy"):
+        return module
+    if module in ("jax", "jaxlib"):
+        return "jax"
+    if hasattr(x, "__dlpack__") or hasattr(x, "__cuda_array_interface__"):
+        return "other"
+    return "numpy"  # lists, tuples, array likes
+
+
+def prepare(x: Any, name: str = "positions", points: bool = True) -> tuple[Any, Like]:
+    """The object the extension reads (in place) and where the caller's outputs go."""
+    framework = framework_of(x)
+    if framework == "numpy":
+        try:
+            array = np.ascontiguousarray(np.asarray(x), dtype=np.float32)
+        except (TypeError, ValueError) as e:
+            raise TypeError(f"{name} must be a NumPy array, an array like, or an array with "
+                            f"__dlpack__ or __cuda_array_interface__; got {type(x).__name__} "
+                            f"({e})") from None
+        if points and array.size == 0 and array.ndim < 2:
+            array = array.reshape(0, 3)  # [] -> no particles
+        return array, HOST
+    if framework == "torch":
+        if x.requires_grad:  # DLPack refuses tensors that require grad; the list does not need it
+            x = x.detach()
+        return x, Like("torch", x.device, x.device.type == "cpu")
+    if framework == "cupy":
+        return x, Like("cupy", x.device.id, False)
+    if framework == "jax":
+        device = next(iter(x.devices()))
+        return x, Like("jax", device, device.platform == "cpu")
+    if hasattr(x, "__dlpack_device__"):
+        host = int(x.__dlpack_device__()[0]) in _DLPACK_HOST
+    else:
+        host = False  # __cuda_array_interface__ only
+    return x, Like("other", None, host)
+
+
+def device_context(like: Like):
+    """The caller's CUDA device as the current one while the library works on its arrays."""
+    if like.host:
+        return contextlib.nullcontext()
+    if like.framework == "torch":
+        import torch
+
+        return torch.cuda.device(like.device)
+    if like.framework == "cupy":
+        import cupy
+
+        return cupy.cuda.Device(like.device)
+    return contextlib.nullcontext()
+
+
+def stream_of(like: Like) -> int:
+    """The caller's current CUDA stream (the library queues its work there), 0: the default."""
+    if like.host:
+        return 0
+    if like.framework == "torch":
+        import torch
+
+        return int(torch.cuda.current_stream(like.device).cuda_stream)
+    if like.framework == "cupy":
+        import cupy
+
+        return int(cupy.cuda.get_current_stream().ptr)
+    return 0
+
+
+def to_host(x: Any) -> np.ndarray:
+    """A host float32 copy of an input array of any framework (kernel inputs of a CPU method)."""
+    framework = framework_of(x)
+    if framework == "torch":
+        x = x.detach().cpu().numpy()
+    elif framework == "cupy":
+        x = x.get()
+    elif framework == "jax":
+        x = np.asarray(x)
+    elif framework == "other" and hasattr(x, "__dlpack__"):
+        try:
+            x = np.from_dlpack(x)
+        except (RuntimeError, BufferError, TypeError):
+            raise ValueError("cannot read a device array of an unknown framework on the host: "
+                             "pass a NumPy array") from None
+    return np.ascontiguousarray(np.asarray(x), dtype=np.float32)
+
+
+def output(array: Any, like: Like) -> Any:
+    """An array from the extension (NumPy on the host, DLPack on the device) in the caller's
+    framework and device: zero-copy where it already is there, a copy to the caller's device
+    when the method worked elsewhere."""
+    if array is None or like.framework == "numpy":
+        return array
+    on_host = isinstance(array, np.ndarray)
+    if like.framework == "torch":
+        import torch
+
+        if on_host:
+            tensor = torch.from_numpy(array)
+            return tensor if like.host else tensor.to(like.device)
+        return torch.from_dlpack(array)
+    if like.framework == "cupy":
+        import cupy
+
+        if on_host:
+            with cupy.cuda.Device(like.device):
+                return cupy.asarray(array)
+        return cupy.from_dlpack(array)
+    if like.framework == "jax":
+        import jax
+
+        if on_host:
+            return jax.device_put(array, like.device)
+        try:
+            return jax.dlpack.from_dlpack(array)
+        except TypeError:  # jax versions that take a capsule only
+            return jax.dlpack.from_dlpack(array.__dlpack__())
+    return array  # other: NumPy on the host, DLPack-capable arrays on the device

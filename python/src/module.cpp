@@ -1,0 +1,519 @@
+// raycut._raycut: the nanobind extension under the raycut Python package (python/raycut). It
+// reads positions from anything with DLPack (NumPy, PyTorch, CuPy, JAX) or
+// __cuda_array_interface__, without a copy, and returns arrays that wrap the library's own
+// buffers (a capsule keeps them alive): NumPy arrays on the host, DLPack-capable arrays on the
+// device that the Python layer hands to the caller's framework (from_dlpack, zero-copy).
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/string_view.h>
+#include <nanobind/stl/vector.h>
+
+#include <cstdint>
+#include <cstring>
+#include <limits>
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "raycut/engine.hpp"
+#include "raycut/error.hpp"
+#include "raycut/kernels.hpp"
+
+#if defined(RAYCUT_PY_CUDA)
+#include "device.hpp"
+#endif
+
+namespace nb = nanobind;
+using raycut::MemorySpace;
+
+namespace {
+
+PyObject* capacity_error = nullptr;  // raycut.CapacityError(RuntimeError)
+
+[[noreturn]] void value_error(const std::string& message) {
+  throw raycut::Error(raycut::ErrorCode::invalid_argument, message);
+}
+
+// ---- inputs ------------------------------------------------------------------------------------
+
+// A float32 C-contiguous array read in place, on the host or the CUDA device.
+struct FloatInput {
+  const float* data = nullptr;
+  std::vector<std::size_t> shape;
+  MemorySpace space = MemorySpace::host;
+  std::optional<nb::ndarray<nb::ro>> keep;  // the imported DLPack tensor, alive during the call
+};
+
+std::string describe_shape(const std::vector<std::size_t>& shape) {
+  std::string s = "(";
+  for (std::size_t d = 0; d < shape.size(); ++d)
+    s += (d ? ", " : "") + std::to_string(shape[d]);
+  return s + (shape.size() == 1 ? ",)" : ")");
+}
+
+std::string describe_dtype(nb::dlpack::dtype dt) {
+  const char* kind = "?";
+  switch (static_cast<nb::dlpack::dtype_code>(dt.code)) {
+    case nb::dlpack::dtype_code::Int: kind = "int"; break;
+    case nb::dlpack::dtype_code::UInt: kind = "uint"; break;
+    case nb::dlpack::dtype_code::Float: kind = "float"; break;
+    case nb::dlpack::dtype_code::Bfloat: kind = "bfloat"; break;
+    case nb::dlpack::dtype_code::Complex: kind = "complex"; break;
+    case nb::dlpack::dtype_code::Bool: kind = "bool"; break;
+  }
+  return kind + std::to_string(dt.bits);
+}
+
+// __cuda_array_interface__ (version 2 or 3) of an object without DLPack (e.g. Numba's arrays).
+FloatInput from_cuda_array_interface(nb::handle obj, const char* name) {
+  nb::dict cai = nb::cast<nb::dict>(obj.attr("__cuda_array_interface__"));
+  FloatInput in;
+  in.space = MemorySpace::device;
+  for (nb::handle d : nb::cast<nb::tuple>(cai["shape"])) in.shape.push_back(nb::cast<std::size_t>(d));
+  const std::string typestr = nb::cast<std::string>(cai["typestr"]);
+  if (typestr != "<f4")
+    value_error(std::string(name) + " must be float32 C-contiguous on the device, got typestr '" +
+                typestr + "' (convert it in your framework first)");
+  if (cai.contains("mask") && !cai["mask"].is_none())
+    value_error(std::string(name) + ": masked arrays are not supported");
+  if (cai.contains("strides") && !cai["strides"].is_none()) {
+    nb::tuple strides = nb::cast<nb::tuple>(cai["strides"]);
+    std::size_t expected = 4;
+    for (std::size_t d = in.shape.size(); d-- > 0;) {
+      if (in.shape[d] > 1 && nb::cast<std::size_t>(strides[d]) != expected)
+        value_error(std::string(name) + " must be C-contiguous (device arrays are read in place)");
+      expected *= in.shape[d];
+    }
+  }
+  nb::tuple data = nb::cast<nb::tuple>(cai["data"]);
+  in.data = reinterpret_cast<const float*>(nb::cast<std::uintptr_t>(data[0]));
+  return in;
+}
+
+FloatInput float_input(nb::handle obj, const char* name) {
+  nb::ndarray<nb::ro> array;
+  if (!nb::try_cast(obj, array, /*convert=*/false)) {
+    if (nb::hasattr(obj, "__cuda_array_interface__")) return from_cuda_array_interface(obj, name);
+    throw nb::type_error((std::string(name) +
+                          " must be a NumPy array or an array with __dlpack__ or "
+                          "__cuda_array_interface__, got " +
+                          nb::cast<std::string>(nb::str(obj.type())))
+                             .c_str());
+  }
+  FloatInput in;
+  for (std::size_t d = 0; d < array.ndim(); ++d) in.shape.push_back(array.shape(d));
+  const int device = array.device_type();
+  if (device == nb::device::cpu::value || device == nb::device::cuda_host::value)
+    in.space = MemorySpace::host;
+  else if (device == nb::device::cuda::value || device == nb::device::cuda_managed::value)
+    in.space = MemorySpace::device;
+  else
+    value_error(std::string(name) + " is on an unsupported device (DLPack device type " +
+                std::to_string(device) + "): raycut reads the host and CUDA devices");
+  if (array.dtype() != nb::dtype<float>())
+    value_error(std::string(name) + " must be float32, got " + describe_dtype(array.dtype()) +
+                (in.space == MemorySpace::device ? " (device arrays are read in place: convert "
+                                                   "them in your framework first)"
+                                                 : ""));
+  std::int64_t expected = 1;
+  const bool empty = array.size() == 0;  // no elements: strides mean nothing
+  for (std::size_t d = array.ndim(); !empty && d-- > 0;) {
+    if (array.shape(d) > 1 && array.stride(d) != expected)
+      value_error(std::string(name) + " must be C-contiguous (arrays are read in place)");
+    expected *= static_cast<std::int64_t>(array.shape(d));
+  }
+  in.data = static_cast<const float*>(array.data());
+  in.keep = std::move(array);
+  return in;
+}
+
+raycut::PositionsView positions_view(const FloatInput& in) {
+  if (in.shape.size() != 2 || in.shape[1] != 3)
+    value_error("positions must have shape (N, 3), got " + describe_shape(in.shape));
+  return {in.data, in.shape[0], in.space};
+}
+
+// ---- outputs -----------------------------------------------------------------------------------
+
+template <class T>
+nb::dlpack::dtype dtype_of() {
+  return nb::dtype<T>();
+}
+
+// Wraps `data` (shape, dtype) without a copy; `owner` keeps the memory alive for as long as any
+// Python array (or a framework tensor imported from it through DLPack) refers to it.
+nb::object wrap(const void* data, std::vector<std::size_t> shape, nb::dlpack::dtype dtype,
+                std::shared_ptr<const void> owner, MemorySpace space) {
+  std::size_t elements = 1;
+  for (std::size_t s : shape) elements *= s;
+  int device_id = 0;
+  if (space == MemorySpace::device) {
+#if defined(RAYCUT_PY_CUDA)
+    device_id = raycut_py::current_device();
+    if (data == nullptr || elements == 0) {  // empty: a valid pointer all the same
+      void* p = raycut_py::device_alloc(16);
+      owner = std::shared_ptr<const void>(p, [](const void* q) {
+        raycut_py::device_free(const_cast<void*>(q));
+      });
+      data = p;
+    }
+#else
+    throw raycut::Error(raycut::ErrorCode::internal, "device output without CUDA");
+#endif
+  } else if (data == nullptr || elements == 0) {
+    static const std::uint64_t empty[2] = {0, 0};
+    data = empty;
+  }
+  auto* held = new std::shared_ptr<const void>(std::move(owner));
+  nb::capsule capsule(held, [](void* p) noexcept {
+    delete static_cast<std::shared_ptr<const void>*>(p);
+  });
+  void* ptr = const_cast<void*>(data);
+  if (space == MemorySpace::host)
+    return nb::cast(nb::ndarray<nb::numpy>(ptr, shape.size(), shape.data(), capsule, nullptr,
+                                           dtype, nb::device::cpu::value, 0));
+  return nb::cast(nb::ndarray<>(ptr, shape.size(), shape.data(), capsule, nullptr, dtype,
+                                nb::device::cuda::value, device_id));
+}
+
+// A host vector, moved into the array that owns it.
+template <class T>
+nb::object host_array(std::vector<T>&& values, std::vector<std::size_t> shape,
+                      nb::dlpack::dtype dtype = dtype_of<T>()) {
+  auto owner = std::make_shared<std::vector<T>>(std::move(values));
+  return wrap(owner->data(), std::move(shape), dtype, owner, MemorySpace::host);
+}
+
+// Indices are uint32 in the library; int32 (the same bits) is what every framework indexes with.
+nb::dlpack::dtype index_dtype(std::size_t n) {
+  return n <= static_cast<std::size_t>(std::numeric_limits<std::int32_t>::max())
+             ? dtype_of<std::int32_t>()
+             : dtype_of<std::uint32_t>();
+}
+
+// The list of `engine`'s positions where the method works (a new buffer: earlier results stay
+// valid).
+std::shared_ptr<raycut::NeighbourListBuffer> fill_list(raycut::Engine& engine, bool half,
+                                                       bool distances, bool vectors) {
+  auto list = std::make_shared<raycut::NeighbourListBuffer>();
+  nb::gil_scoped_release release;
+  engine.neighbours(*list, raycut::ListOptions{half, distances, vectors});
+  return list;
+}
+
+// CSR: (offsets int64 [N+1], indices int32 [P], distances [P] or None, vectors [P, 3] or None).
+nb::tuple neighbours(raycut::Engine& engine, bool half, bool distances, bool vectors,
+                     bool to_host) {
+  auto list = fill_list(engine, half, distances, vectors);
+  const std::size_t n = list->size();
+  const std::size_t pairs = list->pairs();
+  if (to_host && list->space() == MemorySpace::device) {
+    auto host = std::make_shared<raycut::NeighbourList>(list->to_host());
+    list.reset();
+    auto opt = [&](const std::vector<float>& v, std::vector<std::size_t> shape) -> nb::object {
+      if (!v.empty() || pairs == 0)
+        return wrap(v.data(), std::move(shape), dtype_of<float>(), host, MemorySpace::host);
+      return nb::none();
+    };
+    return nb::make_tuple(
+        wrap(host->offsets.data(), {n + 1}, dtype_of<std::int64_t>(), host, MemorySpace::host),
+        wrap(host->indices.data(), {pairs}, index_dtype(n), host, MemorySpace::host),
+        distances ? opt(host->distances, {pairs}) : nb::none(),
+        vectors ? opt(host->vectors, {pairs, 3}) : nb::none());
+  }
+  const MemorySpace space = list->space();
+  return nb::make_tuple(
+      wrap(list->offsets(), {n + 1}, dtype_of<std::int64_t>(), list, space),
+      wrap(list->indices(), {pairs}, index_dtype(n), list, space),
+      distances ? wrap(list->distances(), {pairs}, dtype_of<float>(), list, space) : nb::none(),
+      vectors ? wrap(list->vectors(), {pairs, 3}, dtype_of<float>(), list, space) : nb::none());
+}
+
+// COO pairs (i int64 [P], j int64 [P], d [P] or None, D [P, 3] or None): ASE's "ijdD".
+nb::tuple pairs(raycut::Engine& engine, bool half, bool distances, bool vectors, bool to_host) {
+  auto list = fill_list(engine, half, distances, vectors);
+  const std::size_t n = list->size();
+  const std::size_t count = list->pairs();
+  if (list->space() == MemorySpace::device && !to_host) {
+#if defined(RAYCUT_PY_CUDA)
+    // Two allocations (not one split in two): each array aligned as its own allocation, as
+    // some consumers (JAX) want.
+    auto device_int64 = [](std::size_t size) {
+      return std::shared_ptr<std::int64_t>(
+          static_cast<std::int64_t*>(raycut_py::device_alloc(size * sizeof(std::int64_t))),
+          [](std::int64_t* p) { raycut_py::device_free(p); });
+    };
+    auto i = device_int64(count), j = device_int64(count);
+    {
+      nb::gil_scoped_release release;
+      raycut_py::csr_to_coo(list->offsets(), list->indices(), n, count, i.get(), j.get(),
+                            engine.stream());
+    }
+    const MemorySpace space = MemorySpace::device;
+    return nb::make_tuple(
+        wrap(i.get(), {count}, dtype_of<std::int64_t>(), i, space),
+        wrap(j.get(), {count}, dtype_of<std::int64_t>(), j, space),
+        distances ? wrap(list->distances(), {count}, dtype_of<float>(), list, space) : nb::none(),
+        vectors ? wrap(list->vectors(), {count, 3}, dtype_of<float>(), list, space) : nb::none());
+#else
+    throw raycut::Error(raycut::ErrorCode::internal, "device list without CUDA");
+#endif
+  }
+  // On the host: the library's host list in place, or a copy of the device list.
+  std::shared_ptr<const void> owner = list;
+  const std::uint64_t* offsets = list->offsets();
+  const std::uint32_t* indices = list->indices();
+  const float* d = list->distances();
+  const float* v = list->vectors();
+  if (list->space() == MemorySpace::device) {
+    auto host = std::make_shared<raycut::NeighbourList>(list->to_host());
+    offsets = host->offsets.data();
+    indices = host->indices.data();
+    d = host->distances.empty() ? nullptr : host->distances.data();
+    v = host->vectors.empty() ? nullptr : host->vectors.data();
+    owner = host;
+  }
+  std::vector<std::int64_t> i(count), j(count);
+  {
+    nb::gil_scoped_release release;
+    for (std::size_t row = 0; row < n; ++row)
+      for (std::uint64_t e = offsets[row]; e < offsets[row + 1]; ++e)
+        i[e] = static_cast<std::int64_t>(row);
+    for (std::size_t e = 0; e < count; ++e) j[e] = indices[e];
+  }
+  const MemorySpace space = MemorySpace::host;
+  return nb::make_tuple(host_array(std::move(i), {count}), host_array(std::move(j), {count}),
+                        distances ? wrap(d, {count}, dtype_of<float>(), owner, space) : nb::none(),
+                        vectors ? wrap(v, {count, 3}, dtype_of<float>(), owner, space)
+                                : nb::none());
+}
+
+// Padded [N, K] (int32; N marks an empty slot), counts [N] (int32), report.
+nb::tuple padded(raycut::Engine& engine, std::uint32_t k, bool raise_on_overflow, bool to_host) {
+  auto list = std::make_shared<raycut::PaddedNeighbourBuffer>();
+  raycut::PaddedReport report;
+  {
+    nb::gil_scoped_release release;
+    report = engine.padded_neighbours(*list, k, raise_on_overflow);
+  }
+  const std::size_t n = list->size();
+  nb::dict info;
+  info["overflowed_rows"] = report.overflowed_rows;
+  info["largest_count"] = report.largest_count;
+  info["overflowed"] = report.overflowed();
+  info["k"] = k;
+  if (to_host && list->space() == MemorySpace::device)
+    return nb::make_tuple(host_array(list->indices_to_host(), {n, k}, index_dtype(n + 1)),
+                          host_array(list->counts_to_host(), {n}, index_dtype(n + 1)), info);
+  const MemorySpace space = list->space();
+  return nb::make_tuple(wrap(list->indices(), {n, k}, index_dtype(n + 1), list, space),
+                        wrap(list->counts(), {n}, index_dtype(n + 1), list, space), info);
+}
+
+// The results of the last run() of `kernel`, as new arrays (host copies, or device copies on
+// the device): the arrays `kernel` produces (raycut::produces), empty ones for N = 0.
+nb::dict results(raycut::Engine& engine, std::string_view kernel_name, bool to_host) {
+  const raycut::KernelProduces produces = raycut::produces(raycut::parse_kernel(kernel_name));
+  const std::size_t n = engine.size();
+  nb::dict out;
+  if (engine.space() == MemorySpace::host || to_host) {
+    raycut::Results r;
+    {
+      nb::gil_scoped_release release;
+      r = engine.results();
+    }
+    if (produces.count) out["count"] = host_array(std::move(r.count), {n}, index_dtype(n));
+    if (produces.energy) out["energy"] = host_array(std::move(r.energy), {n});
+    if (produces.force) out["force"] = host_array(std::move(r.force), {n, 3});
+    if (produces.virial) out["virial"] = host_array(std::move(r.virial), {n, 6});
+    if (produces.density) out["density"] = host_array(std::move(r.density), {n});
+    return out;
+  }
+#if defined(RAYCUT_PY_CUDA)
+  const raycut::ResultsView view = engine.results_view();
+  auto copy = [&](const void* src, std::vector<std::size_t> shape, nb::dlpack::dtype dtype) {
+    std::size_t bytes = dtype.bits / 8;
+    for (std::size_t s : shape) bytes *= s;
+    void* dst = raycut_py::device_alloc(bytes);
+    std::shared_ptr<const void> owner(dst, [](const void* p) {
+      raycut_py::device_free(const_cast<void*>(p));
+    });
+    if (src != nullptr) {
+      nb::gil_scoped_release release;
+      raycut_py::device_copy(dst, src, bytes, engine.stream());
+    }
+    return wrap(dst, std::move(shape), dtype, owner, MemorySpace::device);
+  };
+  if (produces.count) out["count"] = copy(view.count, {n}, index_dtype(n));
+  if (produces.energy) out["energy"] = copy(view.energy, {n}, dtype_of<float>());
+  if (produces.force) out["force"] = copy(view.force, {n, 3}, dtype_of<float>());
+  if (produces.virial) out["virial"] = copy(view.virial, {n, 6}, dtype_of<float>());
+  if (produces.density) out["density"] = copy(view.density, {n}, dtype_of<float>());
+  return out;
+#else
+  throw raycut::Error(raycut::ErrorCode::internal, "device results without CUDA");
+#endif
+}
+
+// A per-particle float input of a kernel (sph_force's velocity, density, pressure) where the
+// method works: read in place there, copied to the device (raycut::DeviceArray) from the host.
+struct KernelInput {
+  const float* data = nullptr;
+  std::optional<raycut::DeviceArray> device_copy;
+  FloatInput source;
+};
+
+void kernel_input(KernelInput& out, nb::handle obj, const char* name, std::size_t components,
+                  const raycut::Engine& engine) {
+  if (obj.is_none()) return;
+  out.source = float_input(obj, name);
+  std::size_t elements = 1;
+  for (std::size_t s : out.source.shape) elements *= s;
+  if (elements != components * engine.size())
+    value_error(std::string(name) + " must have " + std::to_string(components * engine.size()) +
+                " values (" + std::to_string(components) + " per particle), got shape " +
+                describe_shape(out.source.shape));
+  out.data = out.source.data;
+  if (out.source.space == engine.space()) return;
+  if (engine.space() == MemorySpace::host)
+    value_error(std::string(name) + " is in device memory but method '" + engine.method() +
+                "' works on the host: pass it on the host");
+  out.device_copy.emplace(std::vector<float>(out.source.data, out.source.data + elements));
+  out.data = out.device_copy->data();
+}
+
+void run(raycut::Engine& engine, std::string_view kernel_name, float lj_epsilon, float lj_sigma,
+         float sph_mass, float sph_viscosity, nb::handle velocity, nb::handle density,
+         nb::handle pressure) {
+  const raycut::Kernel kernel = raycut::parse_kernel(kernel_name);
+  raycut::KernelOptions options;
+  options.lj_epsilon = lj_epsilon;
+  options.lj_sigma = lj_sigma;
+  options.sph_mass = sph_mass;
+  options.sph_viscosity = sph_viscosity;
+  KernelInput v, d, p;
+  kernel_input(v, velocity, "velocity", 3, engine);
+  kernel_input(d, density, "density", 1, engine);
+  kernel_input(p, pressure, "pressure", 1, engine);
+  options.sph = {v.data, d.data, p.data};
+  nb::gil_scoped_release release;
+  engine.run(kernel, options);
+}
+
+const char* space_name(MemorySpace space) {
+  return space == MemorySpace::host ? "host" : "device";
+}
+
+}  // namespace
+
+NB_MODULE(_raycut, m) {
+  m.doc() = "raycut's C++ engine (nanobind); use the raycut package, not this module directly.";
+
+  capacity_error = PyErr_NewExceptionWithDoc(
+      "raycut.CapacityError",
+      "A fixed-size output (the padded neighbour list) is too small: grow it and retry.",
+      PyExc_RuntimeError, nullptr);
+  m.attr("CapacityError") = nb::handle(capacity_error);
+
+  // raycut::Error -> the Python exception of its code, with the library's message.
+  nb::register_exception_translator([](const std::exception_ptr& p, void*) {
+    try {
+      std::rethrow_exception(p);
+    } catch (const raycut::Error& e) {
+      PyObject* type = PyExc_RuntimeError;
+      switch (e.code()) {
+        case raycut::ErrorCode::invalid_argument:
+        case raycut::ErrorCode::invalid_input: type = PyExc_ValueError; break;
+        case raycut::ErrorCode::out_of_memory: type = PyExc_MemoryError; break;
+        case raycut::ErrorCode::unsupported: type = PyExc_NotImplementedError; break;
+        case raycut::ErrorCode::io: type = PyExc_OSError; break;
+        case raycut::ErrorCode::capacity_exceeded: type = capacity_error; break;
+        case raycut::ErrorCode::backend:
+        case raycut::ErrorCode::internal: type = PyExc_RuntimeError; break;
+      }
+      PyErr_SetString(type, e.what());
+    }
+  });
+
+  m.def(
+      "methods",
+      [] {
+        nb::list out;
+        for (const auto& d : raycut::list_methods()) {
+          nb::dict row;
+          row["name"] = d.name;
+          row["summary"] = d.summary;
+          row["available"] = d.available;
+          row["why"] = d.why_unavailable;
+          out.append(row);
+        }
+        return out;
+      },
+      "Every method raycut knows, available here or not.");
+  m.def("auto_method", &raycut::auto_method, "What method='auto' picks on this machine.");
+  m.def("cuda_device_available", &raycut::cuda_device_available);
+  m.attr("has_cuda") =
+#if defined(RAYCUT_PY_CUDA)
+      true;
+#else
+      false;
+#endif
+
+  nb::class_<raycut::Engine>(m, "Engine")
+      .def(nb::init<std::string_view>(), nb::arg("method") = "auto")
+      .def_prop_ro("method", &raycut::Engine::method)
+      .def_prop_ro("space", [](const raycut::Engine& e) { return space_name(e.space()); })
+      .def_prop_ro("size", &raycut::Engine::size)
+      .def_prop_ro("cutoff", &raycut::Engine::cutoff)
+      .def(
+          "set_stream",
+          [](raycut::Engine& e, std::uintptr_t stream) {
+            e.set_stream(reinterpret_cast<void*>(stream));
+          },
+          nb::arg("stream"))
+      .def(
+          "build",
+          [](raycut::Engine& e, nb::handle positions, double cutoff) {
+            const FloatInput in = float_input(positions, "positions");
+            const raycut::PositionsView view = positions_view(in);
+            nb::gil_scoped_release release;
+            e.build(view, static_cast<float>(cutoff));  // beyond float: inf, refused
+          },
+          nb::arg("positions"), nb::arg("cutoff"))
+      .def(
+          "update",
+          [](raycut::Engine& e, nb::handle positions) {
+            const FloatInput in = float_input(positions, "positions");
+            const raycut::PositionsView view = positions_view(in);
+            nb::gil_scoped_release release;
+            e.update(view);
+          },
+          nb::arg("positions"))
+      .def(
+          "set_skin",
+          [](raycut::Engine& e, float skin) { e.set_update_policy(raycut::UpdatePolicy{skin}); },
+          nb::arg("skin"))
+      .def("run", &run, nb::arg("kernel"), nb::arg("lj_epsilon") = 1.0f,
+           nb::arg("lj_sigma") = 1.0f, nb::arg("sph_mass") = 0.0f,
+           nb::arg("sph_viscosity") = 0.0f, nb::arg("velocity").none() = nb::none(),
+           nb::arg("density").none() = nb::none(), nb::arg("pressure").none() = nb::none())
+      .def("results", &results, nb::arg("kernel"), nb::arg("to_host"))
+      .def("neighbours", &neighbours, nb::arg("half"), nb::arg("distances"),
+           nb::arg("vectors"), nb::arg("to_host"))
+      .def("pairs", &pairs, nb::arg("half"), nb::arg("distances"), nb::arg("vectors"),
+           nb::arg("to_host"))
+      .def("padded", &padded, nb::arg("k"), nb::arg("raise_on_overflow"), nb::arg("to_host"))
+      .def("timings", [](const raycut::Engine& e) {
+        const raycut::Timings& t = e.last_timings();
+        nb::dict d;
+        d["build_ms"] = t.build_ms;
+        d["compute_ms"] = t.compute_ms;
+        d["device_build_ms"] = t.device_build_ms;
+        d["device_compute_ms"] = t.device_compute_ms;
+        d["refit"] = t.refit;
+        return d;
+      });
+}

@@ -1,0 +1,211 @@
+"""CUDA inputs (PyTorch, CuPy, JAX, __cuda_array_interface__): outputs in the caller's framework
+on its device, zero-copy, equal to the host path. Skipped (with the reason) without the framework,
+a CUDA device, or raycut's CUDA methods."""
+import numpy as np
+import pytest
+from conftest import AVAILABLE, CUTOFF, DEVICE_METHODS, INPUTS, pair_set, uniform
+
+import raycut
+
+if not raycut.cuda_available():
+    pytest.skip("raycut was built without CUDA or no CUDA device is usable here",
+                allow_module_level=True)
+
+# Device methods, and a CPU method fed device arrays (outputs copied to the device).
+METHODS = DEVICE_METHODS + ["cell-list"]
+
+
+def torch_cuda():
+    torch = pytest.importorskip("torch", reason="PyTorch is not installed")
+    if not torch.cuda.is_available():
+        pytest.skip("PyTorch sees no CUDA device")
+    return torch
+
+
+def cupy_cuda():
+    cupy = pytest.importorskip("cupy", reason="CuPy is not installed")
+    try:
+        if cupy.cuda.runtime.getDeviceCount() == 0:
+            pytest.skip("CuPy sees no CUDA device")
+    except cupy.cuda.runtime.CUDARuntimeError as e:
+        pytest.skip(f"CuPy sees no CUDA device ({e})")
+    return cupy
+
+
+def sorted_rows(i, j, *rest):
+    order = np.lexsort((j, i))
+    return [np.asarray(a)[order] for a in (i, j) + rest]
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("family", sorted(INPUTS))
+def test_torch_equals_host(method, family):
+    torch = torch_cuda()
+    x = INPUTS[family]()
+    host = raycut.neighbor_list("ijdD", x, CUTOFF, method=method)
+    out = raycut.neighbor_list("ijdD", torch.from_numpy(x).cuda(), CUTOFF, method=method)
+    for t, dtype in zip(out, (torch.int64, torch.int64, torch.float32, torch.float32)):
+        assert isinstance(t, torch.Tensor) and t.device.type == "cuda" and t.dtype == dtype
+    got = sorted_rows(*(t.cpu().numpy() for t in out))
+    want = sorted_rows(*host)
+    for g, w in zip(got[:2], want[:2]):
+        np.testing.assert_array_equal(g, w)
+    np.testing.assert_allclose(got[2], want[2], rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(got[3], want[3], rtol=1e-6, atol=1e-7)
+
+
+@pytest.mark.parametrize("method", DEVICE_METHODS)
+def test_torch_zero_copy(method):
+    torch = torch_cuda()
+    x = torch.from_numpy(uniform(2000)).cuda()
+    torch.cuda.synchronize()
+    before = torch.cuda.memory_allocated()
+    engine = raycut.Engine(method)
+    engine.build(x, CUTOFF)
+    offsets, indices, d = engine.neighbours(distances=True)
+    i, j, D = raycut.neighbor_list("ijD", x, CUTOFF, method=method)
+    # The outputs are the library's device memory, wrapped: torch's allocator holds none of it,
+    # and nothing went through the host.
+    assert torch.cuda.memory_allocated() == before
+    for t in (offsets, indices, d, i, j, D):
+        assert t.device.type == "cuda" and t.device == x.device
+        assert t.data_ptr() != 0
+    assert offsets.dtype == torch.int64 and indices.dtype == torch.int32
+    # The tensors are views of the extension's arrays (which wrap the list's own buffer): two
+    # imports of one array see the same memory, and the array's DLPack device is CUDA.
+    with raycut._arrays.device_context(engine._like):
+        raw = engine._engine.neighbours(False, True, False, False)
+    assert raw[0].__dlpack_device__()[0] == 2  # kDLCUDA
+    assert torch.from_dlpack(raw[1]).data_ptr() == torch.from_dlpack(raw[1]).data_ptr()
+    assert torch.from_dlpack(raw[2]).data_ptr() != torch.from_dlpack(raw[1]).data_ptr()
+    assert torch.cuda.memory_allocated() == before
+    count = engine.compute("count")["count"]
+    assert count.device.type == "cuda" and count.dtype == torch.int32
+    assert torch.equal(offsets[1:] - offsets[:-1], count.to(torch.int64))
+    assert torch.equal(torch.bincount(i, minlength=len(x)), count.to(torch.int64))
+    # Kept alive by the tensors alone.
+    del engine
+    torch.cuda.synchronize()
+    assert int(offsets[-1]) == len(indices) == len(j)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_torch_engine_equals_host(method):
+    torch = torch_cuda()
+    x = uniform(1500)
+    host = raycut.Engine(method)
+    host.build(x, 0.12)
+    dev = raycut.Engine(method)
+    dev.build(torch.from_numpy(x).cuda().requires_grad_(), 0.12)  # grad: detached, still fine
+    def close(got, want):  # float sums in another order: errors relative to the largest term
+        want = np.asarray(want, np.float64)
+        scale = float(np.abs(want).max()) if want.size else 0.0
+        np.testing.assert_allclose(got.cpu().numpy(), want, rtol=1e-3, atol=1e-4 * scale)
+
+    kw = dict(sph_mass=1.0, sph_viscosity=0.1, lj_sigma=0.01)
+    for kernel in ("count", "lj", "lj_forces", "smooth", "sph_density"):
+        a = host.compute(kernel, **kw)
+        b = dev.compute(kernel, **kw)
+        assert set(a) == set(b)
+        for name in a:
+            assert b[name].device.type == "cuda" and b[name].shape == a[name].shape
+            close(b[name], a[name])
+    n = len(x)
+    a = host.compute("sph_force", velocity=np.zeros((n, 3), np.float32),
+                     density=np.ones(n, np.float32), pressure=np.ones(n, np.float32), **kw)
+    b = dev.compute("sph_force", velocity=torch.zeros((n, 3), device="cuda"),
+                    density=torch.ones(n, device="cuda"), pressure=torch.ones(n, device="cuda"),
+                    **kw)
+    close(b["force"], a["force"])
+    # Host kernel inputs for a device engine (copied over), device ones for a host engine.
+    c = dev.compute("sph_force", velocity=np.zeros((n, 3), np.float32),
+                    density=np.ones(n, np.float32), pressure=np.ones(n, np.float32), **kw)
+    close(c["force"], a["force"])
+    idx, counts, report = dev.padded_neighbours(8)
+    idx_h, counts_h, report_h = host.padded_neighbours(8)
+    assert idx.device.type == "cuda" and report == report_h
+    np.testing.assert_array_equal(counts.cpu().numpy(), counts_h)
+
+
+def test_torch_input_errors():
+    torch = torch_cuda()
+    x = torch.from_numpy(uniform(100)).cuda()
+    with pytest.raises(ValueError, match="float32"):
+        raycut.neighbor_list("ij", x.double(), CUTOFF)
+    with pytest.raises(ValueError, match="C-contiguous"):
+        raycut.neighbor_list("ij", x.t().contiguous().t(), CUTOFF)
+    with pytest.raises(ValueError, match="shape"):
+        raycut.neighbor_list("ij", x[:, :2].contiguous(), CUTOFF)
+    bad = x.clone()
+    bad[7, 2] = float("nan")
+    with pytest.raises(ValueError, match="index 7"):
+        raycut.neighbor_list("ij", bad, CUTOFF)
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_cupy_equals_host(method):
+    cupy = cupy_cuda()
+    x = INPUTS["clustered"]()
+    host = raycut.neighbor_list("ijd", x, CUTOFF, method=method)
+    out = raycut.neighbor_list("ijd", cupy.asarray(x), CUTOFF, method=method)
+    for a in out:
+        assert isinstance(a, cupy.ndarray)
+    got = sorted_rows(*(a.get() for a in out))
+    want = sorted_rows(*host)
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[1], want[1])
+    np.testing.assert_allclose(got[2], want[2], rtol=1e-6)
+    engine = raycut.Engine(method)
+    engine.build(cupy.asarray(x), CUTOFF)
+    count = engine.compute("count")["count"]
+    assert isinstance(count, cupy.ndarray)
+    np.testing.assert_array_equal(count.get(), np.bincount(want[0], minlength=len(x)))
+
+
+def test_cuda_array_interface_only():
+    cupy = cupy_cuda()
+    x = cupy.asarray(uniform(500))
+
+    class Foreign:  # an array known only through __cuda_array_interface__ (as Numba's)
+        def __init__(self, a):
+            self.a = a
+            self.__cuda_array_interface__ = a.__cuda_array_interface__
+
+    i, j = raycut.neighbor_list("ij", Foreign(x), CUTOFF)
+    i, j = cupy.from_dlpack(i), cupy.from_dlpack(j)  # DLPack-capable device arrays
+    assert pair_set(i.get(), j.get()) == pair_set(*raycut.neighbor_list("ij", x.get(), CUTOFF))
+
+
+def test_jax_equals_host():
+    jax = pytest.importorskip("jax", reason="JAX is not installed")
+    try:
+        gpus = jax.devices("gpu")
+    except RuntimeError:
+        gpus = []
+    if not gpus:
+        pytest.skip("JAX sees no GPU")
+    x = uniform(800)
+    i, j, d = raycut.neighbor_list("ijd", jax.device_put(x, gpus[0]), CUTOFF)
+    assert isinstance(i, jax.Array) and next(iter(i.devices())).platform == "gpu"
+    got = sorted_rows(np.asarray(i), np.asarray(j), np.asarray(d))
+    want = sorted_rows(*raycut.neighbor_list("ijd", x, CUTOFF))
+    np.testing.assert_array_equal(got[0], want[0])
+    np.testing.assert_array_equal(got[1], want[1])
+
+
+def test_all_methods_agree_on_device():
+    torch = torch_cuda()
+    x = torch.from_numpy(INPUTS["coincident"]()).cuda()
+    ref = None
+    for method in AVAILABLE:
+        pairs = pair_set(*(t.cpu().numpy() for t in raycut.neighbor_list("ij", x, CUTOFF,
+                                                                         method=method)))
+        ref = pairs if ref is None else ref
+        assert pairs == ref, method
+
+
+def test_torch_cuda_gradients():
+    from test_frameworks import check_torch_gradients
+
+    torch = torch_cuda()
+    check_torch_gradients(torch, torch.from_numpy(uniform(1000)).cuda())

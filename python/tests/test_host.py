@@ -1,0 +1,231 @@
+"""The host (NumPy) path on every available method: against brute force, the list options, the
+Engine, padded lists and errors."""
+import numpy as np
+import pytest
+from conftest import AVAILABLE, CUTOFF, INPUTS, assert_same_pairs, brute_force, pair_set, uniform
+
+import raycut
+
+
+def test_methods():
+    rows = raycut.methods()
+    assert [set(r) for r in rows] == [{"name", "summary", "available", "why"}] * len(rows)
+    names = [r["name"] for r in rows]
+    assert "brute-force" in names and "cell-list" in names
+    for r in rows:
+        assert r["available"] == (r["why"] == ""), r
+    assert raycut.auto_method() in AVAILABLE
+
+
+@pytest.mark.parametrize("family", sorted(INPUTS))
+def test_neighbor_list_vs_brute_force(method, family):
+    x = INPUTS[family]()
+    i, j = raycut.neighbor_list("ij", x, CUTOFF, method=method)
+    assert isinstance(i, np.ndarray) and i.dtype == np.int64 and j.dtype == np.int64
+    assert np.all(np.diff(i) >= 0), "i is sorted"
+    assert_same_pairs(i, j, x, CUTOFF)
+
+
+@pytest.mark.parametrize("family", ["uniform", "coincident", "empty", "single"])
+def test_half_is_full_halved(method, family):
+    x = INPUTS[family]()
+    full = pair_set(*raycut.neighbor_list("ij", x, CUTOFF, method=method))
+    i, j = raycut.neighbor_list("ij", x, CUTOFF, half=True, method=method)
+    assert np.all(i < j)
+    assert pair_set(i, j) == {(a, b) for a, b in full if a < b}
+    assert 2 * len(i) == len(full)
+    assert_same_pairs(i, j, x, CUTOFF, half=True)
+
+
+def test_quantities_order_and_single_letter(method):
+    x = uniform(300)
+    i, j, d, D = raycut.neighbor_list("ijdD", x, CUTOFF, method=method)
+    D2, j2, i2, d2 = raycut.neighbor_list("Djid", x, CUTOFF, method=method)
+    # Row order within a row is unspecified: compare as sorted (i, j) records.
+    a = np.lexsort((j, i))
+    b = np.lexsort((j2, i2))
+    np.testing.assert_array_equal(i[a], i2[b])
+    np.testing.assert_array_equal(j[a], j2[b])
+    np.testing.assert_array_equal(d[a], d2[b])
+    np.testing.assert_array_equal(D[a], D2[b])
+    only = raycut.neighbor_list("d", x, CUTOFF, method=method)
+    assert isinstance(only, np.ndarray) and only.shape == d.shape
+
+
+@pytest.mark.parametrize("half", [False, True])
+def test_distances_and_vectors_match_positions(method, half):
+    x = INPUTS["clustered"]()
+    i, j, d, D = raycut.neighbor_list("ijdD", x, CUTOFF, half=half, method=method)
+    assert d.dtype == np.float32 and D.dtype == np.float32 and D.shape == (len(i), 3)
+    np.testing.assert_allclose(D, x[j] - x[i], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(d, np.linalg.norm(D.astype(np.float64), axis=1), rtol=1e-5,
+                               atol=1e-7)
+    assert np.all(d < CUTOFF * (1 + 1e-6))
+
+
+def test_float64_and_lists_are_converted(method):
+    x = uniform(200)
+    ref = pair_set(*raycut.neighbor_list("ij", x, CUTOFF, method=method))
+    assert pair_set(*raycut.neighbor_list("ij", x.astype(np.float64), CUTOFF, method=method)) == ref
+    assert pair_set(*raycut.neighbor_list("ij", x.tolist(), CUTOFF, method=method)) == ref
+    fortran = np.asfortranarray(x)
+    assert pair_set(*raycut.neighbor_list("ij", fortran, CUTOFF, method=method)) == ref
+
+
+def test_engine_count_matches_list_rows(method):
+    x = INPUTS["clustered"]()
+    engine = raycut.Engine(method)
+    engine.build(x, CUTOFF)
+    assert engine.method == method and engine.size == len(x)
+    count = engine.compute("count")["count"]
+    assert count.dtype == np.int32 and count.shape == (len(x),)
+    offsets, indices = engine.neighbours()
+    assert offsets.dtype == np.int64 and indices.dtype == np.int32
+    assert offsets[0] == 0 and offsets[-1] == len(indices)
+    np.testing.assert_array_equal(np.diff(offsets), count)
+    inside, edge = brute_force(x, CUTOFF)
+    rows = np.repeat(np.arange(len(x)), np.diff(offsets))
+    assert pair_set(rows, indices) - edge == inside - edge
+
+
+def test_engine_neighbours_options(method):
+    x = uniform(300)
+    engine = raycut.Engine(method)
+    engine.build(x, CUTOFF)
+    offsets, indices, d, D = engine.neighbours(half=True, distances=True, vectors=True)
+    rows = np.repeat(np.arange(len(x)), np.diff(offsets))
+    assert np.all(rows < indices)
+    np.testing.assert_allclose(D, x[indices] - x[rows], atol=1e-6, rtol=0)
+    np.testing.assert_allclose(d, np.linalg.norm(D, axis=1), rtol=1e-5)
+    # Earlier outputs own their buffer: a new call does not change them.
+    kept = indices.copy()
+    engine.update(uniform(300, seed=9))
+    engine.neighbours()
+    np.testing.assert_array_equal(indices, kept)
+
+
+def test_engine_kernels(method):
+    x = uniform(400)
+    engine = raycut.Engine(method)
+    engine.build(x, 0.15)
+    out = engine.compute("smooth")
+    assert set(out) == {"energy", "force"}
+    offsets, indices = engine.neighbours()
+    rows = np.repeat(np.arange(len(x)), np.diff(offsets))
+    r = (x[indices] - x[rows]).astype(np.float64)
+    w = 0.15**2 - (r**2).sum(1)
+    energy = np.bincount(rows, w**2, minlength=len(x))
+    force = np.stack([np.bincount(rows, w * r[:, k], minlength=len(x)) for k in range(3)], 1)
+    np.testing.assert_allclose(out["energy"], energy, rtol=1e-3, atol=1e-9)
+    np.testing.assert_allclose(out["force"], force, rtol=1e-3, atol=1e-7)
+    lj = engine.compute("lj_forces", lj_epsilon=0.5, lj_sigma=0.01)
+    assert lj["force"].shape == (len(x), 3) and lj["virial"].shape == (len(x), 6)
+    assert engine.compute("sph_density", sph_mass=1.0)["density"].shape == (len(x),)
+    n = len(x)
+    f = engine.compute("sph_force", sph_mass=1.0, sph_viscosity=0.1,
+                       velocity=np.zeros((n, 3)), density=np.ones(n), pressure=np.ones(n))
+    assert f["force"].shape == (n, 3) and np.all(np.isfinite(f["force"]))
+
+
+def test_engine_empty_and_single(method):
+    for x in (INPUTS["empty"](), INPUTS["single"]()):
+        engine = raycut.Engine(method)
+        engine.build(x, CUTOFF)
+        n = len(x)
+        out = engine.compute("lj_forces")
+        assert out["energy"].shape == (n,) and out["virial"].shape == (n, 6)
+        assert engine.compute("count")["count"].tolist() == [0] * n
+        offsets, indices = engine.neighbours()
+        assert offsets.tolist() == [0] * (n + 1) and indices.shape == (0,)
+        idx, counts, report = engine.padded_neighbours(4)
+        assert idx.shape == (n, 4) and counts.shape == (n,) and not report["overflowed"]
+
+
+def test_padded_overflow_report(method):
+    x = INPUTS["clustered"]()
+    engine = raycut.Engine(method)
+    engine.build(x, CUTOFF)
+    count = engine.compute("count")["count"]
+    k = max(1, int(np.median(count)))
+    idx, counts, report = engine.padded_neighbours(k)
+    assert idx.shape == (len(x), k) and idx.dtype == np.int32
+    np.testing.assert_array_equal(counts, count)
+    assert report["overflowed"] and report["overflowed_rows"] == int(np.sum(count > k))
+    assert report["largest_count"] == int(count.max())
+    with pytest.raises(raycut.CapacityError, match="grow K"):
+        engine.padded_neighbours(k, raise_on_overflow=True)
+    assert issubclass(raycut.CapacityError, RuntimeError)
+    # Grown to the largest count: every row whole, padded with N.
+    idx, counts, report = engine.padded_neighbours(report["largest_count"], True)
+    assert not report["overflowed"]
+    offsets, indices = engine.neighbours()
+    for row in range(0, len(x), 37):
+        got = idx[row, : counts[row]]
+        assert sorted(got) == sorted(indices[offsets[row] : offsets[row + 1]])
+        assert np.all(idx[row, counts[row] :] == len(x))
+
+
+def test_errors():
+    x = uniform(10)
+    bad = x.copy()
+    bad[3, 1] = np.nan
+    with pytest.raises(ValueError, match="index 3"):
+        raycut.neighbor_list("ij", bad, CUTOFF)
+    bad[3, 1] = np.inf
+    with pytest.raises(ValueError, match="index 3"):
+        raycut.Engine("cell-list").build(bad, CUTOFF)
+    for cutoff in (0.0, -1.0, float("nan"), float("inf"), 1e40):
+        with pytest.raises(ValueError, match="cutoff"):
+            raycut.neighbor_list("ij", x, cutoff)
+    with pytest.raises(ValueError, match="one number"):
+        raycut.neighbor_list("ij", x, [0.1] * 10)
+    with pytest.raises(ValueError, match="periodic boxes are not supported yet"):
+        raycut.neighbor_list("ij", x, CUTOFF, cell=np.eye(3))
+    with pytest.raises(ValueError, match="periodic boxes are not supported yet"):
+        raycut.neighbor_list("ij", x, CUTOFF, pbc=True)
+    with pytest.raises(ValueError, match="periodic boxes are not supported yet"):
+        raycut.neighbor_list("ijS", x, CUTOFF)
+    with pytest.raises(ValueError, match="batches are not supported yet"):
+        raycut.neighbor_list("ij", x, CUTOFF, batch=np.zeros(10, np.int64))
+    i = raycut.neighbor_list("i", x, CUTOFF, pbc=[False, False, False])  # open: fine
+    assert i.dtype == np.int64
+    with pytest.raises(ValueError, match="unknown quantity"):
+        raycut.neighbor_list("ijx", x, CUTOFF)
+    with pytest.raises(ValueError, match="shape"):
+        raycut.neighbor_list("ij", np.zeros((4, 2), np.float32), CUTOFF)
+    with pytest.raises(ValueError, match="unknown method"):
+        raycut.Engine("no-such-method")
+    engine = raycut.Engine("cell-list")
+    with pytest.raises(ValueError, match="before build"):
+        engine.neighbours()
+    engine.build(x, CUTOFF)
+    with pytest.raises(ValueError):
+        engine.compute("no-such-kernel")
+    with pytest.raises(ValueError, match="same N|particles|10"):
+        engine.update(uniform(11))
+    unavailable = [m["name"] for m in raycut.methods() if not m["available"]]
+    if unavailable:
+        with pytest.raises(NotImplementedError, match="not available"):
+            raycut.Engine(unavailable[0])
+
+
+def test_other_framework_host_dlpack():
+    x = uniform(300)
+
+    class Foreign:  # an unknown framework's host array, known only through DLPack
+        def __init__(self, a):
+            self.a = a
+
+        def __dlpack__(self, **kwargs):
+            return self.a.__dlpack__(**kwargs)
+
+        def __dlpack_device__(self):
+            return self.a.__dlpack_device__()
+
+    i, j = raycut.neighbor_list("ij", Foreign(x), CUTOFF)
+    assert isinstance(i, np.ndarray)
+    assert pair_set(i, j) == pair_set(*raycut.neighbor_list("ij", x, CUTOFF))
+    with pytest.raises(ValueError, match="float32"):
+        raycut.neighbor_list("ij", Foreign(x.astype(np.float64)), CUTOFF)
+    with pytest.raises(TypeError, match="__dlpack__"):
+        raycut.Engine().build(object(), CUTOFF)
