@@ -48,12 +48,7 @@
 #include "raycut/generators.hpp"
 #include "raycut/kernels.hpp"
 
-namespace {
-
-void check_cuda(cudaError_t e, const char* what) {
-  if (e != cudaSuccess)
-    throw std::runtime_error(std::string(what) + ": " + cudaGetErrorString(e));
-}
+namespace neighbour_bench {
 
 // The built-in Lennard-Jones energy (raycut::LennardJonesKernel), written as a user would: the
 // same instructions, so functor_lj against lj measures the cost of the user-functor path.
@@ -74,6 +69,18 @@ struct UserLennardJones {
     energy[i] = acc * four_epsilon_sigma6;
   }
 };
+
+static_assert(raycut::vanishes_at_infinity<UserLennardJones>::value &&
+                  raycut::has_combine<UserLennardJones>::value,
+              "the functor must take the built-in LJ's traversal paths");
+
+}  // namespace neighbour_bench
+
+namespace {
+
+void check_cuda(cudaError_t e, const char* what) {
+  if (e != cudaSuccess) throw std::runtime_error(std::string(what) + ": " + cudaGetErrorString(e));
+}
 
 // A device float array the functor writes (its own output, not the engine's).
 class DeviceFloats {
@@ -96,7 +103,6 @@ class DeviceFloats {
     return data_;
   }
   float* data() const { return data_; }
-  std::size_t size() const { return size_; }
 
  private:
   float* data_ = nullptr;
@@ -115,12 +121,16 @@ enum class Op {
   functor_lj,
   list_only_full
 };
-const std::vector<std::pair<std::string, Op>> kOps = {
-    {"build", Op::build},           {"count", Op::count},
-    {"list_full", Op::list_full},   {"list_half", Op::list_half},
-    {"list_full_dv", Op::list_full_dv}, {"padded", Op::padded},
-    {"lj", Op::lj},                 {"lj_forces", Op::lj_forces},
-    {"functor_lj", Op::functor_lj}, {"list_only_full", Op::list_only_full}};
+const std::vector<std::pair<std::string, Op>> kOps = {{"build", Op::build},
+                                                      {"count", Op::count},
+                                                      {"list_full", Op::list_full},
+                                                      {"list_half", Op::list_half},
+                                                      {"list_full_dv", Op::list_full_dv},
+                                                      {"padded", Op::padded},
+                                                      {"lj", Op::lj},
+                                                      {"lj_forces", Op::lj_forces},
+                                                      {"functor_lj", Op::functor_lj},
+                                                      {"list_only_full", Op::list_only_full}};
 
 Op parse_op(const std::string& name) {
   for (const auto& [n, op] : kOps)
@@ -185,7 +195,7 @@ struct Context {
   std::string method;
   raycut::PositionsView positions;
   float cutoff = 0;
-  std::uint32_t k = 1;   // padded width
+  std::uint32_t k = 1;  // padded width
   cudaStream_t stream = nullptr;
   raycut::Engine* built = nullptr;  // for list_only_full
 };
@@ -233,7 +243,7 @@ void execute(Op op, State& s, const Context& c) {
     case Op::functor_lj: {
       // As the built-in with eps = sigma = 1 (KernelOptions' defaults).
       float* out = s.energy.ensure(e.size());
-      raycut::cuda::for_each_pair(e, UserLennardJones{1.0f, 4.0f, out}, c.stream);
+      raycut::cuda::for_each_pair(e, neighbour_bench::UserLennardJones{1.0f, 4.0f, out}, c.stream);
       break;
     }
     case Op::list_only_full:
@@ -369,9 +379,12 @@ int run(const Options& o) {
     for (const auto& name : o.ops) ops.push_back(parse_op(name));
   std::vector<bool> modes;  // cold?
   for (const auto& m : o.modes) {
-    if (m == "cold") modes.push_back(true);
-    else if (m == "prepared") modes.push_back(false);
-    else throw std::invalid_argument("unknown mode '" + m + "' (cold, prepared)");
+    if (m == "cold")
+      modes.push_back(true);
+    else if (m == "prepared")
+      modes.push_back(false);
+    else
+      throw std::invalid_argument("unknown mode '" + m + "' (cold, prepared)");
   }
   if (!raycut::cuda_device_available()) {
     std::fprintf(stderr, "neighbour_bench: no usable CUDA device\n");
@@ -402,18 +415,18 @@ int run(const Options& o) {
       for (int p : o.ps) configs.push_back({"uniform", {beta, p}});
   if (o.lj_liquid) configs.push_back({"lj-liquid", {0, 0}});
 
-  std::printf("neighbour_bench on %s (driver %s, CUDA %s), %d reps, %s stream; ms = CUDA-event "
-              "median\n",
-              sys.gpu.c_str(), sys.driver.c_str(), sys.cuda.c_str(), o.reps,
-              stream ? "own non-blocking" : "legacy default");
+  std::printf(
+      "neighbour_bench on %s (driver %s, CUDA %s), %d reps, %s stream; ms = CUDA-event "
+      "median\n",
+      sys.gpu.c_str(), sys.driver.c_str(), sys.cuda.c_str(), o.reps,
+      stream ? "own non-blocking" : "legacy default");
   std::printf("%-9s %5s %3s %9s %-17s %-14s %10s %10s %12s %s\n", "suite", "param", "p", "N",
               "method", "operation", "cold ms", "prep ms", "entries", "check");
   int failures = 0;
   for (const auto& [suite, pp] : configs) {
-    const Input in = suite == "uniform"
-                         ? Input{"uniform", pp.first, pp.second,
-                                 raycut::uniform_suite(pp.first, pp.second, o.seed)}
-                         : lj_liquid(o.seed);
+    const Input in = suite == "uniform" ? Input{"uniform", pp.first, pp.second,
+                                                raycut::uniform_suite(pp.first, pp.second, o.seed)}
+                                        : lj_liquid(o.seed);
     const std::size_t n = in.cloud.size();
     const raycut::DeviceArray positions(in.cloud.xyz);
     for (const auto& method : o.methods) {
@@ -458,8 +471,8 @@ int run(const Options& o) {
           shown[cold ? 0 : 1] = median(m.events);
           if (m.has_entries) entries_shown = std::to_string(m.entries);
           if (op == Op::padded)
-            entries_shown = "K=" + std::to_string(c.k) + " ovf " +
-                            std::to_string(m.report.overflowed_rows);
+            entries_shown =
+                "K=" + std::to_string(c.k) + " ovf " + std::to_string(m.report.overflowed_rows);
           check_shown = m.check;
           if (csv.is_open()) {
             csv << suite << ',' << in.param << ',' << in.p << ',' << method << ',' << n << ','
@@ -502,8 +515,9 @@ int run(const Options& o) {
 
 int main(int argc, char** argv) {
   Options o;
-  CLI::App app{"Neighbour lists vs fused kernels: CUDA-event medians, cold and prepared "
-               "(spec/NEIGHBOURS.md section 8)"};
+  CLI::App app{
+      "Neighbour lists vs fused kernels: CUDA-event medians, cold and prepared "
+      "(spec/NEIGHBOURS.md section 8)"};
   app.add_option("--methods", o.methods, "Engine methods (default grid,grid-paper)")
       ->delimiter(',');
   app.add_option("--betas", o.betas, "Uniform suite beta values (default 16,32)")

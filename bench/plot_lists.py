@@ -145,7 +145,11 @@ def main():
         print(text)
 
     if args.png:
-        import matplotlib
+        try:
+            import matplotlib
+        except ImportError:
+            raise SystemExit(f"{args.png} not written: matplotlib is missing "
+                             "(Debian: apt-get install python3-matplotlib); the tables are written")
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
