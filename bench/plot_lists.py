@@ -166,7 +166,8 @@ def main():
                              and k[4] == mode and op in table[k])
                 if pts:
                     left.plot([x for x, _ in pts], [y for _, y in pts], styles[method],
-                              marker="o", ms=3, label=f"{method} {op}")
+                              color=f"C{shown.index(op)}", marker="o", ms=3,
+                              label=f"{method} {op}")
             for beta in sorted({k[1] for k in table if k[0] == "uniform"}):
                 pts = []
                 for k in table:
@@ -178,7 +179,8 @@ def main():
                 pts.sort()
                 if pts:
                     right.plot([x for x, _ in pts], [y for _, y in pts], styles[method],
-                               marker="o", label=f"{method} beta {beta}")
+                               color="C0" if beta == 32 else "C1", marker="o",
+                               label=f"{method} beta {beta}")
         left.set_xscale("log")
         left.set_yscale("log")
         left.set_xlabel("particles (uniform suite, beta 32)")
