@@ -54,7 +54,9 @@ while [ $# -gt 0 ]; do
           --out "$res/lists.csv" > "$res/lists.log" 2>&1
         echo "neighbour_bench exit $?"
         grep -E "list_full |count |lj " "$res/lists.log" | grep -E "^uniform +32 +32|^lj-liquid" | head -20
-        [ -f "$res/lists.csv" ] && python3 bench/plot_lists.py "$res/lists.csv" --md "$res/lists.md" \
+        csv="$res/lists.csv"
+        [ -f "$csv" ] || csv="$res/lists.csv.tmp"  # a run that stopped: the rows it wrote
+        [ -f "$csv" ] && python3 bench/plot_lists.py "$csv" --md "$res/lists.md" \
           --png "$res/lists.png" > "$res/lists-plot.log" 2>&1
         [ -f "$res/lists.md" ] && awk '/### Targets/{f=1} /### Every/{f=0} f' "$res/lists.md"
       else
