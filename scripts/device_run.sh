@@ -3,11 +3,13 @@
 # every result in one tarball (for machines that hand back few files). What this project's device
 # sessions ran, in one place.
 #
-#   scripts/device_run.sh [tests REGEX] [bench] [sph]      results: ${OUT:-/tmp/raycut-out}/results.tgz
+#   scripts/device_run.sh [tests REGEX] [bench] [lists] [sph]   results: ${OUT:-/tmp/raycut-out}/results.tgz
 #
 #   tests REGEX  ctest -R REGEX (e.g. "GridVariants|grid_|Sph"; "." for everything, ~6 min)
 #   bench        both suites, every GPU method, plus the paper's grid when its source is in
 #                .deps/paper/Cuda-version/cudaLJ.cu (spec/BENCHMARKS.md; never committed)
+#   lists        neighbour lists vs fused kernels (bench/neighbour_bench: uniform beta 16 and 32,
+#                and the LJ liquid; cold and prepared), lists.csv/.md/.png (docs/benchmarks.md)
 #   sph          the article's SPH run with every GPU method, and the validation scenarios
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -45,6 +47,21 @@ while [ $# -gt 0 ]; do
         --large-reps 2 -o "$res/bench-surface.csv" "${paper[@]}" > "$res/bench-surface.log" 2>&1
       python3 bench/auto_table.py "$res/bench-uniform.csv" "$res/bench-surface.csv" \
         --md "$res/auto-vs-best.md"
+      ;;
+    lists)
+      if [ -x build/bench/neighbour_bench ]; then
+        build/bench/neighbour_bench --methods "${LISTS_METHODS:-grid,grid-paper}" --lj-liquid \
+          --out "$res/lists.csv" > "$res/lists.log" 2>&1
+        echo "neighbour_bench exit $?"
+        grep -E "list_full |count |lj " "$res/lists.log" | grep -E "^uniform +32 +32|^lj-liquid" | head -20
+        csv="$res/lists.csv"
+        [ -f "$csv" ] || csv="$res/lists.csv.tmp"  # a run that stopped: the rows it wrote
+        [ -f "$csv" ] && python3 bench/plot_lists.py "$csv" --md "$res/lists.md" \
+          --png "$res/lists.png" > "$res/lists-plot.log" 2>&1
+        [ -f "$res/lists.md" ] && awk '/### Targets/{f=1} /### Every/{f=0} f' "$res/lists.md"
+      else
+        echo "build/bench/neighbour_bench was not built (needs CUDA and CLI11)"
+      fi
       ;;
     sph)
       for m in grid grid-paper optix-aabb-sorted optix-aabb optix-spheres optix-triangles; do
