@@ -14,7 +14,10 @@
 //                                                         // candidates that instead of a branch
 //     RAYCUT_HD Accumulator init(std::uint32_t i) const;  // initial state (default: {})
 //     RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b);  // a += b: lets
-//                                    // several GPU lanes share one target (small inputs)
+//                                    // several GPU lanes share one target (small inputs); then
+//                                    // Accumulator{} must be its identity (lanes start there and
+//                                    // init(i) is combined once) and the Accumulator made of
+//                                    // 32-bit words (it is shuffled between lanes)
 //   };
 //
 // i and j are the caller's particle indices. The functor carries its outputs (pointers it writes

@@ -11,6 +11,8 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <string>
+#include <type_traits>
 
 #include "raycut/detail/pair_pass.hpp"
 #include "raycut/engine.hpp"
@@ -49,6 +51,14 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk&
   }
 }
 
+// What methods without a pass for the caller's functors (OptiX) answer.
+inline Error no_pair_pass(const std::string& method) {
+  return Error(ErrorCode::unsupported,
+               "method '" + method +
+                   "' runs only its built-in kernels (OptiX programs are compiled ahead): use "
+                   "grid, grid-paper, brute-force-gpu or a CPU method for your functor");
+}
+
 // A HostPass's function-pointer walk as a walk callable.
 struct HostPassWalk {
   const HostPass& pass;
@@ -68,8 +78,9 @@ struct HostPassWalk {
 // host (Engine::space() == host); GPU methods: raycut::cuda::for_each_pair (pairs.cuh, nvcc).
 template <class F>
 void for_each_pair(const Engine& engine, const F& f) {
-  const detail::PairPass& pass = engine.pair_pass();
+  const detail::PairPass pass = engine.pair_pass();
   if (pass.kind == detail::PassKind::none && engine.size() == 0) return;
+  if (pass.kind == detail::PassKind::none) throw detail::no_pair_pass(engine.method());
   if (pass.kind != detail::PassKind::host)
     throw Error(ErrorCode::unsupported,
                 "raycut::for_each_pair: method '" + engine.method() +

@@ -276,7 +276,9 @@ PaddedReport Engine::padded_neighbours(PaddedNeighbourBuffer& list, std::uint32_
 
 detail::PairPass Engine::pair_pass() const {
   const detail::Method& m = impl("pair_pass");
-  if (!built_ || size_ == 0) return {};
+  if (!built_)
+    throw Error(ErrorCode::invalid_argument, "for_each_pair() called before Engine::build()");
+  if (size_ == 0) return {};
   detail::PairPass pass = m.pair_pass();
   pass.method = method_.c_str();
   return pass;

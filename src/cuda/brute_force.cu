@@ -1,5 +1,7 @@
 // The oracle on the GPU: every target against every source (the traversal:
 // include/raycut/detail/cuda/brute_force_pass.cuh). O(N^2): for tests and small inputs.
+#include <string>
+
 #include "cuda/device_results.cuh"
 #include "cuda/methods.hpp"
 #include "raycut/detail/cuda/brute_force_pass.cuh"
@@ -11,6 +13,9 @@ namespace {
 class BruteForceGpu final : public CudaPairMethod<BruteForceGpu> {
  public:
   void build(const float* xyz, std::size_t n, float cutoff) override {
+    if (n >= UINT32_MAX)  // list indices are 32-bit
+      throw Error(ErrorCode::invalid_argument,
+                  "brute-force-gpu handles at most 2^32 - 2 particles, got " + std::to_string(n));
     build_timer_.start(stream_);
     xyz_.resize(3 * n);
     RAYCUT_CUDA_CHECK(cudaMemcpyAsync(xyz_.data(), xyz, 3 * n * sizeof(float),

@@ -38,10 +38,7 @@ void for_each_pair(const Engine& engine, const F& f, cudaStream_t stream = nullp
   switch (pass.kind) {
     case detail::PassKind::none:
       if (engine.size() == 0) return;
-      throw Error(ErrorCode::unsupported,
-                  "method '" + engine.method() +
-                      "' runs only its built-in kernels (OptiX programs are compiled ahead): "
-                      "use grid, grid-paper, brute-force-gpu or a CPU method for your functor");
+      throw detail::no_pair_pass(engine.method());
     case detail::PassKind::host:
       raycut::for_each_pair(engine, f);
       return;
