@@ -11,6 +11,10 @@
 #   lists        neighbour lists vs fused kernels (bench/neighbour_bench: uniform beta 16 and 32,
 #                and the LJ liquid; cold and prepared), lists.csv/.md/.png (docs/benchmarks.md)
 #   sph          the article's SPH run with every GPU method, and the validation scenarios
+#   lists        bench/neighbour_bench: lists, kernels and a user functor (docs/benchmarks.md)
+#   grid-suites  both suites with grid and grid-paper beside the paper's grid (no regression)
+#   memcheck     compute-sanitizer on the functor, list and grid-variant tests
+#   python       the Python package built with the device's Python, and its tests
 set -uo pipefail
 cd "$(dirname "$0")/.."
 out="${OUT:-/tmp/raycut-out}"
@@ -62,6 +66,37 @@ while [ $# -gt 0 ]; do
       else
         echo "build/bench/neighbour_bench was not built (needs CUDA and CLI11)"
       fi
+      ;;
+    memcheck)
+      # compute-sanitizer on the pair-pass paths: user functors, lists, the grid's variants.
+      for t in "raycut_functor_cuda_tests" \
+        "raycut_tests --gtest_filter=Methods/Lists.*:Methods/Conformance.*grid_uniform_n4000*:Methods/Conformance.*grid_paper_lattice_k1_n1000*:Methods/Conformance.*brute_force_gpu_coincident_n1000*" \
+        "raycut_grid_variant_tests --gtest_filter=*uniform*:*coincident*"; do
+        name="${t%% *}"
+        # shellcheck disable=SC2086
+        compute-sanitizer --tool memcheck --error-exitcode 9 build/tests/$t \
+          > "$res/memcheck-$name.log" 2>&1
+        echo "memcheck $name: exit $? ($(grep -E "ERROR SUMMARY" "$res/memcheck-$name.log"))"
+      done
+      ;;
+    python)
+      # The package in the same build tree, with the device's Python (torch, cupy, jax there).
+      py="${RAYCUT_PYTHON:-/opt/torch/.venv/bin/python}"
+      scripts/configure.sh -DRAYCUT_BUILD_PYTHON=ON -DPython_EXECUTABLE="$py" \
+        > "$res/python-build.log" 2>&1 || tail -20 "$res/python-build.log"
+      PYTHONPATH="$PWD/build/python" "$py" -m pytest -q -rs -p no:cacheprovider python/tests \
+        > "$res/pytest.log" 2>&1
+      echo "pytest exit $?"
+      tail -15 "$res/pytest.log"
+      ;;
+    grid-suites)
+      # Both suites, the grids beside the paper's own grid: the no-regression check.
+      "$raycut" bench -s uniform -m grid,grid-paper -o "$res/bench-uniform-grids.csv" \
+        "${paper[@]}" > "$res/bench-uniform-grids.log" 2>&1
+      "$raycut" bench -s surface --param 8,16,32,64,128 -m grid,grid-paper --large-n 4000000 \
+        --large-reps 2 -o "$res/bench-surface-grids.csv" "${paper[@]}" \
+        > "$res/bench-surface-grids.log" 2>&1
+      grep -E "grid " "$res/bench-uniform-grids.log" | tail -8
       ;;
     sph)
       for m in grid grid-paper optix-aabb-sorted optix-aabb optix-spheres optix-triangles; do
