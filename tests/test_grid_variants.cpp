@@ -123,7 +123,6 @@ TEST_P(GridVariants, MatchBruteForce) {
       }
     }
   }
-  }
 
   ASSERT_EQ(got_count.size(), n);
   ASSERT_EQ(got_lj.size(), n);
