@@ -119,7 +119,14 @@ void for_each_case(const std::string& method, std::initializer_list<std::size_t>
         engine.build({nullptr, 0, MemorySpace::host}, cutoff);
       } else {
         const raycut::DeviceArray xyz(cloud.xyz);
-        engine.build(xyz.view(), cutoff);
+        try {
+          engine.build(xyz.view(), cutoff);
+        } catch (const raycut::Error& e) {
+          // The paper's dense grid cannot hold a box 1e3 cutoffs wide and x 0.5 C cells: its
+          // clear out-of-memory refusal is its correct answer (as in the conformance suite).
+          if (method == "grid-paper" && e.code() == raycut::ErrorCode::out_of_memory) continue;
+          throw;
+        }
       }
       body(engine, options);
     }

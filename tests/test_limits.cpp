@@ -106,7 +106,9 @@ TEST(KernelRange, AgreesWithTheKernelsOverTheWholeCutoffRange) {
         EXPECT_NE(std::string(err.what()).find(raycut::to_string(k)), std::string::npos);
       }
       (ok ? accepted : refused)++;
-      if (!ok) EXPECT_THROW(engine.compute(k, options), Error) << "C=" << c;
+      if (!ok) {
+        EXPECT_THROW(engine.compute(k, options), Error) << "C=" << c;
+      }
       // The kernel's own terms, evaluated by its functor on the three points.
       std::vector<std::uint32_t> count(3);
       std::vector<float> energy(3), force(9), virial(18), rho(3);

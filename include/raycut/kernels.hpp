@@ -13,6 +13,13 @@
 //                                                         // traversal may feed out-of-range
 //                                                         // candidates that instead of a branch
 //     RAYCUT_HD Accumulator init(std::uint32_t i) const;  // initial state (default: {})
+//     RAYCUT_HD bool accepts(std::uint32_t i, std::uint32_t j) const;  // which in-range pairs
+//                                    // the functor takes (default: all), decided before the call
+//     static constexpr bool emits_entries = true;  // the Accumulator is the position of the
+//                                    // target's next entry: each call writes one entry there
+//                                    // and adds one. The grid may then give each call its
+//                                    // position itself, so that the lanes sharing a target
+//                                    // write its entries together (coalesced lists)
 //     RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b);  // a += b: lets
 //                                    // several GPU lanes share one target (small inputs); then
 //                                    // Accumulator{} must be its identity (lanes start there and
@@ -140,6 +147,27 @@ struct has_init : std::false_type {};
 template <class F>
 struct has_init<F, std::void_t<decltype(std::declval<const F&>().init(std::uint32_t{}))>>
     : std::true_type {};
+
+template <class F, class = void>
+struct emits_entries : std::false_type {};
+template <class F>
+struct emits_entries<F, std::enable_if_t<F::emits_entries>> : std::true_type {};
+
+template <class F, class = void>
+struct has_accepts : std::false_type {};
+template <class F>
+struct has_accepts<F, std::void_t<decltype(std::declval<const F&>().accepts(std::uint32_t{},
+                                                                            std::uint32_t{}))>>
+    : std::true_type {};
+
+// Whether f takes the in-range pair (i, j).
+template <class F>
+RAYCUT_HD bool accepts(const F& f, std::uint32_t i, std::uint32_t j) {
+  if constexpr (has_accepts<F>::value)
+    return f.accepts(i, j);
+  else
+    return true;
+}
 
 // The initial state of target i.
 template <class F>

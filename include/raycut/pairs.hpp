@@ -45,7 +45,8 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk&
     const auto i = static_cast<std::uint32_t>(t);
     typename F::Accumulator acc = initial_state(f, i);
     for_each_in_range(t, xyz, cutoff_squared, walk, [&](std::size_t j, Vec3 r, float r2) {
-      f(acc, i, static_cast<std::uint32_t>(j), r, r2);
+      const auto source = static_cast<std::uint32_t>(j);
+      if (accepts(f, i, source)) f(acc, i, source, r, r2);
     });
     f.finish(i, acc);
   }

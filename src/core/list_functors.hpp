@@ -12,34 +12,32 @@
 namespace raycut::detail {
 
 // Half lists keep (i, j) with i < j only (no periodic images yet, so i == j never occurs).
-RAYCUT_HD bool keeps(bool half, std::uint32_t i, std::uint32_t j) {
-  return !half || i < j;
-}
-
-struct ListCount {
-  using Accumulator = std::uint32_t;
+struct HalfFilter {
   bool half;
+  RAYCUT_HD bool accepts(std::uint32_t i, std::uint32_t j) const { return !half || i < j; }
+};
+
+struct ListCount : HalfFilter {
+  using Accumulator = std::uint32_t;
   std::uint32_t* counts;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3,
-                            float) const {
-    acc += keeps(half, i, j) ? 1u : 0u;
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float) const {
+    ++acc;
   }
   RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { counts[i] = acc; }
 };
 
 // Row i written from offsets[i]; distances and vectors where asked (null otherwise).
-struct ListFill {
+struct ListFill : HalfFilter {
   using Accumulator = std::uint64_t;  // the next entry of the row
-  bool half;
+  static constexpr bool emits_entries = true;
   const std::uint64_t* offsets;
   std::uint32_t* indices;
   float* distances;
   float* vectors;
   RAYCUT_HD Accumulator init(std::uint32_t i) const { return offsets[i]; }
-  RAYCUT_HD void operator()(Accumulator& slot, std::uint32_t i, std::uint32_t j, Vec3 r,
+  RAYCUT_HD void operator()(Accumulator& slot, std::uint32_t, std::uint32_t j, Vec3 r,
                             float r2) const {
-    if (!keeps(half, i, j)) return;
     indices[slot] = j;
     if (distances) distances[slot] = sqrtf(r2);
     if (vectors) {
@@ -60,9 +58,9 @@ struct PaddedOverflow {
 
 // Row i of the [N, K] matrix: its first K neighbours, then `n` (an invalid index) to the end;
 // counts[i] the true count, and the overflow recorded, never hidden.
-struct PaddedFill {
-  using Accumulator = std::uint32_t;
-  bool half;
+struct PaddedFill : HalfFilter {
+  using Accumulator = std::uint32_t;  // the row's next entry (its count so far)
+  static constexpr bool emits_entries = true;
   std::uint32_t k;
   std::uint32_t n;
   std::uint32_t* indices;
@@ -70,7 +68,6 @@ struct PaddedFill {
   PaddedOverflow* overflow;
   RAYCUT_HD void operator()(Accumulator& count, std::uint32_t i, std::uint32_t j, Vec3,
                             float) const {
-    if (!keeps(half, i, j)) return;
     if (count < k) indices[std::uint64_t{i} * k + count] = j;
     ++count;
   }

@@ -136,7 +136,8 @@ void validate_kernel_range(Kernel kernel, const KernelOptions& options, float cu
   switch (kernel) {
     case Kernel::count:
       return;
-    case Kernel::lj: {
+    case Kernel::lj:
+    case Kernel::lj_forces: {
       const double sigma6 = std::pow(static_cast<double>(options.lj_sigma), 6);
       const bool zero = options.lj_sigma == 0.0f || options.lj_epsilon == 0.0f;
       require("sigma^6", sigma6, options.lj_sigma == 0.0f);

@@ -61,10 +61,11 @@ struct PairGeometry {
 
 __device__ __forceinline__ PairGeometry pair_geometry(const LaunchParams& p, std::uint32_t i,
                                                       std::uint32_t j) {
+  // The local frame's difference times 1 / scale: the caller's d, exactly (ray_method.cu).
   PairGeometry g;
-  g.dx = p.xyz[3 * j] - p.xyz[3 * i];
-  g.dy = p.xyz[3 * j + 1] - p.xyz[3 * i + 1];
-  g.dz = p.xyz[3 * j + 2] - p.xyz[3 * i + 2];
+  g.dx = (p.xyz[3 * j] - p.xyz[3 * i]) * p.inverse_scale;
+  g.dy = (p.xyz[3 * j + 1] - p.xyz[3 * i + 1]) * p.inverse_scale;
+  g.dz = (p.xyz[3 * j + 2] - p.xyz[3 * i + 2]) * p.inverse_scale;
   g.r2 = squared_distance(g.dx, g.dy, g.dz);
   return g;
 }
@@ -73,7 +74,9 @@ __device__ __forceinline__ PairGeometry pair_geometry(const LaunchParams& p, std
 __device__ __forceinline__ void accept_pair(const LaunchParams& p, TargetState& s, std::uint32_t j,
                                             const PairGeometry& g) {
   const std::uint32_t ci = caller_index(p, s.target), cj = caller_index(p, j);
-  with_functor(p, [&](const auto& f) { f(state_of(s, f), ci, cj, Vec3{g.dx, g.dy, g.dz}, g.r2); });
+  with_functor(p, [&](const auto& f) {
+    if (accepts(f, ci, cj)) f(state_of(s, f), ci, cj, Vec3{g.dx, g.dy, g.dz}, g.r2);
+  });
 }
 
 __device__ __forceinline__ void finish_target(const LaunchParams& p, TargetState& s) {

@@ -27,11 +27,13 @@ enum class RayMode : int {
 
 struct LaunchParams {
   OptixTraversableHandle handle;
-  const float* xyz;             // positions in the method's (maybe sorted) order
+  const float* xyz;             // positions in the local frame, the method's (maybe sorted) order
   const std::uint32_t* origin;  // slot -> caller's particle index; null when unsorted
   std::uint32_t n;
-  float cutoff, cutoff_squared;
-  float margin;  // e of src/geometry/ray_geometry.hpp
+  float cutoff;          // in the local frame (the geometry's)
+  float cutoff_squared;  // the caller's C^2 (the predicate's, on the caller's pair vectors)
+  float margin;          // e of src/geometry/ray_geometry.hpp, in the local frame
+  float inverse_scale;   // local frame -> the caller's units (a power of two: exact)
   RayMode mode;
   // The functor of the mode (the others unused); each writes its outputs by caller index.
   CountKernel count;

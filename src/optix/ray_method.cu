@@ -34,24 +34,20 @@ __global__ void morton_keys(const float* xyz, std::uint32_t n, CellGrid grid, st
   ids[i] = i;
 }
 
-// Positions in the local frame: x - shift, exact (geometry::exact_shift), so every pair vector
-// d = x_j - x_i the programs compute is the caller's bit for bit.
-__global__ void gather_positions(const float* xyz, const std::uint32_t* ids, std::uint32_t n,
-                                 float3 shift, float* sorted) {
+// Positions in the local frame: (x - shift) * scale, exact (geometry::exact_shift, scale a power
+// of two putting the cutoff in [1, 2)), so every pair vector the programs compute, times
+// 1 / scale, is the caller's d = x_j - x_i bit for bit (barring subnormals, below 2^-126 C),
+// whatever the magnitude of the coordinates and of the cutoff: OptiX's traversal is not exact
+// far from unit scale (docs/methods.md, "Valid domain of each ray-tracing method").
+// ids: slot -> caller's index (the Morton order), or null.
+__global__ void to_local_frame(const float* xyz, const std::uint32_t* ids, std::uint32_t n,
+                               float3 shift, float scale, float* local) {
   const std::uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
   if (s >= n) return;
-  const std::uint32_t i = ids[s];
-  sorted[3 * s] = xyz[3 * i] - shift.x;
-  sorted[3 * s + 1] = xyz[3 * i + 1] - shift.y;
-  sorted[3 * s + 2] = xyz[3 * i + 2] - shift.z;
-}
-
-__global__ void shift_positions(const float* xyz, std::uint32_t n, float3 shift, float* out) {
-  const std::uint32_t i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i >= n) return;
-  out[3 * i] = xyz[3 * i] - shift.x;
-  out[3 * i + 1] = xyz[3 * i + 1] - shift.y;
-  out[3 * i + 2] = xyz[3 * i + 2] - shift.z;
+  const std::uint32_t i = ids ? ids[s] : s;
+  local[3 * s] = (xyz[3 * i] - shift.x) * scale;
+  local[3 * s + 1] = (xyz[3 * i + 1] - shift.y) * scale;
+  local[3 * s + 2] = (xyz[3 * i + 2] - shift.z) * scale;
 }
 
 // Squared displacements are >= 0, so their float bits order like unsigned integers.
@@ -84,7 +80,8 @@ void RayTracingMethod::build(const float* xyz, std::size_t n, float cutoff) {
   n_ = static_cast<std::uint32_t>(n);
   cutoff_ = cutoff;
   std::copy(shift, shift + 3, shift_);
-  margin_ = geometry::margin(cutoff, static_cast<float>(magnitude));
+  scale_ = std::ldexp(1.0f, -std::ilogb(cutoff));  // the local cutoff in [1, 2)
+  margin_ = geometry::margin(cutoff * scale_, static_cast<float>(magnitude * scale_));
 
   xyz_.resize(3 * n);
   if (sorted_) {
@@ -111,7 +108,7 @@ void RayTracingMethod::build(const float* xyz, std::size_t n, float cutoff) {
     RAYCUT_CUDA_CHECK(
         cudaMemcpyAsync(built_xyz_.data(), xyz, 3 * n * sizeof(float), cudaMemcpyDeviceToDevice));
   }
-  const OptixBuildInput input = primitives(xyz_.data(), n_, cutoff, margin_);
+  const OptixBuildInput input = primitives(xyz_.data(), n_, cutoff * scale_, margin_);
   handle_ = accel_.build(
       input, OPTIX_BUILD_FLAG_PREFER_FAST_TRACE | (refits ? OPTIX_BUILD_FLAG_ALLOW_UPDATE : 0));
   build_timer_.stop();
@@ -133,17 +130,10 @@ void RayTracingMethod::check_domain(double magnitude, float cutoff) const {
 }
 
 void RayTracingMethod::arrange(const float* xyz) {
-  const float3 shift = make_float3(shift_[0], shift_[1], shift_[2]);
-  if (sorted_) {
-    gather_positions<<<blocks_for(n_), block_size>>>(xyz, ids_.data(), n_, shift, xyz_.data());
-    RAYCUT_CUDA_CHECK_LAUNCH();
-  } else if (shift.x != 0 || shift.y != 0 || shift.z != 0) {
-    shift_positions<<<blocks_for(n_), block_size>>>(xyz, n_, shift, xyz_.data());
-    RAYCUT_CUDA_CHECK_LAUNCH();
-  } else {
-    RAYCUT_CUDA_CHECK(cudaMemcpyAsync(xyz_.data(), xyz, 3 * std::size_t{n_} * sizeof(float),
-                                      cudaMemcpyDeviceToDevice));
-  }
+  to_local_frame<<<blocks_for(n_), block_size>>>(xyz, sorted_ ? ids_.data() : nullptr, n_,
+                                                 make_float3(shift_[0], shift_[1], shift_[2]),
+                                                 scale_, xyz_.data());
+  RAYCUT_CUDA_CHECK_LAUNCH();
 }
 
 float RayTracingMethod::max_displacement(const float* xyz) {
@@ -180,7 +170,7 @@ bool RayTracingMethod::update(const float* xyz, std::size_t n, float cutoff) {
   }
   build_timer_.start();
   arrange(xyz);
-  const OptixBuildInput input = primitives(xyz_.data(), n_, cutoff_, margin_);
+  const OptixBuildInput input = primitives(xyz_.data(), n_, cutoff_ * scale_, margin_);
   handle_ = accel_.refit(input);
   build_timer_.stop();
   return true;
@@ -192,9 +182,10 @@ LaunchParams RayTracingMethod::base_params() const {
   p.xyz = xyz_.data();
   p.origin = sorted_ ? ids_.data() : nullptr;
   p.n = n_;
-  p.cutoff = cutoff_;
+  p.cutoff = cutoff_ * scale_;
   p.cutoff_squared = squared_cutoff(cutoff_);
   p.margin = margin_;
+  p.inverse_scale = 1.0f / scale_;
   return p;
 }
 

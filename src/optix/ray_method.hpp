@@ -62,6 +62,7 @@ class RayTracingMethod : public cuda::GpuMethod {
   // Local origin per axis: xyz_ holds x - shift_, exact in float (geometry::exact_shift), so the
   // pair vectors, hence the shared predicate and every kernel, are the caller's bit for bit.
   float shift_[3] = {0, 0, 0};
+  float scale_ = 1;  // a power of two: the local frame's cutoff is in [1, 2)
   cuda::DeviceBuffer<float> xyz_;
   cuda::DeviceBuffer<float> built_xyz_;        // caller's order, at the last full build
   cuda::DeviceBuffer<unsigned> displacement_;  // float bits of the largest squared move

@@ -204,28 +204,17 @@ __global__ void __launch_bounds__(grid_block_size, ManyRegisters ? 1 : 0)
 
 constexpr int grid_max_rows = 49;  // (2 reach + 1)^2 rows for reach <= 3
 
-// G lanes per target, over the target's candidates flattened into one list: the lanes find the
-// rows' ranges together (a block of rows each), a prefix sum over the group places them one after
-// the other, then lane g takes candidates g, g + G, ... of the whole list. Every lane does the
-// same work whatever the lengths of the rows, and neighbouring lanes read neighbouring sources.
-// The lanes' states are combined in a fixed order (combine_lanes): results do not change between
-// runs. Only for functors with a combine().
-template <int G, class F, class Table>
-__global__ void __launch_bounds__(grid_block_size)
-    grid_group_kernel(const float4* __restrict__ pos, Slot n, GridGeometry view, Table table,
-                      float cutoff_squared, F f) {
-  constexpr int groups = grid_block_size / G;
+// G lanes share target t's candidates, flattened into one list: the lanes find the rows' ranges
+// together (a block of rows each), a prefix sum over the group places them one after the other
+// in rows[] as (first slot - first flat index, end flat index); returns the list's length.
+template <int G, class Table>
+__device__ __forceinline__ Slot flatten_rows(const GridGeometry& view, const Table& table,
+                                             const TargetCell& c, bool active, int lane,
+                                             uint2* rows) {
   constexpr int rows_per_lane_max = (grid_max_rows + G - 1) / G;
-  __shared__ uint2 rows[groups][grid_max_rows];  // (first slot - first flat index, end flat index)
-  const int group = threadIdx.x / G, lane = threadIdx.x % G;
-  const Slot t = static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / G);
-  const bool active = t < n;  // no early return: every lane takes part in the shuffles
-  const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
-  const TargetCell c = locate(view, p);
   const int reach = view.grid.reach, side = 2 * reach + 1, row_count = side * side;
   const int rows_per_lane = (row_count + G - 1) / G;
   const int first_row = lane * rows_per_lane;
-
   Slot base[rows_per_lane_max], length[rows_per_lane_max];
   Slot total = 0;
 #pragma unroll
@@ -251,11 +240,30 @@ __global__ void __launch_bounds__(grid_block_size)
   for (int k = 0; k < rows_per_lane_max; ++k) {
     const int r = first_row + k;
     if (k < rows_per_lane && r < row_count) {
-      rows[group][r] = make_uint2(base[k] - flat, flat + length[k]);
+      rows[r] = make_uint2(base[k] - flat, flat + length[k]);
       flat += length[k];
     }
   }
   __syncwarp();
+  return group_total;
+}
+
+// G lanes per target over its flattened candidates: lane g takes candidates g, g + G, ... of the
+// whole list, so every lane does the same work whatever the lengths of the rows, and
+// neighbouring lanes read neighbouring sources. The lanes' states are combined in a fixed order
+// (combine_lanes): results do not change between runs. For functors with a combine(): small
+// inputs, where a thread per target would not fill the GPU.
+template <int G, class F, class Table>
+__global__ void __launch_bounds__(grid_block_size)
+    grid_group_kernel(const float4* __restrict__ pos, Slot n, GridGeometry view, Table table,
+                      float cutoff_squared, F f) {
+  constexpr int groups = grid_block_size / G;
+  __shared__ uint2 rows[groups][grid_max_rows];
+  const int group = threadIdx.x / G, lane = threadIdx.x % G;
+  const Slot t = static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / G);
+  const bool active = t < n;  // no early return: every lane takes part in the shuffles
+  const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
+  const Slot group_total = flatten_rows<G>(view, table, locate(view, p), active, lane, rows[group]);
 
   // Unrolled by U: the slots of U candidates first (the row walk only moves forward), then U
   // independent loads in flight, then the U tests.
@@ -294,6 +302,53 @@ __global__ void __launch_bounds__(grid_block_size)
   }
 }
 
+// A warp per target for functors that emit entries (lists): the 32 lanes take 32 consecutive
+// candidates at a time, and a ballot gives each taken pair its place among them, so the warp
+// writes the target's entries together: coalesced stores instead of one scattered store per
+// entry per thread (docs/benchmarks.md, "Neighbour lists"). Entries within a row keep the
+// order of the candidates, the same on every run.
+template <class F, class Table>
+__global__ void __launch_bounds__(grid_block_size)
+    grid_emit_kernel(const float4* __restrict__ pos, Slot n, GridGeometry view, Table table,
+                     float cutoff_squared, F f) {
+  constexpr int G = 32, groups = grid_block_size / G;
+  __shared__ uint2 rows[groups][grid_max_rows];
+  const int group = threadIdx.x / G, lane = threadIdx.x % G;
+  const Slot t = static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / G);
+  const bool active = t < n;  // the whole warp shares t: uniform
+  const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
+  const Slot total = flatten_rows<G>(view, table, locate(view, p), active, lane, rows[group]);
+  const std::uint32_t i = original_index(p);
+  typename F::Accumulator next{};
+  if (active) next = initial_state(f, i);
+  const unsigned lanes_below = (1u << lane) - 1u;
+  int r = 0;
+  uint2 row = rows[group][0];
+  for (Slot first = 0; first < total; first += G) {  // the same trip count on every lane
+    const Slot fl = first + lane;
+    bool take = false;
+    std::uint32_t j = 0;
+    Vec3 d{0, 0, 0};
+    float r2 = 0;
+    if (fl < total) {
+      while (fl >= row.y) row = rows[group][++r];
+      const Slot s = row.x + fl;
+      const float4 q = pos[s];
+      d = Vec3{q.x - p.x, q.y - p.y, q.z - p.z};
+      r2 = squared_distance(d.x, d.y, d.z);
+      j = original_index(q);
+      take = in_range(r2, cutoff_squared) && s != t && accepts(f, i, j);
+    }
+    const unsigned taken = __ballot_sync(0xffffffffu, take);
+    if (take) {
+      typename F::Accumulator at = next + __popc(taken & lanes_below);
+      f(at, i, j, d, r2);
+    }
+    next += __popc(taken);
+  }
+  if (active && lane == 0) f.finish(i, next);
+}
+
 // Runs functor f for every target of the grid pass `pass`, on `stream`.
 template <class F>
 void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
@@ -302,6 +357,13 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
   const Slot n = static_cast<Slot>(pass.n);
   const float c2 = pass.cutoff_squared;
   const auto launch = [&](const auto& table) {
+    if constexpr (emits_entries<F>::value) {
+      if (g.geometry.grid.reach <= 3) {  // the flattened row table holds (2 * 3 + 1)^2 rows
+        grid_emit_kernel<<<blocks_for(std::uint64_t{n} * 32, grid_block_size), grid_block_size, 0,
+                           stream>>>(pos, n, g.geometry, table, c2, f);
+        return;
+      }
+    }
     GridKernel kernel = g.kernel;
     if constexpr (!has_combine<F>::value) kernel = kernel == GridKernel::thread_many_registers
                                                        ? kernel

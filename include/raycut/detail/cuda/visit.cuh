@@ -20,6 +20,7 @@ namespace raycut::detail::cuda {
 template <class F>
 __device__ __forceinline__ void visit(const F& f, typename F::Accumulator& acc, bool in,
                                       std::uint32_t i, std::uint32_t j, Vec3 r, float r2) {
+  if constexpr (has_accepts<F>::value) in = in && f.accepts(i, j);
   if constexpr (vanishes_at_infinity<F>::value) {
     f(acc, i, j, r, in ? r2 : CUDART_INF_F);
   } else {
