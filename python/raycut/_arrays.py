@@ -121,6 +121,39 @@ def to_host(x: Any) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(x), dtype=np.float32)
 
 
+class DLPackCapsule:
+    """A bare DLPack capsule as an object with __dlpack__ and __dlpack_device__: older nanobind
+    releases return capsules for framework-less arrays, which jax and the array API expect as
+    such objects. A capsule can be consumed once."""
+
+    def __init__(self, capsule: Any, device_id: int):
+        self.capsule = capsule
+        self.device_id = device_id
+
+    def __dlpack__(self, stream: Any = None, **kwargs: Any) -> Any:
+        return self.capsule
+
+    def __dlpack_device__(self) -> tuple:
+        return (2, self.device_id)  # kDLCUDA: the extension returns capsules for device memory
+
+
+def device_id(like: Like) -> int:
+    """The CUDA device index of the caller's arrays (0 when not known)."""
+    device = like.device
+    for name in ("index", "id"):
+        value = getattr(device, name, None)
+        if isinstance(value, int):
+            return value
+    return device if isinstance(device, int) else 0
+
+
+def dlpack_object(array: Any, like: Like) -> Any:
+    """The extension's device array as an object with __dlpack__ (wrapping a bare capsule)."""
+    if type(array).__name__ == "PyCapsule":
+        return DLPackCapsule(array, device_id(like))
+    return array
+
+
 def output(array: Any, like: Like) -> Any:
     """An array from the extension (NumPy on the host, DLPack on the device) in the caller's
     framework and device: zero-copy where it already is there, a copy to the caller's device
@@ -128,6 +161,8 @@ def output(array: Any, like: Like) -> Any:
     if array is None or like.framework == "numpy":
         return array
     on_host = isinstance(array, np.ndarray)
+    if not on_host:
+        array = dlpack_object(array, like)
     if like.framework == "torch":
         import torch
 
@@ -147,8 +182,5 @@ def output(array: Any, like: Like) -> Any:
 
         if on_host:
             return jax.device_put(array, like.device)
-        try:
-            return jax.dlpack.from_dlpack(array)
-        except TypeError:  # jax versions that take a capsule only
-            return jax.dlpack.from_dlpack(array.__dlpack__())
+        return jax.dlpack.from_dlpack(array)
     return array  # other: NumPy on the host, DLPack-capable arrays on the device
