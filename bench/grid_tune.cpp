@@ -46,7 +46,8 @@ std::unique_ptr<raycut::detail::Method> make_variant(const std::string& name) {
   if (name.find("-nocull") != std::string::npos) o.cull = false;
   if (name.find("-dense") != std::string::npos) o.layout = cuda::TableLayout::dense;
   if (name.find("-compact") != std::string::npos) o.layout = cuda::TableLayout::compact;
-  if (name.find("-counting") != std::string::npos) o.dense_build = cuda::DenseBuild::counting_by_particle;
+  if (name.find("-counting") != std::string::npos)
+    o.dense_build = cuda::DenseBuild::counting_by_particle;
   if (name.find("-radix") != std::string::npos) o.dense_build = cuda::DenseBuild::radix;
   if (name.find("-oneblock") != std::string::npos) o.dense_build = cuda::DenseBuild::one_block;
   if (name.find("-bycell") != std::string::npos) o.dense_build = cuda::DenseBuild::counting_by_cell;

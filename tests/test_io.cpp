@@ -13,8 +13,8 @@
 #include <string>
 #include <vector>
 
-#include "raycut/files.hpp"
 #include "raycut/error.hpp"
+#include "raycut/files.hpp"
 #include "raycut/generators.hpp"
 #include "raycut/io.hpp"
 

@@ -122,7 +122,8 @@ TEST(Engine, MovedFromThrowsInsteadOfCrashing) {
   Engine a("brute-force");
   Engine b(std::move(a));
   const float xyz[3] = {0, 0, 0};
-  EXPECT_THROW(a.build({xyz, 1, MemorySpace::host}, 1.0f), raycut::Error);  // NOLINT(bugprone-use-after-move)
+  EXPECT_THROW(a.build({xyz, 1, MemorySpace::host}, 1.0f),
+               raycut::Error);  // NOLINT(bugprone-use-after-move)
   EXPECT_THROW(a.neighbours(), raycut::Error);
   EXPECT_THROW((void)a.space(), raycut::Error);
   EXPECT_THROW(a.set_update_policy({}), raycut::Error);

@@ -15,8 +15,8 @@
 #include <unistd.h>
 
 #include "commands.hpp"
-#include "raycut/files.hpp"
 #include "raycut/engine.hpp"
+#include "raycut/files.hpp"
 #include "raycut/generators.hpp"
 
 namespace raycut::cli {

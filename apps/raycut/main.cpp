@@ -12,10 +12,10 @@
 #include <new>
 
 #include "commands.hpp"
-#include "raycut/host_memory.hpp"
-#include "raycut/files.hpp"
 #include "raycut/engine.hpp"
+#include "raycut/files.hpp"
 #include "raycut/generators.hpp"
+#include "raycut/host_memory.hpp"
 #include "raycut/io.hpp"
 
 namespace raycut::cli {
@@ -57,9 +57,8 @@ std::uint64_t suite_particles(int param, int p) {
 
 void require_particles_fit(std::uint64_t n, double bytes_per_particle, const std::string& what) {
   require_host_memory(static_cast<double>(n) * bytes_per_particle,
-                              what + ": N = " + std::to_string(n) + " particles (~" +
-                                  std::to_string(static_cast<int>(bytes_per_particle)) +
-                                  " bytes each)");
+                      what + ": N = " + std::to_string(n) + " particles (~" +
+                          std::to_string(static_cast<int>(bytes_per_particle)) + " bytes each)");
 }
 
 PointCloud suite_cloud(const std::string& suite, int param, int p, std::uint64_t seed,

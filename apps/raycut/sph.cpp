@@ -16,8 +16,8 @@
 #include <vector>
 
 #include "commands.hpp"
-#include "raycut/files.hpp"
 #include "raycut/engine.hpp"
+#include "raycut/files.hpp"
 #include "raycut/sph/render.hpp"
 #include "raycut/sph/scenario.hpp"
 #include "raycut/sph/solver.hpp"

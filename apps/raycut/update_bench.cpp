@@ -9,8 +9,8 @@
 #include <optional>
 
 #include "commands.hpp"
-#include "raycut/files.hpp"
 #include "raycut/engine.hpp"
+#include "raycut/files.hpp"
 #include "raycut/generators.hpp"
 
 namespace raycut::cli {

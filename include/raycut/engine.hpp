@@ -83,16 +83,16 @@ class NeighbourListBuffer {
   NeighbourListBuffer(NeighbourListBuffer&&) noexcept;
   NeighbourListBuffer& operator=(NeighbourListBuffer&&) noexcept;
 
-  std::size_t size() const;                // N, the number of targets
-  std::uint64_t pairs() const;             // entries (offsets()[N])
-  const std::uint64_t* offsets() const;    // N + 1
-  const std::uint32_t* indices() const;    // pairs()
-  const float* distances() const;          // pairs(), or null when not asked
-  const float* vectors() const;            // 3 pairs(), or null when not asked
+  std::size_t size() const;              // N, the number of targets
+  std::uint64_t pairs() const;           // entries (offsets()[N])
+  const std::uint64_t* offsets() const;  // N + 1
+  const std::uint32_t* indices() const;  // pairs()
+  const float* distances() const;        // pairs(), or null when not asked
+  const float* vectors() const;          // 3 pairs(), or null when not asked
   MemorySpace space() const;
   const ListOptions& options() const;
-  std::size_t bytes() const;               // memory held
-  NeighbourList to_host() const;           // a copy on the host
+  std::size_t bytes() const;      // memory held
+  NeighbourList to_host() const;  // a copy on the host
 
  private:
   friend class Engine;

@@ -14,7 +14,7 @@ enum class ErrorCode {
   io,                // a file could not be read or written, or is malformed (file:line)
   backend,           // CUDA or OptiX reported an error (the message carries its text)
   capacity_exceeded,  // a fixed-size output (padded neighbour list) is too small: grow it
-  internal,          // a broken invariant inside raycut: a bug, please report it
+  internal,           // a broken invariant inside raycut: a bug, please report it
 };
 
 const char* to_string(ErrorCode code) noexcept;

@@ -138,8 +138,9 @@ struct vanishes_at_infinity<F, std::enable_if_t<F::vanishes_at_infinity>> : std:
 template <class F, class = void>
 struct has_combine : std::false_type {};
 template <class F>
-struct has_combine<F, std::void_t<decltype(F::combine(std::declval<typename F::Accumulator&>(),
-                                                      std::declval<const typename F::Accumulator&>()))>>
+struct has_combine<
+    F, std::void_t<decltype(F::combine(std::declval<typename F::Accumulator&>(),
+                                       std::declval<const typename F::Accumulator&>()))>>
     : std::true_type {};
 
 template <class F, class = void>
@@ -156,8 +157,8 @@ struct emits_entries<F, std::enable_if_t<F::emits_entries>> : std::true_type {};
 template <class F, class = void>
 struct has_accepts : std::false_type {};
 template <class F>
-struct has_accepts<F, std::void_t<decltype(std::declval<const F&>().accepts(std::uint32_t{},
-                                                                            std::uint32_t{}))>>
+struct has_accepts<
+    F, std::void_t<decltype(std::declval<const F&>().accepts(std::uint32_t{}, std::uint32_t{}))>>
     : std::true_type {};
 
 // Whether f takes the in-range pair (i, j).
@@ -201,8 +202,7 @@ struct LennardJonesKernel {
   float sigma6;               // sigma^6
   float four_epsilon_sigma6;  // 4 eps sigma^6
   float* energy;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3,
-                            float r2) const {
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float r2) const {
     const float t = fast_reciprocal(r2);
     const float w = t * t * t;
     acc += w * (sigma6 * w - 1.0f);
@@ -224,11 +224,11 @@ struct LennardJonesForceKernel {
     float energy = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0};
   };
   static constexpr bool vanishes_at_infinity = true;
-  float sigma6;                        // sigma^6
-  float four_epsilon_sigma6;           // 4 eps sigma^6
-  float* energy;                       // 1 per target
-  float* force;                        // 3 per target
-  float* virial;                       // 6 per target
+  float sigma6;               // sigma^6
+  float four_epsilon_sigma6;  // 4 eps sigma^6
+  float* energy;              // 1 per target
+  float* force;               // 3 per target
+  float* virial;              // 6 per target
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3 r,
                             float r2) const {
     const float t = fast_reciprocal(r2);
@@ -291,15 +291,12 @@ struct SphDensityKernel {
   float mass_poly6;  // m 315 / (64 pi h^9)
   float h_squared;
   float* density;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3,
-                            float r2) const {
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float r2) const {
     const float w = h_squared - r2;
     acc += w * w * w;
   }
   RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
-  RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
-    density[i] = acc * mass_poly6;
-  }
+  RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { density[i] = acc * mass_poly6; }
 };
 
 // f_i = - sum_j m (p_i + p_j) / (2 rho_j) grad W_spiky + mu sum_j m (v_j - v_i) / rho_j lap W_visc
@@ -328,7 +325,8 @@ struct SphForceKernel {
     }
     const float visc = viscosity * mass / rho_j * spiky * h_r;
     for (int k = 0; k < 3; ++k)
-      acc.f[k] += visc * (in.velocity[3 * std::size_t{j} + k] - in.velocity[3 * std::size_t{i} + k]);
+      acc.f[k] +=
+          visc * (in.velocity[3 * std::size_t{j} + k] - in.velocity[3 * std::size_t{i} + k]);
   }
   RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) {
     for (int k = 0; k < 3; ++k) a.f[k] += b.f[k];

@@ -38,8 +38,7 @@ void for_each_in_range(std::size_t i, const float* xyz, float cutoff_squared, co
 
 // Runs functor f for every target, in parallel over targets (OpenMP).
 template <class Walk, class F>
-void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk& walk,
-              const F& f) {
+void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk& walk, const F& f) {
 #pragma omp parallel for schedule(dynamic, 256)
   for (std::size_t t = 0; t < n; ++t) {
     const auto i = static_cast<std::uint32_t>(t);

@@ -13,8 +13,8 @@ void check(cudaError_t status, const char* what) {
   const auto code = status == cudaErrorMemoryAllocation ? raycut::ErrorCode::out_of_memory
                                                         : raycut::ErrorCode::backend;
   cudaGetLastError();  // clear a non-sticky error
-  throw raycut::Error(code, std::string("raycut (python): ") + what + ": " +
-                                cudaGetErrorString(status));
+  throw raycut::Error(code,
+                      std::string("raycut (python): ") + what + ": " + cudaGetErrorString(status));
 }
 
 // One thread per row: the row's entries get its index (rows are short: tens of entries).
@@ -42,7 +42,9 @@ void* device_alloc(std::size_t bytes) {
   return p;
 }
 
-void device_free(void* p) noexcept { cudaFree(p); }
+void device_free(void* p) noexcept {
+  cudaFree(p);
+}
 
 int current_device() {
   int device = 0;

@@ -13,7 +13,8 @@ void* device_alloc(std::size_t bytes);  // throws raycut::Error(out_of_memory)
 void device_free(void* p) noexcept;
 int current_device();
 // dst <- src, both device memory, on `stream`, synchronised before returning.
-void device_copy(void* dst, const void* src, std::size_t bytes, void* stream);  // the CUDA device of this thread (cudaGetDevice)
+void device_copy(void* dst, const void* src, std::size_t bytes,
+                 void* stream);  // the CUDA device of this thread (cudaGetDevice)
 
 // COO pairs of a device CSR list: i[e] = the row of entry e, j[e] = indices[e], both int64, on
 // `stream` (a cudaStream_t; null: the legacy default stream), synchronised before returning.

@@ -49,20 +49,31 @@ struct FloatInput {
 
 std::string describe_shape(const std::vector<std::size_t>& shape) {
   std::string s = "(";
-  for (std::size_t d = 0; d < shape.size(); ++d)
-    s += (d ? ", " : "") + std::to_string(shape[d]);
+  for (std::size_t d = 0; d < shape.size(); ++d) s += (d ? ", " : "") + std::to_string(shape[d]);
   return s + (shape.size() == 1 ? ",)" : ")");
 }
 
 std::string describe_dtype(nb::dlpack::dtype dt) {
   const char* kind = "?";
   switch (static_cast<nb::dlpack::dtype_code>(dt.code)) {
-    case nb::dlpack::dtype_code::Int: kind = "int"; break;
-    case nb::dlpack::dtype_code::UInt: kind = "uint"; break;
-    case nb::dlpack::dtype_code::Float: kind = "float"; break;
-    case nb::dlpack::dtype_code::Bfloat: kind = "bfloat"; break;
-    case nb::dlpack::dtype_code::Complex: kind = "complex"; break;
-    case nb::dlpack::dtype_code::Bool: kind = "bool"; break;
+    case nb::dlpack::dtype_code::Int:
+      kind = "int";
+      break;
+    case nb::dlpack::dtype_code::UInt:
+      kind = "uint";
+      break;
+    case nb::dlpack::dtype_code::Float:
+      kind = "float";
+      break;
+    case nb::dlpack::dtype_code::Bfloat:
+      kind = "bfloat";
+      break;
+    case nb::dlpack::dtype_code::Complex:
+      kind = "complex";
+      break;
+    case nb::dlpack::dtype_code::Bool:
+      kind = "bool";
+      break;
   }
   return kind + std::to_string(dt.bits);
 }
@@ -72,7 +83,8 @@ FloatInput from_cuda_array_interface(nb::handle obj, const char* name) {
   nb::dict cai = nb::cast<nb::dict>(obj.attr("__cuda_array_interface__"));
   FloatInput in;
   in.space = MemorySpace::device;
-  for (nb::handle d : nb::cast<nb::tuple>(cai["shape"])) in.shape.push_back(nb::cast<std::size_t>(d));
+  for (nb::handle d : nb::cast<nb::tuple>(cai["shape"]))
+    in.shape.push_back(nb::cast<std::size_t>(d));
   const std::string typestr = nb::cast<std::string>(cai["typestr"]);
   if (typestr != "<f4")
     value_error(std::string(name) + " must be float32 C-contiguous on the device, got typestr '" +
@@ -155,9 +167,8 @@ nb::object wrap(const void* data, std::vector<std::size_t> shape, nb::dlpack::dt
     device_id = raycut_py::current_device();
     if (data == nullptr || elements == 0) {  // empty: a valid pointer all the same
       void* p = raycut_py::device_alloc(16);
-      owner = std::shared_ptr<const void>(p, [](const void* q) {
-        raycut_py::device_free(const_cast<void*>(q));
-      });
+      owner = std::shared_ptr<const void>(
+          p, [](const void* q) { raycut_py::device_free(const_cast<void*>(q)); });
       data = p;
     }
 #else
@@ -168,13 +179,12 @@ nb::object wrap(const void* data, std::vector<std::size_t> shape, nb::dlpack::dt
     data = empty;
   }
   auto* held = new std::shared_ptr<const void>(std::move(owner));
-  nb::capsule capsule(held, [](void* p) noexcept {
-    delete static_cast<std::shared_ptr<const void>*>(p);
-  });
+  nb::capsule capsule(
+      held, [](void* p) noexcept { delete static_cast<std::shared_ptr<const void>*>(p); });
   void* ptr = const_cast<void*>(data);
   if (space == MemorySpace::host)
-    return nb::cast(nb::ndarray<nb::numpy>(ptr, shape.size(), shape.data(), capsule, nullptr,
-                                           dtype, nb::device::cpu::value, 0));
+    return nb::cast(nb::ndarray<nb::numpy>(ptr, shape.size(), shape.data(), capsule, nullptr, dtype,
+                                           nb::device::cpu::value, 0));
   return nb::cast(nb::ndarray<>(ptr, shape.size(), shape.data(), capsule, nullptr, dtype,
                                 nb::device::cuda::value, device_id));
 }
@@ -285,10 +295,10 @@ nb::tuple pairs(raycut::Engine& engine, bool half, bool distances, bool vectors,
     for (std::size_t e = 0; e < count; ++e) j[e] = indices[e];
   }
   const MemorySpace space = MemorySpace::host;
-  return nb::make_tuple(host_array(std::move(i), {count}), host_array(std::move(j), {count}),
-                        distances ? wrap(d, {count}, dtype_of<float>(), owner, space) : nb::none(),
-                        vectors ? wrap(v, {count, 3}, dtype_of<float>(), owner, space)
-                                : nb::none());
+  return nb::make_tuple(
+      host_array(std::move(i), {count}), host_array(std::move(j), {count}),
+      distances ? wrap(d, {count}, dtype_of<float>(), owner, space) : nb::none(),
+      vectors ? wrap(v, {count, 3}, dtype_of<float>(), owner, space) : nb::none());
 }
 
 // Padded [N, K] (int32; N marks an empty slot), counts [N] (int32), report.
@@ -338,9 +348,8 @@ nb::dict results(raycut::Engine& engine, std::string_view kernel_name, bool to_h
     std::size_t bytes = dtype.bits / 8;
     for (std::size_t s : shape) bytes *= s;
     void* dst = raycut_py::device_alloc(bytes);
-    std::shared_ptr<const void> owner(dst, [](const void* p) {
-      raycut_py::device_free(const_cast<void*>(p));
-    });
+    std::shared_ptr<const void> owner(
+        dst, [](const void* p) { raycut_py::device_free(const_cast<void*>(p)); });
     if (src != nullptr) {
       nb::gil_scoped_release release;
       raycut_py::device_copy(dst, src, bytes, engine.stream());
@@ -426,13 +435,25 @@ NB_MODULE(_raycut, m) {
       PyObject* type = PyExc_RuntimeError;
       switch (e.code()) {
         case raycut::ErrorCode::invalid_argument:
-        case raycut::ErrorCode::invalid_input: type = PyExc_ValueError; break;
-        case raycut::ErrorCode::out_of_memory: type = PyExc_MemoryError; break;
-        case raycut::ErrorCode::unsupported: type = PyExc_NotImplementedError; break;
-        case raycut::ErrorCode::io: type = PyExc_OSError; break;
-        case raycut::ErrorCode::capacity_exceeded: type = capacity_error; break;
+        case raycut::ErrorCode::invalid_input:
+          type = PyExc_ValueError;
+          break;
+        case raycut::ErrorCode::out_of_memory:
+          type = PyExc_MemoryError;
+          break;
+        case raycut::ErrorCode::unsupported:
+          type = PyExc_NotImplementedError;
+          break;
+        case raycut::ErrorCode::io:
+          type = PyExc_OSError;
+          break;
+        case raycut::ErrorCode::capacity_exceeded:
+          type = capacity_error;
+          break;
         case raycut::ErrorCode::backend:
-        case raycut::ErrorCode::internal: type = PyExc_RuntimeError; break;
+        case raycut::ErrorCode::internal:
+          type = PyExc_RuntimeError;
+          break;
       }
       PyErr_SetString(type, e.what());
     }
@@ -496,13 +517,13 @@ NB_MODULE(_raycut, m) {
           "set_skin",
           [](raycut::Engine& e, float skin) { e.set_update_policy(raycut::UpdatePolicy{skin}); },
           nb::arg("skin"))
-      .def("run", &run, nb::arg("kernel"), nb::arg("lj_epsilon") = 1.0f,
-           nb::arg("lj_sigma") = 1.0f, nb::arg("sph_mass") = 0.0f,
-           nb::arg("sph_viscosity") = 0.0f, nb::arg("velocity").none() = nb::none(),
-           nb::arg("density").none() = nb::none(), nb::arg("pressure").none() = nb::none())
+      .def("run", &run, nb::arg("kernel"), nb::arg("lj_epsilon") = 1.0f, nb::arg("lj_sigma") = 1.0f,
+           nb::arg("sph_mass") = 0.0f, nb::arg("sph_viscosity") = 0.0f,
+           nb::arg("velocity").none() = nb::none(), nb::arg("density").none() = nb::none(),
+           nb::arg("pressure").none() = nb::none())
       .def("results", &results, nb::arg("kernel"), nb::arg("to_host"))
-      .def("neighbours", &neighbours, nb::arg("half"), nb::arg("distances"),
-           nb::arg("vectors"), nb::arg("to_host"))
+      .def("neighbours", &neighbours, nb::arg("half"), nb::arg("distances"), nb::arg("vectors"),
+           nb::arg("to_host"))
       .def("pairs", &pairs, nb::arg("half"), nb::arg("distances"), nb::arg("vectors"),
            nb::arg("to_host"))
       .def("padded", &padded, nb::arg("k"), nb::arg("raise_on_overflow"), nb::arg("to_host"))

@@ -212,8 +212,7 @@ void Engine::run(Kernel kernel, const KernelOptions& options) {
 Results Engine::results() const {
   const detail::Method& m = impl("results");
   if (!has_run_)
-    throw Error(ErrorCode::invalid_argument,
-                "Engine::results() called before a successful run()");
+    throw Error(ErrorCode::invalid_argument, "Engine::results() called before a successful run()");
   if (size_ > 0) return m.results();
   Results empty;  // N = 0: the kernel's vectors, empty
   return empty;
@@ -256,8 +255,7 @@ PaddedReport Engine::padded_neighbours(PaddedNeighbourBuffer& list, std::uint32_
                                        bool throw_on_overflow) {
   detail::Method& m = impl("padded_neighbours");
   if (!built_)
-    throw Error(ErrorCode::invalid_argument,
-                "Engine::padded_neighbours() called before build()");
+    throw Error(ErrorCode::invalid_argument, "Engine::padded_neighbours() called before build()");
   if (!list.storage_ || list.storage_->space() != m.space())
     list.storage_ = m.make_padded_storage();
   if (k == 0 && size_ > 0)
@@ -306,29 +304,60 @@ const detail::PaddedStorage& filled(const std::unique_ptr<detail::PaddedStorage>
 }
 }  // namespace
 
-std::size_t NeighbourListBuffer::size() const { return filled(storage_).n; }
-std::uint64_t NeighbourListBuffer::pairs() const { return filled(storage_).pairs; }
-const std::uint64_t* NeighbourListBuffer::offsets() const { return filled(storage_).offsets; }
-const std::uint32_t* NeighbourListBuffer::indices() const { return filled(storage_).indices; }
-const float* NeighbourListBuffer::distances() const { return filled(storage_).distances; }
-const float* NeighbourListBuffer::vectors() const { return filled(storage_).vectors; }
-MemorySpace NeighbourListBuffer::space() const { return filled(storage_).space(); }
-const ListOptions& NeighbourListBuffer::options() const { return filled(storage_).options; }
-std::size_t NeighbourListBuffer::bytes() const { return storage_ ? storage_->bytes() : 0; }
-NeighbourList NeighbourListBuffer::to_host() const { return filled(storage_).to_host(); }
+std::size_t NeighbourListBuffer::size() const {
+  return filled(storage_).n;
+}
+std::uint64_t NeighbourListBuffer::pairs() const {
+  return filled(storage_).pairs;
+}
+const std::uint64_t* NeighbourListBuffer::offsets() const {
+  return filled(storage_).offsets;
+}
+const std::uint32_t* NeighbourListBuffer::indices() const {
+  return filled(storage_).indices;
+}
+const float* NeighbourListBuffer::distances() const {
+  return filled(storage_).distances;
+}
+const float* NeighbourListBuffer::vectors() const {
+  return filled(storage_).vectors;
+}
+MemorySpace NeighbourListBuffer::space() const {
+  return filled(storage_).space();
+}
+const ListOptions& NeighbourListBuffer::options() const {
+  return filled(storage_).options;
+}
+std::size_t NeighbourListBuffer::bytes() const {
+  return storage_ ? storage_->bytes() : 0;
+}
+NeighbourList NeighbourListBuffer::to_host() const {
+  return filled(storage_).to_host();
+}
 
 PaddedNeighbourBuffer::PaddedNeighbourBuffer() = default;
 PaddedNeighbourBuffer::~PaddedNeighbourBuffer() = default;
 PaddedNeighbourBuffer::PaddedNeighbourBuffer(PaddedNeighbourBuffer&&) noexcept = default;
-PaddedNeighbourBuffer& PaddedNeighbourBuffer::operator=(PaddedNeighbourBuffer&&) noexcept =
-    default;
+PaddedNeighbourBuffer& PaddedNeighbourBuffer::operator=(PaddedNeighbourBuffer&&) noexcept = default;
 
-std::size_t PaddedNeighbourBuffer::size() const { return filled(storage_).n; }
-std::uint32_t PaddedNeighbourBuffer::width() const { return filled(storage_).k; }
-const std::uint32_t* PaddedNeighbourBuffer::indices() const { return filled(storage_).indices; }
-const std::uint32_t* PaddedNeighbourBuffer::counts() const { return filled(storage_).counts; }
-MemorySpace PaddedNeighbourBuffer::space() const { return filled(storage_).space(); }
-const PaddedReport& PaddedNeighbourBuffer::report() const { return filled(storage_).report; }
+std::size_t PaddedNeighbourBuffer::size() const {
+  return filled(storage_).n;
+}
+std::uint32_t PaddedNeighbourBuffer::width() const {
+  return filled(storage_).k;
+}
+const std::uint32_t* PaddedNeighbourBuffer::indices() const {
+  return filled(storage_).indices;
+}
+const std::uint32_t* PaddedNeighbourBuffer::counts() const {
+  return filled(storage_).counts;
+}
+MemorySpace PaddedNeighbourBuffer::space() const {
+  return filled(storage_).space();
+}
+const PaddedReport& PaddedNeighbourBuffer::report() const {
+  return filled(storage_).report;
+}
 std::vector<std::uint32_t> PaddedNeighbourBuffer::indices_to_host() const {
   return filled(storage_).n ? filled(storage_).indices_to_host() : std::vector<std::uint32_t>{};
 }
@@ -410,8 +439,8 @@ bool VerletList::update(PositionsView positions) {
                   "VerletList::update() needs the " + std::to_string(engine_.size()) +
                       " particles of its first call, got " + std::to_string(positions.size));
     validate_positions(positions);
-    if (!moved_beyond(positions, *static_cast<const KeptPositions*>(built_.get()), 0.5f * skin_ * (1.0f - 1e-5f),
-                      engine_.stream()))
+    if (!moved_beyond(positions, *static_cast<const KeptPositions*>(built_.get()),
+                      0.5f * skin_ * (1.0f - 1e-5f), engine_.stream()))
       return false;
   }
   engine_.build(positions, cutoff_ + skin_);

@@ -74,8 +74,8 @@ PaddedFill HostPaddedStorage::prepare(std::size_t targets, std::uint32_t width, 
   counts_.resize(targets);
   indices = data_or_null(indices_);
   counts = data_or_null(counts_);
-  return {half, width, static_cast<std::uint32_t>(targets), indices_.data(), counts_.data(),
-          overflow};
+  return {half,           width,   static_cast<std::uint32_t>(targets), indices_.data(),
+          counts_.data(), overflow};
 }
 
 void report_padded(const PaddedStorage& storage, bool throw_on_overflow) {

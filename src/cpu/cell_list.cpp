@@ -139,7 +139,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   }
 
   std::vector<float> xyz_;
-  static constexpr double width_margin = 1e-4;  // as CellGrid: far above predicate round-off
+  static constexpr double width_margin = 1e-4;   // as CellGrid: far above predicate round-off
   double inverse_width_ = 1;                     // cells per unit length
   std::vector<std::uint32_t> order_;             // sorted slot -> particle index
   std::vector<float> sorted_xyz_;                // positions in sorted order

@@ -16,9 +16,8 @@ const T* data_or_null(const std::vector<T>& v) {
 
 KernelOutputs prepare_host_results(Results& r, Kernel kernel, std::size_t n) {
   const KernelProduces p = produces(kernel);
-  return {sized(r.count, n, p.count), sized(r.energy, n, p.energy),
-          sized(r.force, 3 * n, p.force), sized(r.virial, 6 * n, p.virial),
-          sized(r.density, n, p.density)};
+  return {sized(r.count, n, p.count), sized(r.energy, n, p.energy), sized(r.force, 3 * n, p.force),
+          sized(r.virial, 6 * n, p.virial), sized(r.density, n, p.density)};
 }
 
 ResultsView view_of(const Results& r) {

@@ -22,8 +22,7 @@ template <class T>
 void copy_to_host(std::vector<T>& host, const T* device, std::size_t count) {
   host.resize(count);
   if (count > 0)
-    RAYCUT_CUDA_CHECK(
-        cudaMemcpy(host.data(), device, count * sizeof(T), cudaMemcpyDeviceToHost));
+    RAYCUT_CUDA_CHECK(cudaMemcpy(host.data(), device, count * sizeof(T), cudaMemcpyDeviceToHost));
 }
 
 }  // namespace
@@ -52,8 +51,8 @@ Results DeviceResults::to_host() const {
 ResultsView DeviceResults::view() const {
   if (!valid_) throw Error(ErrorCode::internal, "no results: the last compute failed");
   const KernelProduces p = produces(kernel_);
-  return {p.count ? count_.data() : nullptr,   p.energy ? energy_.data() : nullptr,
-          p.force ? force_.data() : nullptr,   p.virial ? virial_.data() : nullptr,
+  return {p.count ? count_.data() : nullptr,     p.energy ? energy_.data() : nullptr,
+          p.force ? force_.data() : nullptr,     p.virial ? virial_.data() : nullptr,
           p.density ? density_.data() : nullptr, MemorySpace::device};
 }
 
@@ -156,7 +155,8 @@ ListFill DeviceListStorage::prepare_fill(std::uint64_t entries) {
   const double need = per_pair * static_cast<double>(entries);
   if (need > held) {
     const std::string what = "a neighbour list of " + std::to_string(entries) + " pairs";
-    if (need >= 9.0e18) throw Error(ErrorCode::out_of_memory, "not enough device memory for " + what);
+    if (need >= 9.0e18)
+      throw Error(ErrorCode::out_of_memory, "not enough device memory for " + what);
     require_device_memory(static_cast<std::size_t>(need - held), what.c_str());
   }
   indices_.resize(std::max<std::uint64_t>(entries, 1));
@@ -193,24 +193,27 @@ PaddedFill DevicePaddedStorage::prepare(std::size_t targets, std::uint32_t width
   k = width;
   const double need = 4.0 * static_cast<double>(targets) * (static_cast<double>(width) + 1);
   if (need > static_cast<double>(indices_.bytes() + counts_.bytes())) {
-    const std::string what = "a padded neighbour list of " + std::to_string(targets) + " x " +
-                             std::to_string(width);
-    if (need >= 9.0e18) throw Error(ErrorCode::out_of_memory, "not enough device memory for " + what);
+    const std::string what =
+        "a padded neighbour list of " + std::to_string(targets) + " x " + std::to_string(width);
+    if (need >= 9.0e18)
+      throw Error(ErrorCode::out_of_memory, "not enough device memory for " + what);
     require_device_memory(static_cast<std::size_t>(need), what.c_str());
   }
   indices_.resize(targets * std::size_t{width});
   counts_.resize(targets);
   indices = indices_.data();
   counts = counts_.data();
-  overflow_.host() = {0, 0};
-  (void)stream;
-  return {half, width, static_cast<std::uint32_t>(targets), indices_.data(), counts_.data(),
-          overflow_.device()};
+  overflow_.resize(1);
+  RAYCUT_CUDA_CHECK(cudaMemsetAsync(overflow_.data(), 0, sizeof(PaddedOverflow), stream));
+  return {{half},          width,          static_cast<std::uint32_t>(targets),
+          indices_.data(), counts_.data(), overflow_.data()};
 }
 
 void DevicePaddedStorage::read_report(cudaStream_t stream) {
+  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(report_.device(), overflow_.data(), sizeof(PaddedOverflow),
+                                    cudaMemcpyDeviceToDevice, stream));
   RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
-  report = {overflow_.host().rows, overflow_.host().largest};
+  report = {report_.host().rows, report_.host().largest};
 }
 
 }  // namespace raycut::detail::cuda

@@ -9,10 +9,10 @@
 #include <cstdint>
 #include <string>
 
-#include "raycut/detail/cell_grid.hpp"
 #include "cuda/device_results.cuh"
 #include "cuda/grid_common.cuh"
 #include "cuda/methods.hpp"
+#include "raycut/detail/cell_grid.hpp"
 #include "raycut/detail/cuda/grid_paper_pass.cuh"
 #include "raycut/predicate.hpp"
 
@@ -57,8 +57,7 @@ class GridPaper final : public CudaPairMethod<GridPaper> {
 
     // Count per cell, prefix sum, scatter with a ticket per cell (the paper's three loops).
     const std::size_t table = static_cast<std::size_t>(cells) + 1;
-    RAYCUT_CUDA_CHECK(
-        cudaMemsetAsync(counts_.data(), 0, table * sizeof(std::uint32_t), stream_));
+    RAYCUT_CUDA_CHECK(cudaMemsetAsync(counts_.data(), 0, table * sizeof(std::uint32_t), stream_));
     count_per_cell<<<blocks(), paper_block_size, 0, stream_>>>(xyz, n_, grid_, counts_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
     std::size_t temp_bytes = 0;
@@ -67,10 +66,10 @@ class GridPaper final : public CudaPairMethod<GridPaper> {
     temp_.resize(temp_bytes);
     RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(temp_.data(), temp_bytes, counts_.data(),
                                                     start_.data(), std::int64_t(table), stream_));
-    RAYCUT_CUDA_CHECK(
-        cudaMemsetAsync(counts_.data(), 0, table * sizeof(std::uint32_t), stream_));
-    scatter_to_cells<<<blocks(), paper_block_size, 0, stream_>>>(xyz, n_, grid_, start_.data(), counts_.data(),
-                                                x_.data(), y_.data(), z_.data(), index_.data());
+    RAYCUT_CUDA_CHECK(cudaMemsetAsync(counts_.data(), 0, table * sizeof(std::uint32_t), stream_));
+    scatter_to_cells<<<blocks(), paper_block_size, 0, stream_>>>(
+        xyz, n_, grid_, start_.data(), counts_.data(), x_.data(), y_.data(), z_.data(),
+        index_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
     build_timer_.stop(stream_);
   }

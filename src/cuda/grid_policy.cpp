@@ -86,18 +86,16 @@ GridPlan plan_grid(const GridPolicy& policy, std::size_t n, const float lo[3], c
     // thread's cell; more cells than particles would spend threads on empty ones).
     const bool by_cell = plan.cells <= n && 2 * plan.cells >= n;
     const std::size_t counting_limit = by_cell ? t.counting_sort_up_to : t.counting_sort_up_to - 1;
-    plan.dense_build = n > counting_limit
-                           ? DenseBuild::radix
-                           : (by_cell ? DenseBuild::counting_by_cell
-                                      : DenseBuild::counting_by_particle);
+    plan.dense_build = n > counting_limit ? DenseBuild::radix
+                                          : (by_cell ? DenseBuild::counting_by_cell
+                                                     : DenseBuild::counting_by_particle);
   }
 
   // The kernel. The group kernel's row table holds (2 * 3 + 1)^2 rows: reach <= 3.
   const bool many_registers =
       policy.registers == RegisterBudget::unlimited ||
       (policy.registers == RegisterBudget::automatic && density >= t.many_registers_density);
-  const GridKernel thread =
-      many_registers ? GridKernel::thread_many_registers : GridKernel::thread;
+  const GridKernel thread = many_registers ? GridKernel::thread_many_registers : GridKernel::thread;
   if (view.grid.reach > 3 || policy.lanes == LanesPerTarget::one) {
     plan.kernel = thread;
   } else if (policy.lanes != LanesPerTarget::automatic) {

@@ -26,8 +26,8 @@ enum class RegisterBudget { automatic, compiler_default, unlimited };
 
 struct GridPolicy {
   CellWidth cell_width = CellWidth::automatic;
-  int x_split = 0;    // x cells this many times narrower than y, z cells; 0: automatic
-  bool cull = true;   // per target: skip rows out of reach, trim each row in x
+  int x_split = 0;   // x cells this many times narrower than y, z cells; 0: automatic
+  bool cull = true;  // per target: skip rows out of reach, trim each row in x
   TableLayout layout = TableLayout::automatic;
   DenseBuild dense_build = DenseBuild::automatic;
   LanesPerTarget lanes = LanesPerTarget::automatic;

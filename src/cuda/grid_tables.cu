@@ -1,10 +1,10 @@
+#include <thrust/iterator/counting_iterator.h>
 #include <cub/block/block_scan.cuh>
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
 #include <cub/device/device_select.cuh>
 #include <cuda/functional>
 #include <cuda/std/functional>
-#include <thrust/iterator/counting_iterator.h>
 
 #include <algorithm>
 #include <cstdint>
@@ -16,7 +16,6 @@ namespace raycut::detail::cuda {
 namespace {
 
 constexpr int one_block_threads = 1024;
-
 
 template <class Key>
 __global__ void keys_kernel(const float* __restrict__ xyz, Slot n, GridGeometry view, Key* keys,
@@ -225,8 +224,6 @@ int log2_of_power_of_two(std::uint64_t p) {
   return l;
 }
 
-
-
 }  // namespace
 
 void GridTables::build(const float* xyz, std::uint32_t n, const GridPlan& plan,
@@ -244,9 +241,9 @@ GridPass GridTables::pass(const GridPlan& plan) const {
   p.geometry = plan.geometry;
   p.dense = plan.dense;
   p.dense_table.start = start_.data();
-  p.compact_table = {cell_keys_.data(), start_.data(), row_keys_.data(),
-                     reinterpret_cast<const std::uint32_t*>(row_cells_.data()), row_mask_,
-                     row_shift_};
+  p.compact_table = {cell_keys_.data(), start_.data(),
+                     row_keys_.data(),  reinterpret_cast<const std::uint32_t*>(row_cells_.data()),
+                     row_mask_,         row_shift_};
   p.kernel = plan.kernel;
   return p;
 }
@@ -276,10 +273,10 @@ void GridTables::sort(DeviceBuffer<Key>& keys, DeviceBuffer<Key>& keys_alt, int 
 template <class Op>
 void GridTables::scan(Op op, std::uint64_t count, bool exclusive, cudaStream_t stream) {
   const auto run = [&](void* temp, std::size_t& bytes) {
-    return exclusive ? cub::DeviceScan::ExclusiveScan(temp, bytes, start_.data(), start_.data(),
-                                                      op, std::uint32_t{0}, count, stream)
-                     : cub::DeviceScan::InclusiveScan(temp, bytes, start_.data(), start_.data(),
-                                                      op, count, stream);
+    return exclusive ? cub::DeviceScan::ExclusiveScan(temp, bytes, start_.data(), start_.data(), op,
+                                                      std::uint32_t{0}, count, stream)
+                     : cub::DeviceScan::InclusiveScan(temp, bytes, start_.data(), start_.data(), op,
+                                                      count, stream);
   };
   // The temporary size depends on the length and the kind of scan only: ask cub again only
   // when they change.
@@ -333,8 +330,8 @@ void GridTables::build_dense(const float* xyz, const GridPlan& plan, cudaStream_
                                                      start_.data());
   RAYCUT_CUDA_CHECK_LAUNCH();
   scan(::cuda::std::plus<std::uint32_t>{}, cells + 1, /*exclusive=*/true, stream);
-  scatter_cells_kernel<<<blocks(n_), 256, 0, stream>>>(keys32_.data(), index_.data(),
-                                                       start_.data(), n_, index_alt_.data());
+  scatter_cells_kernel<<<blocks(n_), 256, 0, stream>>>(keys32_.data(), index_.data(), start_.data(),
+                                                       n_, index_alt_.data());
   RAYCUT_CUDA_CHECK_LAUNCH();
   if (plan.dense_build == DenseBuild::counting_by_cell)
     place_by_cell_kernel<<<blocks(cells), 256, 0, stream>>>(
@@ -354,7 +351,7 @@ void GridTables::build_compact(const float* xyz, const GridPlan& plan, cudaStrea
   pos_.resize(n_);
   run_start_.resize(n_);
   keys_kernel<<<blocks_for(n_, 256), 256, 0, stream>>>(xyz, n_, view, keys64_.data(),
-                                                        index_.data());
+                                                       index_.data());
   RAYCUT_CUDA_CHECK_LAUNCH();
   std::uint64_t* sorted = nullptr;
   sort(keys64_, keys64_alt_, key_bits(plan.cells), sorted, stream);
@@ -386,10 +383,9 @@ void GridTables::build_compact(const float* xyz, const GridPlan& plan, cudaStrea
       sorted, run_start_.data(), runs_device, n_, view.xgrid.dims[0], cell_keys_.data(),
       start_.data(), row_keys_.data(), row_cells_.data(), row_mask_, row_shift_);
   RAYCUT_CUDA_CHECK_LAUNCH();
-  close_rows_kernel<<<blocks_for(runs, 256), 256, 0, stream>>>(cell_keys_.data(), runs_device,
-                                                              view.xgrid.dims[0], row_keys_.data(),
-                                                              row_cells_.data(), row_mask_,
-                                                              row_shift_);
+  close_rows_kernel<<<blocks_for(runs, 256), 256, 0, stream>>>(
+      cell_keys_.data(), runs_device, view.xgrid.dims[0], row_keys_.data(), row_cells_.data(),
+      row_mask_, row_shift_);
   RAYCUT_CUDA_CHECK_LAUNCH();
 }
 

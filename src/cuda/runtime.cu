@@ -6,8 +6,8 @@
 #include <string>
 
 #include "core/validation.hpp"
-#include "raycut/detail/cuda/check.cuh"
 #include "cuda/device_buffer.cuh"
+#include "raycut/detail/cuda/check.cuh"
 
 namespace raycut::detail::cuda {
 
@@ -105,16 +105,16 @@ bool moved_beyond(const float* now, const float* then, std::size_t n, float dist
   // A pinned, mapped flag: the kernel writes it, the host reads it after the stream gets there.
   static thread_local unsigned* flag = [] {
     unsigned* p = nullptr;
-    RAYCUT_CUDA_CHECK(cudaHostAlloc(reinterpret_cast<void**>(&p), sizeof(unsigned),
-                                    cudaHostAllocMapped));
+    RAYCUT_CUDA_CHECK(
+        cudaHostAlloc(reinterpret_cast<void**>(&p), sizeof(unsigned), cudaHostAllocMapped));
     return p;
   }();
   *flag = 0;
   unsigned* device_flag = nullptr;
   RAYCUT_CUDA_CHECK(cudaHostGetDevicePointer(reinterpret_cast<void**>(&device_flag), flag, 0));
   const unsigned blocks = static_cast<unsigned>(std::min<std::size_t>((n + 255) / 256, 4096));
-  if (n > 0) moved_beyond_kernel<<<blocks, 256, 0, s>>>(now, then, n, distance * distance,
-                                                         device_flag);
+  if (n > 0)
+    moved_beyond_kernel<<<blocks, 256, 0, s>>>(now, then, n, distance * distance, device_flag);
   RAYCUT_CUDA_CHECK_LAUNCH();
   RAYCUT_CUDA_CHECK(cudaStreamSynchronize(s));
   return *flag != 0;

@@ -28,8 +28,7 @@ DeviceMemory copy_on_device(const void* device, std::size_t bytes, void* stream)
 
 // True when some particle of `now` is more than `distance` away from its place in `then`
 // ((n, 3) device positions): one reduction on `stream`, one flag read back.
-bool moved_beyond(const float* now, const float* then, std::size_t n, float distance,
-                  void* stream);
+bool moved_beyond(const float* now, const float* then, std::size_t n, float distance, void* stream);
 
 // Name of the current device and the CUDA runtime version ("13.0").
 std::string device_name();

@@ -24,8 +24,8 @@
 #include <system_error>
 #include <vector>
 
-#include "raycut/files.hpp"
 #include "raycut/error.hpp"
+#include "raycut/files.hpp"
 
 namespace raycut {
 namespace {

@@ -48,29 +48,74 @@ struct LaunchParams {
 };
 
 // The launch's mode and functor; one overload per functor the programs know.
-inline void set_functor(LaunchParams& p, const CountKernel& f) { p.mode = RayMode::count; p.count = f; }
-inline void set_functor(LaunchParams& p, const LennardJonesKernel& f) { p.mode = RayMode::lj; p.lj = f; }
-inline void set_functor(LaunchParams& p, const LennardJonesForceKernel& f) { p.mode = RayMode::lj_forces; p.lj_forces = f; }
-inline void set_functor(LaunchParams& p, const SmoothKernel& f) { p.mode = RayMode::smooth; p.smooth = f; }
-inline void set_functor(LaunchParams& p, const SphDensityKernel& f) { p.mode = RayMode::sph_density; p.sph_density = f; }
-inline void set_functor(LaunchParams& p, const SphForceKernel& f) { p.mode = RayMode::sph_force; p.sph_force = f; }
-inline void set_functor(LaunchParams& p, const ListCount& f) { p.mode = RayMode::list_count; p.list_count = f; }
-inline void set_functor(LaunchParams& p, const ListFill& f) { p.mode = RayMode::list_fill; p.list_fill = f; }
-inline void set_functor(LaunchParams& p, const PaddedFill& f) { p.mode = RayMode::padded; p.padded = f; }
+inline void set_functor(LaunchParams& p, const CountKernel& f) {
+  p.mode = RayMode::count;
+  p.count = f;
+}
+inline void set_functor(LaunchParams& p, const LennardJonesKernel& f) {
+  p.mode = RayMode::lj;
+  p.lj = f;
+}
+inline void set_functor(LaunchParams& p, const LennardJonesForceKernel& f) {
+  p.mode = RayMode::lj_forces;
+  p.lj_forces = f;
+}
+inline void set_functor(LaunchParams& p, const SmoothKernel& f) {
+  p.mode = RayMode::smooth;
+  p.smooth = f;
+}
+inline void set_functor(LaunchParams& p, const SphDensityKernel& f) {
+  p.mode = RayMode::sph_density;
+  p.sph_density = f;
+}
+inline void set_functor(LaunchParams& p, const SphForceKernel& f) {
+  p.mode = RayMode::sph_force;
+  p.sph_force = f;
+}
+inline void set_functor(LaunchParams& p, const ListCount& f) {
+  p.mode = RayMode::list_count;
+  p.list_count = f;
+}
+inline void set_functor(LaunchParams& p, const ListFill& f) {
+  p.mode = RayMode::list_fill;
+  p.list_fill = f;
+}
+inline void set_functor(LaunchParams& p, const PaddedFill& f) {
+  p.mode = RayMode::padded;
+  p.padded = f;
+}
 
 // Calls visit(functor) with the functor of the launch's mode.
 template <class Visit>
 __host__ __device__ __forceinline__ void with_functor(const LaunchParams& p, Visit&& visit) {
   switch (p.mode) {
-    case RayMode::count: visit(p.count); break;
-    case RayMode::lj: visit(p.lj); break;
-    case RayMode::lj_forces: visit(p.lj_forces); break;
-    case RayMode::smooth: visit(p.smooth); break;
-    case RayMode::sph_density: visit(p.sph_density); break;
-    case RayMode::sph_force: visit(p.sph_force); break;
-    case RayMode::list_count: visit(p.list_count); break;
-    case RayMode::list_fill: visit(p.list_fill); break;
-    case RayMode::padded: visit(p.padded); break;
+    case RayMode::count:
+      visit(p.count);
+      break;
+    case RayMode::lj:
+      visit(p.lj);
+      break;
+    case RayMode::lj_forces:
+      visit(p.lj_forces);
+      break;
+    case RayMode::smooth:
+      visit(p.smooth);
+      break;
+    case RayMode::sph_density:
+      visit(p.sph_density);
+      break;
+    case RayMode::sph_force:
+      visit(p.sph_force);
+      break;
+    case RayMode::list_count:
+      visit(p.list_count);
+      break;
+    case RayMode::list_fill:
+      visit(p.list_fill);
+      break;
+    case RayMode::padded:
+      visit(p.padded);
+      break;
   }
 }
 

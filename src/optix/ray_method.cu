@@ -7,8 +7,8 @@
 #include <cstdio>
 #include <cstring>
 
-#include "raycut/detail/cell_grid.hpp"
 #include "geometry/ray_geometry.hpp"
+#include "raycut/detail/cell_grid.hpp"
 
 namespace raycut::detail::optix {
 namespace {
@@ -198,8 +198,7 @@ void RayTracingMethod::launch(const F& f) {
 
 void RayTracingMethod::compute(Kernel kernel, const KernelOptions& options) {
   timed_compute(kernel, n_, [&](const KernelOutputs& out) {
-    with_kernel(kernel, options, squared_cutoff(cutoff_), out,
-                [&](const auto& f) { launch(f); });
+    with_kernel(kernel, options, squared_cutoff(cutoff_), out, [&](const auto& f) { launch(f); });
   });
 }
 

@@ -9,9 +9,9 @@
 #include <string>
 #include <utility>
 
-#include "raycut/host_memory.hpp"
-#include "raycut/files.hpp"
 #include "raycut/error.hpp"
+#include "raycut/files.hpp"
+#include "raycut/host_memory.hpp"
 
 namespace raycut::sph {
 namespace {

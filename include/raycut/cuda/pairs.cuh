@@ -22,8 +22,8 @@
 #include <string>
 
 #include "raycut/detail/cuda/brute_force_pass.cuh"
-#include "raycut/detail/cuda/grid_pass.cuh"
 #include "raycut/detail/cuda/grid_paper_pass.cuh"
+#include "raycut/detail/cuda/grid_pass.cuh"
 #include "raycut/engine.hpp"
 #include "raycut/pairs.hpp"
 

@@ -60,7 +60,7 @@ struct DenseTablePass {
 // Non-empty cells only: sorted keys with their first slots, and a hash table from row to the
 // row's run of unique cells.
 struct CompactTablePass {
-  const std::uint64_t* cell_keys = nullptr;  // non-empty cells, ascending
+  const std::uint64_t* cell_keys = nullptr;   // non-empty cells, ascending
   const std::uint32_t* cell_start = nullptr;  // runs + 1 entries
   const std::uint64_t* row_keys = nullptr;    // hash table: row id, or ~0
   const std::uint32_t* row_cells = nullptr;   // hash table: the row's unique cells [x, y), pairs

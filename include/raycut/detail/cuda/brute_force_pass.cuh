@@ -33,8 +33,8 @@ __global__ void brute_force_kernel(const float* xyz, std::size_t n, float cutoff
       tile[3 * threadIdx.x + 2] = xyz[3 * load + 2];
     }
     __syncthreads();
-    const int count = n - base < brute_force_block_size ? static_cast<int>(n - base)
-                                                        : brute_force_block_size;
+    const int count =
+        n - base < brute_force_block_size ? static_cast<int>(n - base) : brute_force_block_size;
     if (!active) continue;
     for (int t = 0; t < count; ++t) {
       const std::size_t j = base + t;

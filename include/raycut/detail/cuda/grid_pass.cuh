@@ -365,14 +365,14 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
       }
     }
     GridKernel kernel = g.kernel;
-    if constexpr (!has_combine<F>::value) kernel = kernel == GridKernel::thread_many_registers
-                                                       ? kernel
-                                                       : GridKernel::thread;
+    if constexpr (!has_combine<F>::value)
+      kernel = kernel == GridKernel::thread_many_registers ? kernel : GridKernel::thread;
     const auto group = [&](auto lanes) {
       if constexpr (has_combine<F>::value) {
         constexpr int G = decltype(lanes)::value;
-        grid_group_kernel<G><<<blocks_for(std::uint64_t{n} * G, grid_block_size), grid_block_size,
-                               0, stream>>>(pos, n, g.geometry, table, c2, f);
+        grid_group_kernel<G>
+            <<<blocks_for(std::uint64_t{n} * G, grid_block_size), grid_block_size, 0, stream>>>(
+                pos, n, g.geometry, table, c2, f);
       }
     };
     switch (kernel) {
