@@ -118,6 +118,19 @@ INSTANTIATE_TEST_SUITE_P(Methods, Lists, ::testing::ValuesIn(available_methods()
                            return name;
                          });
 
+// Without a GPU, device memory is refused as unsupported, with a message saying so (it said
+// "CUDA driver version is insufficient ... at src/cuda/runtime.cu:25").
+TEST(Engine, DeviceMemoryWithoutAGpuIsUnsupported) {
+  if (raycut::cuda_device_available()) GTEST_SKIP() << "a CUDA device is present";
+  try {
+    raycut::DeviceArray array(std::vector<float>{1, 2, 3});
+    FAIL() << "no error";
+  } catch (const raycut::Error& e) {
+    EXPECT_EQ(e.code(), raycut::ErrorCode::unsupported) << e.what();
+    EXPECT_NE(std::string(e.what()).find("device"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Engine, MovedFromThrowsInsteadOfCrashing) {
   Engine a("brute-force");
   Engine b(std::move(a));

@@ -62,6 +62,9 @@ void DeviceFree::operator()(void* p) const noexcept {
 }
 
 DeviceMemory upload(const void* host, std::size_t bytes) {
+  if (!device_available())
+    throw Error(ErrorCode::unsupported,
+                "device memory asked for, but no CUDA device is usable in this process");
   require_device_memory(bytes, "the positions");
   void* p = nullptr;
   RAYCUT_CUDA_CHECK(cudaMalloc(&p, bytes));
