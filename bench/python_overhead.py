@@ -40,20 +40,24 @@ from raycut import _arrays
 TARGET_US = 30.0
 
 
-def per_call_us(fn, calls: int, warmup: int, sync=None) -> list:
-    """Wall microseconds of each of `calls` calls of fn (after `warmup` untimed ones)."""
+def per_call_us(fns, calls: int, warmup: int, sync=None) -> list:
+    """Wall microseconds of each of `calls` calls of each function of fns (after `warmup`
+    untimed ones), the functions taking turns call by call (so that a busy machine slows them
+    alike): one list of times per function."""
     for _ in range(warmup):
-        fn()
+        for fn in fns:
+            fn()
     if sync:
         sync()
-    times = []
+    times = [[] for _ in fns]
     clock = time.perf_counter_ns
     for _ in range(calls):
-        start = clock()
-        fn()
-        if sync:
-            sync()
-        times.append((clock() - start) / 1e3)
+        for fn, t in zip(fns, times):
+            start = clock()
+            fn()
+            if sync:
+                sync()
+            t.append((clock() - start) / 1e3)
     return times
 
 
@@ -132,7 +136,6 @@ def bench_input(label, x, sync, method: str, cutoff: float, calls: int, warmup: 
                  ("build+count", api_build_count, ext_build_count, ("build_ms", "compute_ms")),
                  ("neighbor_list", api_list, ext_list, ("build_ms",))]
         for name, api, ext, phases in cases:
-            api_t = per_call_us(api, calls, warmup, sync)
             cpp_t = []
             if name != "neighbor_list":  # the engine's own C++ phase times, call by call
 
@@ -148,8 +151,8 @@ def bench_input(label, x, sync, method: str, cutoff: float, calls: int, warmup: 
                     e.build(x_ext, cutoff)
                     e.pairs(False, False, False, host)
                     cpp_t.append(e.timings()["build_ms"] * 1e3)
-            ext_t = per_call_us(ext, calls, warmup, sync)
-            per_call_us(timed, max(calls // 4, 10), 0, sync)
+            api_t, ext_t, _ = per_call_us((api, ext, timed), calls, warmup, sync)
+            cpp_t = cpp_t[warmup:]
             api_med, ext_med = statistics.median(api_t), statistics.median(ext_t)
             cpp_med = statistics.median(cpp_t)
             rows.append({
