@@ -38,3 +38,16 @@ def test_lj_md_torch_skips_cleanly_without_torch(monkeypatch, capsys):
     monkeypatch.setattr(module, "torch", None)
     assert module.main(size=8) == {"skipped": True, "ok": True}
     assert "PyTorch is not installed" in capsys.readouterr().out
+
+
+def test_python_overhead_bench_runs(tmp_path):
+    spec = importlib.util.spec_from_file_location(
+        "raycut_bench_python_overhead", EXAMPLES.parents[1] / "bench" / "python_overhead.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    out = tmp_path / "overhead.csv"
+    rows = bench.main(["--n", "200", "--calls", "5", "--warmup", "2", "--method", "cell-list",
+                       "--out", str(out)])
+    assert {r["api"] for r in rows} == {"count", "build+count", "neighbor_list"}
+    assert out.read_text().startswith("input,method,")
+    assert all(r["pairs"] > 0 and r["api_us_median"] > 0 for r in rows)
