@@ -284,3 +284,6 @@ def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = No
     found = {"i": i, "j": j, "d": d, "D": v}
     out = tuple(found[letter] for letter in quantities)
     return out[0] if len(out) == 1 else out
+
+
+from . import ase  # noqa: E402  raycut.ase.neighbor_list: ASE Atoms in, ASE's types out
