@@ -5,12 +5,6 @@
 #include "core/validation.hpp"
 
 namespace raycut::detail {
-namespace {
-template <class T>
-const T* data_or_null(const std::vector<T>& v) {
-  return v.empty() ? nullptr : v.data();
-}
-}  // namespace
 
 std::size_t HostListStorage::bytes() const {
   return offsets_.capacity() * sizeof(std::uint64_t) + indices_.capacity() * sizeof(std::uint32_t) +

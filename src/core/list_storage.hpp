@@ -11,6 +11,12 @@
 
 namespace raycut::detail {
 
+// A vector's data, or null when it is empty (what views of absent outputs hold).
+template <class T>
+const T* data_or_null(const std::vector<T>& v) {
+  return v.empty() ? nullptr : v.data();
+}
+
 class ListStorage {
  public:
   virtual ~ListStorage() = default;

@@ -8,10 +8,6 @@ T* sized(std::vector<T>& v, std::size_t count, bool wanted) {
   v.assign(count, T{});
   return v.data();
 }
-template <class T>
-const T* data_or_null(const std::vector<T>& v) {
-  return v.empty() ? nullptr : v.data();
-}
 }  // namespace
 
 KernelOutputs prepare_host_results(Results& r, Kernel kernel, std::size_t n) {
