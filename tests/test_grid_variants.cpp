@@ -1,4 +1,4 @@
-// Every kernel and table path of the `grid` method (GridOptions: a thread per target or grouped
+// Every kernel and table path of the `grid` method (GridPolicy: a thread per target or grouped
 // lanes; dense tables from a counting sort (in one block or several, placed by particle or by
 // cell) or a radix sort; the compact
 // table; reach 1 to 3) against the CPU brute force. The conformance suite runs `grid` with its

@@ -247,8 +247,8 @@ Command add_bench(CLI::App& app) {
   cmd->add_option("--p", o->ps, "Mean particles per cell (default 1,2,4,8,16,32)")
       ->delimiter(',')
       ->check(positive_integer());
-  cmd->add_option("-k,--kernel", o->kernel, "count, lj or smooth")
-      ->check(CLI::IsMember({"count", "lj", "smooth"}));
+  cmd->add_option("-k,--kernel", o->kernel, "count, lj, lj_forces or smooth")
+      ->check(CLI::IsMember({"count", "lj", "lj_forces", "smooth"}));
   cmd->add_option("-r,--reps", o->reps, "Timed repetitions after one warm-up")
       ->check(CLI::Range(1, 1000));
   cmd->add_option("--max-n", o->max_n, "Skip configurations with more particles than this")
