@@ -34,6 +34,7 @@ __all__ = [
     "CapacityError",
     "Engine",
     "KERNELS",
+    "VerletList",
     "auto_method",
     "cuda_available",
     "methods",
@@ -229,6 +230,104 @@ class Engine:
         like = self._like
         out = self._call(like, self._engine.pairs, bool(half), bool(distances), bool(vectors),
                          like.host)
+        return tuple(_arrays.output(a, like) for a in out)
+
+
+class VerletList:
+    """A Verlet neighbour list: every pair within ``cutoff + skin``, rebuilt only when some
+    particle has moved more than ``skin / 2`` since the last rebuild (until then no pair within
+    ``cutoff`` can be missing from it).
+
+    >>> verlet = raycut.VerletList(cutoff=0.1, skin=0.02)
+    >>> for step in range(steps):
+    ...     x = integrate(x)                          # (N, 3) float32, NumPy or a CUDA tensor
+    ...     verlet.update(x)                          # True when it rebuilt the list
+    ...     offsets, indices = verlet.neighbours()    # pairs within cutoff + skin
+
+    The list holds every pair within ``cutoff + skin`` of the positions of its last rebuild, not
+    only those within ``cutoff``: the caller filters by the cutoff (compute ``|x_j - x_i|`` from
+    the current positions and drop pairs at or beyond ``cutoff``). ``distances`` and ``vectors``
+    are those of the last rebuild's positions, not of the current ones. The displacement check
+    runs where the positions are (on the device for device positions: one reduction, no copy to
+    the host).
+
+    ``method``: a name from ``methods()`` or ``"auto"``. ``half``: each unordered pair once, in
+    the row of its smaller index. ``distances``/``vectors``: also ``|r_ij|`` and
+    ``r_ij = x_j - x_i`` per entry. Raises ValueError for a cutoff or skin out of range
+    (``skin`` >= 0), for positions of another N than the first ``update``, and for bad positions,
+    as ``Engine.build`` does.
+    """
+
+    def __init__(self, cutoff: float, skin: float, method: str = "auto", half: bool = False,
+                 distances: bool = False, vectors: bool = False) -> None:
+        if not isinstance(skin, numbers.Real):
+            raise ValueError(f"skin must be a real number, got {type(skin).__name__}")
+        self._list = _raycut.VerletList(_cutoff(cutoff), float(skin), method, bool(half),
+                                        bool(distances), bool(vectors))
+        self._like = _arrays.HOST
+
+    def __repr__(self) -> str:
+        return (f"raycut.VerletList(cutoff={self.cutoff}, skin={self.skin}, "
+                f"method={self.method!r}, size={self.size}, rebuilds={self.rebuilds})")
+
+    @property
+    def method(self) -> str:
+        """The method's name (what ``"auto"`` resolved to)."""
+        return self._list.method
+
+    @property
+    def space(self) -> str:
+        """Where the method works (and the list lives): ``"host"`` or ``"device"``."""
+        return self._list.space
+
+    @property
+    def size(self) -> int:
+        """N, the number of particles (0 before the first ``update``)."""
+        return self._list.size
+
+    @property
+    def cutoff(self) -> float:
+        return self._list.cutoff
+
+    @property
+    def skin(self) -> float:
+        return self._list.skin
+
+    @property
+    def rebuilds(self) -> int:
+        """How many times the list was built (the first ``update`` included)."""
+        return self._list.rebuilds
+
+    def update(self, positions: Any) -> bool:
+        """New (N, 3) float32 positions (the same N after the first call): rebuilds the list at
+        ``cutoff + skin`` when some particle has moved more than ``skin / 2`` since the last
+        rebuild (always on the first call, and when the positions moved to another memory
+        space: host to device or back). Returns True when it rebuilt the list. A failed call
+        (ValueError for another N or a bad coordinate) leaves the list as it was."""
+        x, like = _arrays.prepare(positions)
+        with _arrays.device_context(like):
+            self._list.set_stream(_arrays.stream_of(like))
+            rebuilt = bool(self._list.update(x))
+        self._like = like
+        return rebuilt
+
+    def neighbours(self) -> tuple:
+        """The CSR list of the last rebuild: ``(offsets, indices)``, then ``distances`` and
+        ``vectors`` when the list was made with them; dtypes, shapes and framework as
+        ``Engine.neighbours`` (on the device for device positions and GPU methods).
+
+        Every pair within ``cutoff + skin``: filter by the cutoff yourself. The arrays stay valid
+        and unchanged for as long as you hold them, across later rebuilds: the library reuses its
+        list buffer, so they wrap a copy of it, made once per rebuild (on the device for device
+        lists: a memcpy, cheap next to the rebuild) on the first ``neighbours()`` call after it.
+        Calls between two rebuilds return arrays over that same copy (no copy per call): treat
+        them as read-only. Raises ValueError before the first ``update``.
+        """
+        like = self._like
+        with _arrays.device_context(like):
+            self._list.set_stream(_arrays.stream_of(like))
+            offsets, indices, d, v = self._list.neighbours(like.host)
+        out = [offsets, indices] + ([d] if d is not None else []) + ([v] if v is not None else [])
         return tuple(_arrays.output(a, like) for a in out)
 
 
