@@ -34,7 +34,8 @@ void PrintTo(const Case& c, std::ostream* os) {
 }
 
 PointCloud cloud_of(const Case& c) {
-  if (c.family == "pair-2e19") return {"pair-2e19", {0, 0, 0, 2e19f, 0, 0}, c.cutoff};
+  if (c.family == "pair-2e19")
+    return {"pair-2e19", {0, 0, 0, 2e19f, 0, 0}, c.cutoff, raycut::Box::open()};
   return raycut::make_family(c.family, c.n, c.cutoff, /*seed=*/17 + c.n);
 }
 

@@ -4,6 +4,7 @@
 
 #include <unistd.h>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
@@ -13,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "raycut/box.hpp"
 #include "raycut/error.hpp"
 #include "raycut/files.hpp"
 #include "raycut/generators.hpp"
@@ -381,6 +383,191 @@ TEST_F(PositionsIo, OutputFileAppearsWholeOrNotAtAll) {
   EXPECT_TRUE(fs::is_symlink(path("link.csv")));
   EXPECT_EQ(read_positions(file).size(), 0u);
   EXPECT_EQ(names_in(path("")), (std::vector<std::string>{"keep.csv", "link.csv"}));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Periodic boxes in extended XYZ: Lattice and pbc on the comment line (ASE's and OVITO's format).
+
+Box box_of(std::array<double, 9> rows, std::array<bool, 3> pbc) {
+  Box box;
+  for (int k = 0; k < 9; ++k) box.cell[k / 3][k % 3] = rows[k];
+  for (int k = 0; k < 3; ++k) box.pbc[k] = pbc[k];
+  return box;
+}
+
+std::string comment_line(const std::string& file) {
+  std::ifstream in(file);
+  std::string count, comment;
+  std::getline(in, count);
+  std::getline(in, comment);
+  return comment;
+}
+
+TEST_F(PositionsIo, XyzBoxRoundTripsExactly) {
+  const std::vector<Box> boxes = {
+      Box::orthorhombic(5.44, 5.44, 5.44),
+      box_of({3.1, 0.1, -1.0 / 3, 1.3, 2.7, 0.1, -0.9, 1.1, 2.3}, {true, true, true}),
+      box_of({2, 0, 0, 0, 0, 3, 0, 4, 0}, {true, true, true}),  // left-handed
+      box_of({1e-300, 0, 0, 0, 1e300, 0, 0, 0, 5e-324}, {true, true, true}),
+      box_of({3, 0, 0, 1.5, 2.598, 0, 0, 0, 0}, {true, true, false}),  // slab, c zero
+      box_of({0, 0, 0, 0, 0, 0, 0, 0, 7.25}, {false, false, true}),    // wire
+      box_of({10, 0, 0, 0, 10, 0, 0, 0, 10}, {false, false, false}),   // a cell, no periodic axis
+  };
+  const PointCloud points = awkward_cloud();
+  for (const Box& box : boxes) {
+    PointCloud cloud = points;
+    cloud.box = box;
+    write_xyz(path("box.xyz"), cloud);
+    const PointCloud read = read_positions(path("box.xyz"));
+    EXPECT_EQ(read.box, box) << comment_line(path("box.xyz"));
+    expect_same_bits(read.xyz, cloud.xyz);
+  }
+  PointCloud cloud = points;
+  cloud.box = box_of({3, 0, 0, 1.5, 2.598, 0, 0, 0, 0}, {true, true, false});
+  write_xyz(path("slab.xyz"), cloud);
+  EXPECT_EQ(comment_line(path("slab.xyz")),
+            "Lattice=\"3 0 0 1.5 2.598 0 0 0 0\" Properties=species:S:1:pos:R:3 pbc=\"T T F\"");
+  // An open box keeps the comment line as it was.
+  write_xyz(path("open.xyz"), points);
+  EXPECT_EQ(comment_line(path("open.xyz")), "Properties=species:S:1:pos:R:3");
+  EXPECT_TRUE(read_positions(path("open.xyz")).box.is_open());
+  EXPECT_TRUE(read_positions(write_file("plain.xyz", "1\nplain\nX 1 2 3\n")).box.is_open());
+}
+
+// Byte for byte what ASE 3.29 writes (ase.io.write(..., format="extxyz")).
+TEST_F(PositionsIo, XyzReadsWhatAseWrites) {
+  const PointCloud si = read_positions(write_file(
+      "si.xyz",
+      "2\n"
+      "Lattice=\"5.44 0.0 0.0 0.0 5.44 0.0 0.0 0.0 5.44\" Properties=species:S:1:pos:R:3 "
+      "pbc=\"T T T\"\n"
+      "Si       0.00000000       0.00000000       0.00000000\n"
+      "Si       1.36000000       1.36000000       1.36000000\n"));
+  EXPECT_EQ(si.box, Box::orthorhombic(5.44, 5.44, 5.44));
+  EXPECT_EQ(si.xyz, (std::vector<float>{0, 0, 0, 1.36f, 1.36f, 1.36f}));
+  const PointCloud slab = read_positions(
+      write_file("slab.xyz",
+                 "2\n"
+                 "Lattice=\"3.0 0.0 0.0 1.5 2.598 0.0 0.0 0.0 0.0\" Properties=species:S:1:pos:R:3 "
+                 "pbc=\"T T F\"\n"
+                 "C        0.00000000       0.00000000       0.00000000\n"
+                 "O        1.10000000       0.10000000      -0.20000000\n"));
+  EXPECT_EQ(slab.box, box_of({3, 0, 0, 1.5, 2.598, 0, 0, 0, 0}, {true, true, false}));
+  // An open molecule: ASE always writes pbc, and no Lattice for a zero cell.
+  const PointCloud molecule =
+      read_positions(write_file("mol.xyz",
+                                "2\n"
+                                "Properties=species:S:1:pos:R:3 pbc=\"F F F\"\n"
+                                "H        0.00000000       0.00000000       0.00000000\n"
+                                "H        0.74000000       0.00000000       0.00000000\n"));
+  EXPECT_TRUE(molecule.box.is_open());
+  EXPECT_EQ(molecule.size(), 2u);
+  // With info and arrays of its own, and OVITO's Origin (irrelevant to pairs: ignored).
+  const PointCloud rich = read_positions(write_file(
+      "rich.xyz",
+      "1\n"
+      "Lattice=\"4.0 0.0 0.0 0.0 4.0 0.0 0.0 0.0 4.0\" "
+      "Properties=species:S:1:pos:R:3:forces:R:3 energy=-1.5 config_type=bulk pbc=\"T T T\" "
+      "Origin=\"-2 -2 -2\"\n"
+      "Cu 1 2 3 0.1 0.2 0.3\n"));
+  EXPECT_EQ(rich.box, Box::orthorhombic(4, 4, 4));
+  EXPECT_EQ(rich.xyz, (std::vector<float>{1, 2, 3}));
+}
+
+TEST_F(PositionsIo, XyzBoxFollowsAseDefaults) {
+  const std::string atom = "X 0 0 0\n";
+  // Lattice without pbc: periodic on all three axes (ase/io/extxyz.py, _read_xyz_frame).
+  EXPECT_EQ(read_positions(write_file("a.xyz", "1\nLattice=\"2 0 0 0 3 0 0 0 4\"\n" + atom)).box,
+            Box::orthorhombic(2, 3, 4));
+  // pbc=T stands for all three; True/False/1/0 in any case; separators spaces or commas.
+  EXPECT_EQ(
+      read_positions(write_file("b.xyz", "1\nLattice=\"2 0 0 0 3 0 0 0 4\" pbc=T\n" + atom)).box,
+      Box::orthorhombic(2, 3, 4));
+  EXPECT_EQ(read_positions(write_file("c.xyz",
+                                      "1\nLattice='2,0,0,0,3,0,0,0,4' "
+                                      "pbc=[True, false, TRUE]\n" +
+                                          atom))
+                .box,
+            Box::orthorhombic(2, 3, 4, true, false, true));
+  EXPECT_EQ(read_positions(write_file("d.xyz",
+                                      "1\nlattice = \"2 0 0 0 3 0 0 0 4\"  PBC = "
+                                      "\"1 1 0\"\n" +
+                                          atom))
+                .box,
+            Box::orthorhombic(2, 3, 4, true, true, false));
+  // The last of a repeated key counts, as in ASE's dict.
+  EXPECT_EQ(read_positions(write_file("e.xyz",
+                                      "1\nLattice=\"2 0 0 0 3 0 0 0 4\" pbc=\"T T T\" "
+                                      "pbc=\"F F T\"\n" +
+                                          atom))
+                .box,
+            Box::orthorhombic(2, 3, 4, false, false, true));
+  // pbc all false without a Lattice: open. Bare words of a free comment are not keys.
+  EXPECT_TRUE(read_positions(write_file("f.xyz", "1\npbc=\"F F F\"\n" + atom)).box.is_open());
+  EXPECT_TRUE(
+      read_positions(write_file("g.xyz", "1\nmade with pbc and a Lattice, it's fine\n" + atom))
+          .box.is_open());
+  // A periodic axis without a Lattice (ASE would make a zero cell): refused, naming file:line.
+  const std::string file =
+      write_file("h.xyz", "1\nProperties=species:S:1:pos:R:3 pbc=\"T T T\"\n" + atom);
+  const std::string message = io_error([&] { read_positions(file); });
+  EXPECT_TRUE(contains(message, file + ":2:")) << message;
+  EXPECT_TRUE(contains(message, "no Lattice")) << message;
+}
+
+TEST_F(PositionsIo, XyzMalformedBoxNamesFileAndLine) {
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {"Lattice=\"1 0 0 0 1 0 0 0\"", "malformed Lattice"},
+      {"Lattice=\"1 0 0 0 1 0 0 0 1 0\"", "malformed Lattice"},
+      {"Lattice=\"1 0 0 0 nan 0 0 0 1\"", "malformed Lattice"},
+      {"Lattice=\"1 0 0 0 1 0 0 0 inf\"", "malformed Lattice"},
+      {"Lattice=\"1 0 0 0 1 0 0 0 1e999\"", "malformed Lattice"},
+      {"Lattice=\"1 0 0 0 x 0 0 0 1\"", "malformed Lattice"},
+      {"Lattice=", "malformed Lattice"},
+      {"Lattice=\"1 0 0 0 1 0 0 0 1\" pbc=\"T T\"", "malformed pbc"},
+      {"Lattice=\"1 0 0 0 1 0 0 0 1\" pbc=\"T X F\"", "malformed pbc"},
+      {"Lattice=\"1 0 0 0 1 0 0 0 1\" pbc=yes", "malformed pbc"},
+      {"Lattice=\"1 0 0 0 1 0 0 0 1\" pbc=\"T T F T\"", "malformed pbc"},
+      {"Lattice=\"1 0 0 2 0 0 0 0 1\"", "singular"},
+      {"Lattice=\"1 0 0 0 0 0 0 0 1\" pbc=\"T T T\"", "b has zero length"},
+      {"Lattice=\"1 0 0 0 1 0 0 0 0\"", "c has zero length"},
+  };
+  for (const auto& [comment, expected] : cases) {
+    const std::string file = write_file("bad.xyz", "1\n" + comment + "\nX 0 0 0\n");
+    const std::string message = io_error([&] { read_positions(file); });
+    EXPECT_TRUE(contains(message, file + ":2: ")) << comment << " -> " << message;
+    EXPECT_TRUE(contains(message, expected)) << comment << " -> " << message;
+  }
+  // A slab may leave its non-periodic row zero.
+  EXPECT_EQ(read_positions(write_file("slab.xyz",
+                                      "1\nLattice=\"1 0 0 0 1 0 0 0 0\" "
+                                      "pbc=\"T T F\"\nX 0 0 0\n"))
+                .box,
+            Box::orthorhombic(1, 1, 0, true, true, false));
+}
+
+TEST_F(PositionsIo, WritersRefuseBoxesTheyCannotHold) {
+  PointCloud cloud = make_family("uniform", 10, 1.0f, 1);
+  cloud.box = Box::orthorhombic(2, 2, 2);
+  auto refused = [](const std::function<void()>& action) -> std::string {
+    try {
+      action();
+    } catch (const Error& error) {
+      EXPECT_EQ(error.code(), ErrorCode::invalid_argument) << error.what();
+      return error.what();
+    }
+    ADD_FAILURE() << "no raycut::Error thrown";
+    return "";
+  };
+  EXPECT_TRUE(contains(refused([&] { write_csv(path("p.csv"), cloud); }), "periodic box"));
+  EXPECT_FALSE(fs::exists(path("p.csv")));
+  cloud.box = box_of({1, 0, 0, 2, 0, 0, 0, 0, 1}, {true, true, true});
+  EXPECT_TRUE(contains(refused([&] { write_xyz(path("p.xyz"), cloud); }), "singular"));
+  EXPECT_FALSE(fs::exists(path("p.xyz")));
+  // A cell without periodic axes is no loss for pairs: CSV takes the positions.
+  cloud.box = box_of({1, 0, 0, 0, 1, 0, 0, 0, 1}, {false, false, false});
+  write_csv(path("q.csv"), cloud);
+  EXPECT_EQ(read_positions(path("q.csv")).size(), 10u);
 }
 
 }  // namespace

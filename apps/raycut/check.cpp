@@ -57,6 +57,12 @@ int run_check(const CheckOptions& o) {
   std::vector<PointCloud> inputs;
   if (!o.input.empty()) {
     PointCloud cloud = read_positions(o.input);
+    if (cloud.box.periodic()) {  // not checked as an open cloud: that would be silently wrong
+      throw Error(ErrorCode::unsupported,
+                  o.input +
+                      ": periodic boxes (the file's Lattice and pbc) are not supported by "
+                      "check yet (to check the positions as an open cloud, set pbc=\"F F F\")");
+    }
     cloud.cutoff = o.cutoff;
     inputs.push_back(std::move(cloud));
   } else {

@@ -9,12 +9,15 @@
 #include <string_view>
 #include <vector>
 
+#include "raycut/box.hpp"
+
 namespace raycut {
 
 struct PointCloud {
   std::string name;        // family or suite label, e.g. "uniform" or "surface alpha=64 p=8"
   std::vector<float> xyz;  // (N,3) row-major
   float cutoff = 0;        // the cutoff the input is meant for
+  Box box;                 // periodic box (an extended XYZ file's Lattice and pbc); open if none
   std::size_t size() const { return xyz.size() / 3; }
 };
 

@@ -24,6 +24,7 @@
 #include <system_error>
 #include <vector>
 
+#include "raycut/box.hpp"
 #include "raycut/error.hpp"
 #include "raycut/files.hpp"
 
@@ -222,6 +223,137 @@ std::size_t xyz_position_column(std::string_view comment, const std::string& pat
   fail(path, line, "Properties has no pos:R:3 field");
 }
 
+// The key=value pairs of an extended-XYZ comment line, split as ASE's key_val_str_to_dict
+// (ase/io/extxyz.py) splits them: "", '', {} or [] delimit a value, a backslash escapes the next
+// character, whitespace separates pairs, spaces around '=' are allowed. A key without '=' has
+// no value (ASE reads it as T).
+struct KeyValue {
+  std::string key, value;
+  bool has_value = false;
+};
+
+std::vector<KeyValue> comment_key_values(std::string_view line) {
+  line = trim(line);
+  std::vector<std::vector<std::string>> pairs(1, std::vector<std::string>(1));
+  char closing = 0;
+  bool escaped = false;
+  for (const char c : line) {
+    if (escaped) {
+      pairs.back().back() += c;
+      escaped = false;
+    } else if (c == '\\') {
+      escaped = true;
+    } else if (closing != 0) {
+      if (c == closing) {
+        closing = 0;
+      } else {
+        pairs.back().back() += c;
+      }
+    } else if (c == '"' || c == '\'' || c == '{' || c == '[') {
+      closing = c == '{' ? '}' : c == '[' ? ']' : c;
+    } else if (c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\v' || c == '\f') {
+      if (!pairs.back().back().empty()) pairs.emplace_back(1);
+    } else if (c == '=') {
+      // "key = value": the space opened an empty pair, which '=' folds back into the key's.
+      if (pairs.size() > 1 && pairs.back().size() == 1 && pairs.back()[0].empty()) {
+        pairs.pop_back();
+      }
+      pairs.back().emplace_back();
+    } else {
+      pairs.back().back() += c;
+    }
+  }
+  std::vector<KeyValue> result;
+  for (const auto& pair : pairs) {
+    if (pair.size() == 1 && pair[0].empty()) continue;
+    KeyValue kv;
+    kv.key = pair[0];
+    kv.has_value = pair.size() > 1;
+    for (std::size_t k = 1; k < pair.size(); ++k) kv.value += (k > 1 ? "=" : "") + pair[k];
+    result.push_back(std::move(kv));
+  }
+  return result;
+}
+
+// Tokens of a value separated by whitespace or commas (ASE: re.findall(r'[^\s,]+', value)).
+std::vector<std::string_view> value_tokens(std::string_view value) {
+  std::vector<std::string_view> tokens;
+  const auto separator = [](char c) {
+    return c == ' ' || c == '\t' || c == ',' || c == '\r' || c == '\n' || c == '\v' || c == '\f';
+  };
+  std::size_t i = 0;
+  while (i < value.size()) {
+    while (i < value.size() && separator(value[i])) ++i;
+    const std::size_t begin = i;
+    while (i < value.size() && !separator(value[i])) ++i;
+    if (i > begin) tokens.push_back(value.substr(begin, i - begin));
+  }
+  return tokens;
+}
+
+bool parse_double(std::string_view token, double& value) {
+  if (token.size() > 1 && token.front() == '+' && token[1] != '-') token.remove_prefix(1);
+  const char* end = token.data() + token.size();
+  const auto [ptr, ec] = std::from_chars(token.data(), end, value);
+  return ec == std::errc() && ptr == end && std::isfinite(value);
+}
+
+// The periodic box of an extended-XYZ comment line (io.hpp: the rules, ASE's).
+Box xyz_box(std::string_view comment, const std::string& path, std::size_t line) {
+  const KeyValue* lattice = nullptr;
+  const KeyValue* pbc = nullptr;
+  const std::vector<KeyValue> pairs = comment_key_values(comment);
+  for (const KeyValue& kv : pairs) {  // the last of a repeated key counts, as in ASE's dict
+    if (!kv.has_value) continue;      // a bare word of a free-text comment
+    const std::string key = lowercase(kv.key);
+    if (key == "lattice") lattice = &kv;
+    if (key == "pbc") pbc = &kv;
+  }
+  Box box;
+  if (lattice == nullptr && pbc == nullptr) return box;
+  if (lattice != nullptr) {
+    const auto tokens = value_tokens(lattice->value);
+    bool ok = tokens.size() == 9;
+    for (std::size_t k = 0; ok && k < 9; ++k) ok = parse_double(tokens[k], box.cell[k / 3][k % 3]);
+    if (!ok) {
+      fail(path, line,
+           "malformed Lattice " + quote_token(lattice->value) +
+               " (expected 9 finite numbers, the cell rows: \"ax ay az bx by bz cx cy cz\")");
+    }
+  }
+  if (pbc != nullptr) {
+    const auto tokens = value_tokens(pbc->value);
+    bool ok = tokens.size() == 1 || tokens.size() == 3;
+    for (std::size_t k = 0; ok && k < tokens.size(); ++k) {
+      const std::string word = lowercase(tokens[k]);
+      ok = word == "t" || word == "true" || word == "1" || word == "f" || word == "false" ||
+           word == "0";
+      box.pbc[k] = word == "t" || word == "true" || word == "1";
+    }
+    if (!ok) {
+      fail(path, line,
+           "malformed pbc " + quote_token(pbc->value) +
+               " (expected 3 of T/F/True/False, e.g. pbc=\"T T F\")");
+    }
+    if (tokens.size() == 1) box.pbc[1] = box.pbc[2] = box.pbc[0];  // ASE: pbc=T is all three
+  } else {
+    // ase/io/extxyz.py, _read_xyz_frame: "default pbc for extxyz file containing Lattice is
+    // True in all directions".
+    box.pbc[0] = box.pbc[1] = box.pbc[2] = true;
+  }
+  if (lattice == nullptr && box.periodic()) {
+    fail(path, line,
+         "pbc " + quote_token(pbc->value) +
+             " has a periodic axis but there is no Lattice (the cell) on the comment line");
+  }
+  try {
+    validate(box);
+  } catch (const Error& error) {
+    fail(path, line, error.what());
+  }
+  return box;
+}
+
 // The first frame of an (extended) XYZ file. What follows it, blank lines aside, must be the
 // count line of a next frame (a trajectory; not read), or nothing: a count smaller than the
 // atoms that follow is an error, not a silent truncation.
@@ -240,6 +372,7 @@ PointCloud read_xyz(const std::string& path) {
     fail(path, 2, "missing comment line");
   }
   const std::size_t pos_column = xyz_position_column(line, path, reader.number());
+  cloud.box = xyz_box(line, path, reader.number());
   // The count is only a claim: reserve no more than the file can hold (a particle line has at
   // least 6 bytes, "0 0 0\n"), so that a 10-byte file saying 10^9 allocates nothing large.
   std::error_code size_error;
@@ -299,8 +432,14 @@ void require_whole_points(const std::string& path, const PointCloud& cloud) {
   }
 }
 
-// Shortest representation that reads back to the same float.
+// Shortest representation that reads back to the same float (double).
 void write_number(io::OutputFile& out, float value) {
+  char digits[64];
+  const auto result = std::to_chars(digits, digits + sizeof digits, value);
+  out.write(std::string_view(digits, static_cast<std::size_t>(result.ptr - digits)));
+}
+
+void write_number(io::OutputFile& out, double value) {
   char digits[64];
   const auto result = std::to_chars(digits, digits + sizeof digits, value);
   out.write(std::string_view(digits, static_cast<std::size_t>(result.ptr - digits)));
@@ -314,6 +453,10 @@ PointCloud read_positions(const std::string& path) {
 
 void write_csv(const std::string& path, const PointCloud& cloud) {
   require_whole_points(path, cloud);
+  if (cloud.box.periodic()) {
+    throw Error(ErrorCode::invalid_argument,
+                path + ": CSV has no place for a periodic box (Lattice, pbc): write .xyz");
+  }
   io::OutputFile out(path);
   out.write("x,y,z\n");
   for (std::size_t i = 0; i < cloud.size(); ++i) {
@@ -329,8 +472,30 @@ void write_csv(const std::string& path, const PointCloud& cloud) {
 
 void write_xyz(const std::string& path, const PointCloud& cloud) {
   require_whole_points(path, cloud);
+  const bool has_box = !cloud.box.is_open();
+  if (has_box) {
+    try {
+      validate(cloud.box);
+    } catch (const Error& error) {
+      throw Error(ErrorCode::invalid_argument, path + ": " + error.what());
+    }
+  }
   io::OutputFile out(path);
-  out.write(std::to_string(cloud.size()) + "\nProperties=species:S:1:pos:R:3\n");
+  out.write(std::to_string(cloud.size()) + "\n");
+  if (has_box) {  // ASE's layout: Lattice="..." Properties=... pbc="T T F"
+    out.write("Lattice=\"");
+    for (int k = 0; k < 9; ++k) {
+      if (k > 0) out.write(" ");
+      write_number(out, cloud.box.cell[k / 3][k % 3]);
+    }
+    out.write("\" ");
+  }
+  out.write("Properties=species:S:1:pos:R:3");
+  if (has_box) {
+    out.write(std::string(" pbc=\"") + (cloud.box.pbc[0] ? "T" : "F") + " " +
+              (cloud.box.pbc[1] ? "T" : "F") + " " + (cloud.box.pbc[2] ? "T" : "F") + "\"");
+  }
+  out.write("\n");
   for (std::size_t i = 0; i < cloud.size(); ++i) {
     out.write("X ");
     write_number(out, cloud.xyz[3 * i]);

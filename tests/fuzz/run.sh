@@ -30,7 +30,7 @@ fi
 binary="$work/fuzz_positions"
 "$cxx" -std=c++20 -O1 -g -fno-omit-frame-pointer -fsanitize=fuzzer,address,undefined \
   -fno-sanitize-recover=all -I"$root/include" -I"$root/src" \
-  "$here/fuzz_positions.cpp" "$root/src/io/positions_io.cpp" -o "$binary"
+  "$here/fuzz_positions.cpp" "$root/src/io/positions_io.cpp" "$root/src/core/box.cpp" -o "$binary"
 
 # Every input is written to a file and read back: on tmpfs when there is one (a disk is ~50x
 # slower), in a folder of this run's own.
