@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "error_helpers.hpp"
 #include "raycut/box.hpp"
 #include "raycut/error.hpp"
 
@@ -28,19 +29,10 @@ Box make_box(std::array<std::array<double, 3>, 3> rows,
 }
 
 std::string refused(const std::function<void()>& action) {
-  try {
-    action();
-  } catch (const Error& error) {
-    EXPECT_EQ(error.code(), ErrorCode::invalid_argument) << error.what();
-    return error.what();
-  }
-  ADD_FAILURE() << "no raycut::Error thrown";
-  return "";
+  return raycut_test::error_message(ErrorCode::invalid_argument, action);
 }
 
-bool contains(const std::string& text, const std::string& part) {
-  return text.find(part) != std::string::npos;
-}
+using raycut_test::contains;
 
 const double inf = std::numeric_limits<double>::infinity();
 const double s3 = std::sqrt(3.0);

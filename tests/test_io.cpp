@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "error_helpers.hpp"
 #include "raycut/box.hpp"
 #include "raycut/error.hpp"
 #include "raycut/files.hpp"
@@ -80,19 +81,10 @@ void expect_same_bits(const std::vector<float>& read, const std::vector<float>& 
 }
 
 std::string io_error(const std::function<void()>& action) {
-  try {
-    action();
-  } catch (const Error& error) {
-    EXPECT_EQ(error.code(), ErrorCode::io) << error.what();
-    return error.what();
-  }
-  ADD_FAILURE() << "no raycut::Error thrown";
-  return "";
+  return raycut_test::error_message(ErrorCode::io, action);
 }
 
-bool contains(const std::string& text, const std::string& part) {
-  return text.find(part) != std::string::npos;
-}
+using raycut_test::contains;
 
 TEST_F(PositionsIo, CsvRoundTripIsBitExact) {
   const PointCloud cloud = awkward_cloud();

@@ -445,6 +445,19 @@ void write_number(io::OutputFile& out, double value) {
   out.write(std::string_view(digits, static_cast<std::size_t>(result.ptr - digits)));
 }
 
+// One line per particle: prefix, then x, y, z with the separator between them.
+void write_rows(io::OutputFile& out, const PointCloud& cloud, const char* prefix,
+                const char* separator) {
+  for (std::size_t i = 0; i < cloud.size(); ++i) {
+    out.write(prefix);
+    for (int a = 0; a < 3; ++a) {
+      if (a > 0) out.write(separator);
+      write_number(out, cloud.xyz[3 * i + a]);
+    }
+    out.write("\n");
+  }
+}
+
 }  // namespace
 
 PointCloud read_positions(const std::string& path) {
@@ -459,14 +472,7 @@ void write_csv(const std::string& path, const PointCloud& cloud) {
   }
   io::OutputFile out(path);
   out.write("x,y,z\n");
-  for (std::size_t i = 0; i < cloud.size(); ++i) {
-    write_number(out, cloud.xyz[3 * i]);
-    out.write(",");
-    write_number(out, cloud.xyz[3 * i + 1]);
-    out.write(",");
-    write_number(out, cloud.xyz[3 * i + 2]);
-    out.write("\n");
-  }
+  write_rows(out, cloud, "", ",");
   out.commit();
 }
 
@@ -496,15 +502,7 @@ void write_xyz(const std::string& path, const PointCloud& cloud) {
               (cloud.box.pbc[1] ? "T" : "F") + " " + (cloud.box.pbc[2] ? "T" : "F") + "\"");
   }
   out.write("\n");
-  for (std::size_t i = 0; i < cloud.size(); ++i) {
-    out.write("X ");
-    write_number(out, cloud.xyz[3 * i]);
-    out.write(" ");
-    write_number(out, cloud.xyz[3 * i + 1]);
-    out.write(" ");
-    write_number(out, cloud.xyz[3 * i + 2]);
-    out.write("\n");
-  }
+  write_rows(out, cloud, "X ", " ");
   out.commit();
 }
 
