@@ -43,7 +43,16 @@ struct Box {
         if (v != 0) return false;
     return true;
   }
-  bool operator==(const Box&) const = default;
+  // Spelled out: CUDA translation units include this header and compile as C++17.
+  bool operator==(const Box& o) const {
+    for (int a = 0; a < 3; ++a) {
+      if (pbc[a] != o.pbc[a]) return false;
+      for (int b = 0; b < 3; ++b)
+        if (cell[a][b] != o.cell[a][b]) return false;
+    }
+    return true;
+  }
+  bool operator!=(const Box& o) const { return !(*this == o); }
 };
 
 // Throws Error(invalid_argument), with a message naming the problem, when:
