@@ -102,7 +102,7 @@ class NeighbourListBuffer {
 // Rows past K of a padded list, never truncated silently.
 struct PaddedReport {
   std::uint64_t overflowed_rows = 0;  // rows with more than K neighbours
-  std::uint32_t largest_count = 0;    // the largest row (grow K to this and retry)
+  std::uint32_t largest_count = 0;    // the largest row over K (0 if none): grow K to it, retry
   bool overflowed() const { return overflowed_rows > 0; }
 };
 
