@@ -67,6 +67,28 @@ def assert_same_pairs(i, j, x, cutoff, half=False):
         edge = {(a, b) for a, b in edge if a < b}
     assert found - edge == inside - edge
 
+def torch_cuda():
+    """PyTorch on CUDA with raycut's CUDA methods, or skip saying which is missing."""
+    if not raycut.cuda_available():
+        pytest.skip("raycut was built without CUDA or no CUDA device is usable here")
+    torch = pytest.importorskip("torch", reason="PyTorch is not installed")
+    if not torch.cuda.is_available():
+        pytest.skip("PyTorch sees no CUDA device")
+    return torch
+
+
+def cupy_cuda():
+    """CuPy on CUDA with raycut's CUDA methods, or skip saying which is missing."""
+    if not raycut.cuda_available():
+        pytest.skip("raycut was built without CUDA or no CUDA device is usable here")
+    cupy = pytest.importorskip("cupy", reason="CuPy is not installed")
+    try:
+        if cupy.cuda.runtime.getDeviceCount() == 0:
+            pytest.skip("CuPy sees no CUDA device")
+    except cupy.cuda.runtime.CUDARuntimeError as e:
+        pytest.skip(f"CuPy sees no CUDA device ({e})")
+    return cupy
+
 
 def pytest_report_header(config):
     return [f"raycut: {raycut.__file__}", f"raycut methods here: {', '.join(AVAILABLE)}"]

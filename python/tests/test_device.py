@@ -3,7 +3,8 @@ on its device, zero-copy, equal to the host path. Skipped (with the reason) with
 a CUDA device, or raycut's CUDA methods."""
 import numpy as np
 import pytest
-from conftest import AVAILABLE, CUTOFF, DEVICE_METHODS, INPUTS, pair_set, uniform
+from conftest import (AVAILABLE, CUTOFF, DEVICE_METHODS, INPUTS, cupy_cuda, pair_set, torch_cuda,
+                      uniform)
 
 import raycut
 
@@ -13,23 +14,6 @@ if not raycut.cuda_available():
 
 # Device methods, and a CPU method fed device arrays (outputs copied to the device).
 METHODS = DEVICE_METHODS + ["cell-list"]
-
-
-def torch_cuda():
-    torch = pytest.importorskip("torch", reason="PyTorch is not installed")
-    if not torch.cuda.is_available():
-        pytest.skip("PyTorch sees no CUDA device")
-    return torch
-
-
-def cupy_cuda():
-    cupy = pytest.importorskip("cupy", reason="CuPy is not installed")
-    try:
-        if cupy.cuda.runtime.getDeviceCount() == 0:
-            pytest.skip("CuPy sees no CUDA device")
-    except cupy.cuda.runtime.CUDARuntimeError as e:
-        pytest.skip(f"CuPy sees no CUDA device ({e})")
-    return cupy
 
 
 def sorted_rows(i, j, *rest):

@@ -3,7 +3,7 @@
 rebuilds. Host (NumPy) for every method here; CUDA (PyTorch, CuPy) skipped without them."""
 import numpy as np
 import pytest
-from conftest import CUTOFF, DEVICE_METHODS, brute_force, pair_set, uniform
+from conftest import CUTOFF, DEVICE_METHODS, brute_force, cupy_cuda, pair_set, torch_cuda, uniform
 
 import raycut
 
@@ -174,26 +174,6 @@ def test_empty_and_single():
 
 
 # ---- CUDA ----------------------------------------------------------------------------------------
-
-def torch_cuda():
-    if not raycut.cuda_available():
-        pytest.skip("raycut was built without CUDA or no CUDA device is usable here")
-    torch = pytest.importorskip("torch", reason="PyTorch is not installed")
-    if not torch.cuda.is_available():
-        pytest.skip("PyTorch sees no CUDA device")
-    return torch
-
-
-def cupy_cuda():
-    if not raycut.cuda_available():
-        pytest.skip("raycut was built without CUDA or no CUDA device is usable here")
-    cupy = pytest.importorskip("cupy", reason="CuPy is not installed")
-    try:
-        if cupy.cuda.runtime.getDeviceCount() == 0:
-            pytest.skip("CuPy sees no CUDA device")
-    except cupy.cuda.runtime.CUDARuntimeError as e:
-        pytest.skip(f"CuPy sees no CUDA device ({e})")
-    return cupy
 
 
 @pytest.mark.parametrize("method", DEVICE_METHODS + ["cell-list"])
