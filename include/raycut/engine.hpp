@@ -14,6 +14,7 @@
 #include <string_view>
 #include <vector>
 
+#include "raycut/box.hpp"
 #include "raycut/error.hpp"
 #include "raycut/kernels.hpp"
 
@@ -27,6 +28,39 @@ struct PositionsView {
   const float* xyz = nullptr;
   std::size_t size = 0;  // N, the number of particles
   MemorySpace space = MemorySpace::host;
+};
+
+// What build() takes beyond positions and a cutoff (spec/NEIGHBOURS.md, 2-4): periodic boxes,
+// batches of independent systems, and a second point set. The default is one open system.
+//
+// A pair is a triple (i, j, S), S an integer vector (0 on non-periodic axes), with
+// r_ij = x_j - x_i + S . cell; in range iff |r_ij| < C. Boxes thinner than 2C give a pair once
+// per image, and (i, i, S != 0) self-images. Positions may be unwrapped: S refers to them as given.
+struct Systems {
+  Box box;                             // every system's box (default: open)
+  std::vector<Box> boxes;              // or one box per system of a batch (then `box` is unused)
+  // A batch: system s holds particles [offsets[s], offsets[s + 1]) (contiguous), S + 1 entries
+  // from 0 to N, non-decreasing. Empty: one system. Pairs never cross systems; indices stay
+  // global; systems of 0 and 1 particles are valid.
+  std::vector<std::uint64_t> offsets;
+  // Two point sets: when `queries` holds points (size > 0 or xyz set), they are the targets
+  // and build()'s positions the sources; pairs (q, p) with |p - q + S . cell| < C, no
+  // self-exclusion. In a batch, query_offsets gives each system's queries as offsets does its
+  // sources. Same memory space as the sources.
+  PositionsView queries;
+  std::vector<std::uint64_t> query_offsets;
+
+  static Systems periodic(const Box& b) {
+    Systems s;
+    s.box = b;
+    return s;
+  }
+  // Open, one system, no queries: what build(positions, cutoff) means.
+  bool plain() const {
+    return box.is_open() && boxes.empty() && offsets.empty() && queries.xyz == nullptr &&
+           queries.size == 0;
+  }
+  bool has_queries() const { return queries.xyz != nullptr || queries.size > 0; }
 };
 
 // Per-target results on the host; a vector is empty when the kernel does not produce it
@@ -57,14 +91,18 @@ struct NeighbourList {
   std::vector<std::uint64_t> offsets;  // N + 1 entries
   std::vector<std::uint32_t> indices;
   std::vector<float> distances;  // |r_ij| per entry, when asked
-  std::vector<float> vectors;    // r_ij = x_j - x_i per entry (3 floats), when asked
+  std::vector<float> vectors;    // r_ij = x_j - x_i + S . cell per entry (3 floats), when asked
+  std::vector<std::int32_t> shifts;  // S per entry (3 ints), when asked
 };
 
 // What a neighbour list holds (spec/NEIGHBOURS.md section 5).
 struct ListOptions {
-  bool half = false;       // each unordered pair once, as (i, j) with i < j, in row i
+  // Each pair once: of (i, j, S) and (j, i, -S), the one with i < j, or i == j and S
+  // lexicographically positive, in row i. Not with query sets (their pairs are not symmetric).
+  bool half = false;
   bool distances = false;  // |r_ij| per entry
-  bool vectors = false;    // r_ij = x_j - x_i per entry
+  bool vectors = false;    // r_ij = x_j - x_i + S . cell per entry
+  bool shifts = false;     // the image shift S per entry (3 int32; zeros without a box)
 };
 
 namespace detail {
@@ -89,6 +127,7 @@ class NeighbourListBuffer {
   const std::uint32_t* indices() const;  // pairs()
   const float* distances() const;        // pairs(), or null when not asked
   const float* vectors() const;          // 3 pairs(), or null when not asked
+  const std::int32_t* shifts() const;    // 3 pairs(), or null when not asked
   MemorySpace space() const;
   const ListOptions& options() const;
   std::size_t bytes() const;      // memory held
@@ -220,8 +259,17 @@ class Engine {
   // the method's structure. Throws Error with the first bad index or the bad value, before any
   // device work.
   void build(PositionsView positions, float cutoff);
+  // The same with periodic boxes, a batch or query points (Systems says what each means).
+  // Throws Error(invalid_argument) for a bad box (Box's validate), bad offsets or a box count
+  // that matches neither 1 nor the systems, and Error(unsupported) for a method that cannot
+  // (the OptiX methods and grid-paper: no images or batches; docs/methods.md).
+  void build(PositionsView positions, float cutoff, const Systems& systems);
+  void build(PositionsView positions, float cutoff, const Box& box) {
+    build(positions, cutoff, Systems::periodic(box));
+  }
 
-  // New positions of the same N particles, cutoff unchanged: refit or rebuild per the policy.
+  // New positions of the same N particles, cutoff and systems unchanged: refit or rebuild per
+  // the policy (with boxes, batches or queries: a rebuild, the queries kept).
   void update(PositionsView positions);
   void set_update_policy(const UpdatePolicy& policy);
 
@@ -245,7 +293,11 @@ class Engine {
                                  bool throw_on_overflow = false);
 
   const Timings& last_timings() const { return timings_; }
+  // The number of targets (rows of lists, entries of results): N, or M with query points.
   std::size_t size() const { return size_; }
+  // The number of sources: N (the positions given to build()).
+  std::size_t sources() const { return sources_; }
+  const Systems& systems() const { return systems_; }
   float cutoff() const { return cutoff_; }
 
   // What include/raycut/pairs.hpp and include/raycut/cuda/pairs.cuh run a user's functor
@@ -260,8 +312,10 @@ class Engine {
   std::string method_;
   std::unique_ptr<detail::Method> impl_;
   void* stream_ = nullptr;
-  std::size_t size_ = 0;
+  std::size_t size_ = 0, sources_ = 0;
   float cutoff_ = 0;
+  Systems systems_;
+  std::shared_ptr<void> images_;  // the points a method builds over with images (core/images)
   bool built_ = false;
   bool has_run_ = false;
   Timings timings_;

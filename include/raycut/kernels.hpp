@@ -20,6 +20,8 @@
 //                                    // and adds one. The grid may then give each call its
 //                                    // position itself, so that the lanes sharing a target
 //                                    // write its entries together (coalesced lists)
+//     static constexpr bool takes_shift = true;  // operator() and accepts() take the pair's
+//                                    // image shift S as a last argument (const Shift&)
 //     RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b);  // a += b: lets
 //                                    // several GPU lanes share one target (small inputs); then
 //                                    // Accumulator{} must be its identity (lanes start there and
@@ -27,7 +29,8 @@
 //                                    // 32-bit words (it is shuffled between lanes)
 //   };
 //
-// i and j are the caller's particle indices. The functor carries its outputs (pointers it writes
+// i and j are the caller's particle indices (with query points: i a query, j a source); with a
+// periodic box r already includes the image shift (r = x_j - x_i + S . cell). The functor carries its outputs (pointers it writes
 // in finish) and its parameters; it is copied to the device by value, so it holds no host-only
 // state when run on a GPU method.
 #pragma once
@@ -128,7 +131,22 @@ RAYCUT_HD float fast_reciprocal(float b) {
 #endif
 }
 
+// The image shift S of a pair (i, j, S): r_ij = x_j - x_i + S . cell (spec/NEIGHBOURS.md, 2);
+// zero without a periodic box. A functor that declares `static constexpr bool takes_shift =
+// true` gets it as a last argument of operator() and accepts():
+//   operator()(acc, i, j, r, r2, const Shift& s)   accepts(i, j, const Shift& s)
+struct Shift {
+  std::int32_t a = 0, b = 0, c = 0;
+  // Lexicographically positive: the half-list orientation of a self-image (i, i, S).
+  RAYCUT_HD bool positive() const { return a != 0 ? a > 0 : (b != 0 ? b > 0 : c > 0); }
+};
+
 // ---- what the traversals ask of a functor (defaults for the optional members) ----------------
+
+template <class F, class = void>
+struct takes_shift : std::false_type {};
+template <class F>
+struct takes_shift<F, std::enable_if_t<F::takes_shift>> : std::true_type {};
 
 template <class F, class = void>
 struct vanishes_at_infinity : std::false_type {};
@@ -160,14 +178,31 @@ template <class F>
 struct has_accepts<
     F, std::void_t<decltype(std::declval<const F&>().accepts(std::uint32_t{}, std::uint32_t{}))>>
     : std::true_type {};
-
-// Whether f takes the in-range pair (i, j).
 template <class F>
-RAYCUT_HD bool accepts(const F& f, std::uint32_t i, std::uint32_t j) {
-  if constexpr (has_accepts<F>::value)
-    return f.accepts(i, j);
-  else
+struct has_accepts<F, std::enable_if_t<takes_shift<F>::value,
+                                       std::void_t<decltype(std::declval<const F&>().accepts(
+                                           std::uint32_t{}, std::uint32_t{}, Shift{}))>>>
+    : std::true_type {};
+
+// Whether f takes the in-range pair (i, j, s).
+template <class F>
+RAYCUT_HD bool accepts(const F& f, std::uint32_t i, std::uint32_t j, const Shift& s = {}) {
+  if constexpr (!has_accepts<F>::value)
     return true;
+  else if constexpr (takes_shift<F>::value)
+    return f.accepts(i, j, s);
+  else
+    return f.accepts(i, j);
+}
+
+// f's call for the in-range pair (i, j, s), the shift passed where f takes it.
+template <class F>
+RAYCUT_HD void apply(const F& f, typename F::Accumulator& acc, std::uint32_t i, std::uint32_t j,
+                     Vec3 r, float r2, const Shift& s = {}) {
+  if constexpr (takes_shift<F>::value)
+    f(acc, i, j, r, r2, s);
+  else
+    f(acc, i, j, r, r2);
 }
 
 // The initial state of target i.

@@ -15,6 +15,19 @@
 
 namespace raycut::detail {
 
+// What a method builds over when there are images, batches or query points (the engine makes
+// it, src/core/images.hpp): points [0, targets) are the targets; every point is a candidate
+// source, mapped by `images` to the caller's source and shift. Pointers in the method's memory
+// space, owned by the engine and valid until the next build.
+struct Points {
+  const float* xyz = nullptr;  // (size, 3)
+  std::size_t size = 0;
+  std::size_t targets = 0;
+  ImageTables images;
+  const std::uint32_t* system = nullptr;  // per point; null: one system
+  std::uint32_t systems = 1;
+};
+
 class Method {
  public:
   virtual ~Method() = default;
@@ -27,6 +40,17 @@ class Method {
   // Build over n >= 1 validated positions (in space()), cutoff validated. The pointer is
   // valid only during the call: copy what you need.
   virtual void build(const float* xyz, std::size_t n, float cutoff) = 0;
+
+  // Build over points with images, batches or queries. Methods that cannot say so
+  // (supports_points() names why) and keep the default.
+  virtual void build_points(const Points&, float) {
+    throw Error(ErrorCode::unsupported, "this method does not take periodic boxes, batches or "
+                                        "query points");
+  }
+  // Empty when build_points() works; otherwise why not, for the engine's message.
+  virtual std::string points_unsupported() const {
+    return "its traversal has no images, batches or query points (docs/methods.md)";
+  }
 
   // New positions of the same n particles. Returns true when the structure was refitted;
   // the default rebuilds.

@@ -49,6 +49,11 @@ struct GridGeometry {
   float x_cells_per_cell;  // xgrid cells per grid cell, along x
   float reach_cells;       // the cutoff in cell units, inflated so that culling stays conservative
   bool cull;
+  // Batches: system s's cells are z layers [s * layer_stride, s * layer_stride + layer_cells) of
+  // the grid (layer_stride - layer_cells >= reach empty layers between systems, so no stencil
+  // reaches another system); system[k] of point k. layer_cells = 0: one system.
+  const std::uint32_t* system = nullptr;
+  std::uint32_t layer_cells = 0, layer_stride = 0;
 };
 
 // The particles of cells [xa, xb] of row `row` are slots [start[row * dims0 + xa],
@@ -79,7 +84,8 @@ enum class GridKernel {
 };
 
 struct GridPass {
-  const void* particles = nullptr;  // float4 per slot, in cell order: x y z, w = caller's index
+  const void* particles = nullptr;  // float4 per slot, in cell order: x y z, w = point index
+  const std::uint32_t* targets = nullptr;  // the slots of the targets in slot order; null: all
   GridGeometry geometry;
   bool dense = true;
   DenseTablePass dense_table;
@@ -87,10 +93,22 @@ struct GridPass {
   GridKernel kernel = GridKernel::thread;
 };
 
+// Points with images (src/core/images.hpp): per point k the caller's source index (or
+// not_a_source: a query point) and its shift T_k, the point being x_source + T_k . cell; a pair
+// (target i, point k) has S = T_k - T_i. Null tables: the points are the caller's particles.
+constexpr std::uint32_t not_a_source = 0xFFFFFFFFu;
+struct ImageTables {
+  const std::uint32_t* source = nullptr;  // per point
+  const std::int32_t* shift = nullptr;    // 3 per point
+  bool active() const { return source != nullptr; }
+};
+
 struct PairPass {
   PassKind kind = PassKind::none;
   const char* method = "";
-  std::size_t n = 0;
+  std::size_t n = 0;        // targets: points [0, n)
+  std::size_t points = 0;   // every point a candidate source (n without images)
+  ImageTables images;
   float cutoff_squared = 0;
   HostPass host;
   BruteForcePass brute_force;
