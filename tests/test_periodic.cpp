@@ -89,6 +89,11 @@ struct Family {
   bool faces = false;
 };
 
+// gtest prints parameters with this (else as raw bytes).
+void PrintTo(const Family& f, std::ostream* os) {
+  *os << f.name << " n=" << f.n << " cutoff=" << f.cutoff;
+}
+
 // The particles, and a length that bounds every coordinate once wrapped (for float tolerances).
 std::vector<float> draw(const Family& f, std::uint64_t seed, double* length = nullptr) {
   std::mt19937_64 rng(seed);
@@ -437,7 +442,9 @@ void expect_kernels(Engine& engine, const Batch& b, const NeighbourList& full,
   EXPECT_EQ(failures, 0) << what;
   std::size_t band = 0;
   for (const PeriodicOracle& o : b.oracles) band += o.band_pairs.size();
-  if (n > 0 && band == 0) EXPECT_GT(compared, 0u) << what << ": no target compared";
+  if (n > 0 && band == 0) {
+    EXPECT_GT(compared, 0u) << what << ": no target compared";
+  }
 }
 
 // Everything a built engine must hold for batch b.
@@ -948,11 +955,14 @@ TEST_P(PeriodicEdgeCases, CoincidentParticles) {
                        {},
                        5});
   b.finish();
-  for (std::int64_t i = 0; i < 3; ++i)
-    for (std::int64_t j = 0; j < 3; ++j)
-      if (i != j)
+  for (std::int64_t i = 0; i < 3; ++i) {
+    for (std::int64_t j = 0; j < 3; ++j) {
+      if (i != j) {
         ASSERT_TRUE(std::binary_search(b.oracles[0].in.begin(), b.oracles[0].in.end(),
                                        PeriodicTriple{i, j, 0, 0, 0}));
+      }
+    }
+  }
   Engine engine(method);
   b.build(engine, false);
   const NeighbourList full = engine.neighbours({false, true, true, true});
