@@ -466,6 +466,33 @@ void expect_matches(Engine& engine, const Batch& b, const std::string& what) {
     EXPECT_EQ(2 * half.indices.size(), full.indices.size()) << what;
   }
   ASSERT_NO_FATAL_FAILURE(expect_kernels(engine, b, full, what));
+
+  // The padded matrix: the list's rows (a source once per image), and overflow reported.
+  std::uint32_t largest = 0;
+  for (std::size_t i = 0; i < b.targets(); ++i)
+    largest = std::max<std::uint32_t>(largest, full.offsets[i + 1] - full.offsets[i]);
+  raycut::PaddedNeighbourBuffer padded;
+  const std::uint32_t k = std::max<std::uint32_t>(largest, 1);
+  EXPECT_FALSE(engine.padded_neighbours(padded, k).overflowed()) << what;
+  if (b.targets() > 0) {
+    const std::vector<std::uint32_t> counts = padded.counts_to_host(),
+                                     matrix = padded.indices_to_host();
+    ASSERT_EQ(counts.size(), b.targets());
+    for (std::size_t i = 0; i < b.targets(); ++i) {
+      std::vector<std::uint32_t> want(full.indices.begin() + full.offsets[i],
+                                      full.indices.begin() + full.offsets[i + 1]);
+      ASSERT_EQ(counts[i], want.size()) << what << ": padded count of target " << i;
+      std::vector<std::uint32_t> row(matrix.begin() + i * k, matrix.begin() + i * k + counts[i]);
+      std::sort(row.begin(), row.end());
+      std::sort(want.begin(), want.end());
+      ASSERT_EQ(row, want) << what << ": padded row " << i;
+    }
+  }
+  if (largest >= 2) {
+    const raycut::PaddedReport report = engine.padded_neighbours(padded, largest - 1);
+    EXPECT_EQ(report.largest_count, largest) << what;
+    EXPECT_GT(report.overflowed_rows, 0u) << what;
+  }
 }
 
 // The same systems with particles (and queries) permuted within each system and the systems in
@@ -986,6 +1013,45 @@ TEST_P(PeriodicEdgeCases, NoShiftsWithoutABox) {
   EXPECT_EQ(l.shifts, std::vector<std::int32_t>(6, 0));
 }
 
+// update() with new positions of the same particles: a rebuild over the same boxes and batch.
+TEST_P(PeriodicEdgeCases, UpdateKeepsTheSystems) {
+  const std::string& method = GetParam();
+  SKIP_UNAVAILABLE(method);
+  for (const char* name : {"very_skewed", "unwrapped_triclinic", "slab"}) {
+    const Family f = find_family(name);
+    const Batch& b = family_batch(f);
+    const Batch moved = one_system(f, 999);
+    Engine engine(method);
+    engine.build({b.xyz.data(), b.sources(), MemorySpace::host}, static_cast<float>(f.cutoff),
+                 f.box);
+    engine.update({moved.xyz.data(), moved.sources(), MemorySpace::host});
+    ASSERT_NO_FATAL_FAILURE(expect_list(engine.neighbours({false, false, false, true}), moved,
+                                        false, method + " " + std::string(name) + " after update"));
+  }
+  // A batch: every system keeps its box (here the sources of each system reversed).
+  const Batch& b = mixed_batch();
+  Batch moved = b;
+  for (System& s : moved.systems) {
+    std::vector<float> reversed;
+    for (std::size_t k = s.xyz.size() / 3; k-- > 0;)
+      reversed.insert(reversed.end(), s.xyz.begin() + 3 * k, s.xyz.begin() + 3 * k + 3);
+    s.xyz = reversed;
+  }
+  moved.finish();
+  Engine engine(method);
+  b.build(engine);
+  engine.update({moved.xyz.data(), moved.sources(), MemorySpace::host});
+  ASSERT_NO_FATAL_FAILURE(expect_list(engine.neighbours({false, false, false, true}), moved, false,
+                                      method + " mixed batch after update"));
+  // Query points are not kept beyond build(): update() refuses them (engine.hpp), build again.
+  const Batch& q = query_batch();
+  q.build(engine);
+  const std::string m = error_message(ErrorCode::unsupported, [&] {
+    engine.update({q.xyz.data(), q.sources(), MemorySpace::host});
+  });
+  EXPECT_TRUE(contains(m, "query")) << m;
+}
+
 INSTANTIATE_TEST_SUITE_P(Methods, PeriodicEdgeCases, ::testing::ValuesIn(methods),
                          [](const auto& info) {
                            std::string name = info.param;
@@ -1026,16 +1092,21 @@ TEST_P(PeriodicErrors, BadOffsets) {
   SKIP_UNAVAILABLE(method);
   const std::vector<float> xyz(3 * 6, 0.25f);
   Engine engine(method);
-  for (const std::vector<std::uint64_t>& offsets :
-       {std::vector<std::uint64_t>{1, 6}, std::vector<std::uint64_t>{0, 3, 5},
-        std::vector<std::uint64_t>{0, 3, 7}, std::vector<std::uint64_t>{0, 4, 2, 6},
-        std::vector<std::uint64_t>{0}}) {
+  // Each with a word of what is wrong.
+  const std::vector<std::pair<std::vector<std::uint64_t>, std::string>> cases = {
+      {{1, 6}, "must be 0"},
+      {{0, 3, 5}, "end at"},
+      {{0, 3, 7}, "end at"},
+      {{0, 4, 2, 6}, "decreas"},
+      {{0}, "2 entries"}};
+  for (const auto& [offsets, problem] : cases) {
     Systems s = Systems::periodic(Box::orthorhombic(1, 1, 1));
     s.offsets = offsets;
     const std::string m = error_message(ErrorCode::invalid_argument, [&] {
       engine.build({xyz.data(), 6, MemorySpace::host}, 0.5f, s);
     });
     EXPECT_TRUE(contains(m, "offsets")) << m;
+    EXPECT_TRUE(contains(m, problem)) << m;
   }
 }
 
@@ -1050,19 +1121,19 @@ TEST_P(PeriodicErrors, BoxCountMatchesNeitherOneNorTheSystems) {
   std::string m = error_message(ErrorCode::invalid_argument, [&] {
     engine.build({xyz.data(), 6, MemorySpace::host}, 0.5f, s);
   });
-  EXPECT_TRUE(contains(m, "box")) << m;
+  EXPECT_TRUE(contains(m, "boxes") && contains(m, "2") && contains(m, "3 systems")) << m;
   s.boxes.resize(4, Box::orthorhombic(1, 1, 1));
   m = error_message(ErrorCode::invalid_argument, [&] {
     engine.build({xyz.data(), 6, MemorySpace::host}, 0.5f, s);
   });
-  EXPECT_TRUE(contains(m, "box")) << m;
+  EXPECT_TRUE(contains(m, "boxes") && contains(m, "4") && contains(m, "3 systems")) << m;
   // Several boxes without offsets: one system, so only one box fits.
   s.offsets.clear();
   s.boxes.resize(2);
   m = error_message(ErrorCode::invalid_argument, [&] {
     engine.build({xyz.data(), 6, MemorySpace::host}, 0.5f, s);
   });
-  EXPECT_TRUE(contains(m, "box")) << m;
+  EXPECT_TRUE(contains(m, "boxes") && contains(m, "1 system")) << m;
   // One box for three systems is fine (it is every system's).
   s.offsets = {0, 2, 4, 6};
   s.boxes = {Box::orthorhombic(1, 1, 1)};
@@ -1088,7 +1159,7 @@ TEST_P(PeriodicErrors, QueryOffsetsMissingOrInconsistent) {
     const std::string m = error_message(ErrorCode::invalid_argument, [&] {
       engine.build({xyz.data(), 6, MemorySpace::host}, 0.5f, s);
     });
-    EXPECT_TRUE(contains(m, "quer")) << m;
+    EXPECT_TRUE(contains(m, "query_offsets")) << m;
   }
   s.query_offsets = {0, 1, 4};
   EXPECT_NO_THROW(engine.build({xyz.data(), 6, MemorySpace::host}, 0.5f, s));
