@@ -187,6 +187,11 @@ std::vector<Family> families() {
       family("faces_triclinic", make_box({2, 0, 0, 0.5, 1.5, 0, 0.25, 0.5, 1.25}), 50);
   faces_tri.faces = true;
   out.push_back(faces_tri);
+  // On the faces and 1000 cells away, still exactly (multiples of 1/16 below 2^24 / 16).
+  Family faces_far = faces_tri;
+  faces_far.name = "faces_triclinic_unwrapped";
+  faces_far.unwrap = 1000;
+  out.push_back(faces_far);
   Family unwrapped = family("unwrapped_triclinic", scaled(rhombohedral, 1.3), 60);
   unwrapped.unwrap = 1000;
   out.push_back(unwrapped);
