@@ -108,4 +108,68 @@ file(GLOB leftovers ${WORK}/.*.tmp-*)
 if(leftovers)
   message(FATAL_ERROR "temporary files left behind: ${leftovers}")
 endif()
+
+# Issue 14: periodic boxes. --cell (9 numbers, or 3 for an orthorhombic box) and --pbc, as
+# separate values or one quoted string; each method against the brute force in the same box.
+# Boxes thinner than 2 cutoffs: pairs once per image, self-images.
+expect_exit(0 check -m cell-list -f uniform,lattice-k1,coincident -n 0,1,150 --cell 1.5 1.5 1.5)
+expect_match("${last_out}" "periodic box 1.5x1.5x1.5 \\(pbc T T T\\)")
+expect_match("${last_out}" "passed: 0 mismatch")
+expect_exit(0 check -m cell-list -f uniform -n 200 --cell "2 0 0 0.7 2 0 -0.3 0.4 2" --pbc "T F T")
+expect_match("${last_out}" "\\[\\[2 0 0\\] \\[0.7 2 0\\] \\[-0.3 0.4 2\\]\\] \\(pbc T F T\\)")
+expect_match("${last_out}" "passed: 0 mismatch")
+expect_exit(0 check -m cell-list -f uniform -n 200 --cell 1 0 0 -0.5 0.8 0 0 0 1 --pbc 1 1 0)
+expect_match("${last_out}" "passed: 0 mismatch")
+# A periodic extended-XYZ file is checked in its box. One particle in a unit cube at cutoff 1.5:
+# its 6 face and 12 edge images (|S| = 1, 1.41), not the 8 corners (1.73).
+file(WRITE ${WORK}/self.xyz "1\nLattice=\"1 0 0 0 1 0 0 0 1\" Properties=species:S:1:pos:R:3 pbc=\"T T T\"\nH 0.3 0.4 0.5\n")
+expect_exit(0 check -m cell-list -i ${WORK}/self.xyz -c 1.5)
+expect_match("${last_out}" "self.xyz +1 +1.5 +cell-list +18 +0 ")
+expect_match("${last_out}" "passed: 0 mismatch")
+# Two particles 1.8 apart, 0.2 through the periodic x face (pbc T F F): 2 entries; with --pbc
+# F F F (overriding the file's) none. Lattice without pbc is periodic on every axis (ASE).
+file(WRITE ${WORK}/pair.xyz "2\nLattice=\"2 0 0 0 2 0 0 0 2\" Properties=species:S:1:pos:R:3 pbc=\"T F F\"\nH 0.1 0.1 0.1\nH 1.9 0.1 0.1\n")
+expect_exit(0 check -m cell-list -i ${WORK}/pair.xyz -c 0.5)
+expect_match("${last_out}" "pair.xyz +2 +0.5 +cell-list +2 +0 ")
+expect_exit(0 check -m cell-list -i ${WORK}/pair.xyz -c 0.5 --pbc F F F)
+expect_match("${last_out}" "pair.xyz +2 +0.5 +cell-list +0 +0 ")
+file(WRITE ${WORK}/lattice.xyz "2\nLattice=\"2 0 0 0 2 0 0 0 2\"\nH 0.1 0.1 0.1\nH 0.1 1.9 1.9\n")
+expect_exit(0 check -m cell-list -i ${WORK}/lattice.xyz -c 0.5)
+expect_match("${last_out}" "lattice.xyz +2 +0.5 +cell-list +2 +0 ")
+# --cell overrides the file's cell (here: too wide for the image).
+expect_exit(0 check -m cell-list -i ${WORK}/pair.xyz -c 0.5 --cell 3 3 3)
+expect_match("${last_out}" "pair.xyz +2 +0.5 +cell-list +0 +0 ")
+# Bad values: exit 2, one line naming the option; a singular cell gets the box's message.
+foreach(bad "1 2" "1 2 3 4" "1 2 x" "1 2 nan" "1 2 3 4 5 6 7 8 1e999")
+  expect_exit(2 check -m cell-list -f uniform -n 10 --cell ${bad})
+  expect_match("${last_err}" "--cell: must be 9 finite numbers")
+endforeach()
+expect_exit(2 check -m cell-list -f uniform -n 10 --cell 1 0 0 2 0 0 0 0 1)
+expect_match("${last_err}" "--cell: .*linearly dependent")
+expect_exit(2 check -m cell-list -f uniform -n 10 --cell 0 1 1)
+expect_match("${last_err}" "--cell: .*zero length")
+foreach(bad "T X T" "T T" "yes")
+  expect_exit(2 check -m cell-list -f uniform -n 10 --cell 2 2 2 --pbc ${bad})
+  expect_match("${last_err}" "--pbc: must be 3 of T/F")
+endforeach()
+expect_exit(2 check -m cell-list -f uniform -n 10 --pbc T T T)
+expect_match("${last_err}" "--pbc: needs a cell")
+expect_exit(2 check -m cell-list -i ${WORK}/cloud.xyz --pbc T T T)
+expect_match("${last_err}" "--pbc: needs a cell")
+expect_exit(2 bench --methods cell-list --param 4 --p 1 --cell 1 1)
+expect_match("${last_err}" "--cell: must be 9 finite numbers")
+# bench in a box: its rows under the suite name with -periodic.
+expect_exit(0 bench --methods cell-list --param 4 --p 1,2 --reps 1 --cell 1 1 1 --out ${WORK}/p.csv)
+file(READ ${WORK}/p.csv csv)
+expect_match("${csv}" "uniform-periodic,cell-list,4,2,128,")
+# Methods without periodic boxes (grid-paper, OptiX) are rows saying so, not mismatches; with
+# nothing left to compare, exit 2.
+expect_exit(0 methods)
+if(last_out MATCHES "grid-paper +available")
+  expect_exit(0 check -m cell-list,grid-paper -f uniform -n 100 --cell 2 2 2)
+  expect_match("${last_out}" "grid-paper +- +- +- +unsupported")
+  expect_match("${last_out}" "passed: 0 mismatch.*1 skipped")
+  expect_exit(2 check -m grid-paper -f uniform -n 100 --cell 2 2 2)
+  expect_match("${last_err}" "none of the methods")
+endif()
 message(STATUS "cli: all checks passed")
