@@ -139,6 +139,12 @@ expect_match("${last_out}" "lattice.xyz +2 +0.5 +cell-list +2 +0 ")
 # --cell overrides the file's cell (here: too wide for the image).
 expect_exit(0 check -m cell-list -i ${WORK}/pair.xyz -c 0.5 --cell 3 3 3)
 expect_match("${last_out}" "pair.xyz +2 +0.5 +cell-list +0 +0 ")
+# A family too large for the box (too many images) is a row saying so; the others are checked.
+expect_exit(0 check -m cell-list -f huge-scale,uniform -n 100 --cell 0.7 0.9 1.3)
+expect_match("${last_out}" "huge-scale +100 .* brute-force +- +- +- +refused")
+expect_match("${last_out}" "passed: 0 mismatch.*1 input\\(s\\) refused")
+expect_exit(2 check -m cell-list -f huge-scale -n 100 --cell 0.7 0.9 1.3)
+expect_match("${last_err}" "every input was refused")
 # Bad values: exit 2, one line naming the option; a singular cell gets the box's message.
 foreach(bad "1 2" "1 2 3 4" "1 2 x" "1 2 nan" "1 2 3 4 5 6 7 8 1e999")
   expect_exit(2 check -m cell-list -f uniform -n 10 --cell ${bad})
