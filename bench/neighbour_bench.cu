@@ -210,8 +210,11 @@ Input lj_liquid(std::uint64_t seed) {
 // each run of per_system particles is an independent uniform sample).
 Input periodic_liquid(std::string suite, int systems, int per_system, std::uint64_t seed) {
   const std::size_t n = static_cast<std::size_t>(systems) * per_system;
-  Input in{std::move(suite), systems, per_system,
-           raycut::uniform_suite(1, static_cast<int>(n), seed)};
+  Input in{std::move(suite),
+           systems,
+           per_system,
+           raycut::uniform_suite(1, static_cast<int>(n), seed),
+           {}};
   const double side = std::cbrt(per_system / 0.8442);
   for (float& x : in.cloud.xyz) x = static_cast<float>(x * side);
   in.cloud.cutoff = 2.5f;
