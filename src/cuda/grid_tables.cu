@@ -239,7 +239,7 @@ namespace {
 struct IsTarget {
   const float4* pos;
   std::uint32_t targets;
-  __host__ __device__ bool operator()(Slot s) const { return __float_as_uint(pos[s].w) < targets; }
+  __device__ bool operator()(Slot s) const { return __float_as_uint(pos[s].w) < targets; }
 };
 }  // namespace
 

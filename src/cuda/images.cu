@@ -9,6 +9,7 @@
 
 #include "cuda/device_buffer.cuh"
 #include "cuda/device_results.cuh"
+#include "raycut/detail/cuda/visit.cuh"
 
 namespace raycut::detail::cuda {
 namespace {
