@@ -651,8 +651,9 @@ int main(int argc, char** argv) {
       ->delimiter(',')
       ->check(CLI::PositiveNumber);
   app.add_option("--ops", o.ops,
-                 "Operations (default all): build,count,list_full,list_half,list_full_dv,padded,"
-                 "lj,lj_forces,functor_lj,list_only_full")
+                 "Operations (default: each input's own; the open ones all of build,count,"
+                 "list_full,list_half,list_full_dv,padded,lj,lj_forces,functor_lj,list_only_full; "
+                 "also list_full_s,list_half_s,lj_forces_only)")
       ->delimiter(',');
   app.add_option("--modes", o.modes, "cold and/or prepared (default both)")->delimiter(',');
   app.add_option("--reps", o.reps, "Timed repetitions after one warm-up (>= 5 for the spec)")
