@@ -16,7 +16,7 @@
 #                periodic.csv/.md (with lists.csv's tables too when the lists step ran before)
 #   sph          the article's SPH run with every GPU method, and the validation scenarios
 #   grid-suites  both suites with grid and grid-paper beside the paper's grid (no regression)
-#   memcheck     compute-sanitizer on the functor, list and grid-variant tests
+#   memcheck     compute-sanitizer on the functor, list, grid-variant and periodic GPU tests
 #   python       the Python package built with the device's Python, and its tests
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -91,8 +91,10 @@ while [ $# -gt 0 ]; do
       # compute-sanitizer on the pair-pass paths: user functors, lists, the grid's variants.
       for t in "raycut_functor_cuda_tests" \
         "raycut_tests --gtest_filter=Methods/Lists.*:Methods/Conformance.*grid_uniform_n4000*:Methods/Conformance.*grid_paper_lattice_k1_n1000*:Methods/Conformance.*brute_force_gpu_coincident_n1000*" \
-        "raycut_grid_variant_tests --gtest_filter=*uniform*:*coincident*"; do
+        "raycut_grid_variant_tests --gtest_filter=*uniform*:*coincident*" \
+        "raycut_tests --gtest_filter=*Periodic*/grid:*Periodic*/brute_force_gpu:*Periodic*/grid_*:*Periodic*/brute_force_gpu_*"; do
         name="${t%% *}"
+        [[ "$t" == *Periodic* ]] && name="$name-periodic"
         # shellcheck disable=SC2086
         compute-sanitizer --tool memcheck --error-exitcode 9 build/tests/$t \
           > "$res/memcheck-$name.log" 2>&1

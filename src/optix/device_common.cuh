@@ -75,7 +75,7 @@ __device__ __forceinline__ void accept_pair(const LaunchParams& p, TargetState& 
                                             const PairGeometry& g) {
   const std::uint32_t ci = caller_index(p, s.target), cj = caller_index(p, j);
   with_functor(p, [&](const auto& f) {
-    if (accepts(f, ci, cj)) f(state_of(s, f), ci, cj, Vec3{g.dx, g.dy, g.dz}, g.r2);
+    if (accepts(f, ci, cj)) apply(f, state_of(s, f), ci, cj, Vec3{g.dx, g.dy, g.dz}, g.r2);
   });
 }
 

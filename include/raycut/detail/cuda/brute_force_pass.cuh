@@ -26,6 +26,7 @@ __global__ void brute_force_kernel(const float* xyz, std::size_t n, std::size_t 
               zi = active ? xyz[3 * i + 2] : 0;
   const std::uint32_t si = active && system ? system[i] : 0;
   const auto ii = static_cast<std::uint32_t>(i);
+  const typename Images::Target ti = active ? images.target(ii) : typename Images::Target{};
   typename F::Accumulator acc{};
   if (active) acc = initial_state(f, ii);
   for (std::size_t base = 0; base < points; base += brute_force_block_size) {
@@ -45,7 +46,8 @@ __global__ void brute_force_kernel(const float* xyz, std::size_t n, std::size_t 
       if (j == i || (system && system[j] != si)) continue;
       const Vec3 r{tile[3 * t] - xi, tile[3 * t + 1] - yi, tile[3 * t + 2] - zi};
       const float r2 = squared_distance(r.x, r.y, r.z);
-      visit(f, acc, in_range(r2, cutoff_squared), ii, static_cast<std::uint32_t>(j), r, r2, images);
+      const auto k = static_cast<std::uint32_t>(j);
+      visit(f, acc, in_range(r2, cutoff_squared), ii, k, k, r, r2, images, ti);
     }
   }
   if (active) f.finish(ii, acc);
