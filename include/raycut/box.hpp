@@ -86,6 +86,10 @@ bool minimum_image_ok(const Box& box, double cutoff);
 // cell far too thin for the cutoff), and the errors of validate().
 std::array<int, 3> image_range(const Box& box, double cutoff);
 
+// The reciprocal rows g_k of the effective cell: the fractional coordinate of x along axis k is
+// x . g_k (g_k . row_m = delta_km), |g_k| = 1 / face width. The errors of validate().
+std::array<std::array<double, 3>, 3> reciprocal_rows(const Box& box);
+
 // A position wrapped into the cell: x = wrapped + shift . cell (shift as a row vector; 0 on
 // non-periodic axes, where wrapped equals x).
 struct Wrapped {

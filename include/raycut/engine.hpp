@@ -37,8 +37,8 @@ struct PositionsView {
 // r_ij = x_j - x_i + S . cell; in range iff |r_ij| < C. Boxes thinner than 2C give a pair once
 // per image, and (i, i, S != 0) self-images. Positions may be unwrapped: S refers to them as given.
 struct Systems {
-  Box box;                             // every system's box (default: open)
-  std::vector<Box> boxes;              // or one box per system of a batch (then `box` is unused)
+  Box box;                 // every system's box (default: open)
+  std::vector<Box> boxes;  // or one box per system of a batch (then `box` is unused)
   // A batch: system s holds particles [offsets[s], offsets[s + 1]) (contiguous), S + 1 entries
   // from 0 to N, non-decreasing. Empty: one system. Pairs never cross systems; indices stay
   // global; systems of 0 and 1 particles are valid.
@@ -90,8 +90,8 @@ struct ResultsView {
 struct NeighbourList {
   std::vector<std::uint64_t> offsets;  // N + 1 entries
   std::vector<std::uint32_t> indices;
-  std::vector<float> distances;  // |r_ij| per entry, when asked
-  std::vector<float> vectors;    // r_ij = x_j - x_i + S . cell per entry (3 floats), when asked
+  std::vector<float> distances;      // |r_ij| per entry, when asked
+  std::vector<float> vectors;        // r_ij = x_j - x_i + S . cell per entry (3 floats), when asked
   std::vector<std::int32_t> shifts;  // S per entry (3 ints), when asked
 };
 
@@ -269,7 +269,8 @@ class Engine {
   }
 
   // New positions of the same N particles, cutoff and systems unchanged: refit or rebuild per
-  // the policy (with boxes, batches or queries: a rebuild, the queries kept).
+  // the policy (with boxes or batches: a rebuild; with query points: Error(unsupported), build
+  // again).
   void update(PositionsView positions);
   void set_update_policy(const UpdatePolicy& policy);
 
@@ -316,6 +317,7 @@ class Engine {
   float cutoff_ = 0;
   Systems systems_;
   std::shared_ptr<void> images_;  // the points a method builds over with images (core/images)
+  bool queries_ = false;          // built with query points
   bool built_ = false;
   bool has_run_ = false;
   Timings timings_;
@@ -328,7 +330,9 @@ class Engine {
 // list filter by the cutoff themselves.
 class VerletList {
  public:
-  VerletList(std::string_view method, float cutoff, float skin, const ListOptions& options = {});
+  // `systems`: boxes and batches as Engine::build takes them (no query points).
+  VerletList(std::string_view method, float cutoff, float skin, const ListOptions& options = {},
+             const Systems& systems = {});
   // New positions (the same N after the first call); returns true when the list was rebuilt.
   bool update(PositionsView positions);
   const NeighbourListBuffer& list() const { return list_; }
@@ -341,6 +345,7 @@ class VerletList {
   Engine engine_;
   float cutoff_, skin_;
   ListOptions options_;
+  Systems systems_;
   NeighbourListBuffer list_;
   std::shared_ptr<void> built_;  // positions at the last build, where the method works
   std::uint64_t rebuilds_ = 0;

@@ -30,9 +30,9 @@
 //   };
 //
 // i and j are the caller's particle indices (with query points: i a query, j a source); with a
-// periodic box r already includes the image shift (r = x_j - x_i + S . cell). The functor carries its outputs (pointers it writes
-// in finish) and its parameters; it is copied to the device by value, so it holds no host-only
-// state when run on a GPU method.
+// periodic box r already includes the image shift (r = x_j - x_i + S . cell). The functor carries
+// its outputs (pointers it writes in finish) and its parameters; it is copied to the device by
+// value, so it holds no host-only state when run on a GPU method.
 #pragma once
 
 #include <cmath>

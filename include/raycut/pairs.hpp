@@ -14,6 +14,7 @@
 #include <string>
 #include <type_traits>
 
+#include "raycut/detail/images.hpp"
 #include "raycut/detail/pair_pass.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/kernels.hpp"
@@ -36,19 +37,31 @@ void for_each_in_range(std::size_t i, const float* xyz, float cutoff_squared, co
   });
 }
 
-// Runs functor f for every target, in parallel over targets (OpenMP).
-template <class Walk, class F>
-void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk& walk, const F& f) {
+// Runs functor f for every target (points [0, n)), in parallel over targets (OpenMP); candidate
+// points become the caller's sources and shifts through `images` (detail/images.hpp).
+template <class Walk, class F, class Images = NoImages>
+void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk& walk, const F& f,
+              const Images& images = {}) {
 #pragma omp parallel for schedule(dynamic, 256)
   for (std::size_t t = 0; t < n; ++t) {
     const auto i = static_cast<std::uint32_t>(t);
     typename F::Accumulator acc = initial_state(f, i);
-    for_each_in_range(t, xyz, cutoff_squared, walk, [&](std::size_t j, Vec3 r, float r2) {
-      const auto source = static_cast<std::uint32_t>(j);
-      if (accepts(f, i, source)) f(acc, i, source, r, r2);
+    for_each_in_range(t, xyz, cutoff_squared, walk, [&](std::size_t k, Vec3 r, float r2) {
+      std::uint32_t j;
+      Shift s{};
+      if (resolve(f, images, true, i, static_cast<std::uint32_t>(k), j, s))
+        apply(f, acc, i, j, r, r2, s);
     });
     f.finish(i, acc);
   }
+}
+
+// run_host over a HostPass, with its images.
+template <class Walk, class F>
+void run_host_pass(const PairPass& pass, const Walk& walk, const F& f) {
+  with_images(pass, [&](const auto& images) {
+    run_host(pass.n, pass.host.xyz, pass.cutoff_squared, walk, f, images);
+  });
 }
 
 // What methods without a pass for the caller's functors (OptiX) answer.
@@ -86,7 +99,7 @@ void for_each_pair(const Engine& engine, const F& f) {
                 "raycut::for_each_pair: method '" + engine.method() +
                     "' works on the GPU: use raycut::cuda::for_each_pair from "
                     "<raycut/cuda/pairs.cuh>, compiled by nvcc");
-  detail::run_host(pass.n, pass.host.xyz, pass.cutoff_squared, detail::HostPassWalk{pass.host}, f);
+  detail::run_host_pass(pass, detail::HostPassWalk{pass.host}, f);
 }
 
 }  // namespace raycut

@@ -181,8 +181,19 @@ std::array<int, 3> image_range(const Box& box, double cutoff) {
   return range;
 }
 
-Wrapped wrap(const Box& box, const std::array<double, 3>& x) {
+std::array<std::array<double, 3>, 3> reciprocal_rows(const Box& box) {
   const Basis basis = effective_basis(box);
+  std::array<std::array<double, 3>, 3> g{};
+  for (int k = 0; k < 3; ++k) {
+    // f_k = x . (e_i x e_j) / det(E) with E's rows e = length * unit.
+    const Vec side = cross(basis.unit[(k + 1) % 3], basis.unit[(k + 2) % 3]);
+    for (int c = 0; c < 3; ++c) g[k][c] = side[c] / basis.det / basis.length[k];
+  }
+  return g;
+}
+
+Wrapped wrap(const Box& box, const std::array<double, 3>& x) {
+  const auto g = reciprocal_rows(box);
   for (int k = 0; k < 3; ++k) {
     if (!std::isfinite(x[k])) {
       throw Error(ErrorCode::invalid_argument, "wrap: position (" + std::to_string(x[0]) + ", " +
@@ -195,9 +206,7 @@ Wrapped wrap(const Box& box, const std::array<double, 3>& x) {
   constexpr double limit = 2147483648.0;  // 2^31
   for (int k = 0; k < 3; ++k) {
     if (!box.pbc[k]) continue;
-    // f_k = x . (e_i x e_j) / det(E) with E's rows e = length * unit.
-    const Vec side = cross(basis.unit[(k + 1) % 3], basis.unit[(k + 2) % 3]);
-    const double f = dot(x, side) / basis.det / basis.length[k];
+    const double f = dot(x, g[k]);
     double shift = std::floor(f);
     if (f - shift >= 1) shift += 1;  // f tiny and negative: f + 1 rounds to 1
     if (!(shift >= -limit && shift < limit)) {

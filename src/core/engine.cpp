@@ -5,10 +5,12 @@
 #include <cstring>
 #include <vector>
 
+#include "core/images.hpp"
 #include "core/list_storage.hpp"
 #include "core/method.hpp"
 #include "core/validation.hpp"
 #if defined(RAYCUT_HAVE_CUDA)
+#include "cuda/images.hpp"
 #include "cuda/runtime.hpp"
 #endif
 
@@ -119,8 +121,11 @@ void Engine::build(PositionsView positions, float cutoff) {
   validate_positions(positions);
   built_ = false;
   has_run_ = false;
-  size_ = positions.size;
+  size_ = sources_ = positions.size;
   cutoff_ = cutoff;
+  systems_ = {};
+  queries_ = false;
+  images_.reset();
   timings_ = {};
   if (size_ == 0) {  // nothing to build; every query answers "no pairs"
     built_ = true;
@@ -137,13 +142,77 @@ void Engine::build(PositionsView positions, float cutoff) {
   built_ = true;
 }
 
+void Engine::build(PositionsView positions, float cutoff, const Systems& systems) {
+  if (systems.plain()) {
+    build(positions, cutoff);
+    return;
+  }
+  detail::Method& m = impl("build");
+  detail::validate_cutoff(cutoff);
+  validate_positions(positions);
+  if (systems.has_queries()) {
+    if (systems.queries.space != positions.space)
+      throw Error(ErrorCode::invalid_argument,
+                  "query points and sources must be in the same memory space (host or device)");
+    validate_positions(systems.queries);
+  }
+  if (const std::string why = m.points_unsupported(); !why.empty())
+    throw Error(ErrorCode::unsupported, "method '" + method_ +
+                                            "' does not take periodic boxes, batches or query "
+                                            "points: " +
+                                            why);
+  const detail::ImagePlan plan = detail::plan_images(systems, positions.size, cutoff);
+  built_ = false;
+  has_run_ = false;
+  size_ = plan.target_count();
+  sources_ = positions.size;
+  cutoff_ = cutoff;
+  systems_ = systems;
+  systems_.queries = {};  // the pointer is not kept beyond build()
+  queries_ = systems.has_queries();
+  images_.reset();
+  timings_ = {};
+  if (size_ == 0) {  // no targets: every query answers "no pairs"
+    built_ = true;
+    return;
+  }
+  const auto start = Clock::now();
+  with_positions_in_method_space(positions, [&](const float* sources) {
+    with_positions_in_method_space(systems.queries, [&](const float* queries) {
+      std::shared_ptr<detail::ImagePoints> points;
+      if (m.space() == MemorySpace::host) {
+        points = detail::expand_on_host(plan, sources, queries);
+      } else {
+#if defined(RAYCUT_HAVE_CUDA)
+        points = detail::cuda::expand_on_device(plan, sources, queries, stream_);
+#endif
+      }
+      m.build_points(points->points(), cutoff);
+      m.synchronize();
+      images_ = points;
+    });
+  });
+  timings_.build_ms = elapsed_ms(start);
+  timings_.device_build_ms = m.device_build_ms();
+  built_ = true;
+}
+
 void Engine::update(PositionsView positions) {
   detail::Method& m = impl("update");
   if (!built_) throw Error(ErrorCode::invalid_argument, "Engine::update() called before build()");
-  if (positions.size != size_)
-    throw Error(ErrorCode::invalid_argument, "Engine::update() needs the " + std::to_string(size_) +
-                                                 " particles of build(), got " +
-                                                 std::to_string(positions.size));
+  if (positions.size != sources_)
+    throw Error(ErrorCode::invalid_argument,
+                "Engine::update() needs the " + std::to_string(sources_) +
+                    " particles of build(), got " + std::to_string(positions.size));
+  if (!systems_.plain()) {
+    // Query points are not kept beyond build(): there is nothing to rebuild them from.
+    if (queries_)
+      throw Error(ErrorCode::unsupported,
+                  "Engine::update() with query points: call build() with the new positions");
+    const Systems systems = systems_;
+    build(positions, cutoff_, systems);
+    return;
+  }
   validate_positions(positions);
   has_run_ = false;
   timings_ = {};
@@ -175,11 +244,11 @@ void Engine::with_positions_in_method_space(const PositionsView& positions, F&& 
 #if defined(RAYCUT_HAVE_CUDA)
   detail::cuda::DeviceMemory device_copy;
 #endif
-  if (positions.space != impl_->space()) {
-    const std::size_t bytes = 3 * size_ * sizeof(float);
+  if (positions.space != impl_->space() && positions.size > 0) {
+    const std::size_t bytes = 3 * positions.size * sizeof(float);
 #if defined(RAYCUT_HAVE_CUDA)
     if (impl_->space() == MemorySpace::host) {
-      host_copy.resize(3 * size_);
+      host_copy.resize(3 * positions.size);
       detail::cuda::download(host_copy.data(), xyz, bytes);
       xyz = host_copy.data();
     } else {
@@ -237,6 +306,10 @@ void Engine::neighbours(NeighbourListBuffer& list, const ListOptions& options) {
   if (!built_)
     throw Error(ErrorCode::invalid_argument, "Engine::neighbours() called before build()");
   if (!list.storage_ || list.storage_->space() != m.space()) list.storage_ = m.make_list_storage();
+  if (options.half && queries_)
+    throw Error(ErrorCode::invalid_argument,
+                "half lists need one point set: with query points every (query, source) pair is "
+                "a pair of its own (ask for the full list)");
   if (size_ == 0) {
     list.storage_->set_empty(options);
     return;
@@ -321,6 +394,9 @@ const float* NeighbourListBuffer::distances() const {
 }
 const float* NeighbourListBuffer::vectors() const {
   return filled(storage_).vectors;
+}
+const std::int32_t* NeighbourListBuffer::shifts() const {
+  return filled(storage_).shifts;
 }
 MemorySpace NeighbourListBuffer::space() const {
   return filled(storage_).space();
@@ -422,8 +498,10 @@ bool moved_beyond(const PositionsView& now, const KeptPositions& then, float dis
 }  // namespace
 
 VerletList::VerletList(std::string_view method, float cutoff, float skin,
-                       const ListOptions& options)
-    : engine_(method), cutoff_(cutoff), skin_(skin), options_(options) {
+                       const ListOptions& options, const Systems& systems)
+    : engine_(method), cutoff_(cutoff), skin_(skin), options_(options), systems_(systems) {
+  if (systems.has_queries())
+    throw Error(ErrorCode::invalid_argument, "VerletList: query points are not supported");
   detail::validate_cutoff(cutoff);
   if (!(skin >= 0) || !std::isfinite(skin))
     throw Error(ErrorCode::invalid_argument,
@@ -434,7 +512,7 @@ VerletList::VerletList(std::string_view method, float cutoff, float skin,
 bool VerletList::update(PositionsView positions) {
   const bool first = !built_;
   if (!first) {
-    if (positions.size != engine_.size())
+    if (positions.size != engine_.sources())
       throw Error(ErrorCode::invalid_argument,
                   "VerletList::update() needs the " + std::to_string(engine_.size()) +
                       " particles of its first call, got " + std::to_string(positions.size));
@@ -443,7 +521,7 @@ bool VerletList::update(PositionsView positions) {
                       0.5f * skin_ * (1.0f - 1e-5f), engine_.stream()))
       return false;
   }
-  engine_.build(positions, cutoff_ + skin_);
+  engine_.build(positions, cutoff_ + skin_, systems_);
   engine_.neighbours(list_, options_);
   built_ = keep_positions(positions, engine_.stream());
   ++rebuilds_;

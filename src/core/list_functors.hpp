@@ -11,23 +11,28 @@
 
 namespace raycut::detail {
 
-// Half lists keep (i, j) with i < j only (no periodic images yet, so i == j never occurs).
+// Half lists keep, of (i, j, S) and (j, i, -S), the one with i < j, or i == j and S
+// lexicographically positive (a self-image; (i, i, 0) never reaches a functor).
 struct HalfFilter {
+  static constexpr bool takes_shift = true;
   bool half;
-  RAYCUT_HD bool accepts(std::uint32_t i, std::uint32_t j) const { return !half || i < j; }
+  RAYCUT_HD bool accepts(std::uint32_t i, std::uint32_t j, const Shift& s) const {
+    return !half || i < j || (i == j && s.positive());
+  }
 };
 
 struct ListCount : HalfFilter {
   using Accumulator = std::uint32_t;
   std::uint32_t* counts;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float) const {
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float,
+                            const Shift&) const {
     ++acc;
   }
   RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { counts[i] = acc; }
 };
 
-// Row i written from offsets[i]; distances and vectors where asked (null otherwise).
+// Row i written from offsets[i]; distances, vectors and shifts where asked (null otherwise).
 struct ListFill : HalfFilter {
   using Accumulator = std::uint64_t;  // the next entry of the row
   static constexpr bool emits_entries = true;
@@ -35,10 +40,16 @@ struct ListFill : HalfFilter {
   std::uint32_t* indices;
   float* distances;
   float* vectors;
+  std::int32_t* shifts;
   RAYCUT_HD Accumulator init(std::uint32_t i) const { return offsets[i]; }
-  RAYCUT_HD void operator()(Accumulator& slot, std::uint32_t, std::uint32_t j, Vec3 r,
-                            float r2) const {
+  RAYCUT_HD void operator()(Accumulator& slot, std::uint32_t, std::uint32_t j, Vec3 r, float r2,
+                            const Shift& s) const {
     indices[slot] = j;
+    if (shifts) {
+      shifts[3 * slot] = s.a;
+      shifts[3 * slot + 1] = s.b;
+      shifts[3 * slot + 2] = s.c;
+    }
     if (distances) distances[slot] = sqrtf(r2);
     if (vectors) {
       vectors[3 * slot] = r.x;
@@ -66,8 +77,8 @@ struct PaddedFill : HalfFilter {
   std::uint32_t* indices;
   std::uint32_t* counts;
   PaddedOverflow* overflow;
-  RAYCUT_HD void operator()(Accumulator& count, std::uint32_t i, std::uint32_t j, Vec3,
-                            float) const {
+  RAYCUT_HD void operator()(Accumulator& count, std::uint32_t i, std::uint32_t j, Vec3, float,
+                            const Shift&) const {
     if (count < k) indices[std::uint64_t{i} * k + count] = j;
     ++count;
   }

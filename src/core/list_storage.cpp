@@ -8,7 +8,8 @@ namespace raycut::detail {
 
 std::size_t HostListStorage::bytes() const {
   return offsets_.capacity() * sizeof(std::uint64_t) + indices_.capacity() * sizeof(std::uint32_t) +
-         (distances_.capacity() + vectors_.capacity()) * sizeof(float);
+         (distances_.capacity() + vectors_.capacity()) * sizeof(float) +
+         shifts_.capacity() * sizeof(std::int32_t);
 }
 
 NeighbourList HostListStorage::to_host() const {
@@ -17,6 +18,7 @@ NeighbourList HostListStorage::to_host() const {
   list.indices.assign(indices_.begin(), indices_.begin() + pairs);
   if (options.distances) list.distances.assign(distances_.begin(), distances_.begin() + pairs);
   if (options.vectors) list.vectors.assign(vectors_.begin(), vectors_.begin() + 3 * pairs);
+  if (options.shifts) list.shifts.assign(shifts_.begin(), shifts_.begin() + 3 * pairs);
   return list;
 }
 
@@ -42,15 +44,20 @@ ListFill HostListStorage::prepare_fill(std::uint64_t entries, bool half) {
     if (indices_.size() < entries) indices_.resize(entries);
     if (options.distances && distances_.size() < entries) distances_.resize(entries);
     if (options.vectors && vectors_.size() < 3 * entries) vectors_.resize(3 * entries);
+    if (options.shifts && shifts_.size() < 3 * entries) shifts_.resize(3 * entries);
   } catch (const std::bad_alloc&) {
-    const double per_pair = 4.0 + (options.distances ? 4.0 : 0.0) + (options.vectors ? 12.0 : 0.0);
+    const double per_pair = bytes_per_entry(options);
     throw Error(ErrorCode::out_of_memory,
                 "not enough host memory for a neighbour list of " + std::to_string(entries) +
                     " pairs (" + format_bytes(per_pair * static_cast<double>(entries)) + ")");
   }
   publish();
-  return {half, offsets_.data(), indices_.data(), options.distances ? distances_.data() : nullptr,
-          options.vectors ? vectors_.data() : nullptr};
+  return {{half},
+          offsets_.data(),
+          indices_.data(),
+          options.distances ? distances_.data() : nullptr,
+          options.vectors ? vectors_.data() : nullptr,
+          options.shifts ? shifts_.data() : nullptr};
 }
 
 void HostListStorage::publish() {
@@ -58,6 +65,12 @@ void HostListStorage::publish() {
   indices = data_or_null(indices_);
   distances = options.distances ? data_or_null(distances_) : nullptr;
   vectors = options.vectors ? data_or_null(vectors_) : nullptr;
+  shifts = options.shifts ? data_or_null(shifts_) : nullptr;
+}
+
+double bytes_per_entry(const ListOptions& options) {
+  return 4.0 + (options.distances ? 4.0 : 0.0) + (options.vectors ? 12.0 : 0.0) +
+         (options.shifts ? 12.0 : 0.0);
 }
 
 PaddedFill HostPaddedStorage::prepare(std::size_t targets, std::uint32_t width, bool half,
@@ -68,8 +81,8 @@ PaddedFill HostPaddedStorage::prepare(std::size_t targets, std::uint32_t width, 
   counts_.resize(targets);
   indices = data_or_null(indices_);
   counts = data_or_null(counts_);
-  return {half,           width,   static_cast<std::uint32_t>(targets), indices_.data(),
-          counts_.data(), overflow};
+  return {{half},          width,          static_cast<std::uint32_t>(targets),
+          indices_.data(), counts_.data(), overflow};
 }
 
 void report_padded(const PaddedStorage& storage, bool throw_on_overflow) {

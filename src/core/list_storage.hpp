@@ -33,7 +33,11 @@ class ListStorage {
   const std::uint32_t* indices = nullptr;
   const float* distances = nullptr;
   const float* vectors = nullptr;
+  const std::int32_t* shifts = nullptr;
 };
+
+// The bytes one list entry takes with these options.
+double bytes_per_entry(const ListOptions& options);
 
 class PaddedStorage {
  public:
@@ -67,6 +71,7 @@ class HostListStorage final : public ListStorage {
   std::vector<std::uint64_t> offsets_;
   std::vector<std::uint32_t> indices_;
   std::vector<float> distances_, vectors_;
+  std::vector<std::int32_t> shifts_;
 };
 
 class HostPaddedStorage final : public PaddedStorage {

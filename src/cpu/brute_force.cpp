@@ -9,20 +9,30 @@ namespace {
 
 class BruteForceCpu final : public HostMethod<BruteForceCpu> {
  public:
+  // Every point of the target's system.
   auto candidates() const {
-    return [this](std::size_t, auto&& f) {
-      for (std::size_t j = 0; j < xyz_.size() / 3; ++j) f(j, &xyz_[3 * j]);
+    return [this](std::size_t i, auto&& f) {
+      const std::size_t points = xyz_.size() / 3;
+      for (std::size_t j = 0; j < points; ++j)
+        if (system_.empty() || system_[j] == system_[i]) f(j, &xyz_[3 * j]);
     };
   }
 
   void build(const float* xyz, std::size_t n, float cutoff) override {
-    require_indexable(n, "brute-force");
-    xyz_.assign(xyz, xyz + 3 * n);
-    set_positions(xyz_.data(), n, cutoff);
+    build_points(Points{xyz, n, n}, cutoff);
+  }
+  std::string points_unsupported() const override { return {}; }
+  void build_points(const Points& points, float cutoff) override {
+    require_indexable(points.size, "brute-force");
+    xyz_.assign(points.xyz, points.xyz + 3 * points.size);
+    system_.clear();
+    if (points.systems > 1) system_.assign(points.system, points.system + points.size);
+    set_positions(xyz_.data(), points.size, cutoff, points.targets, points.images);
   }
 
  private:
   std::vector<float> xyz_;
+  std::vector<std::uint32_t> system_;  // per point (batches); empty: one system
 };
 
 }  // namespace

@@ -32,8 +32,10 @@ namespace {
 //   (never equal to a near label), and the cell has no neighbour cells along this axis.
 // Every float gets a label (|x / w| <= 2^128 / 2^-60 fits a double), with no box, no clamping and
 // no coarsening; keys compare lexicographically (z, y, x), so near cells sort row-major.
+// Batches put the system first: systems never share a cell, and a stencil never leaves its
+// system.
 struct CellKey {
-  std::uint64_t z, y, x;
+  std::uint64_t system, z, y, x;
   auto operator<=>(const CellKey&) const = default;
 };
 
@@ -63,10 +65,18 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   }
 
   void build(const float* xyz, std::size_t n, float cutoff) override {
+    build_points(Points{xyz, n, n}, cutoff);
+  }
+
+  std::string points_unsupported() const override { return {}; }
+  void build_points(const Points& points, float cutoff) override {
     // Particle indices, slots and cell numbers are 32-bit (NeighbourList::indices is uint32).
+    const std::size_t n = points.size;
+    const float* xyz = points.xyz;
+    const std::uint32_t* system = points.systems > 1 ? points.system : nullptr;
     require_indexable(n, "cell-list");
     xyz_.assign(xyz, xyz + 3 * n);
-    set_positions(xyz_.data(), n, cutoff);
+    set_positions(xyz_.data(), n, cutoff, points.targets, points.images);
     inverse_width_ = 1.0 / (static_cast<double>(cutoff) * (1.0 + width_margin));
 
     // Sort particles by (cell key, index): the entries themselves, not indices into them.
@@ -79,8 +89,8 @@ class CellListCpu final : public HostMethod<CellListCpu> {
 #pragma omp parallel for schedule(static)
     for (std::size_t i = 0; i < n; ++i)
       entries[i] = {
-          {axis_label(xyz[3 * i + 2], inverse_width_), axis_label(xyz[3 * i + 1], inverse_width_),
-           axis_label(xyz[3 * i], inverse_width_)},
+          {system ? system[i] : 0u, axis_label(xyz[3 * i + 2], inverse_width_),
+           axis_label(xyz[3 * i + 1], inverse_width_), axis_label(xyz[3 * i], inverse_width_)},
           static_cast<std::uint32_t>(i)};
     std::sort(entries.begin(), entries.end());
     order_.resize(n);
@@ -123,7 +133,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
       for (int dz = -rz; dz <= rz; ++dz)
         for (int dy = -ry; dy <= ry; ++dy)
           for (int dx = -rx; dx <= rx; ++dx) {
-            const CellKey nk{k.z + dz, k.y + dy, k.x + dx};
+            const CellKey nk{k.system, k.z + dz, k.y + dy, k.x + dx};
             auto it = std::lower_bound(cell_keys_.begin(), cell_keys_.end(), nk);
             if (it != cell_keys_.end() && *it == nk)
               per_cell[c].push_back(static_cast<std::uint32_t>(it - cell_keys_.begin()));

@@ -70,6 +70,8 @@ class HostMethod : public Method {
     PairPass pass;
     pass.kind = PassKind::host;
     pass.n = n_;
+    pass.points = points_;
+    pass.images = images_;
     pass.cutoff_squared = cutoff_squared_;
     pass.host.method = this;
     pass.host.xyz = xyz_;
@@ -88,21 +90,29 @@ class HostMethod : public Method {
                   std::string(method) + " supports fewer than 2^32 = 4294967296 particles " +
                       "(32-bit indices), got N = " + std::to_string(n));
   }
-  // The positions candidates() reads targets from (caller's order), and the cutoff.
-  void set_positions(const float* xyz, std::size_t n, float cutoff) {
+  // The points candidates() reads targets from (the first `targets`; the caller's order), their
+  // images, and the cutoff.
+  void set_positions(const float* xyz, std::size_t points, float cutoff, std::size_t targets,
+                     const ImageTables& images = {}) {
     xyz_ = xyz;
-    n_ = n;
+    points_ = points;
+    n_ = targets;
+    images_ = images;
     cutoff_squared_ = squared_cutoff(cutoff);
+  }
+  void set_positions(const float* xyz, std::size_t n, float cutoff) {
+    set_positions(xyz, n, cutoff, n);
   }
 
  private:
   template <class F>
   void run(const F& f) const {
-    run_host(n_, xyz_, cutoff_squared_, static_cast<const Self*>(this)->candidates(), f);
+    run_host_pass(pair_pass(), static_cast<const Self*>(this)->candidates(), f);
   }
 
   const float* xyz_ = nullptr;
-  std::size_t n_ = 0;
+  std::size_t n_ = 0, points_ = 0;  // targets, points
+  ImageTables images_;
   float cutoff_squared_ = 0;
   Results results_;
 };

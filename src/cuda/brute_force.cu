@@ -13,15 +13,24 @@ namespace {
 class BruteForceGpu final : public CudaPairMethod<BruteForceGpu> {
  public:
   void build(const float* xyz, std::size_t n, float cutoff) override {
+    build_points(Points{xyz, n, n}, cutoff);
+  }
+
+  std::string points_unsupported() const override { return {}; }
+  void build_points(const Points& points, float cutoff) override {
+    const std::size_t n = points.size;
     if (n >= UINT32_MAX)  // list indices are 32-bit
       throw Error(ErrorCode::invalid_argument,
-                  "brute-force-gpu handles at most 2^32 - 2 particles, got " + std::to_string(n));
+                  "brute-force-gpu handles at most 2^32 - 2 points, got " + std::to_string(n));
     build_timer_.start(stream_);
     xyz_.resize(3 * n);
-    RAYCUT_CUDA_CHECK(cudaMemcpyAsync(xyz_.data(), xyz, 3 * n * sizeof(float),
+    RAYCUT_CUDA_CHECK(cudaMemcpyAsync(xyz_.data(), points.xyz, 3 * n * sizeof(float),
                                       cudaMemcpyDeviceToDevice, stream_));
     build_timer_.stop(stream_);
-    n_ = n;
+    n_ = points.targets;
+    points_ = n;
+    images_ = points.images;
+    system_ = points.systems > 1 ? points.system : nullptr;
     cutoff_squared_ = squared_cutoff(cutoff);
   }
 
@@ -30,8 +39,11 @@ class BruteForceGpu final : public CudaPairMethod<BruteForceGpu> {
     PairPass pass;
     pass.kind = PassKind::brute_force_gpu;
     pass.n = n_;
+    pass.points = points_;
+    pass.images = images_;
     pass.cutoff_squared = cutoff_squared_;
     pass.brute_force.xyz = xyz_.data();
+    pass.brute_force.system = system_;
     return pass;
   }
   template <class F>
@@ -41,7 +53,9 @@ class BruteForceGpu final : public CudaPairMethod<BruteForceGpu> {
 
  private:
   DeviceBuffer<float> xyz_;
-  std::size_t n_ = 0;
+  std::size_t n_ = 0, points_ = 0;  // targets, points
+  ImageTables images_;
+  const std::uint32_t* system_ = nullptr;
   float cutoff_squared_ = 0;
 };
 

@@ -87,7 +87,7 @@ double EventTimer::elapsed_ms() const {
 
 std::size_t DeviceListStorage::bytes() const {
   return counts_.bytes() + offsets_.bytes() + indices_.bytes() + distances_.bytes() +
-         vectors_.bytes() + scan_temp_.bytes();
+         vectors_.bytes() + shifts_.bytes() + scan_temp_.bytes();
 }
 
 NeighbourList DeviceListStorage::to_host() const {
@@ -99,6 +99,7 @@ NeighbourList DeviceListStorage::to_host() const {
                                  cudaMemcpyDeviceToHost));
   if (options.distances) copy_to_host(list.distances, distances, pairs);
   if (options.vectors) copy_to_host(list.vectors, vectors, 3 * pairs);
+  if (options.shifts) copy_to_host(list.shifts, shifts, 3 * pairs);
   return list;
 }
 
@@ -150,8 +151,9 @@ std::uint64_t DeviceListStorage::scan_counts(cudaStream_t stream) {
 
 ListFill DeviceListStorage::prepare_fill(std::uint64_t entries) {
   pairs = entries;
-  const double per_pair = 4.0 + (options.distances ? 4.0 : 0.0) + (options.vectors ? 12.0 : 0.0);
-  const double held = static_cast<double>(indices_.bytes() + distances_.bytes() + vectors_.bytes());
+  const double per_pair = bytes_per_entry(options);
+  const double held = static_cast<double>(indices_.bytes() + distances_.bytes() + vectors_.bytes() +
+                                          shifts_.bytes());
   const double need = per_pair * static_cast<double>(entries);
   if (need > held) {
     const std::string what = "a neighbour list of " + std::to_string(entries) + " pairs";
@@ -162,10 +164,14 @@ ListFill DeviceListStorage::prepare_fill(std::uint64_t entries) {
   indices_.resize(std::max<std::uint64_t>(entries, 1));
   if (options.distances) distances_.resize(std::max<std::uint64_t>(entries, 1));
   if (options.vectors) vectors_.resize(std::max<std::uint64_t>(3 * entries, 1));
+  if (options.shifts) shifts_.resize(std::max<std::uint64_t>(3 * entries, 1));
   publish();
-  return {options.half, offsets_.data(), indices_.data(),
+  return {{options.half},
+          offsets_.data(),
+          indices_.data(),
           options.distances ? distances_.data() : nullptr,
-          options.vectors ? vectors_.data() : nullptr};
+          options.vectors ? vectors_.data() : nullptr,
+          options.shifts ? shifts_.data() : nullptr};
 }
 
 void DeviceListStorage::publish() {
@@ -173,6 +179,7 @@ void DeviceListStorage::publish() {
   indices = indices_.data();
   distances = options.distances ? distances_.data() : nullptr;
   vectors = options.vectors ? vectors_.data() : nullptr;
+  shifts = options.shifts ? shifts_.data() : nullptr;
 }
 
 std::vector<std::uint32_t> DevicePaddedStorage::indices_to_host() const {

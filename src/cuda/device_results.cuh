@@ -92,6 +92,7 @@ class DeviceListStorage final : public ListStorage {
   DeviceBuffer<std::uint64_t> offsets_;
   DeviceBuffer<std::uint32_t> indices_;
   DeviceBuffer<float> distances_, vectors_;
+  DeviceBuffer<std::int32_t> shifts_;
   DeviceBuffer<unsigned char> scan_temp_;
   MappedValue<std::uint64_t> total_;
 };

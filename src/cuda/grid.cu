@@ -20,16 +20,27 @@ class Grid final : public CudaPairMethod<Grid> {
   explicit Grid(const GridPolicy& policy) : policy_(policy) {}
 
   void build(const float* xyz, std::size_t n, float cutoff) override {
+    build_points(Points{xyz, n, n}, cutoff);
+  }
+
+  std::string points_unsupported() const override { return {}; }
+  void build_points(const Points& points, float cutoff) override {
+    const std::size_t n = points.size;
     if (n >= UINT32_MAX)
       throw Error(ErrorCode::invalid_argument,
-                  "grid handles at most 2^32 - 2 particles, got " + std::to_string(n));
-    n_ = n;
+                  "grid handles at most 2^32 - 2 points, got " + std::to_string(n));
+    n_ = points.targets;
+    points_ = n;
+    images_ = points.images;
     cutoff_squared_ = squared_cutoff(cutoff);
     build_timer_.start(stream_);
     float lo[3], hi[3];
-    box_.compute(xyz, n, lo, hi, stream_);
-    plan_ = plan_grid(policy_, n, lo, hi, cutoff);
-    tables_.build(xyz, static_cast<std::uint32_t>(n), plan_, stream_);
+    box_.compute(points.xyz, n, lo, hi, stream_);
+    plan_ = plan_grid(policy_, GridInput{n, points.targets, points.systems}, lo, hi, cutoff);
+    plan_.geometry.system = points.systems > 1 ? points.system : nullptr;
+    tables_.build(points.xyz, static_cast<std::uint32_t>(n), plan_, stream_);
+    if (points.targets < n)
+      tables_.select_targets(static_cast<std::uint32_t>(points.targets), stream_);
     build_timer_.stop(stream_);
   }
 
@@ -38,8 +49,11 @@ class Grid final : public CudaPairMethod<Grid> {
     PairPass pass;
     pass.kind = PassKind::grid;
     pass.n = n_;
+    pass.points = points_;
+    pass.images = images_;
     pass.cutoff_squared = cutoff_squared_;
     pass.grid = tables_.pass(plan_);
+    if (n_ == points_) pass.grid.targets = nullptr;
     return pass;
   }
   template <class F>
@@ -49,7 +63,8 @@ class Grid final : public CudaPairMethod<Grid> {
 
  private:
   GridPolicy policy_;
-  std::size_t n_ = 0;
+  std::size_t n_ = 0, points_ = 0;  // targets, points
+  ImageTables images_;
   float cutoff_squared_ = 0;
   GridPlan plan_;
   BoundingBox box_;

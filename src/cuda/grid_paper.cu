@@ -42,6 +42,9 @@ __global__ void scatter_to_cells(const float* xyz, std::uint32_t n, CellGrid gri
 
 class GridPaper final : public CudaPairMethod<GridPaper> {
  public:
+  std::string points_unsupported() const override {
+    return "grid-paper reproduces the paper's grid over one open box (use grid)";
+  }
   void build(const float* xyz, std::size_t n, float cutoff) override {
     if (n >= UINT32_MAX)
       throw Error(ErrorCode::invalid_argument,

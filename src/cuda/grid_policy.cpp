@@ -37,23 +37,33 @@ GridKernel lanes_kernel(LanesPerTarget lanes) {
 
 }  // namespace
 
-GridPlan plan_grid(const GridPolicy& policy, std::size_t n, const float lo[3], const float hi[3],
-                   float cutoff, const GridThresholds& t) {
+GridPlan plan_grid(const GridPolicy& policy, const GridInput& input, const float lo[3],
+                   const float hi[3], float cutoff, const GridThresholds& t) {
+  const std::size_t n = input.n;
   const Sizes sizes{n, t};
   GridPlan plan;
   GridGeometry& view = plan.geometry;
 
+  // Systems of a batch share the box [lo, hi] (each in its own frame) and stack their cells.
   const CellGrid coarse = make_cell_grid(lo, hi, cutoff, 1);
-  const double density = static_cast<double>(n) / static_cast<double>(coarse.cell_count());
+  const double density = static_cast<double>(n) /
+                         (static_cast<double>(coarse.cell_count()) * std::max(input.systems, 1u));
   int k = static_cast<int>(policy.cell_width);  // CellWidth::cutoff = 1, half = 2, third = 3
   if (policy.cell_width == CellWidth::automatic) k = density >= t.fine_cells_density ? 2 : 1;
   view.grid = make_cell_grid(lo, hi, cutoff, k);
+  if (input.systems > 1) {
+    // reach empty layers between systems: no stencil row reaches the next system's cells.
+    view.layer_cells = view.grid.dims[2];
+    view.layer_stride = view.layer_cells + static_cast<std::uint32_t>(view.grid.reach);
+    view.grid.dims[2] = input.systems * view.layer_stride;
+  }
 
   // Narrower x cells, unless they alone would push a dense table over 8 cells per particle or
   // the table would be compact anyway (docs/grid.md: sphere surfaces).
   int split = policy.x_split > 0 ? policy.x_split : t.default_x_split[std::min(k, 2)];
   for (;; split /= 2) {
     view.xgrid = split > 1 ? make_cell_grid(lo, hi, cutoff, k * split) : view.grid;
+    view.xgrid.dims[2] = view.grid.dims[2];
     if (split == 1 || policy.x_split > 0 || policy.layout != TableLayout::automatic ||
         sizes.few_cells(cell_count(view)) || !sizes.fits_dense(view.grid.cell_count()))
       break;
@@ -101,9 +111,11 @@ GridPlan plan_grid(const GridPolicy& policy, std::size_t n, const float lo[3], c
   } else if (policy.lanes != LanesPerTarget::automatic) {
     plan.kernel = lanes_kernel(policy.lanes);
   } else {
-    plan.kernel = n >= t.thread_kernel_from
-                      ? thread
-                      : (n <= t.group_of_32_up_to ? GridKernel::lanes32 : GridKernel::lanes16);
+    const std::size_t targets = input.targets;
+    plan.kernel =
+        targets >= t.thread_kernel_from
+            ? thread
+            : (targets <= t.group_of_32_up_to ? GridKernel::lanes32 : GridKernel::lanes16);
   }
   return plan;
 }

@@ -81,7 +81,15 @@ struct GridPlan {
   GridKernel kernel = GridKernel::thread;
 };
 
-GridPlan plan_grid(const GridPolicy& policy, std::size_t n, const float lo[3], const float hi[3],
-                   float cutoff, const GridThresholds& thresholds = {});
+// What the grid is built over: n points, the first `targets` of them targets, in `systems`
+// independent systems (batches: each its own layer of z cells).
+struct GridInput {
+  std::size_t n = 0;
+  std::size_t targets = 0;
+  std::uint32_t systems = 1;
+};
+
+GridPlan plan_grid(const GridPolicy& policy, const GridInput& input, const float lo[3],
+                   const float hi[3], float cutoff, const GridThresholds& thresholds = {});
 
 }  // namespace raycut::detail::cuda

@@ -22,7 +22,7 @@ __global__ void keys_kernel(const float* __restrict__ xyz, Slot n, GridGeometry 
                             Slot* index) {
   const Slot i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= n) return;
-  keys[i] = static_cast<Key>(cell_key(view, xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]));
+  keys[i] = static_cast<Key>(cell_key(view, xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2], i));
   index[i] = i;
 }
 
@@ -43,7 +43,7 @@ __device__ __forceinline__ void count_one(const float* __restrict__ xyz, Slot i,
                                           const GridGeometry& view, std::uint32_t* keys,
                                           Slot* provisional, Slot* start) {
   const auto key =
-      static_cast<std::uint32_t>(cell_key(view, xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]));
+      static_cast<std::uint32_t>(cell_key(view, xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2], i));
   keys[i] = key;
   provisional[i] = atomicAdd(&start[key], 1u);
 }
@@ -235,9 +235,31 @@ void GridTables::build(const float* xyz, std::uint32_t n, const GridPlan& plan,
     build_compact(xyz, plan, stream);
 }
 
+namespace {
+struct IsTarget {
+  const float4* pos;
+  std::uint32_t targets;
+  __host__ __device__ bool operator()(Slot s) const { return __float_as_uint(pos[s].w) < targets; }
+};
+}  // namespace
+
+void GridTables::select_targets(std::uint32_t targets, cudaStream_t stream) {
+  targets_.resize(std::max<std::uint32_t>(targets, 1));
+  selected_.resize(1);
+  const thrust::counting_iterator<std::uint32_t> slots(0);
+  const IsTarget is_target{pos_.data(), targets};
+  std::size_t temp_bytes = 0;
+  RAYCUT_CUDA_CHECK(cub::DeviceSelect::If(nullptr, temp_bytes, slots, targets_.data(),
+                                          selected_.data(), n_, is_target, stream));
+  temp_.resize(std::max<std::size_t>(temp_bytes, 1));
+  RAYCUT_CUDA_CHECK(cub::DeviceSelect::If(temp_.data(), temp_bytes, slots, targets_.data(),
+                                          selected_.data(), n_, is_target, stream));
+}
+
 GridPass GridTables::pass(const GridPlan& plan) const {
   GridPass p;
   p.particles = pos_.data();
+  p.targets = targets_.data();
   p.geometry = plan.geometry;
   p.dense = plan.dense;
   p.dense_table.start = start_.data();

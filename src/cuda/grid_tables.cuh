@@ -25,6 +25,8 @@ class GridTables {
   // Builds what `plan` asks for over n device positions, queued on `stream` (the compact table
   // reads its number of cells back).
   void build(const float* xyz, std::uint32_t n, const GridPlan& plan, cudaStream_t stream);
+  // The slots of points [0, targets) in slot order, for a pass over those targets only.
+  void select_targets(std::uint32_t targets, cudaStream_t stream);
   // The traversal's view of the last build.
   GridPass pass(const GridPlan& plan) const;
 
@@ -43,6 +45,8 @@ class GridTables {
   DeviceBuffer<std::uint32_t> index_, index_alt_, run_start_;
   std::uint32_t* order_ = nullptr;  // index_ or index_alt_: sorted slot -> original index
   DeviceBuffer<float4> pos_;
+  DeviceBuffer<std::uint32_t> targets_;  // select_targets()
+  DeviceBuffer<std::uint32_t> selected_;  // its count (device; the number is known)
   DeviceBuffer<std::uint32_t> start_;  // dense: per cell; compact: per non-empty cell
   DeviceBuffer<std::uint64_t> cell_keys_, row_keys_;
   DeviceBuffer<uint2> row_cells_;

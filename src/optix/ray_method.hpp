@@ -19,6 +19,9 @@ namespace raycut::detail::optix {
 class RayTracingMethod : public cuda::GpuMethod {
  public:
   void build(const float* xyz, std::size_t n, float cutoff) override;
+  std::string points_unsupported() const override {
+    return "the OptiX programs trace one open set of particles (docs/methods.md: use grid)";
+  }
   bool update(const float* xyz, std::size_t n, float cutoff) override;
   void set_update_policy(const UpdatePolicy& policy) override { policy_ = policy; }
   void compute(Kernel kernel, const KernelOptions& options) override;

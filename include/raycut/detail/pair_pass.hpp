@@ -24,11 +24,12 @@ using CandidateSink = void (*)(void* context, std::size_t j, const float* xyz_j)
 struct HostPass {
   const void* method = nullptr;
   void (*walk)(const void* method, std::size_t i, CandidateSink sink, void* context) = nullptr;
-  const float* xyz = nullptr;  // (N, 3), the caller's order
+  const float* xyz = nullptr;  // (points, 3): the caller's order, or the points with images
 };
 
 struct BruteForcePass {
-  const float* xyz = nullptr;  // (N, 3) on the device
+  const float* xyz = nullptr;             // (points, 3) on the device
+  const std::uint32_t* system = nullptr;  // per point (batches); null: one system
 };
 
 // Particles in cell order, one array per coordinate as in the paper.

@@ -14,34 +14,38 @@ namespace raycut::detail::cuda {
 
 constexpr int brute_force_block_size = 256;
 
-template <class F>
-__global__ void brute_force_kernel(const float* xyz, std::size_t n, float cutoff_squared, F f) {
+// Targets are points [0, n), sources every point [0, points) of the same system (batches).
+template <class F, class Images>
+__global__ void brute_force_kernel(const float* xyz, std::size_t n, std::size_t points,
+                                   const std::uint32_t* system, float cutoff_squared, F f,
+                                   Images images) {
   __shared__ float tile[3 * brute_force_block_size];
   const std::size_t i = blockIdx.x * std::size_t{brute_force_block_size} + threadIdx.x;
   const bool active = i < n;
   const float xi = active ? xyz[3 * i] : 0, yi = active ? xyz[3 * i + 1] : 0,
               zi = active ? xyz[3 * i + 2] : 0;
+  const std::uint32_t si = active && system ? system[i] : 0;
   const auto ii = static_cast<std::uint32_t>(i);
   typename F::Accumulator acc{};
   if (active) acc = initial_state(f, ii);
-  for (std::size_t base = 0; base < n; base += brute_force_block_size) {
+  for (std::size_t base = 0; base < points; base += brute_force_block_size) {
     const std::size_t load = base + threadIdx.x;
     __syncthreads();
-    if (load < n) {
+    if (load < points) {
       tile[3 * threadIdx.x] = xyz[3 * load];
       tile[3 * threadIdx.x + 1] = xyz[3 * load + 1];
       tile[3 * threadIdx.x + 2] = xyz[3 * load + 2];
     }
     __syncthreads();
-    const int count =
-        n - base < brute_force_block_size ? static_cast<int>(n - base) : brute_force_block_size;
+    const int count = points - base < brute_force_block_size ? static_cast<int>(points - base)
+                                                             : brute_force_block_size;
     if (!active) continue;
     for (int t = 0; t < count; ++t) {
       const std::size_t j = base + t;
-      if (j == i) continue;
+      if (j == i || (system && system[j] != si)) continue;
       const Vec3 r{tile[3 * t] - xi, tile[3 * t + 1] - yi, tile[3 * t + 2] - zi};
       const float r2 = squared_distance(r.x, r.y, r.z);
-      visit(f, acc, in_range(r2, cutoff_squared), ii, static_cast<std::uint32_t>(j), r, r2);
+      visit(f, acc, in_range(r2, cutoff_squared), ii, static_cast<std::uint32_t>(j), r, r2, images);
     }
   }
   if (active) f.finish(ii, acc);
@@ -49,8 +53,11 @@ __global__ void brute_force_kernel(const float* xyz, std::size_t n, float cutoff
 
 template <class F>
 void run_brute_force(const PairPass& pass, const F& f, cudaStream_t stream) {
-  brute_force_kernel<<<blocks_for(pass.n, brute_force_block_size), brute_force_block_size, 0,
-                       stream>>>(pass.brute_force.xyz, pass.n, pass.cutoff_squared, f);
+  with_images(pass, [&](const auto& images) {
+    brute_force_kernel<<<blocks_for(pass.n, brute_force_block_size), brute_force_block_size, 0,
+                         stream>>>(pass.brute_force.xyz, pass.n, pass.points,
+                                   pass.brute_force.system, pass.cutoff_squared, f, images);
+  });
   RAYCUT_CUDA_CHECK_LAUNCH();
 }
 

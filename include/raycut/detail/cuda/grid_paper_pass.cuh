@@ -1,6 +1,7 @@
 // The seed paper's traversal (Cuda-version/cudaLJ.cu): each target scans the 27 cells around its
 // own in a dense grid of cells at least C wide (built by src/cuda/grid_paper.cu). Kept for
-// comparison; every functor runs through run_grid_paper(). nvcc only.
+// comparison (no periodic images, batches or query points); every functor runs through
+// run_grid_paper(). nvcc only.
 #pragma once
 
 #include <cuda_runtime.h>
@@ -36,7 +37,7 @@ __global__ void grid_paper_kernel(GridPaperPass p, std::uint32_t n, float cutoff
           if (s == t) continue;
           const Vec3 r{p.x[s] - xt, p.y[s] - yt, p.z[s] - zt};
           const float r2 = squared_distance(r.x, r.y, r.z);
-          visit(f, acc, in_range(r2, cutoff_squared), i, p.index[s], r, r2);
+          visit(f, acc, in_range(r2, cutoff_squared), i, p.index[s], r, r2, NoImages{});
         }
       }
     }

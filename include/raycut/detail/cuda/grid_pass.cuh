@@ -86,24 +86,36 @@ struct TargetCell {
   float frac[3];
 };
 
+// The z cell of point k at height z: within its system's layer of z cells (batches).
+__host__ __device__ __forceinline__ std::uint32_t z_cell(const GridGeometry& view, float z,
+                                                         std::uint32_t k) {
+  const std::uint32_t c = view.grid.coord(z, 2);
+  if (view.layer_cells == 0) return c;
+  const std::uint32_t last = view.layer_cells - 1;
+  return view.system[k] * view.layer_stride + (c < last ? c : last);
+}
+
 __device__ __forceinline__ TargetCell locate(const GridGeometry& view, const float4& p) {
   TargetCell c;
   const float pc[3] = {p.x, p.y, p.z};
 #pragma unroll
   for (int a = 0; a < 3; ++a) {
     const CellGrid& g = a == 0 ? view.xgrid : view.grid;
-    c.cell[a] = static_cast<int>(g.coord(pc[a], a));
-    c.frac[a] = static_cast<float>((static_cast<double>(pc[a]) - g.origin[a]) * g.inverse_width -
-                                   c.cell[a]);
+    c.cell[a] =
+        static_cast<int>(a == 2 ? z_cell(view, pc[a], __float_as_uint(p.w)) : g.coord(pc[a], a));
+    const int own = a == 2 ? static_cast<int>(g.coord(pc[a], a)) : c.cell[a];
+    c.frac[a] =
+        static_cast<float>((static_cast<double>(pc[a]) - g.origin[a]) * g.inverse_width - own);
   }
   return c;
 }
 
-// Row-major key of the cell holding (x, y, z): the x cells of a row are consecutive keys.
+// Row-major key of the cell holding point k at (x, y, z): the x cells of a row are consecutive
+// keys.
 __host__ __device__ __forceinline__ std::uint64_t cell_key(const GridGeometry& view, float x,
-                                                           float y, float z) {
+                                                           float y, float z, std::uint32_t k) {
   const CellGrid& g = view.grid;
-  return (static_cast<std::uint64_t>(g.coord(z, 2)) * g.dims[1] + g.coord(y, 1)) *
+  return (static_cast<std::uint64_t>(z_cell(view, z, k)) * g.dims[1] + g.coord(y, 1)) *
              view.xgrid.dims[0] +
          view.xgrid.coord(x, 0);
 }
@@ -187,17 +199,23 @@ __device__ __forceinline__ void for_each_candidate(const float4* __restrict__ po
 
 // One thread per target. ManyRegisters: the registers it wants (fewer warps, each with more
 // loads in flight), for dense boxes.
-template <bool ManyRegisters, class F, class Table>
+// The slot of the t-th target: targets lists them when only some points are targets.
+__device__ __forceinline__ Slot target_slot(const Slot* targets, Slot t) {
+  return targets ? targets[t] : t;
+}
+
+template <bool ManyRegisters, class F, class Table, class Images>
 __global__ void __launch_bounds__(grid_block_size, ManyRegisters ? 1 : 0)
-    grid_thread_kernel(const float4* __restrict__ pos, Slot n, GridGeometry view, Table table,
-                       float cutoff_squared, F f) {
-  const Slot t = blockIdx.x * grid_block_size + threadIdx.x;
-  if (t >= n) return;
+    grid_thread_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n,
+                       GridGeometry view, Table table, float cutoff_squared, F f, Images images) {
+  const Slot tid = blockIdx.x * grid_block_size + threadIdx.x;
+  if (tid >= n) return;
+  const Slot t = target_slot(targets, tid);
   const float4 p = pos[t];
   const std::uint32_t i = original_index(p);
   typename F::Accumulator acc = initial_state(f, i);
   for_each_candidate(pos, t, p, view, table, [&](const float4& q, Vec3 r, float r2) {
-    visit(f, acc, in_range(r2, cutoff_squared), i, original_index(q), r, r2);
+    visit(f, acc, in_range(r2, cutoff_squared), i, original_index(q), r, r2, images);
   });
   f.finish(i, acc);
 }
@@ -253,15 +271,17 @@ __device__ __forceinline__ Slot flatten_rows(const GridGeometry& view, const Tab
 // neighbouring lanes read neighbouring sources. The lanes' states are combined in a fixed order
 // (combine_lanes): results do not change between runs. For functors with a combine(): small
 // inputs, where a thread per target would not fill the GPU.
-template <int G, class F, class Table>
+template <int G, class F, class Table, class Images>
 __global__ void __launch_bounds__(grid_block_size)
-    grid_group_kernel(const float4* __restrict__ pos, Slot n, GridGeometry view, Table table,
-                      float cutoff_squared, F f) {
+    grid_group_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n,
+                      GridGeometry view, Table table, float cutoff_squared, F f, Images images) {
   constexpr int groups = grid_block_size / G;
   __shared__ uint2 rows[groups][grid_max_rows];
   const int group = threadIdx.x / G, lane = threadIdx.x % G;
-  const Slot t = static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / G);
-  const bool active = t < n;  // no early return: every lane takes part in the shuffles
+  const Slot tid =
+      static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / G);
+  const bool active = tid < n;  // no early return: every lane takes part in the shuffles
+  const Slot t = active ? target_slot(targets, tid) : 0;
   const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
   const Slot group_total = flatten_rows<G>(view, table, locate(view, p), active, lane, rows[group]);
 
@@ -291,7 +311,8 @@ __global__ void __launch_bounds__(grid_block_size)
     for (int u = 0; u < U; ++u) {
       const Vec3 d{q[u].x - p.x, q[u].y - p.y, q[u].z - p.z};
       const float r2 = squared_distance(d.x, d.y, d.z);
-      visit(f, acc, in_range(r2, cutoff_squared) && s[u] != t, i, original_index(q[u]), d, r2);
+      visit(f, acc, in_range(r2, cutoff_squared) && s[u] != t, i, original_index(q[u]), d, r2,
+            images);
     }
   }
   combine_lanes<G, F>(acc);
@@ -307,15 +328,17 @@ __global__ void __launch_bounds__(grid_block_size)
 // writes the target's entries together: coalesced stores instead of one scattered store per
 // entry per thread (docs/benchmarks.md, "Neighbour lists"). Entries within a row keep the
 // order of the candidates, the same on every run.
-template <class F, class Table>
+template <class F, class Table, class Images>
 __global__ void __launch_bounds__(grid_block_size)
-    grid_emit_kernel(const float4* __restrict__ pos, Slot n, GridGeometry view, Table table,
-                     float cutoff_squared, F f) {
+    grid_emit_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n, GridGeometry view,
+                     Table table, float cutoff_squared, F f, Images images) {
   constexpr int G = 32, groups = grid_block_size / G;
   __shared__ uint2 rows[groups][grid_max_rows];
   const int group = threadIdx.x / G, lane = threadIdx.x % G;
-  const Slot t = static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / G);
-  const bool active = t < n;  // the whole warp shares t: uniform
+  const Slot tid =
+      static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / G);
+  const bool active = tid < n;  // the whole warp shares t: uniform
+  const Slot t = active ? target_slot(targets, tid) : 0;
   const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
   const Slot total = flatten_rows<G>(view, table, locate(view, p), active, lane, rows[group]);
   const std::uint32_t i = original_index(p);
@@ -328,6 +351,7 @@ __global__ void __launch_bounds__(grid_block_size)
     const Slot fl = first + lane;
     bool take = false;
     std::uint32_t j = 0;
+    Shift shift{};
     Vec3 d{0, 0, 0};
     float r2 = 0;
     if (fl < total) {
@@ -336,13 +360,13 @@ __global__ void __launch_bounds__(grid_block_size)
       const float4 q = pos[s];
       d = Vec3{q.x - p.x, q.y - p.y, q.z - p.z};
       r2 = squared_distance(d.x, d.y, d.z);
-      j = original_index(q);
-      take = in_range(r2, cutoff_squared) && s != t && accepts(f, i, j);
+      take = resolve(f, images, in_range(r2, cutoff_squared) && s != t, i, original_index(q), j,
+                     shift);
     }
     const unsigned taken = __ballot_sync(0xffffffffu, take);
     if (take) {
       typename F::Accumulator at = next + __popc(taken & lanes_below);
-      f(at, i, j, d, r2);
+      apply(f, at, i, j, d, r2, shift);
     }
     next += __popc(taken);
   }
@@ -354,13 +378,14 @@ template <class F>
 void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
   const GridPass& g = pass.grid;
   const auto* pos = static_cast<const float4*>(g.particles);
+  const Slot* targets = g.targets;
   const Slot n = static_cast<Slot>(pass.n);
   const float c2 = pass.cutoff_squared;
-  const auto launch = [&](const auto& table) {
+  const auto launch = [&](const auto& table, const auto& images) {
     if constexpr (emits_entries<F>::value) {
       if (g.geometry.grid.reach <= 3) {  // the flattened row table holds (2 * 3 + 1)^2 rows
         grid_emit_kernel<<<blocks_for(std::uint64_t{n} * 32, grid_block_size), grid_block_size, 0,
-                           stream>>>(pos, n, g.geometry, table, c2, f);
+                           stream>>>(pos, targets, n, g.geometry, table, c2, f, images);
         return;
       }
     }
@@ -372,17 +397,17 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
         constexpr int G = decltype(lanes)::value;
         grid_group_kernel<G>
             <<<blocks_for(std::uint64_t{n} * G, grid_block_size), grid_block_size, 0, stream>>>(
-                pos, n, g.geometry, table, c2, f);
+                pos, targets, n, g.geometry, table, c2, f, images);
       }
     };
     switch (kernel) {
       case GridKernel::thread:
         grid_thread_kernel<false><<<blocks_for(n, grid_block_size), grid_block_size, 0, stream>>>(
-            pos, n, g.geometry, table, c2, f);
+            pos, targets, n, g.geometry, table, c2, f, images);
         break;
       case GridKernel::thread_many_registers:
         grid_thread_kernel<true><<<blocks_for(n, grid_block_size), grid_block_size, 0, stream>>>(
-            pos, n, g.geometry, table, c2, f);
+            pos, targets, n, g.geometry, table, c2, f, images);
         break;
       case GridKernel::lanes4:
         group(std::integral_constant<int, 4>{});
@@ -398,10 +423,12 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
         break;
     }
   };
-  if (g.dense)
-    launch(DenseTable{g.dense_table.start});
-  else
-    launch(CompactTable{g.compact_table});
+  with_images(pass, [&](const auto& images) {
+    if (g.dense)
+      launch(DenseTable{g.dense_table.start}, images);
+    else
+      launch(CompactTable{g.compact_table}, images);
+  });
   RAYCUT_CUDA_CHECK_LAUNCH();
 }
 

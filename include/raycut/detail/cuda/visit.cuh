@@ -8,23 +8,28 @@
 #include <cstdint>
 
 #include "raycut/detail/cuda/check.cuh"
+#include "raycut/detail/images.hpp"
 #include "raycut/kernels.hpp"
 #include "raycut/predicate.hpp"
 
 namespace raycut::detail::cuda {
 
-// One candidate source j of target i, `in` by the shared predicate: the functor's terms when in
-// range. A functor whose terms vanish at r2 = +inf is fed that instead of a branch (a few
-// instructions per pair, and some lane of a warp is in range at almost every step: the branch
-// would only add its own cost); the others branch.
-template <class F>
+// One candidate point k of target i, `in` by the shared predicate: the functor's terms when
+// taken (detail/images.hpp maps k to the caller's source and shift). A functor whose terms
+// vanish at r2 = +inf is fed that instead of a branch (a few instructions per pair, and some
+// lane of a warp is in range at almost every step: the branch would only add its own cost); the
+// others branch.
+template <class F, class Images>
 __device__ __forceinline__ void visit(const F& f, typename F::Accumulator& acc, bool in,
-                                      std::uint32_t i, std::uint32_t j, Vec3 r, float r2) {
-  if constexpr (has_accepts<F>::value) in = in && f.accepts(i, j);
+                                      std::uint32_t i, std::uint32_t k, Vec3 r, float r2,
+                                      const Images& images) {
+  std::uint32_t j;
+  Shift s{};
+  const bool take = resolve(f, images, in, i, k, j, s);
   if constexpr (vanishes_at_infinity<F>::value) {
-    f(acc, i, j, r, in ? r2 : CUDART_INF_F);
+    apply(f, acc, i, j, r, take ? r2 : CUDART_INF_F, s);
   } else {
-    if (in) f(acc, i, j, r, r2);
+    if (take) apply(f, acc, i, j, r, r2, s);
   }
 }
 

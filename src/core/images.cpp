@@ -1,0 +1,205 @@
+#include "core/images.hpp"
+
+#include <algorithm>
+#include <string>
+
+#include "core/validation.hpp"
+#include "raycut/box.hpp"
+
+namespace raycut::detail {
+namespace {
+
+// Images are kept a little beyond the cutoff: f is computed in double (error ~1e-16), the
+// predicate in float on the rounded points; this margin covers both with room to spare.
+constexpr double reach_margin = 1e-4;
+
+[[noreturn]] void refuse(const std::string& what) {
+  throw Error(ErrorCode::invalid_argument, what);
+}
+
+// offsets (S + 1 entries, 0 to total, non-decreasing), or {0, total} for one system.
+std::vector<std::uint64_t> checked_offsets(const std::vector<std::uint64_t>& offsets,
+                                           std::size_t systems, std::size_t total, const char* name,
+                                           const char* what) {
+  if (offsets.empty()) return {0, total};
+  if (offsets.size() != systems + 1)
+    refuse(std::string(name) + " has " + std::to_string(offsets.size()) + " entries; " +
+           std::to_string(systems + 1) + " expected (one per system, plus one)");
+  if (offsets.front() != 0)
+    refuse(std::string(name) + "[0] must be 0, got " + std::to_string(offsets.front()));
+  for (std::size_t s = 0; s + 1 < offsets.size(); ++s)
+    if (offsets[s + 1] < offsets[s])
+      refuse(std::string(name) + " decreases at system " + std::to_string(s) + ": " +
+             std::to_string(offsets[s]) + " then " + std::to_string(offsets[s + 1]));
+  if (offsets.back() != total)
+    refuse(std::string(name) + " must end at the number of " + what + " (" + std::to_string(total) +
+           "), got " + std::to_string(offsets.back()));
+  return offsets;
+}
+
+// A system's frame; errors name the system in a batch.
+ImageFrame frame_of(const Box& box, double cutoff, std::size_t system, bool batch) {
+  ImageFrame frame;
+  try {
+    const auto g = reciprocal_rows(box);  // validates the box
+    image_range(box, cutoff);             // refuses cells far too thin for the cutoff
+    for (int k = 0; k < 3; ++k) {
+      frame.pbc[k] = box.pbc[k];
+      for (int c = 0; c < 3; ++c) {
+        frame.cell[k][c] = box.cell[k][c];
+        frame.reciprocal[k][c] = g[k][c];
+      }
+      if (box.pbc[k]) frame.reach[k] = cutoff / face_width(box, k) * (1 + reach_margin);
+    }
+  } catch (const Error& e) {
+    if (!batch) throw;
+    throw Error(e.code(), "system " + std::to_string(system) + ": " + e.what());
+  }
+  return frame;
+}
+
+class HostImagePoints final : public ImagePoints {
+ public:
+  HostImagePoints(const ImagePlan& plan, const float* sources, const float* queries);
+
+ private:
+  std::vector<float> xyz_;
+  std::vector<std::uint32_t> source_, system_;
+  std::vector<std::int32_t> shift_;
+};
+
+[[noreturn]] void refuse_wrap(std::size_t index, const float* x, const char* what) {
+  refuse(std::string(what) + " " + std::to_string(index) + " at (" + std::to_string(x[0]) + ", " +
+         std::to_string(x[1]) + ", " + std::to_string(x[2]) +
+         ") lies more than 2^31 boxes away: its image shift leaves the int32 range");
+}
+
+HostImagePoints::HostImagePoints(const ImagePlan& plan, const float* sources,
+                                 const float* queries) {
+  const std::uint32_t systems = plan.systems();
+  const std::size_t n = plan.source_count(), targets = plan.target_count();
+  const bool with_queries = plan.has_queries();
+  std::vector<ImageFrame> frames = plan.frames;
+  if (plan.own_frames)
+    for (std::uint32_t s = 0; s < systems; ++s) {
+      if (plan.sources[s] < plan.sources[s + 1])
+        system_origin(frames[s], sources + 3 * plan.sources[s]);
+      else if (with_queries && plan.queries[s] < plan.queries[s + 1])
+        system_origin(frames[s], queries + 3 * plan.queries[s]);
+    }
+
+  // Every particle wrapped, and its images counted, then placed after the targets (and sources).
+  std::vector<WrappedPoint> wrapped(n);
+  std::vector<std::uint64_t> image_offset(n + 1, 0);
+  std::vector<std::uint32_t> system_of(n);
+  for (std::uint32_t s = 0; s < systems; ++s)
+    for (std::uint64_t p = plan.sources[s]; p < plan.sources[s + 1]; ++p) {
+      system_of[p] = s;
+      wrapped[p] = wrap_point(frames[s], sources + 3 * p);
+      if (!wrapped[p].ok) refuse_wrap(p, sources + 3 * p, "particle");
+      image_offset[p + 1] = image_count(frames[s], wrapped[p], false);
+    }
+  for (std::size_t p = 0; p < n; ++p) image_offset[p + 1] += image_offset[p];
+  const std::uint64_t first_image = targets + (with_queries ? n : 0);
+  const std::uint64_t total = first_image + image_offset[n];
+  if (std::string why = too_many_points(total, targets); !why.empty()) refuse(why);
+
+  try {
+    xyz_.resize(3 * total);
+    source_.resize(total);
+    shift_.resize(3 * total);
+    if (systems > 1) system_.resize(total);
+  } catch (const std::bad_alloc&) {
+    throw Error(ErrorCode::out_of_memory,
+                "not enough host memory for " + std::to_string(total) + " points with images (" +
+                    format_bytes(32.0 * static_cast<double>(total)) + ")");
+  }
+  const auto place = [&](std::uint64_t k, const float* p, std::uint32_t source, std::uint32_t s,
+                         const std::int32_t t[3]) {
+    std::copy_n(p, 3, &xyz_[3 * k]);
+    source_[k] = source;
+    std::copy_n(t, 3, &shift_[3 * k]);
+    if (systems > 1) system_[k] = s;
+  };
+  // A wrapped particle or query at point k.
+  const auto place_wrapped = [&](std::uint64_t k, const ImageFrame& frame, const WrappedPoint& w,
+                                 std::uint32_t source, std::uint32_t s) {
+    float p[3];
+    for (int c = 0; c < 3; ++c) p[c] = static_cast<float>(w.x[c] - frame.origin[c]);
+    const std::int32_t t[3] = {-w.shift[0], -w.shift[1], -w.shift[2]};
+    place(k, p, source, s, t);
+  };
+
+  for (std::uint32_t s = 0; s < systems; ++s) {
+    if (with_queries) {
+      for (std::uint64_t q = plan.queries[s]; q < plan.queries[s + 1]; ++q) {
+        const WrappedPoint w = wrap_point(frames[s], queries + 3 * q);
+        if (!w.ok) refuse_wrap(q, queries + 3 * q, "query point");
+        place_wrapped(q, frames[s], w, not_a_source, s);
+      }
+    }
+    for (std::uint64_t p = plan.sources[s]; p < plan.sources[s + 1]; ++p) {
+      const std::uint64_t k = with_queries ? targets + p : p;
+      place_wrapped(k, frames[s], wrapped[p], static_cast<std::uint32_t>(p), s);
+      std::uint64_t next = first_image + image_offset[p];
+      const WrappedPoint& w = wrapped[p];
+      for_each_image(frames[s], w, false, [&](const int nshift[3], const float position[3]) {
+        const std::int32_t t[3] = {nshift[0] - w.shift[0], nshift[1] - w.shift[1],
+                                   nshift[2] - w.shift[2]};
+        place(next++, position, static_cast<std::uint32_t>(p), s, t);
+      });
+    }
+  }
+
+  points_.xyz = xyz_.data();
+  points_.size = total;
+  points_.targets = targets;
+  points_.images = {source_.data(), shift_.data()};
+  points_.system = systems > 1 ? system_.data() : nullptr;
+  points_.systems = systems;
+}
+
+}  // namespace
+
+ImagePlan plan_images(const Systems& systems, std::size_t sources, double cutoff) {
+  const std::size_t count = systems.offsets.empty() ? 1 : systems.offsets.size() - 1;
+  if (!systems.offsets.empty() && systems.offsets.size() < 2)
+    refuse("batch offsets need at least 2 entries (0 and N), got 1");
+  ImagePlan plan;
+  plan.sources = checked_offsets(systems.offsets, count, sources, "batch offsets", "particles");
+  if (systems.has_queries()) {
+    if (systems.queries.size > 0 && systems.queries.xyz == nullptr)
+      refuse("query positions pointer is null for M = " + std::to_string(systems.queries.size));
+    if (count > 1 && systems.query_offsets.empty())
+      refuse("a batch with query points needs query_offsets (one range of queries per system)");
+    plan.queries = checked_offsets(systems.query_offsets, count, systems.queries.size,
+                                   "query_offsets", "query points");
+  } else if (!systems.query_offsets.empty()) {
+    refuse("query_offsets given without query points");
+  }
+  if (!systems.boxes.empty() && systems.boxes.size() != 1 && systems.boxes.size() != count)
+    refuse("Systems::boxes has " + std::to_string(systems.boxes.size()) + " boxes for " +
+           std::to_string(count) + " systems (1 for all, or one per system)");
+  plan.frames.reserve(count);
+  for (std::size_t s = 0; s < count; ++s) {
+    const Box& box =
+        systems.boxes.empty() ? systems.box : systems.boxes[systems.boxes.size() == 1 ? 0 : s];
+    plan.frames.push_back(frame_of(box, cutoff, s, count > 1));
+  }
+  plan.own_frames = count > 1;
+  return plan;
+}
+
+std::string too_many_points(std::uint64_t points, std::size_t targets) {
+  if (points < not_a_source) return {};
+  return "periodic images: " + std::to_string(points) + " points for " + std::to_string(targets) +
+         " targets exceed the 2^32 - 1 that 32-bit indices address " +
+         "(a box far thinner than the cutoff makes many images per particle)";
+}
+
+std::shared_ptr<ImagePoints> expand_on_host(const ImagePlan& plan, const float* sources,
+                                            const float* queries) {
+  return std::make_shared<HostImagePoints>(plan, sources, queries);
+}
+
+}  // namespace raycut::detail

@@ -1,0 +1,60 @@
+// Periodic boxes, batches and query points at the engine level (spec/NEIGHBOURS.md, 2-4): the
+// caller's particles become one set of points that any method with a pair pass builds over as
+// if it were an open cloud, with tables that map each point back to the caller's source and
+// image shift (detail/images.hpp applies them in every traversal). So every such method gets
+// thin boxes, self-images, unwrapped positions, batches and query sets from one implementation.
+//
+// The points, in this order (deterministic):
+//   targets  the caller's particles (or the query points), each wrapped into its system's cell;
+//   sources  with query points only: the caller's particles, wrapped;
+//   images   for each particle in the caller's order, its images n != 0 (n in lexicographic
+//            order) that can lie within the cutoff of its cell (core/image_frame.hpp).
+// Point k has source[k] (the caller's index; not_a_source for a query) and shift T_k, the point
+// being x_source + T_k . cell (minus its system's frame origin); a pair (i, k) has
+// S = T_k - T_i. Batches add system[k]; each system sits in its own frame, near the origin.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "core/image_frame.hpp"
+#include "core/method.hpp"
+#include "raycut/engine.hpp"
+
+namespace raycut::detail {
+
+// What the expansion needs, checked and derived on the host from Systems.
+struct ImagePlan {
+  std::vector<ImageFrame> frames;      // per system
+  std::vector<std::uint64_t> sources;  // S + 1 offsets of the systems' particles
+  std::vector<std::uint64_t> queries;  // S + 1 offsets of their queries; empty: none
+  bool own_frames = false;             // batches: each system in its own frame
+  std::uint32_t systems() const { return static_cast<std::uint32_t>(frames.size()); }
+  bool has_queries() const { return !queries.empty(); }
+  std::size_t source_count() const { return sources.back(); }
+  std::size_t target_count() const { return has_queries() ? queries.back() : sources.back(); }
+};
+
+// Validates `systems` for `sources` particles (offsets, box count, each Box) and the cutoff
+// against each box (image counts); throws Error(invalid_argument) naming what is wrong.
+ImagePlan plan_images(const Systems& systems, std::size_t sources, double cutoff);
+
+// The points a method builds over, owned: the engine keeps them while the build lives.
+class ImagePoints {
+ public:
+  virtual ~ImagePoints() = default;
+  const Points& points() const { return points_; }
+
+ protected:
+  Points points_;
+};
+
+// The expansion on the host (positions in host memory).
+std::shared_ptr<ImagePoints> expand_on_host(const ImagePlan& plan, const float* sources,
+                                            const float* queries);
+
+// Why `points` points cannot be indexed with 32 bits (empty when they can), for the error.
+std::string too_many_points(std::uint64_t points, std::size_t targets);
+
+}  // namespace raycut::detail
