@@ -182,8 +182,9 @@ class Engine:
         self._batch = b
 
     def update(self, positions: Any, skin: float = 0.0) -> None:
-        """New positions of the same N particles, cutoff, boxes, batch and queries unchanged
-        (with those: a rebuild). ``skin`` > 0 lets the OptiX
+        """New positions of the same N particles, cutoff, boxes and batch unchanged (with boxes
+        or a batch: a rebuild; after a build with queries: NotImplementedError, build again).
+        ``skin`` > 0 lets the OptiX
         methods refit their structure instead of rebuilding it while no particle has moved more
         than skin / 2 since the last full build."""
         x, like = _arrays.prepare(positions)

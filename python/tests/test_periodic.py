@@ -39,45 +39,42 @@ def completed_cell(cell, pbc):
     return out
 
 
-def shift_range(targets, sources, cell, pbc, cutoff):
-    """Every S that can give a pair: |fractional r_k| <= cutoff / width_k, so |S_k| is at most
-    the spread of the points' fractional coordinates plus that."""
+def reference(targets, sources, cutoff, cell=None, pbc=(False,) * 3, exclude_self=True):
+    """{(i, j, S)} with |sources[j] - targets[i] + S @ cell| < cutoff in float64, every image S,
+    (i, i, 0) left out when exclude_self; and the ambiguous triples within REL of the cutoff.
+
+    The fractional coordinate of r_ij along a periodic axis k is f_j - f_i + S_k, and at most
+    cutoff / width_k in magnitude: so S_k lies within m_k = ceil(cutoff / width_k) + 1 of
+    -floor(f_j - f_i), and every S there is tried."""
+    t = np.asarray(targets, np.float64).reshape(-1, 3)
+    s = np.asarray(sources, np.float64).reshape(-1, 3)
+    pbc = np.broadcast_to(np.asarray(pbc, bool), (3,))
+    cell = np.zeros((3, 3)) if cell is None else np.asarray(cell, np.float64)
     full = completed_cell(cell, pbc)
     inverse = np.linalg.inv(full)
     volume = abs(np.linalg.det(full))
     ranges = []
-    points = np.concatenate([targets, sources]) if len(targets) + len(sources) else np.zeros((1, 3))
-    frac = points @ inverse
     for k in range(3):
         if not pbc[k]:
             ranges.append([0])
             continue
         width = volume / np.linalg.norm(np.cross(full[(k + 1) % 3], full[(k + 2) % 3]))
-        m = int(np.ceil(frac[:, k].max() - frac[:, k].min() + cutoff / width)) + 1
+        m = int(np.ceil(cutoff / width)) + 1
         ranges.append(range(-m, m + 1))
-    return np.array(list(itertools.product(*ranges)), np.int64)
-
-
-def reference(targets, sources, cutoff, cell=None, pbc=(False,) * 3, exclude_self=True):
-    """{(i, j, S)} with |sources[j] - targets[i] + S @ cell| < cutoff in float64, every image S,
-    (i, i, 0) left out when exclude_self; and the ambiguous triples within REL of the cutoff."""
-    t = np.asarray(targets, np.float64).reshape(-1, 3)
-    s = np.asarray(sources, np.float64).reshape(-1, 3)
-    pbc = np.broadcast_to(np.asarray(pbc, bool), (3,))
-    cell = np.zeros((3, 3)) if cell is None else np.asarray(cell, np.float64)
-    shifts = shift_range(t, s, cell, pbc, cutoff) if pbc.any() else np.zeros((1, 3), np.int64)
-    offsets = shifts.astype(np.float64) @ cell
+    local = np.array(list(itertools.product(*ranges)), np.int64)  # (K, 3)
+    ft, fs = t @ inverse, s @ inverse
     inside, edge = set(), set()
-    zero = np.flatnonzero(~shifts.any(axis=1))
     for i in range(len(t)):
-        r = s[:, None, :] - t[i] + offsets[None, :, :]  # (N, K, 3)
+        base = -np.floor(fs - ft[i]).astype(np.int64) * pbc  # (N, 3)
+        shifts = base[:, None, :] + local[None, :, :]  # (N, K, 3)
+        r = s[:, None, :] - t[i] + shifts.astype(np.float64) @ cell
         dist = np.sqrt((r * r).sum(-1))
         if exclude_self and i < len(s):
-            dist[i, zero] = np.inf
+            dist[i][~shifts[i].any(axis=1)] = np.inf
         for j, k in zip(*np.nonzero(dist < cutoff)):
-            inside.add((i, int(j)) + tuple(int(v) for v in shifts[k]))
+            inside.add((i, int(j)) + tuple(int(v) for v in shifts[j, k]))
         for j, k in zip(*np.nonzero(np.abs(dist - cutoff) <= REL * cutoff)):
-            edge.add((i, int(j)) + tuple(int(v) for v in shifts[k]))
+            edge.add((i, int(j)) + tuple(int(v) for v in shifts[j, k]))
     return inside, edge
 
 
