@@ -163,6 +163,8 @@ def torch_vectors(torch: Any, sources: Any, targets: Any, i: Any, j: Any, shifts
                             device=device)
     if c.shape == (3,):
         c = torch.diag(c)
+    if c.dim() == 3 and (c.shape[0] == 1 or boxes_.count == 1):
+        c = c[0]  # one box for every system
     s = shifts.to(device=device, dtype=dtype)
     if c.dim() == 2:
         return vectors + s @ c

@@ -487,7 +487,7 @@ def test_torch_gradcheck_positions_and_cell(system_method, name):
 
     def f(x, c):
         i, d, D = raycut.neighbor_list("idD", x, cutoff, cell=c, pbc=pbc, method=system_method)
-        assert d.dtype == torch.float64 and D.requires_grad
+        assert d.dtype == torch.float64 and D.dtype == torch.float64
         return pooled(torch, len(x), i, d, D)
 
     assert torch.autograd.gradcheck(f, (x, c), eps=1e-6, atol=1e-6)
@@ -498,6 +498,22 @@ def test_torch_gradcheck_positions_and_cell(system_method, name):
     D32 = raycut.neighbor_list("D", x.detach().float(), cutoff, cell=cell, pbc=pbc,
                                method=system_method)
     assert D32.shape == D.shape
+
+
+def test_torch_cell_forms_and_devices_of_outputs(system_method):
+    torch = torch_double()
+    x, cell, pbc, cutoff = case("small-cubic", seed=55)
+    edges = torch.tensor([1.0, 1.0, 1.0], dtype=torch.float64, requires_grad=True)
+    xt = torch.tensor(x, dtype=torch.float64, requires_grad=True)
+    i, j, d, S = raycut.neighbor_list("ijdS", xt, cutoff, cell=edges, method=system_method)
+    assert S.dtype == torch.int32 and i.dtype == torch.int64 and d.dtype == torch.float64
+    (g,) = torch.autograd.grad(d.sum(), edges)
+    # d |r| / d L_k = sum over pairs of S_k r_k / |r| (r = x_j - x_i + S L).
+    r = xt.detach()[j] - xt.detach()[i] + S.double() * edges.detach()
+    torch.testing.assert_close(g, (S.double() * r / d.detach()[:, None]).sum(0))
+    one = raycut.neighbor_list("d", xt, cutoff, cell=torch.eye(3, dtype=torch.float64)[None],
+                               method=system_method)
+    torch.testing.assert_close(torch.sort(one.detach()).values, torch.sort(d.detach()).values)
 
 
 def test_torch_gradcheck_batch_and_radius(system_method):
@@ -518,7 +534,7 @@ def test_torch_gradcheck_batch_and_radius(system_method):
     assert torch.autograd.gradcheck(f, (x, c), eps=1e-6, atol=1e-6)
     q = torch.tensor(inside_cell(6, cells[3], pbcs[3], seed=61), dtype=torch.float64,
                      requires_grad=True)
-    p = x.detach()[batch == 3].clone().requires_grad_()
+    p = x.detach()[torch.from_numpy(batch == 3)].clone().requires_grad_()
     c3 = c.detach()[3].clone().requires_grad_()
 
     def g(p, q, c):
