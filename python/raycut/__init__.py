@@ -106,6 +106,7 @@ class Engine:
         self._engine = _raycut.Engine(method)
         self._like = _arrays.HOST
         self._queries = False
+        self._batch = _systems.Batch(None, 1, None, None)
 
     def __repr__(self) -> str:
         return (f"raycut.Engine(method={self.method!r}, space={self.space!r}, size={self.size}, "
@@ -173,8 +174,10 @@ class Engine:
         elif batch_queries is not None:
             raise ValueError("batch_queries without queries")
         b = _systems.batch(boxes, n, batch, m, batch_queries)
-        cells = None if boxes is None else boxes.cells
-        flags = None if boxes is None else boxes.pbc
+        # No periodic axis anywhere: no images, an open build (which every method has).
+        periodic = boxes is not None and boxes.periodic
+        cells = boxes.cells if periodic else None
+        flags = boxes.pbc if periodic else None
         self._call(like, self._engine.build, x, _cutoff(cutoff), cells, flags, b.offsets, q,
                    b.query_offsets)
         self._like = like
@@ -453,15 +456,15 @@ def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = No
 
     ``positions``: (N, 3) float32 (NumPy: any float, converted), wrapped into the cell or not
     (S refers to the positions as given). ``cell``: the box, rows the lattice vectors a, b, c
-    (ASE's convention): (3, 3), or 3 numbers for an orthorhombic box, or (S, 3, 3) for one box
+    (ASE's convention): (3, 3), or 3 numbers for an orthorhombic box, or (B, 3, 3) for one box
     per system of a batch; None: open boundaries. ``pbc``: which lattice vectors repeat: one
-    bool, 3 bools, or (S, 3) per system; None: all three when a cell is given. Open axes take
+    bool, 3 bools, or (B, 3) per system; None: all three when a cell is given. Open axes take
     no images (their cell row may be zero). A singular cell raises ValueError.
 
     ``batch``: many independent systems in one call, as torch_cluster's ``batch``: the system
     index of each particle, (N,) integers, sorted (each system's particles contiguous; unsorted
     raises ValueError). Pairs never cross systems; indices stay global; systems may be empty.
-    The number of systems is that of a per-system ``cell``/``pbc``, else ``batch.max() + 1``.
+    The number of systems B is that of a per-system ``cell``/``pbc``, else ``batch.max() + 1``.
 
     The outputs are of the positions' framework and device (CUDA tensors in: CUDA tensors out,
     zero-copy). For PyTorch positions or cell that require grad, ``d`` and ``D`` are computed in
@@ -471,7 +474,7 @@ def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = No
     NotImplementedError for them.
 
     >>> i, j, S = raycut.neighbor_list("ijS", x, 3.0, cell=[10.0, 10.0, 10.0], pbc=True)
-    >>> i, j = raycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (S, 3, 3)
+    >>> i, j = raycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
     """
     letters = _letters(quantities)
     grad = _requires_grad(positions) or (_arrays.framework_of(positions) == "torch"

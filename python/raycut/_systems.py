@@ -34,7 +34,7 @@ def _flags(pbc: Any) -> np.ndarray:
     flags = np.asarray(flags)
     if flags.dtype != bool:
         if not np.issubdtype(flags.dtype, np.integer) or not np.isin(flags, (0, 1)).all():
-            raise ValueError(f"pbc must be booleans (one, 3, or (S, 3)), got {flags.dtype} "
+            raise ValueError(f"pbc must be booleans (one, 3, or (B, 3)), got {flags.dtype} "
                              f"{flags.tolist() if flags.size <= 9 else flags.shape}")
         flags = flags.astype(bool)
     if flags.ndim == 0:
@@ -43,7 +43,7 @@ def _flags(pbc: Any) -> np.ndarray:
         return flags.reshape(1, 3)
     if flags.ndim == 2 and flags.shape[1] == 3:
         return flags
-    raise ValueError(f"pbc must be one bool, 3 bools or (S, 3) bools (one row per system), got "
+    raise ValueError(f"pbc must be one bool, 3 bools or (B, 3) bools (one row per system), got "
                      f"shape {flags.shape}")
 
 
@@ -51,7 +51,7 @@ def _cells(cell: Any) -> np.ndarray:
     try:
         c = np.asarray(_arrays.to_numpy(cell), dtype=np.float64)
     except (TypeError, ValueError) as e:
-        raise ValueError(f"cell must be numbers: 3 (orthorhombic), (3, 3) or (S, 3, 3), rows the "
+        raise ValueError(f"cell must be numbers: 3 (orthorhombic), (3, 3) or (B, 3, 3), rows the "
                          f"lattice vectors ({e})") from None
     if c.shape == (3,):
         return np.diag(c).reshape(1, 3, 3)  # orthorhombic edge lengths, as ASE takes them
@@ -60,7 +60,7 @@ def _cells(cell: Any) -> np.ndarray:
     if c.ndim == 3 and c.shape[1:] == (3, 3):
         return c
     raise ValueError(f"cell must have shape (3,) (orthorhombic edges), (3, 3) (rows: lattice "
-                     f"vectors a, b, c) or (S, 3, 3) (one per system of a batch), got {c.shape}")
+                     f"vectors a, b, c) or (B, 3, 3) (one per system of a batch), got {c.shape}")
 
 
 def boxes(cell: Any, pbc: Any) -> Optional[Boxes]:
@@ -129,7 +129,7 @@ def batch(boxes_: Optional[Boxes], n: int, batch_: Any, m: Optional[int] = None,
     per_system = boxes_ is not None and boxes_.count > 1
     if batch_ is None and batch_queries is None:
         if per_system:
-            raise ValueError(f"cell/pbc give {boxes_.count} systems (shape (S, 3, 3) / (S, 3)) "
+            raise ValueError(f"cell/pbc give {boxes_.count} systems (shape (B, 3, 3) / (B, 3)) "
                              "but no batch says which particles belong to which: pass batch=")
         return Batch(boxes_, 1, None, None)
     names = ("batch", "batch_queries") if m is None else ("batch_points", "batch_queries")
