@@ -9,7 +9,21 @@
 // Inputs: the paper's uniform suite exactly as `raycut bench -s uniform` makes it
 // (raycut::uniform_suite(beta, p, seed 1): N = p beta^3 in [0,1)^3, cutoff 1/beta), and with
 // --lj-liquid an LJ liquid: N = 2^20 uniform random in a cube at density 0.8442, rc = 2.5,
-// NOT periodic (the engine has no periodic boxes yet).
+// not periodic (the rows measured before the engine had boxes).
+//
+// With --periodic, the periodic workloads of spec/NEIGHBOURS.md section 8 (density 0.8442,
+// rc 2.5, cube sides from the density, uniform random positions in [0, side)^3 of each system):
+//   lj-liquid-pbc  one periodic cube of 2^20 particles (side ~107.5)
+//   batch-pbc      512 periodic cubes of 128 particles (side ~5.33) as one batch
+//                  (Systems::offsets, one box shared by all), and 64 cubes of 4096 (side ~16.9)
+// with their own operations (--ops overrides them), the lists with image shifts:
+//   list_full_s     build + neighbours(buffer, {shifts})
+//   list_half_s     build + neighbours(buffer, {half, shifts})
+//   lj_forces_only  run(Kernel::lj_forces) alone, on an engine built before the timing (cold:
+//                   a fresh one, so the result arrays are allocated inside the timing)
+// (lj-liquid-pbc: build, count, list_full_s, list_half_s, lj_forces, lj_forces_only; the
+// batches: build, count, list_full_s). Their rows have param = systems, p = particles per
+// system.
 //
 // Operations (each but build and list_only_full includes Engine::build):
 //   build           Engine::build on device positions
@@ -22,6 +36,7 @@
 //   functor_lj      build + raycut::cuda::for_each_pair with a user functor carrying the
 //                   built-in LJ energy math and its own output buffer
 //   list_only_full  neighbours(buffer) alone, on an engine built before the timing
+//   list_full_s, list_half_s, lj_forces_only: above (any input; shifts are 0 without a box)
 // One CSV row per (input, method, operation, mode); `pairs` is the ordered in-range pair count
 // (sum of Kernel::count), `entries` what the result holds, `check` whether it agrees (list
 // entries vs pairs; functor energies bitwise against Kernel::lj).
@@ -119,7 +134,10 @@ enum class Op {
   lj,
   lj_forces,
   functor_lj,
-  list_only_full
+  list_only_full,
+  list_full_s,
+  list_half_s,
+  lj_forces_only
 };
 const std::vector<std::pair<std::string, Op>> kOps = {{"build", Op::build},
                                                       {"count", Op::count},
@@ -130,7 +148,18 @@ const std::vector<std::pair<std::string, Op>> kOps = {{"build", Op::build},
                                                       {"lj", Op::lj},
                                                       {"lj_forces", Op::lj_forces},
                                                       {"functor_lj", Op::functor_lj},
-                                                      {"list_only_full", Op::list_only_full}};
+                                                      {"list_only_full", Op::list_only_full},
+                                                      {"list_full_s", Op::list_full_s},
+                                                      {"list_half_s", Op::list_half_s},
+                                                      {"lj_forces_only", Op::lj_forces_only}};
+// What runs by default: every operation of the first ten on the open inputs (the rows measured
+// before the periodic ones), these on the periodic ones.
+const std::vector<Op> kOpenOps = {Op::build,        Op::count,         Op::list_full, Op::list_half,
+                                  Op::list_full_dv, Op::padded,        Op::lj,        Op::lj_forces,
+                                  Op::functor_lj,   Op::list_only_full};
+const std::vector<Op> kLiquidOps = {Op::build,       Op::count,     Op::list_full_s,
+                                    Op::list_half_s, Op::lj_forces, Op::lj_forces_only};
+const std::vector<Op> kBatchOps = {Op::build, Op::count, Op::list_full_s};
 
 Op parse_op(const std::string& name) {
   for (const auto& [n, op] : kOps)
@@ -148,6 +177,7 @@ struct Options {
   std::vector<std::string> modes = {"cold", "prepared"};
   int reps = 5;
   bool lj_liquid = false;
+  bool periodic = false;
   bool no_suite = false;
   bool own_stream = false;
   double padded_factor = 1.25;
@@ -156,20 +186,46 @@ struct Options {
 };
 
 struct Input {
-  std::string suite;  // uniform or lj-liquid
+  std::string suite;  // uniform, lj-liquid, lj-liquid-pbc or batch-pbc
   int param = 0, p = 0;
   raycut::PointCloud cloud;
+  raycut::Systems systems;  // plain for the open inputs
 };
 
 // The LJ liquid of spec/NEIGHBOURS.md section 8 without periodicity: 2^20 particles uniform in a
 // cube of side (N / 0.8442)^(1/3), rc = 2.5 (the suite's generator, scaled: deterministic).
 Input lj_liquid(std::uint64_t seed) {
   const int n = 1 << 20;
-  Input in{"lj-liquid", 0, 0, raycut::uniform_suite(1, n, seed)};
+  Input in{"lj-liquid", 0, 0, raycut::uniform_suite(1, n, seed), {}};
   const float side = static_cast<float>(std::cbrt(n / 0.8442));
   for (float& x : in.cloud.xyz) x *= side;
   in.cloud.cutoff = 2.5f;
   in.cloud.name = "lj-liquid N=2^20 density 0.8442 rc 2.5 (not periodic)";
+  return in;
+}
+
+// `systems` periodic cubes of `per_system` particles at density 0.8442, rc = 2.5, as one input:
+// one system (no offsets) when systems == 1, else a batch sharing one box. Positions uniform in
+// [0, side)^3 of each system (the suite's generator, scaled; its streams are per particle, so
+// each run of per_system particles is an independent uniform sample).
+Input periodic_liquid(std::string suite, int systems, int per_system, std::uint64_t seed) {
+  const std::size_t n = static_cast<std::size_t>(systems) * per_system;
+  Input in{std::move(suite),
+           systems,
+           per_system,
+           raycut::uniform_suite(1, static_cast<int>(n), seed),
+           {}};
+  const double side = std::cbrt(per_system / 0.8442);
+  for (float& x : in.cloud.xyz) x = static_cast<float>(x * side);
+  in.cloud.cutoff = 2.5f;
+  in.systems.box = raycut::Box::orthorhombic(side, side, side);
+  if (systems > 1)
+    for (int s = 0; s <= systems; ++s)
+      in.systems.offsets.push_back(static_cast<std::uint64_t>(s) * per_system);
+  char name[128];
+  std::snprintf(name, sizeof name, "%s %d x %d, periodic cube side %.3f, rc 2.5", in.suite.c_str(),
+                systems, per_system, side);
+  in.cloud.name = name;
   return in;
 }
 
@@ -189,11 +245,13 @@ struct State {
   raycut::PaddedNeighbourBuffer padded;
   DeviceFloats energy;
   raycut::PaddedReport report;
+  bool built = false;  // the engine was built outside the timing (prepare())
 };
 
 struct Context {
   std::string method;
   raycut::PositionsView positions;
+  const raycut::Systems* systems = nullptr;  // null or plain: the two-argument build
   float cutoff = 0;
   std::uint32_t k = 1;  // padded width
   cudaStream_t stream = nullptr;
@@ -206,6 +264,27 @@ void make_engine(State& s, const Context& c) {
   s.engine = s.owned.get();
 }
 
+// Open inputs keep the two-argument build their rows were measured with.
+void build(raycut::Engine& e, const Context& c) {
+  if (c.systems && !c.systems->plain())
+    e.build(c.positions, c.cutoff, *c.systems);
+  else
+    e.build(c.positions, c.cutoff);
+}
+
+// Operations timed on an engine built before the timing (by prepare()).
+bool prebuilt(Op op) {
+  return op == Op::lj_forces_only;
+}
+
+// Outside the timing: the built engine of a compute-alone operation (once per prepared state).
+void prepare(Op op, State& s, const Context& c) {
+  if (!prebuilt(op) || s.built) return;
+  if (!s.engine) make_engine(s, c);
+  build(*s.engine, c);
+  s.built = true;
+}
+
 // The operation itself: everything between the two events.
 void execute(Op op, State& s, const Context& c) {
   if (op == Op::list_only_full) {
@@ -213,9 +292,13 @@ void execute(Op op, State& s, const Context& c) {
     s.engine->neighbours(s.list);
     return;
   }
+  if (op == Op::lj_forces_only) {
+    s.engine->run(raycut::Kernel::lj_forces);
+    return;
+  }
   if (!s.engine) make_engine(s, c);
   raycut::Engine& e = *s.engine;
-  e.build(c.positions, c.cutoff);
+  build(e, c);
   switch (op) {
     case Op::build:
       break;
@@ -246,7 +329,21 @@ void execute(Op op, State& s, const Context& c) {
       raycut::cuda::for_each_pair(e, neighbour_bench::UserLennardJones{1.0f, 4.0f, out}, c.stream);
       break;
     }
+    case Op::list_full_s: {
+      raycut::ListOptions lo;
+      lo.shifts = true;
+      e.neighbours(s.list, lo);
+      break;
+    }
+    case Op::list_half_s: {
+      raycut::ListOptions lo;
+      lo.half = true;
+      lo.shifts = true;
+      e.neighbours(s.list, lo);
+      break;
+    }
     case Op::list_only_full:
+    case Op::lj_forces_only:
       break;
   }
 }
@@ -281,7 +378,7 @@ std::string compare_energies(const std::vector<float>& got, const std::vector<fl
 }
 
 bool uses_run(Op op) {
-  return op == Op::count || op == Op::lj || op == Op::lj_forces;
+  return op == Op::count || op == Op::lj || op == Op::lj_forces || op == Op::lj_forces_only;
 }
 
 // One warm-up, then `reps` timed repetitions of `op` in `mode`.
@@ -298,10 +395,13 @@ Measurement measure(Op op, bool cold, int reps, const Context& c,
   }
   for (int r = -1; r < reps; ++r) {
     std::optional<State> fresh;
+    // A compute-alone operation's engine is built here, outside the timing (cold: a fresh one).
+    if (prebuilt(op)) prepare(op, cold ? fresh.emplace() : *prepared, c);
     check_cuda(cudaDeviceSynchronize(), "cudaDeviceSynchronize");
     const auto t0 = std::chrono::steady_clock::now();
     check_cuda(cudaEventRecord(start, c.stream), "cudaEventRecord");
-    State& s = cold ? fresh.emplace() : *prepared;  // cold: construction inside the timing
+    // cold: construction inside the timing
+    State& s = !cold ? *prepared : fresh ? *fresh : fresh.emplace();
     execute(op, s, c);
     check_cuda(cudaEventRecord(stop, c.stream), "cudaEventRecord");
     check_cuda(cudaEventSynchronize(stop), "cudaEventSynchronize");
@@ -314,12 +414,19 @@ Measurement measure(Op op, bool cold, int reps, const Context& c,
         case Op::list_full:
         case Op::list_only_full:
         case Op::list_full_dv:
-        case Op::list_half: {
+        case Op::list_half:
+        case Op::list_full_s:
+        case Op::list_half_s: {
           m.entries = s.list.pairs();
           m.bytes = s.list.bytes();
           m.has_entries = true;
-          const std::uint64_t want = op == Op::list_half ? pairs / 2 : pairs;
+          // A half list holds one of (i, j, S) and (j, i, -S), self-images (i, i, +-S) included.
+          const bool half = op == Op::list_half || op == Op::list_half_s;
+          const std::uint64_t want = half ? pairs / 2 : pairs;
           m.check = m.entries == want ? "ok" : "MISMATCH";
+          const bool shifts = op == Op::list_full_s || op == Op::list_half_s;
+          if (shifts && m.entries > 0 && s.list.shifts() == nullptr)
+            m.check = "MISMATCH(no shifts)";
           break;
         }
         case Op::padded: {
@@ -351,7 +458,7 @@ Measurement measure(Op op, bool cold, int reps, const Context& c,
       m.host.push_back(std::chrono::duration<double, std::milli>(t1 - t0).count());
       if (op != Op::list_only_full) {
         const raycut::Timings& t = s.engine->last_timings();
-        m.engine_build.push_back(t.device_build_ms);
+        if (!prebuilt(op)) m.engine_build.push_back(t.device_build_ms);
         if (uses_run(op)) m.engine_compute.push_back(t.device_compute_ms);
       }
     }
@@ -375,11 +482,8 @@ std::string fmt(double v) {
 }
 
 int run(const Options& o) {
-  std::vector<Op> ops;
-  if (o.ops.empty())
-    for (const auto& [n, op] : kOps) ops.push_back(op);
-  else
-    for (const auto& name : o.ops) ops.push_back(parse_op(name));
+  std::vector<Op> asked;  // empty: each input's default operations
+  for (const auto& name : o.ops) asked.push_back(parse_op(name));
   std::vector<bool> modes;  // cold?
   for (const auto& m : o.modes) {
     if (m == "cold")
@@ -417,6 +521,11 @@ int run(const Options& o) {
     for (int beta : o.betas)
       for (int p : o.ps) configs.push_back({"uniform", {beta, p}});
   if (o.lj_liquid) configs.push_back({"lj-liquid", {0, 0}});
+  if (o.periodic) {  // (systems, particles per system)
+    configs.push_back({"lj-liquid-pbc", {1, 1 << 20}});
+    configs.push_back({"batch-pbc", {512, 128}});
+    configs.push_back({"batch-pbc", {64, 4096}});
+  }
 
   std::printf(
       "neighbour_bench on %s (driver %s, CUDA %s), %d reps, %s stream; ms = CUDA-event "
@@ -427,15 +536,25 @@ int run(const Options& o) {
               "method", "operation", "cold ms", "prep ms", "entries", "check");
   int failures = 0;
   for (const auto& [suite, pp] : configs) {
-    const Input in = suite == "uniform" ? Input{"uniform", pp.first, pp.second,
-                                                raycut::uniform_suite(pp.first, pp.second, o.seed)}
-                                        : lj_liquid(o.seed);
+    const Input in = suite == "uniform"     ? Input{"uniform",
+                                                pp.first,
+                                                pp.second,
+                                                raycut::uniform_suite(pp.first, pp.second, o.seed),
+                                                {}}
+                     : suite == "lj-liquid" ? lj_liquid(o.seed)
+                                            : periodic_liquid(suite, pp.first, pp.second, o.seed);
+    const std::vector<Op>& ops = !asked.empty()             ? asked
+                                 : suite == "lj-liquid-pbc" ? kLiquidOps
+                                 : suite == "batch-pbc"     ? kBatchOps
+                                                            : kOpenOps;
     const std::size_t n = in.cloud.size();
+    if (!in.systems.plain()) std::printf("# %s\n", in.cloud.name.c_str());
     const raycut::DeviceArray positions(in.cloud.xyz);
     for (const auto& method : o.methods) {
       Context c;
       c.method = method;
       c.positions = positions.view();
+      c.systems = &in.systems;
       c.cutoff = in.cloud.cutoff;
       c.stream = stream;
       std::uint64_t pairs = 0;
@@ -444,9 +563,11 @@ int run(const Options& o) {
       try {
         built = std::make_unique<raycut::Engine>(method);
         if (stream) built->set_stream(stream);
-        built->build(c.positions, c.cutoff);
+        build(*built, c);
         for (auto v : built->compute(raycut::Kernel::count).count) pairs += v;
-        reference_energy = built->compute(raycut::Kernel::lj).energy;
+        // Only the functor's check needs it (a method may refuse lj elsewhere).
+        if (std::find(ops.begin(), ops.end(), Op::functor_lj) != ops.end())
+          reference_energy = built->compute(raycut::Kernel::lj).energy;
       } catch (const std::exception& e) {
         std::fprintf(stderr, "  %s N=%zu %s: skipped: %s\n", suite.c_str(), n, method.c_str(),
                      e.what());
@@ -470,7 +591,7 @@ int run(const Options& o) {
             cudaGetLastError();  // a refusal, not a sticky error, is what we go on from
             continue;
           }
-          if (m.check == "MISMATCH" || m.check.rfind("DIFFERS", 0) == 0) ++failures;
+          if (m.check.rfind("MISMATCH", 0) == 0 || m.check.rfind("DIFFERS", 0) == 0) ++failures;
           shown[cold ? 0 : 1] = median(m.events);
           if (m.has_entries) entries_shown = std::to_string(m.entries);
           if (op == Op::padded)
@@ -530,15 +651,20 @@ int main(int argc, char** argv) {
       ->delimiter(',')
       ->check(CLI::PositiveNumber);
   app.add_option("--ops", o.ops,
-                 "Operations (default all): build,count,list_full,list_half,list_full_dv,padded,"
-                 "lj,lj_forces,functor_lj,list_only_full")
+                 "Operations (default: each input's own; the open ones all of build,count,"
+                 "list_full,list_half,list_full_dv,padded,lj,lj_forces,functor_lj,list_only_full; "
+                 "also list_full_s,list_half_s,lj_forces_only)")
       ->delimiter(',');
   app.add_option("--modes", o.modes, "cold and/or prepared (default both)")->delimiter(',');
   app.add_option("--reps", o.reps, "Timed repetitions after one warm-up (>= 5 for the spec)")
       ->check(CLI::Range(1, 1000));
   app.add_flag("--lj-liquid", o.lj_liquid,
                "Also the LJ liquid: N = 2^20, density 0.8442, rc 2.5, not periodic");
-  app.add_flag("--no-suite", o.no_suite, "Skip the uniform suite (with --lj-liquid: only it)");
+  app.add_flag("--periodic", o.periodic,
+               "Also the periodic workloads: the LJ liquid in a periodic cube (2^20), batches of "
+               "512 x 128 and 64 x 4096 periodic cubes; lists with shifts, lj_forces");
+  app.add_flag("--no-suite", o.no_suite,
+               "Skip the uniform suite (with --lj-liquid / --periodic: only those)");
   app.add_flag("--stream", o.own_stream,
                "Run on an own non-blocking stream (default: the legacy default stream)");
   app.add_option("--padded-factor", o.padded_factor, "K = ceil(factor x mean count)")

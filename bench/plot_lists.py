@@ -6,6 +6,8 @@ issue, uniform suite, beta 32): at p = 32 (1,048,576 particles) build + full lis
 <= 3x build + count, build + half list <= 1.2 ms, build + lj_forces <= 0.75 ms, build + lj
 <= 0.6 ms, the user functor within 5 % of the built-in lj; at p = 8 build + full list <= 0.4 ms.
 Targets are judged on --mode (default prepared: reused buffers) for every method in the CSV.
+Rows of the periodic workloads (neighbour_bench --periodic: suites ending in -pbc, param =
+systems, p = particles per system) get a table of their own.
 
   plot_lists.py lists.csv --md lists.md --png lists.png [--mode prepared]
 """
@@ -15,7 +17,11 @@ import math
 from collections import defaultdict
 
 OPS = ["build", "count", "list_full", "list_only_full", "list_half", "list_full_dv", "padded",
-       "lj", "lj_forces", "functor_lj"]
+       "lj", "lj_forces", "functor_lj", "list_full_s", "list_half_s", "lj_forces_only"]
+
+
+def periodic(suite):
+    return suite.endswith("-pbc")
 
 # (description, operation, beta, p, kind, limit): kind "ms" compares the median with the limit;
 # "ratio:OP" compares median / median of OP with the limit.
@@ -87,10 +93,12 @@ def main():
            f"result, medians of {env['reps']} after a warm-up. prepared: one Engine and its "
            "buffers reused; cold: a fresh Engine and fresh buffers, every allocation timed.\n"]
 
-    out.append(f"### Targets (uniform suite, beta 32; judged on {args.mode})\n")
-    head = "| target | limit | method | " + " | ".join(modes) + " | result |"
-    out += [head, "|" + "---|" * (4 + len(modes))]
-    for t in TARGETS:
+    has_uniform = any(k[0] == "uniform" for k in table)
+    if has_uniform:
+        out.append(f"### Targets (uniform suite, beta 32; judged on {args.mode})\n")
+        head = "| target | limit | method | " + " | ".join(modes) + " | result |"
+        out += [head, "|" + "---|" * (4 + len(modes))]
+    for t in TARGETS if has_uniform else []:
         desc, _, _, _, kind, limit = t
         unit = "x" if kind.startswith("ratio:") else " ms"
         for method in methods:
@@ -100,16 +108,17 @@ def main():
             cells = " | ".join(fmt(vals[m]) + (unit if not math.isnan(vals[m]) else "")
                                for m in modes)
             out.append(f"| {desc} | <= {limit:g}{unit} | {method} | {cells} | {result} |")
-    out.append("")
+    if has_uniform:
+        out.append("")
 
-    for mode in modes:
+    for mode in modes if any(not periodic(k[0]) for k in table) else []:
         out.append(f"### Every configuration ({mode}, ms; list/count = build + full list over "
                    "build + count; functor/lj = build + user functor over build + lj)\n")
         cols = ["suite", "beta", "p", "N", "method", "neighbours", "build", "count", "list_full",
                 "list/count", "list only", "half", "full+d+v", "padded (K, overflow)", "lj",
                 "lj_forces", "functor", "functor/lj", "list MB"]
         out += ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-        for key in sorted(k for k in table if k[4] == mode):
+        for key in sorted(k for k in table if k[4] == mode and not periodic(k[0])):
             suite, beta, p, method, _ = key
             ops = table[key]
             any_row = next(iter(ops.values()))
@@ -131,6 +140,35 @@ def main():
             out.append("| " + " | ".join(cells) + " |")
         out.append("")
 
+    for mode in modes:
+        keys = sorted((k for k in table if k[4] == mode and periodic(k[0])),
+                      key=lambda k: (k[0], k[1] * k[2], k[3]))
+        if not keys:
+            continue
+        out.append(f"### Periodic workloads ({mode}, ms; density 0.8442, rc 2.5; lists with image "
+                   "shifts; full/count = build + full list over build + count; lj_forces alone: "
+                   "the compute on a built engine)\n")
+        cols = ["suite", "systems", "per system", "N", "method", "pairs", "neighbours", "build",
+                "count", "full list", "full/count", "half list", "lj_forces", "lj_forces alone",
+                "list MB"]
+        out += ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+        for key in keys:
+            suite, systems, per_system, method, _ = key
+            ops = table[key]
+            any_row = next(iter(ops.values()))
+            n = int(any_row["N"])
+            pairs = fnum(any_row["pairs"])
+            get = lambda op: fnum(ops[op]["ms"]) if op in ops else math.nan  # noqa: E731
+            mb = fnum(ops["list_full_s"]["bytes"]) / 2**20 if "list_full_s" in ops else math.nan
+            cells = [suite, str(systems), f"{per_system:,}", f"{n:,}", method,
+                     "" if math.isnan(pairs) else f"{int(pairs):,}",
+                     fmt(pairs / n if n else math.nan, 1), fmt(get("build")), fmt(get("count")),
+                     fmt(get("list_full_s")), fmt(get("list_full_s") / get("count"), 2),
+                     fmt(get("list_half_s")), fmt(get("lj_forces")), fmt(get("lj_forces_only")),
+                     fmt(mb, 1)]
+            out.append("| " + " | ".join(cells) + " |")
+        out.append("")
+
     bad = [r for r in rows if r["check"] not in ("ok", "bitwise", "close", "-")]
     if bad:
         out.append("**Result checks that failed:** " + ", ".join(
@@ -144,7 +182,9 @@ def main():
     else:
         print(text)
 
-    if args.png:
+    if args.png and not has_uniform:
+        print(f"{args.png} not written: no uniform-suite rows to plot")
+    elif args.png:
         try:
             import matplotlib
         except ImportError:

@@ -3,15 +3,18 @@
 # every result in one tarball (for machines that hand back few files). What this project's device
 # sessions ran, in one place.
 #
-#   scripts/device_run.sh [tests REGEX] [bench] [lists] [sph]   results: ${OUT:-/tmp/raycut-out}/results.tgz
+#   scripts/device_run.sh [tests REGEX] [bench] [lists] [periodic] [sph]   results: ${OUT:-/tmp/raycut-out}/results.tgz
 #
 #   tests REGEX  ctest -R REGEX (e.g. "GridVariants|grid_|Sph"; "." for everything, ~6 min)
 #   bench        both suites, every GPU method, plus the paper's grid when its source is in
 #                .deps/paper/Cuda-version/cudaLJ.cu (spec/BENCHMARKS.md; never committed)
 #   lists        neighbour lists vs fused kernels (bench/neighbour_bench: uniform beta 16 and 32,
 #                and the LJ liquid; cold and prepared), lists.csv/.md/.png (docs/benchmarks.md)
+#   periodic     bench/neighbour_bench --periodic (issue 14): the LJ liquid in a periodic cube
+#                (2^20) and batches of 512 x 128 and 64 x 4096 periodic cubes; lists with shifts,
+#                lj_forces; cold and prepared; PERIODIC_METHODS (default grid) picks the methods.
+#                periodic.csv/.md (with lists.csv's tables too when the lists step ran before)
 #   sph          the article's SPH run with every GPU method, and the validation scenarios
-#   lists        bench/neighbour_bench: lists, kernels and a user functor (docs/benchmarks.md)
 #   grid-suites  both suites with grid and grid-paper beside the paper's grid (no regression)
 #   memcheck     compute-sanitizer on the functor, list and grid-variant tests
 #   python       the Python package built with the device's Python, and its tests
@@ -63,6 +66,23 @@ while [ $# -gt 0 ]; do
         [ -f "$csv" ] && python3 bench/plot_lists.py "$csv" --md "$res/lists.md" \
           --png "$res/lists.png" > "$res/lists-plot.log" 2>&1
         [ -f "$res/lists.md" ] && awk '/### Targets/{f=1} /### Every/{f=0} f' "$res/lists.md"
+      else
+        echo "build/bench/neighbour_bench was not built (needs CUDA and CLI11)"
+      fi
+      ;;
+    periodic)
+      if [ -x build/bench/neighbour_bench ]; then
+        build/bench/neighbour_bench --methods "${PERIODIC_METHODS:-grid}" --no-suite --periodic \
+          --out "$res/periodic.csv" > "$res/periodic.log" 2>&1
+        echo "neighbour_bench --periodic exit $?"
+        grep -E "^(lj-liquid-pbc|batch-pbc) |skipped|failed" "$res/periodic.log" | head -30
+        csv="$res/periodic.csv"
+        [ -f "$csv" ] || csv="$res/periodic.csv.tmp"  # a run that stopped: the rows it wrote
+        csvs=()
+        [ -f "$res/lists.csv" ] && csvs+=("$res/lists.csv")  # one markdown with both
+        [ -f "$csv" ] && python3 bench/plot_lists.py "${csvs[@]}" "$csv" --md "$res/periodic.md" \
+          > "$res/periodic-plot.log" 2>&1
+        [ -f "$res/periodic.md" ] && awk '/### Periodic workloads/{f=1} f' "$res/periodic.md"
       else
         echo "build/bench/neighbour_bench was not built (needs CUDA and CLI11)"
       fi

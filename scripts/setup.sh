@@ -3,6 +3,7 @@
 # Python package's build and test requirements (python/requirements.txt, from PyPI) into a
 # virtual environment in the repository, .venv (ignored by git; Debian's own Python refuses
 # `pip install` outside one, PEP 668). scripts/test.sh uses it.
+# Open MPI builds raycut::mpi, the distributed engine, and its tests (mpirun, 1 to 4 ranks).
 # The CUDA toolkit is optional and not a Debian package here: when nvcc is on the machine
 # (/usr/local/cuda), the CUDA methods are built; otherwise the CPU methods only.
 set -euo pipefail
@@ -15,6 +16,7 @@ $SUDO apt-get install -y -qq --no-install-recommends \
   cmake ninja-build g++ make git \
   libgtest-dev libgmock-dev libcli11-dev libpng-dev \
   clang-format python3 python3-dev python3-venv python3-numpy python3-matplotlib \
+  openmpi-bin libopenmpi-dev \
   clang libclang-rt-14-dev  # the readers' fuzz test (tests/fuzz: libFuzzer, sanitizers)
 [ -x .venv/bin/python ] || python3 -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip

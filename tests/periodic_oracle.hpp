@@ -19,6 +19,10 @@
 // however far unwrapped, and any cell thickness. The g_k come from the inverse Gram matrix of
 // the periodic rows (not the cross products box.cpp uses).
 //
+// Two point sets (spec section 4): make_query_oracle gives the triples (q, p, S) of queries q and
+// sources p, r = p - q + S . cell, with no self-exclusion (the sets differ, even where a query
+// coincides with a source).
+//
 // Brute force over all (i, j): for the tests' small systems (up to a few hundred particles).
 // Header-only, for the tests.
 #pragma once
@@ -40,7 +44,9 @@ using PeriodicTriple = std::array<std::int64_t, 5>;
 enum class ImageClass { in, band, out };
 
 struct PeriodicOracle {
-  std::vector<float> xyz;
+  std::vector<float> xyz;      // the particles; with query points, the queries (the i of triples)
+  std::vector<float> sources;  // with query points, the sources (the j); else unused
+  bool query = false;          // two point sets: no (i, i, 0) exclusion, j indexes `sources`
   double cell[3][3] = {};
   bool pbc[3] = {};
   double cutoff = 0;
@@ -48,12 +54,15 @@ struct PeriodicOracle {
   double in_below2 = 0, out_above2 = 0;        // (C (1 - band))^2, (C (1 + band))^2
   std::vector<PeriodicTriple> in, band_pairs;  // full list: sorted, every orientation
 
-  std::size_t size() const { return xyz.size() / 3; }
+  std::size_t size() const { return xyz.size() / 3; }  // targets (rows)
+  std::size_t source_count() const { return query ? sources.size() / 3 : size(); }
+  const float* source_xyz() const { return query ? sources.data() : xyz.data(); }
 
   std::array<double, 3> vector(std::size_t i, std::size_t j, const std::int64_t s[3]) const {
     std::array<double, 3> r;
+    const float* xj = source_xyz() + 3 * j;
     for (int c = 0; c < 3; ++c) {
-      r[c] = static_cast<double>(xyz[3 * j + c]) - static_cast<double>(xyz[3 * i + c]);
+      r[c] = static_cast<double>(xj[c]) - static_cast<double>(xyz[3 * i + c]);
       for (int m = 0; m < 3; ++m) r[c] += static_cast<double>(s[m]) * cell[m][c];
     }
     return r;
@@ -66,7 +75,7 @@ struct PeriodicOracle {
   ImageClass classify(const PeriodicTriple& t) const {
     for (int k = 0; k < 3; ++k)
       if (!pbc[k] && t[2 + k] != 0) return ImageClass::out;
-    if (t[0] == t[1] && t[2] == 0 && t[3] == 0 && t[4] == 0) return ImageClass::out;
+    if (!query && t[0] == t[1] && t[2] == 0 && t[3] == 0 && t[4] == 0) return ImageClass::out;
     const double d2 = squared_distance(t);
     return d2 < in_below2 ? ImageClass::in : d2 > out_above2 ? ImageClass::out : ImageClass::band;
   }
@@ -134,14 +143,8 @@ inline std::array<std::array<double, 3>, 3> reciprocal(const double cell[3][3], 
   return out;
 }
 
-}  // namespace periodic_detail
-
-// `box`: anything with double cell[3][3] and bool pbc[3] (raycut::Box; only its fields are read).
 template <class BoxLike>
-PeriodicOracle make_periodic_oracle(const std::vector<float>& xyz, const BoxLike& box,
-                                    double cutoff, double band = 1e-5) {
-  PeriodicOracle o;
-  o.xyz = xyz;
+void set_box(PeriodicOracle& o, const BoxLike& box, double cutoff, double band) {
   for (int r = 0; r < 3; ++r) {
     o.pbc[r] = box.pbc[r];
     for (int c = 0; c < 3; ++c) o.cell[r][c] = box.cell[r][c];
@@ -150,14 +153,19 @@ PeriodicOracle make_periodic_oracle(const std::vector<float>& xyz, const BoxLike
   o.band = band;
   o.in_below2 = (cutoff * (1 - band)) * (cutoff * (1 - band));
   o.out_above2 = (cutoff * (1 + band)) * (cutoff * (1 + band));
-  const auto g = periodic_detail::reciprocal(o.cell, o.pbc);
-  const double reach = cutoff * (1 + band);
-  const std::size_t n = o.size();
+}
+
+// Every (i, j, S) of the oracle's point sets, classified into o.in and o.band_pairs (sorted).
+inline void enumerate(PeriodicOracle& o) {
+  const auto g = reciprocal(o.cell, o.pbc);
+  const double reach = o.cutoff * (1 + o.band);
+  const std::size_t n = o.size(), m = o.source_count();
+  const float* xs = o.source_xyz();
   for (std::size_t i = 0; i < n; ++i) {
-    for (std::size_t j = 0; j < n; ++j) {
+    for (std::size_t j = 0; j < m; ++j) {
       double d[3];
       for (int c = 0; c < 3; ++c)
-        d[c] = static_cast<double>(xyz[3 * j + c]) - static_cast<double>(xyz[3 * i + c]);
+        d[c] = static_cast<double>(xs[3 * j + c]) - static_cast<double>(o.xyz[3 * i + c]);
       std::int64_t lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
       for (int k = 0; k < 3; ++k) {
         if (!o.pbc[k]) continue;
@@ -186,6 +194,33 @@ PeriodicOracle make_periodic_oracle(const std::vector<float>& xyz, const BoxLike
   }
   std::sort(o.in.begin(), o.in.end());
   std::sort(o.band_pairs.begin(), o.band_pairs.end());
+}
+
+}  // namespace periodic_detail
+
+// `box`: anything with double cell[3][3] and bool pbc[3] (raycut::Box; only its fields are read).
+template <class BoxLike>
+PeriodicOracle make_periodic_oracle(const std::vector<float>& xyz, const BoxLike& box,
+                                    double cutoff, double band = 1e-5) {
+  PeriodicOracle o;
+  o.xyz = xyz;
+  periodic_detail::set_box(o, box, cutoff, band);
+  periodic_detail::enumerate(o);
+  return o;
+}
+
+// Queries (targets, rows) against sources: triples (q, p, S), r = p - q + S . cell, every one
+// with |r| < C, (q, p, 0) included when they coincide.
+template <class BoxLike>
+PeriodicOracle make_query_oracle(const std::vector<float>& queries,
+                                 const std::vector<float>& sources, const BoxLike& box,
+                                 double cutoff, double band = 1e-5) {
+  PeriodicOracle o;
+  o.xyz = queries;
+  o.sources = sources;
+  o.query = true;
+  periodic_detail::set_box(o, box, cutoff, band);
+  periodic_detail::enumerate(o);
   return o;
 }
 
@@ -204,6 +239,7 @@ struct PeriodicCheck {
 // every in triple exactly once, band triples at most once, nothing else (no out triple, no
 // (i, i, 0), no shift on a non-periodic axis). Half: the same over the triples of the half
 // orientation (half_orientation), and every listed triple in that orientation.
+// With a query oracle, i indexes the queries and j the sources (full lists only).
 template <class Index>
 PeriodicCheck check_periodic_pairs(const PeriodicOracle& o, const std::vector<Index>& i,
                                    const std::vector<Index>& j,
@@ -216,14 +252,16 @@ PeriodicCheck check_periodic_pairs(const PeriodicOracle& o, const std::vector<In
     return check;
   }
   const auto n = static_cast<std::int64_t>(o.size());
+  const auto m = static_cast<std::int64_t>(o.source_count());
   std::vector<PeriodicTriple> listed;
   listed.reserve(i.size());
   for (std::size_t p = 0; p < i.size(); ++p) {
     const PeriodicTriple t{static_cast<std::int64_t>(i[p]), static_cast<std::int64_t>(j[p]),
                            shifts[3 * p], shifts[3 * p + 1], shifts[3 * p + 2]};
-    if (t[0] < 0 || t[0] >= n || t[1] < 0 || t[1] >= n) {
+    if (t[0] < 0 || t[0] >= n || t[1] < 0 || t[1] >= m) {
       ++check.bad_index;
-      check.fail("index out of range in " + triple_text(t) + " (N = " + std::to_string(n) + ")");
+      check.fail("index out of range in " + triple_text(t) + " (targets " + std::to_string(n) +
+                 ", sources " + std::to_string(m) + ")");
       continue;
     }
     listed.push_back(t);
@@ -256,7 +294,7 @@ PeriodicCheck check_periodic_pairs(const PeriodicOracle& o, const std::vector<In
         for (int k = 0; k < 3; ++k) open_shift |= !o.pbc[k] && t[2 + k] != 0;
         if (open_shift) {
           what << "shift on a non-periodic axis: " << triple_text(t);
-        } else if (t[0] == t[1] && t[2] == 0 && t[3] == 0 && t[4] == 0) {
+        } else if (!o.query && t[0] == t[1] && t[2] == 0 && t[3] == 0 && t[4] == 0) {
           what << "self pair " << triple_text(t);
         } else {
           what << "out of range: " << triple_text(t)

@@ -15,6 +15,17 @@ run(${CMAKE_COMMAND} -S ${SOURCE}/tests/consumer -B ${WORK}/build -DCMAKE_PREFIX
 run(${CMAKE_COMMAND} --build ${WORK}/build)
 run(${WORK}/build/consumer)
 run(${WORK}/build/consumer_sph)
+# raycut::mpi where the install has it: the config must find MPI and export the target.
+file(GLOB config ${WORK}/prefix/lib*/cmake/raycut/raycutConfig.cmake)
+file(STRINGS ${config} mpi_line REGEX "set\\(raycut_HAVE_MPI ON\\)")
+if(mpi_line)
+  if(NOT EXISTS ${WORK}/build/consumer_mpi)
+    message(FATAL_ERROR "raycut has raycut::mpi but tests/consumer built no consumer_mpi")
+  endif()
+  run(${CMAKE_COMMAND} -E env OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+      ${WORK}/build/consumer_mpi)
+  message(STATUS "install: raycut::mpi consumer built and ran (one process)")
+endif()
 message(STATUS "install: find_package(raycut) consumer built and ran")
 
 # The example, with the nvcc (and the architectures, when set on the command line) raycut was

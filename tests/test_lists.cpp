@@ -146,3 +146,28 @@ TEST(Engine, MovedFromThrowsInsteadOfCrashing) {
 }
 
 }  // namespace
+
+// compare_neighbours with shifts: the same source through another image is another entry.
+TEST(Compare, ShiftsAreCompared) {
+  raycut::NeighbourList want;
+  want.offsets = {0, 2, 2};
+  want.indices = {0, 1};
+  want.shifts = {1, 0, 0, 0, 0, -1};
+  raycut::NeighbourList got = want;
+  EXPECT_TRUE(raycut::compare_neighbours(got, want).equal());
+  std::swap(got.indices[0], got.indices[1]);  // row order is free: entries move with shifts
+  std::swap(got.shifts[0], got.shifts[3]);
+  std::swap(got.shifts[2], got.shifts[5]);
+  EXPECT_TRUE(raycut::compare_neighbours(got, want).equal());
+  got = want;
+  got.shifts[5] = 1;  // (1, S = (0, 0, 1)) instead of (0, 0, -1)
+  const auto diff = raycut::compare_neighbours(got, want);
+  EXPECT_FALSE(diff.equal());
+  EXPECT_EQ(diff.differing_targets, 1u);
+  EXPECT_NE(diff.first_difference.find("missing 1(0,0,-1)"), std::string::npos)
+      << diff.first_difference;
+  got.shifts.clear();  // a list without the shifts the oracle has cannot match
+  EXPECT_FALSE(raycut::compare_neighbours(got, want).equal());
+  want.shifts.clear();  // without shifts on either side: indices only, as before
+  EXPECT_TRUE(raycut::compare_neighbours(got, want).equal());
+}

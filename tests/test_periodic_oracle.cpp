@@ -257,6 +257,54 @@ TEST(PeriodicOracle, CheckerCatchesEveryKindOfMistake) {
   EXPECT_NE(c.problems.find("non-periodic axis"), std::string::npos) << c.problems;
 }
 
+// The query variant: queries equal to the sources give the one-set pairs plus every (i, i, 0);
+// distinct sets, a naive wide search as above.
+TEST(PeriodicOracle, QueryVariantMatchesTheOneSetOracleAndANaiveSearch) {
+  const TestBox box = make_box({1.1, 0, 0, 0.5, 0.9, 0, -0.2, 0.3, 0.8});
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(-1.0f, 2.0f);
+  std::vector<float> points(3 * 8), queries(3 * 5);
+  for (float& v : points) v = u(rng);
+  for (float& v : queries) v = u(rng);
+  const double cutoff = 1.3;
+  const PeriodicOracle one = make_periodic_oracle(points, box, cutoff);
+  const PeriodicOracle same = make_query_oracle(points, points, box, cutoff);
+  std::vector<PeriodicTriple> want = one.in;
+  for (std::int64_t i = 0; i < 8; ++i) want.push_back({i, i, 0, 0, 0});
+  std::sort(want.begin(), want.end());
+  EXPECT_EQ(same.in, want);
+  expect_ok(same, list_of(same.in, false), false);
+
+  const PeriodicOracle q = make_query_oracle(queries, points, box, cutoff);
+  std::vector<PeriodicTriple> naive;
+  const int K = 10;
+  for (std::int64_t i = 0; i < 5; ++i)
+    for (std::int64_t j = 0; j < 8; ++j)
+      for (std::int64_t a = -K; a <= K; ++a)
+        for (std::int64_t b = -K; b <= K; ++b)
+          for (std::int64_t c = -K; c <= K; ++c) {
+            double r2 = 0;
+            for (int x = 0; x < 3; ++x) {
+              const double r = double(points[3 * j + x]) - double(queries[3 * i + x]) +
+                               a * box.cell[0][x] + b * box.cell[1][x] + c * box.cell[2][x];
+              r2 += r * r;
+            }
+            const double lo = cutoff * (1 - 1e-5);
+            if (r2 < lo * lo) naive.push_back({i, j, a, b, c});
+          }
+  EXPECT_EQ(q.in, naive);
+  EXPECT_GT(naive.size(), 20u);
+  // Indices are checked against their own set: 8 sources, 5 queries.
+  List l = list_of(q.in, false);
+  l.add({0, 8, 0, 0, 0});
+  PeriodicCheck c = check_periodic_pairs(q, l.i, l.j, l.s, false);
+  EXPECT_EQ(c.bad_index, 1u);
+  l = list_of(q.in, false);
+  l.add({5, 0, 0, 0, 0});
+  c = check_periodic_pairs(q, l.i, l.j, l.s, false);
+  EXPECT_EQ(c.bad_index, 1u);
+}
+
 TEST(PeriodicOracle, BandPairsAtMostOnce) {
   // d = 1 = C exactly (a power of two, exact in float): in the band, either answer accepted.
   const PeriodicOracle o =

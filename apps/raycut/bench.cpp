@@ -1,6 +1,7 @@
 // raycut bench: the timing protocol of spec/BENCHMARKS.md. Positions start where the method
 // works (device for GPU methods, uploaded untimed); one warm-up, then `reps` timed build+compute;
-// medians (min/max of total) per phase, one CSV row per timer (host clock, CUDA events).
+// medians (min/max of total) per phase, one CSV row per timer (host clock, CUDA events). With
+// --cell/--pbc every build is in that periodic box, and the suite column says "-periodic".
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -35,6 +36,11 @@ struct BenchOptions {
   std::string paper_binary;  // the paper's cudaLJ, run after ours, its rows merged
   std::size_t large_n = 0;   // above this many particles (0: never) ...
   int large_reps = 2;        // ... time this many repetitions instead (the CSV says how many)
+  BoxOptions box_options;
+  Box box;  // resolved from box_options
+  // The suite column: the suite's name, with "-periodic" in a periodic box, so that rows of
+  // both never mix under one name.
+  std::string suite_column() const { return box.periodic() ? suite + "-periodic" : suite; }
 };
 
 struct Samples {
@@ -130,7 +136,14 @@ std::string bench_method(const BenchOptions& o, const std::string& method, Kerne
     if (!on_device) on_device.emplace(cloud.xyz);
     view = on_device->view();
   }
-  engine.build(view, cloud.cutoff);
+  // Open boxes take the plain build: the rows of an open run stay what they were.
+  const auto build = [&] {
+    if (o.box.periodic())
+      engine.build(view, cloud.cutoff, o.box);
+    else
+      engine.build(view, cloud.cutoff);
+  };
+  build();
   const auto counts = engine.compute(Kernel::count).count;
   std::uint64_t pairs = 0;
   for (auto c : counts) pairs += c;
@@ -139,7 +152,7 @@ std::string bench_method(const BenchOptions& o, const std::string& method, Kerne
   const int reps = o.large_n != 0 && cloud.size() > o.large_n ? o.large_reps : o.reps;
   Samples host, events;
   for (int r = 0; r < reps; ++r) {
-    engine.build(view, cloud.cutoff);
+    build();
     engine.run(kernel);
     const Timings& t = engine.last_timings();
     host.add(t.build_ms, t.compute_ms);
@@ -151,7 +164,7 @@ std::string bench_method(const BenchOptions& o, const std::string& method, Kerne
     char line[512];
     std::snprintf(
         line, sizeof line, "%s,%s,%d,%d,%zu,%.9g,%llu,%.4f,%.4f,%.4f,%.4f,%.4f,%d,%s,%s\n",
-        o.suite.c_str(), method.c_str(), param, p, cloud.size(), cloud.cutoff,
+        o.suite_column().c_str(), method.c_str(), param, p, cloud.size(), cloud.cutoff,
         static_cast<unsigned long long>(pairs), median(s.build), median(s.compute), median(s.total),
         *std::min_element(s.total.begin(), s.total.end()),
         *std::max_element(s.total.begin(), s.total.end()), reps, timer, environment.c_str());
@@ -171,7 +184,11 @@ std::string bench_method(const BenchOptions& o, const std::string& method, Kerne
   return rows;
 }
 
-int run_bench(const BenchOptions& o) {
+int run_bench(BenchOptions& o) {
+  o.box = resolve_box(o.box_options);
+  if (o.box.periodic() && !o.paper_binary.empty())
+    throw Error(ErrorCode::invalid_argument,
+                "--paper-binary: the paper's grid has no periodic boxes; leave out --cell/--pbc");
   const auto methods = resolve_methods(o.methods);
   const Kernel kernel = parse_kernel(o.kernel);
   std::vector<int> params = o.params;
@@ -188,6 +205,9 @@ int run_bench(const BenchOptions& o) {
       "total_ms_max,reps,timer,gpu,driver,cuda,optix\n");
   std::fprintf(stderr, "raycut bench: %s suite, kernel %s, %d reps, on %s -> %s\n", o.suite.c_str(),
                o.kernel.c_str(), o.reps, gpu.c_str(), o.out.c_str());
+  if (o.box.periodic())
+    std::fprintf(stderr, "  periodic box %s (suite column %s)\n", describe_box(o.box).c_str(),
+                 o.suite_column().c_str());
 
   std::size_t configs = 0, done = 0;
   for (int param : params)
@@ -264,6 +284,7 @@ Command add_bench(CLI::App& app) {
                   "Path of the paper's cudaLJ (built by you from Cuda-version/cudaLJ.cu): run it "
                   "after ours and merge its rows as method paper-cudaLJ")
       ->check(CLI::ExistingFile);
+  add_box_options(*cmd, o->box_options);
   return [o] { return run_bench(*o); };
 }
 

@@ -1,8 +1,11 @@
 // raycut check: every chosen method against the brute-force oracle on generated families or a
-// file: neighbour sets, counts and smooth-kernel sums. Exit 1 on any mismatch.
+// file: neighbour sets, counts and smooth-kernel sums. Exit 1 on any mismatch. In a periodic box
+// (--cell/--pbc, or an extended-XYZ file's Lattice and pbc) the oracle gets the same box, list
+// entries are compared with their image shifts, and the half list is compared too.
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <memory>
 
 #include "commands.hpp"
@@ -22,6 +25,7 @@ struct CheckOptions {
   std::uint64_t seed = 1;
   std::string input;
   std::string oracle = "auto";
+  BoxOptions box;
 };
 
 // Largest |smooth energy - oracle| over targets, relative to the largest possible term sum
@@ -52,20 +56,25 @@ bool smooth_in_range(float cutoff) {
   }
 }
 
+// Builds over the cloud in its box: the plain build when the box has no periodic axis (a file's
+// Lattice with pbc F F F has no images), so methods without boxes check such files as before.
+void build_in_box(Engine& engine, const PositionsView& view, const PointCloud& cloud) {
+  if (cloud.box.periodic())
+    engine.build(view, cloud.cutoff, cloud.box);
+  else
+    engine.build(view, cloud.cutoff);
+}
+
 int run_check(const CheckOptions& o) {
   const auto methods = resolve_methods(o.methods);
   std::vector<PointCloud> inputs;
   if (!o.input.empty()) {
     PointCloud cloud = read_positions(o.input);
-    if (cloud.box.periodic()) {  // not checked as an open cloud: that would be silently wrong
-      throw Error(ErrorCode::unsupported,
-                  o.input +
-                      ": periodic boxes (the file's Lattice and pbc) are not supported by "
-                      "check yet (to check the positions as an open cloud, set pbc=\"F F F\")");
-    }
+    cloud.box = resolve_box(o.box, cloud.box);  // --cell / --pbc override the file's
     cloud.cutoff = o.cutoff;
     inputs.push_back(std::move(cloud));
   } else {
+    const Box box = resolve_box(o.box);  // before any generation: bad options fail at once
     std::vector<std::string> families = o.families;
     if (std::find(families.begin(), families.end(), "all") != families.end())
       families = family_names();
@@ -74,21 +83,42 @@ int run_check(const CheckOptions& o) {
       for (std::size_t n : o.sizes) {
         require_particles_fit(n, 128, "check: family " + f);
         inputs.push_back(make_family(f, n, o.cutoff, o.seed));
+        inputs.back().box = box;
       }
   }
 
   std::printf("%-18s %8s %7s  %-16s %12s %10s %10s  %s\n", "input", "N", "cutoff", "method",
               "pairs", "bad-tgts", "smooth-err", "status");
-  int failures = 0;
+  int failures = 0, skipped = 0, refused = 0, compared = 0;
   for (const auto& cloud : inputs) {
+    const bool periodic = cloud.box.periodic();
+    if (periodic)
+      std::printf("%s: periodic box %s\n", cloud.name.c_str(), describe_box(cloud.box).c_str());
     const std::string oracle_name = o.oracle != "auto" ? o.oracle
                                     : (cuda_device_available() && cloud.size() > 20000)
                                         ? "brute-force-gpu"
                                         : "brute-force";
     Engine oracle(oracle_name);
     const PositionsView view{cloud.xyz.data(), cloud.size(), MemorySpace::host};
-    oracle.build(view, cloud.cutoff);
-    const NeighbourList want_list = oracle.neighbours();
+    try {
+      build_in_box(oracle, view, cloud);
+    } catch (const Error& e) {
+      // A family whose own scale does not fit the box (huge-scale in a small cell: too many
+      // images) is refused by the oracle as by every method: say so and check the others.
+      if (!periodic || e.code() != ErrorCode::invalid_argument) throw;
+      ++refused;
+      std::printf("%-18s %8zu %7g  %-16s %12s %10s %10s  %s\n", cloud.name.c_str(), cloud.size(),
+                  cloud.cutoff, oracle_name.c_str(), "-", "-", "-", "refused");
+      std::printf("    %s\n", e.what());
+      continue;
+    }
+    // In a box an entry is (j, S): the same j through two images is two entries.
+    ListOptions full;
+    full.shifts = periodic;
+    ListOptions half = full;
+    half.half = true;
+    const NeighbourList want_list = oracle.neighbours(full);
+    const NeighbourList want_half = periodic ? oracle.neighbours(half) : NeighbourList{};
     Results want_count;  // the list's row lengths: no third O(N^2) pass
     for (std::size_t i = 0; i < cloud.size(); ++i)
       want_count.count.push_back(
@@ -97,13 +127,31 @@ int run_check(const CheckOptions& o) {
     const Results want_smooth = smooth ? oracle.compute(Kernel::smooth) : Results{};
     for (const auto& method : methods) {
       Engine engine(method);
-      engine.build(view, cloud.cutoff);
-      const auto diff = compare_neighbours(engine.neighbours(), want_list);
-      const bool counts_ok = engine.compute(Kernel::count).count == want_count.count;
-      const double err = smooth ? smooth_error(engine.compute(Kernel::smooth), want_smooth,
-                                               want_count.count, cloud.cutoff)
-                                : 0.0;
-      const bool ok = diff.equal() && counts_ok && err <= 1e-5;  // false for NaN
+      NeighbourComparison diff, half_diff;
+      bool counts_ok = false;
+      double err = 0;
+      try {
+        build_in_box(engine, view, cloud);
+        diff = compare_neighbours(engine.neighbours(full), want_list);
+        if (periodic) half_diff = compare_neighbours(engine.neighbours(half), want_half);
+        counts_ok = engine.compute(Kernel::count).count == want_count.count;
+        if (smooth)
+          err = smooth_error(engine.compute(Kernel::smooth), want_smooth, want_count.count,
+                             cloud.cutoff);
+      } catch (const Error& e) {
+        // Methods without periodic boxes (docs/methods.md) refuse them: a row saying so, not a
+        // mismatch and not the end of the check.
+        if (!periodic || e.code() != ErrorCode::unsupported) throw;
+        ++skipped;
+        std::printf("%-18s %8zu %7g  %-16s %12s %10s %10s  %s\n", cloud.name.c_str(), cloud.size(),
+                    cloud.cutoff, method.c_str(), "-", "-", "-", "unsupported");
+        std::printf("    %s\n", e.what());
+        std::fflush(stdout);
+        continue;
+      }
+      ++compared;
+      const bool ok =
+          diff.equal() && half_diff.equal() && counts_ok && err <= 1e-5;  // false for NaN
       failures += !ok;
       char err_text[16] = "n/a";  // smooth out of float range at this cutoff: not compared
       if (smooth) std::snprintf(err_text, sizeof err_text, "%.2e", err);
@@ -111,12 +159,30 @@ int run_check(const CheckOptions& o) {
                   cloud.cutoff, method.c_str(), static_cast<unsigned long long>(diff.pairs),
                   diff.differing_targets, err_text, ok ? "ok" : "MISMATCH");
       if (!diff.equal()) std::printf("    first difference: %s\n", diff.first_difference.c_str());
+      if (!half_diff.equal())
+        std::printf("    the half list differs (%zu targets); first difference: %s\n",
+                    half_diff.differing_targets, half_diff.first_difference.c_str());
       if (!counts_ok) std::printf("    the count kernel differs from the oracle\n");
       std::fflush(stdout);
     }
   }
-  std::printf("%s: %d mismatch(es) over %zu input(s) x %zu method(s)\n",
-              failures ? "FAILED" : "passed", failures, inputs.size(), methods.size());
+  if (compared == 0 && skipped > 0)
+    throw Error(ErrorCode::unsupported,
+                "check: none of the methods asked for supports periodic boxes (see `raycut "
+                "methods` and docs/methods.md); nothing was compared");
+  if (compared == 0 && refused > 0)
+    throw Error(ErrorCode::invalid_argument,
+                "check: every input was refused in this box (above); nothing was compared");
+  char skipped_text[160] = "";
+  if (skipped)
+    std::snprintf(skipped_text, sizeof skipped_text, " (%d skipped: no periodic boxes)", skipped);
+  if (refused)
+    std::snprintf(skipped_text + std::strlen(skipped_text),
+                  sizeof skipped_text - std::strlen(skipped_text),
+                  " (%d input(s) refused in this box)", refused);
+  std::printf("%s: %d mismatch(es) over %zu input(s) x %zu method(s)%s\n",
+              failures ? "FAILED" : "passed", failures, inputs.size(), methods.size(),
+              skipped_text);
   return failures ? 1 : 0;
 }
 
@@ -139,7 +205,10 @@ Command add_check(CLI::App& app) {
       ->check(count_option());
   cmd->add_option("-c,--cutoff", o->cutoff, "Cutoff radius")->check(positive_finite());
   cmd->add_option("--seed", o->seed, "Random seed of the families");
-  cmd->add_option("-i,--input", o->input, "Positions file (.csv, .xyz) instead of families")
+  cmd->add_option(
+         "-i,--input", o->input,
+         "Positions file (.csv, .xyz) instead of families; an extended XYZ's Lattice and pbc are "
+         "its periodic box (--cell/--pbc override them)")
       ->check(CLI::ExistingFile);
   // Only the brute forces are references: a faster method checked against itself (or another
   // method under test) would prove nothing.
@@ -148,6 +217,7 @@ Command add_check(CLI::App& app) {
                   "brute-force or brute-force-gpu")
       ->check(one_of({"auto", "brute-force", "brute-force-gpu"},
                      "the oracles; the methods under test are not references"));
+  add_box_options(*cmd, o->box);
   return [o] { return run_check(*o); };
 }
 

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "raycut/box.hpp"
 #include "raycut/generators.hpp"
 
 namespace raycut::cli {
@@ -42,6 +43,22 @@ CLI::Validator non_negative_finite();  // a float, finite and >= 0
 CLI::Validator positive_integer();     // 1 .. 2^31 - 1
 CLI::Validator count_option();         // a whole number >= 0 (no sign, no exponent)
 CLI::Validator one_of(std::vector<std::string> names, std::string what);
+
+// --cell and --pbc as given: tokens, each holding one or more values (separated by spaces or
+// commas), so both `--cell 4 4 4` and `--cell "4 0 0 0 4 0 0 0 4"` work.
+struct BoxOptions {
+  std::vector<std::string> cell, pbc;
+  bool given() const { return !cell.empty() || !pbc.empty(); }
+};
+// Registers --cell and --pbc on a subcommand.
+void add_box_options(CLI::App& cmd, BoxOptions& o);
+// The box of the options, over `base` (an input file's box, or open): --cell replaces the cell
+// (pbc all true unless --pbc says otherwise), --pbc alone the periodic axes of base's cell.
+// Error(invalid_argument) naming the option: a malformed value, --pbc with no cell, or a box
+// that validate() refuses (its message).
+Box resolve_box(const BoxOptions& o, const Box& base = Box::open());
+// "4x4x4 (pbc T T F)" or "[[ax ay az] [bx by bz] [cx cy cz]] (pbc T T T)", for messages and rows.
+std::string describe_box(const Box& box);
 
 // The median of samples (mean of the middle two for an even count).
 double median(std::vector<double> samples);

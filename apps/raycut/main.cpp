@@ -3,6 +3,7 @@
 // that cannot be written in full, not enough memory) is one line on stderr and exit code 2; a
 // check that finds a mismatch exits 1.
 #include <algorithm>
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
@@ -135,6 +136,113 @@ CLI::Validator one_of(std::vector<std::string> names, std::string what) {
         return std::find(names.begin(), names.end(), t) != names.end();
       },
       "one of " + list + " (" + what + ")");
+}
+
+namespace {
+
+// Values of a multi-token option: each token split at spaces and commas.
+std::vector<std::string> option_values(const std::vector<std::string>& tokens) {
+  std::vector<std::string> values;
+  for (const auto& token : tokens) {
+    std::string value;
+    for (char ch : token + " ") {
+      if (ch == ' ' || ch == ',' || ch == '\t') {
+        if (!value.empty()) values.push_back(value);
+        value.clear();
+      } else {
+        value += ch;
+      }
+    }
+  }
+  return values;
+}
+
+std::string joined(const std::vector<std::string>& tokens) {
+  std::string text;
+  for (const auto& t : tokens) text += (text.empty() ? "" : " ") + t;
+  return io::printable(text);
+}
+
+}  // namespace
+
+void add_box_options(CLI::App& cmd, BoxOptions& o) {
+  cmd.add_option("--cell", o.cell,
+                 "Periodic box: the cell rows a b c as 9 numbers \"ax ay az bx by bz cx cy cz\", "
+                 "or 3 side lengths of an orthorhombic box; periodic on every axis unless --pbc")
+      ->expected(1, 9);
+  cmd.add_option("--pbc", o.pbc,
+                 "Which cell rows repeat: 3 of T/F/true/false/1/0 (\"T T F\", 1 1 0); one value "
+                 "for all three; default T T T with --cell")
+      ->expected(1, 3);
+}
+
+Box resolve_box(const BoxOptions& o, const Box& base) {
+  Box box = base;
+  if (!o.cell.empty()) {
+    const auto values = option_values(o.cell);
+    double v[9] = {};
+    bool ok = values.size() == 9 || values.size() == 3;
+    for (std::size_t k = 0; ok && k < values.size(); ++k) {
+      const std::string& t = values[k];
+      const auto [ptr, ec] = std::from_chars(t.data(), t.data() + t.size(), v[k]);
+      ok = ec == std::errc() && ptr == t.data() + t.size() && std::isfinite(v[k]);
+    }
+    if (!ok)
+      throw Error(ErrorCode::invalid_argument,
+                  "--cell: must be 9 finite numbers, the cell rows \"ax ay az bx by bz cx cy cz\", "
+                  "or 3, the sides of an orthorhombic box; got '" +
+                      joined(o.cell) + "'");
+    box = values.size() == 3 ? Box::orthorhombic(v[0], v[1], v[2]) : Box{};
+    if (values.size() == 9)
+      for (int k = 0; k < 9; ++k) box.cell[k / 3][k % 3] = v[k];
+    box.pbc[0] = box.pbc[1] = box.pbc[2] = true;
+  }
+  if (!o.pbc.empty()) {
+    const auto values = option_values(o.pbc);
+    bool flags[3] = {};
+    bool ok = values.size() == 1 || values.size() == 3;
+    for (std::size_t k = 0; ok && k < values.size(); ++k) {
+      std::string w = values[k];
+      std::transform(w.begin(), w.end(), w.begin(),
+                     [](unsigned char c) { return std::tolower(c); });
+      ok = w == "t" || w == "true" || w == "1" || w == "f" || w == "false" || w == "0";
+      flags[k] = w == "t" || w == "true" || w == "1";
+    }
+    if (!ok)
+      throw Error(ErrorCode::invalid_argument,
+                  "--pbc: must be 3 of T/F/true/false/1/0, one per cell row (e.g. \"T T F\"), or "
+                  "one for all three; got '" +
+                      joined(o.pbc) + "'");
+    if (values.size() == 1) flags[1] = flags[2] = flags[0];
+    if (o.cell.empty() && base.is_open())
+      throw Error(ErrorCode::invalid_argument,
+                  "--pbc: needs a cell: give --cell (or an extended-XYZ input with a Lattice)");
+    for (int k = 0; k < 3; ++k) box.pbc[k] = flags[k];
+  }
+  if (o.given()) {
+    try {
+      validate(box);
+    } catch (const Error& e) {
+      throw Error(ErrorCode::invalid_argument,
+                  std::string(o.cell.empty() ? "--pbc (with the input's Lattice)" : "--cell") +
+                      ": " + e.what());
+    }
+  }
+  return box;
+}
+
+std::string describe_box(const Box& box) {
+  char text[256];
+  const auto& c = box.cell;
+  const bool diagonal =
+      c[0][1] == 0 && c[0][2] == 0 && c[1][0] == 0 && c[1][2] == 0 && c[2][0] == 0 && c[2][1] == 0;
+  if (diagonal)
+    std::snprintf(text, sizeof text, "%gx%gx%g", c[0][0], c[1][1], c[2][2]);
+  else
+    std::snprintf(text, sizeof text, "[[%g %g %g] [%g %g %g] [%g %g %g]]", c[0][0], c[0][1],
+                  c[0][2], c[1][0], c[1][1], c[1][2], c[2][0], c[2][1], c[2][2]);
+  return std::string(text) + " (pbc " + (box.pbc[0] ? "T" : "F") + " " + (box.pbc[1] ? "T" : "F") +
+         " " + (box.pbc[2] ? "T" : "F") + ")";
 }
 
 double median(std::vector<double> v) {

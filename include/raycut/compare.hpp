@@ -21,6 +21,8 @@ struct NeighbourComparison {
 };
 
 // Per-target comparison as multisets (order within a row ignored; a duplicate is a difference).
+// When `expected` has shifts (ListOptions::shifts), an entry is (j, S): the same source through
+// another image is a different entry, and `got` must have its shifts too.
 NeighbourComparison compare_neighbours(const NeighbourList& got, const NeighbourList& expected);
 
 // |got - want| / scale, NaN-aware, for comparing kernel results: +inf (a failure at every

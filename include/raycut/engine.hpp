@@ -233,6 +233,7 @@ bool cuda_device_available();
 
 namespace detail {
 class Method;
+class ImagePoints;
 struct PairPass;
 }  // namespace detail
 
@@ -316,7 +317,8 @@ class Engine {
   std::size_t size_ = 0, sources_ = 0;
   float cutoff_ = 0;
   Systems systems_;
-  std::shared_ptr<void> images_;  // the points a method builds over with images (core/images)
+  // The points a method builds over with images (core/images.hpp), reused by later builds.
+  std::shared_ptr<detail::ImagePoints> images_;
   bool queries_ = false;          // built with query points
   bool built_ = false;
   bool has_run_ = false;

@@ -46,11 +46,12 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk&
   for (std::size_t t = 0; t < n; ++t) {
     const auto i = static_cast<std::uint32_t>(t);
     typename F::Accumulator acc = initial_state(f, i);
-    for_each_in_range(t, xyz, cutoff_squared, walk, [&](std::size_t k, Vec3 r, float r2) {
+    const typename Images::Target ti = images.target(i);
+    for_each_in_range(t, xyz, cutoff_squared, walk, [&](std::size_t point, Vec3 r, float r2) {
+      const auto k = static_cast<std::uint32_t>(point);
       std::uint32_t j;
       Shift s{};
-      if (resolve(f, images, true, i, static_cast<std::uint32_t>(k), j, s))
-        apply(f, acc, i, j, r, r2, s);
+      if (resolve(f, images, ti, true, i, k, k, j, s)) apply(f, acc, i, j, r, r2, s);
     });
     f.finish(i, acc);
   }

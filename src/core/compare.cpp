@@ -1,34 +1,57 @@
 #include "raycut/compare.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <iterator>
 #include <limits>
 #include <sstream>
+#include <tuple>
 #include <vector>
 
 namespace raycut {
 namespace {
 
-std::vector<std::uint32_t> sorted_row(const NeighbourList& list, std::size_t i) {
-  std::vector<std::uint32_t> row(list.indices.begin() + list.offsets[i],
-                                 list.indices.begin() + list.offsets[i + 1]);
+// One list entry: the source index and, when the list has them, its image shift S.
+struct Entry {
+  std::uint32_t j = 0;
+  std::array<std::int32_t, 3> shift{};
+  bool operator<(const Entry& o) const { return std::tie(j, shift) < std::tie(o.j, o.shift); }
+  bool operator==(const Entry& o) const { return j == o.j && shift == o.shift; }
+};
+
+std::vector<Entry> sorted_row(const NeighbourList& list, std::size_t i, bool with_shifts) {
+  std::vector<Entry> row;
+  for (std::uint64_t k = list.offsets[i]; k < list.offsets[i + 1]; ++k) {
+    Entry e;
+    e.j = list.indices[k];
+    if (with_shifts)
+      for (int c = 0; c < 3; ++c) e.shift[c] = list.shifts[3 * k + c];
+    row.push_back(e);
+  }
   std::sort(row.begin(), row.end());
   return row;
 }
 
-std::string describe(std::size_t i, const std::vector<std::uint32_t>& got,
-                     const std::vector<std::uint32_t>& want) {
-  std::vector<std::uint32_t> missing, extra;
+void print(std::ostringstream& s, const Entry& e, bool with_shifts) {
+  s << ' ' << e.j;
+  if (with_shifts) s << '(' << e.shift[0] << ',' << e.shift[1] << ',' << e.shift[2] << ')';
+}
+
+std::string describe(std::size_t i, const std::vector<Entry>& got, const std::vector<Entry>& want,
+                     bool with_shifts) {
+  std::vector<Entry> missing, extra;
   std::set_difference(want.begin(), want.end(), got.begin(), got.end(),
                       std::back_inserter(missing));
   std::set_difference(got.begin(), got.end(), want.begin(), want.end(), std::back_inserter(extra));
   std::ostringstream s;
   s << "target " << i << ": " << got.size() << " neighbours, expected " << want.size()
     << "; missing";
-  for (std::size_t k = 0; k < std::min<std::size_t>(missing.size(), 5); ++k) s << ' ' << missing[k];
+  for (std::size_t k = 0; k < std::min<std::size_t>(missing.size(), 5); ++k)
+    print(s, missing[k], with_shifts);
   s << "; extra or repeated";
-  for (std::size_t k = 0; k < std::min<std::size_t>(extra.size(), 5); ++k) s << ' ' << extra[k];
+  for (std::size_t k = 0; k < std::min<std::size_t>(extra.size(), 5); ++k)
+    print(s, extra[k], with_shifts);
   return s.str();
 }
 
@@ -45,9 +68,22 @@ NeighbourComparison compare_neighbours(const NeighbourList& got, const Neighbour
     c.differing_targets = c.targets;
     return c;
   }
+  // Shifts take part when the expected list has them: then (j, S) is the entry, and a list
+  // without them (or with too few) cannot match.
+  const bool with_shifts = !expected.shifts.empty();
+  if (with_shifts && (expected.shifts.size() != 3 * expected.indices.size() ||
+                      got.shifts.size() != 3 * got.indices.size())) {
+    c.first_difference =
+        "the list has " + std::to_string(got.shifts.size()) + " shift values for " +
+        std::to_string(got.indices.size()) +
+        " entries, expected 3 per entry (the oracle's: " + std::to_string(expected.shifts.size()) +
+        " for " + std::to_string(expected.indices.size()) + ")";
+    c.differing_targets = c.targets;
+    return c;
+  }
   for (std::size_t i = 0; i < c.targets; ++i) {
-    const auto g = sorted_row(got, i), w = sorted_row(expected, i);
-    if (g != w && c.differing_targets++ == 0) c.first_difference = describe(i, g, w);
+    const auto g = sorted_row(got, i, with_shifts), w = sorted_row(expected, i, with_shifts);
+    if (g != w && c.differing_targets++ == 0) c.first_difference = describe(i, g, w, with_shifts);
   }
   return c;
 }

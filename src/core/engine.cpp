@@ -170,7 +170,6 @@ void Engine::build(PositionsView positions, float cutoff, const Systems& systems
   systems_ = systems;
   systems_.queries = {};  // the pointer is not kept beyond build()
   queries_ = systems.has_queries();
-  images_.reset();
   timings_ = {};
   if (size_ == 0) {  // no targets: every query answers "no pairs"
     built_ = true;
@@ -179,17 +178,19 @@ void Engine::build(PositionsView positions, float cutoff, const Systems& systems
   const auto start = Clock::now();
   with_positions_in_method_space(positions, [&](const float* sources) {
     with_positions_in_method_space(systems.queries, [&](const float* queries) {
-      std::shared_ptr<detail::ImagePoints> points;
-      if (m.space() == MemorySpace::host) {
-        points = detail::expand_on_host(plan, sources, queries);
-      } else {
+      if (!images_ || images_->space() != m.space()) {
+        images_.reset();
+        if (m.space() == MemorySpace::host) {
+          images_ = detail::make_host_image_points();
+        } else {
 #if defined(RAYCUT_HAVE_CUDA)
-        points = detail::cuda::expand_on_device(plan, sources, queries, stream_);
+          images_ = detail::cuda::make_device_image_points();
 #endif
+        }
       }
-      m.build_points(points->points(), cutoff);
+      images_->expand(plan, sources, queries, stream_);
+      m.build_points(images_->points(), cutoff);
       m.synchronize();
-      images_ = points;
     });
   });
   timings_.build_ms = elapsed_ms(start);

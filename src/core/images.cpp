@@ -60,12 +60,16 @@ ImageFrame frame_of(const Box& box, double cutoff, std::size_t system, bool batc
 
 class HostImagePoints final : public ImagePoints {
  public:
-  HostImagePoints(const ImagePlan& plan, const float* sources, const float* queries);
+  MemorySpace space() const override { return MemorySpace::host; }
+  void expand(const ImagePlan& plan, const float* sources, const float* queries,
+              void*) override;
 
  private:
   std::vector<float> xyz_;
-  std::vector<std::uint32_t> source_, system_;
-  std::vector<std::int32_t> shift_;
+  std::vector<PointImage> image_;
+  std::vector<std::uint32_t> system_;
+  std::vector<WrappedPoint> wrapped_;
+  std::vector<std::uint64_t> image_offset_;
 };
 
 [[noreturn]] void refuse_wrap(std::size_t index, const float* x, const char* what) {
@@ -74,8 +78,8 @@ class HostImagePoints final : public ImagePoints {
          ") lies more than 2^31 boxes away: its image shift leaves the int32 range");
 }
 
-HostImagePoints::HostImagePoints(const ImagePlan& plan, const float* sources,
-                                 const float* queries) {
+void HostImagePoints::expand(const ImagePlan& plan, const float* sources, const float* queries,
+                             void*) {
   const std::uint32_t systems = plan.systems();
   const std::size_t n = plan.source_count(), targets = plan.target_count();
   const bool with_queries = plan.has_queries();
@@ -89,25 +93,22 @@ HostImagePoints::HostImagePoints(const ImagePlan& plan, const float* sources,
     }
 
   // Every particle wrapped, and its images counted, then placed after the targets (and sources).
-  std::vector<WrappedPoint> wrapped(n);
-  std::vector<std::uint64_t> image_offset(n + 1, 0);
-  std::vector<std::uint32_t> system_of(n);
+  wrapped_.resize(n);
+  image_offset_.assign(n + 1, 0);
   for (std::uint32_t s = 0; s < systems; ++s)
     for (std::uint64_t p = plan.sources[s]; p < plan.sources[s + 1]; ++p) {
-      system_of[p] = s;
-      wrapped[p] = wrap_point(frames[s], sources + 3 * p);
-      if (!wrapped[p].ok) refuse_wrap(p, sources + 3 * p, "particle");
-      image_offset[p + 1] = image_count(frames[s], wrapped[p], false);
+      wrapped_[p] = wrap_point(frames[s], sources + 3 * p);
+      if (!wrapped_[p].ok) refuse_wrap(p, sources + 3 * p, "particle");
+      image_offset_[p + 1] = image_count(frames[s], wrapped_[p], false);
     }
-  for (std::size_t p = 0; p < n; ++p) image_offset[p + 1] += image_offset[p];
+  for (std::size_t p = 0; p < n; ++p) image_offset_[p + 1] += image_offset_[p];
   const std::uint64_t first_image = targets + (with_queries ? n : 0);
-  const std::uint64_t total = first_image + image_offset[n];
+  const std::uint64_t total = first_image + image_offset_[n];
   if (std::string why = too_many_points(total, targets); !why.empty()) refuse(why);
 
   try {
     xyz_.resize(3 * total);
-    source_.resize(total);
-    shift_.resize(3 * total);
+    image_.resize(total);
     if (systems > 1) system_.resize(total);
   } catch (const std::bad_alloc&) {
     throw Error(ErrorCode::out_of_memory,
@@ -117,8 +118,7 @@ HostImagePoints::HostImagePoints(const ImagePlan& plan, const float* sources,
   const auto place = [&](std::uint64_t k, const float* p, std::uint32_t source, std::uint32_t s,
                          const std::int32_t t[3]) {
     std::copy_n(p, 3, &xyz_[3 * k]);
-    source_[k] = source;
-    std::copy_n(t, 3, &shift_[3 * k]);
+    image_[k] = {source, {t[0], t[1], t[2]}};
     if (systems > 1) system_[k] = s;
   };
   // A wrapped particle or query at point k.
@@ -140,9 +140,9 @@ HostImagePoints::HostImagePoints(const ImagePlan& plan, const float* sources,
     }
     for (std::uint64_t p = plan.sources[s]; p < plan.sources[s + 1]; ++p) {
       const std::uint64_t k = with_queries ? targets + p : p;
-      place_wrapped(k, frames[s], wrapped[p], static_cast<std::uint32_t>(p), s);
-      std::uint64_t next = first_image + image_offset[p];
-      const WrappedPoint& w = wrapped[p];
+      place_wrapped(k, frames[s], wrapped_[p], static_cast<std::uint32_t>(p), s);
+      std::uint64_t next = first_image + image_offset_[p];
+      const WrappedPoint& w = wrapped_[p];
       for_each_image(frames[s], w, false, [&](const int nshift[3], const float position[3]) {
         const std::int32_t t[3] = {nshift[0] - w.shift[0], nshift[1] - w.shift[1],
                                    nshift[2] - w.shift[2]};
@@ -154,7 +154,7 @@ HostImagePoints::HostImagePoints(const ImagePlan& plan, const float* sources,
   points_.xyz = xyz_.data();
   points_.size = total;
   points_.targets = targets;
-  points_.images = {source_.data(), shift_.data()};
+  points_.images = {image_.data()};
   points_.system = systems > 1 ? system_.data() : nullptr;
   points_.systems = systems;
 }
@@ -197,9 +197,8 @@ std::string too_many_points(std::uint64_t points, std::size_t targets) {
          "(a box far thinner than the cutoff makes many images per particle)";
 }
 
-std::shared_ptr<ImagePoints> expand_on_host(const ImagePlan& plan, const float* sources,
-                                            const float* queries) {
-  return std::make_shared<HostImagePoints>(plan, sources, queries);
+std::unique_ptr<ImagePoints> make_host_image_points() {
+  return std::make_unique<HostImagePoints>();
 }
 
 }  // namespace raycut::detail

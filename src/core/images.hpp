@@ -9,8 +9,8 @@
 //   sources  with query points only: the caller's particles, wrapped;
 //   images   for each particle in the caller's order, its images n != 0 (n in lexicographic
 //            order) that can lie within the cutoff of its cell (core/image_frame.hpp).
-// Point k has source[k] (the caller's index; not_a_source for a query) and shift T_k, the point
-// being x_source + T_k . cell (minus its system's frame origin); a pair (i, k) has
+// Point k has image[k] = {source (the caller's index; not_a_source for a query), shift T_k},
+// the point being x_source + T_k . cell (minus its system's frame origin); a pair (i, k) has
 // S = T_k - T_i. Batches add system[k]; each system sits in its own frame, near the origin.
 #pragma once
 
@@ -40,10 +40,15 @@ struct ImagePlan {
 // against each box (image counts); throws Error(invalid_argument) naming what is wrong.
 ImagePlan plan_images(const Systems& systems, std::size_t sources, double cutoff);
 
-// The points a method builds over, owned: the engine keeps them while the build lives.
+// The points a method builds over, owned by the engine while the build lives; expand() reuses
+// the buffers of the previous call (they only grow), so a step loop allocates once.
 class ImagePoints {
  public:
   virtual ~ImagePoints() = default;
+  virtual MemorySpace space() const = 0;
+  // `sources` (and `queries`) in space(); GPU work queued on `stream` (a cudaStream_t).
+  virtual void expand(const ImagePlan& plan, const float* sources, const float* queries,
+                      void* stream) = 0;
   const Points& points() const { return points_; }
 
  protected:
@@ -51,8 +56,7 @@ class ImagePoints {
 };
 
 // The expansion on the host (positions in host memory).
-std::shared_ptr<ImagePoints> expand_on_host(const ImagePlan& plan, const float* sources,
-                                            const float* queries);
+std::unique_ptr<ImagePoints> make_host_image_points();
 
 // Why `points` points cannot be indexed with 32 bits (empty when they can), for the error.
 std::string too_many_points(std::uint64_t points, std::size_t targets);

@@ -239,7 +239,7 @@ namespace {
 struct IsTarget {
   const float4* pos;
   std::uint32_t targets;
-  __host__ __device__ bool operator()(Slot s) const { return __float_as_uint(pos[s].w) < targets; }
+  __device__ bool operator()(Slot s) const { return __float_as_uint(pos[s].w) < targets; }
 };
 }  // namespace
 
@@ -254,6 +254,19 @@ void GridTables::select_targets(std::uint32_t targets, cudaStream_t stream) {
   temp_.resize(std::max<std::size_t>(temp_bytes, 1));
   RAYCUT_CUDA_CHECK(cub::DeviceSelect::If(temp_.data(), temp_bytes, slots, targets_.data(),
                                           selected_.data(), n_, is_target, stream));
+}
+
+__global__ void gather_images_kernel(const float4* pos, const PointImage* image, Slot n,
+                                     PointImage* slot_images) {
+  const Slot s = blockIdx.x * blockDim.x + threadIdx.x;
+  if (s < n) slot_images[s] = image[__float_as_uint(pos[s].w)];
+}
+
+void GridTables::gather_images(const PointImage* image, cudaStream_t stream) {
+  slot_images_.resize(std::max<std::uint32_t>(n_, 1));
+  gather_images_kernel<<<blocks_for(n_, 256), 256, 0, stream>>>(pos_.data(), image, n_,
+                                                                 slot_images_.data());
+  RAYCUT_CUDA_CHECK_LAUNCH();
 }
 
 GridPass GridTables::pass(const GridPlan& plan) const {

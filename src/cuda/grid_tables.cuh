@@ -27,6 +27,10 @@ class GridTables {
   void build(const float* xyz, std::uint32_t n, const GridPlan& plan, cudaStream_t stream);
   // The slots of points [0, targets) in slot order, for a pass over those targets only.
   void select_targets(std::uint32_t targets, cudaStream_t stream);
+  // The image of each slot's point (image[point], gathered into slot order: the traversal's
+  // candidates of a row then read consecutive entries).
+  void gather_images(const PointImage* image, cudaStream_t stream);
+  const PointImage* slot_images() const { return slot_images_.data(); }
   // The traversal's view of the last build.
   GridPass pass(const GridPlan& plan) const;
 
@@ -46,6 +50,7 @@ class GridTables {
   std::uint32_t* order_ = nullptr;  // index_ or index_alt_: sorted slot -> original index
   DeviceBuffer<float4> pos_;
   DeviceBuffer<std::uint32_t> targets_;  // select_targets()
+  DeviceBuffer<PointImage> slot_images_;  // gather_images()
   DeviceBuffer<std::uint32_t> selected_;  // its count (device; the number is known)
   DeviceBuffer<std::uint32_t> start_;  // dense: per cell; compact: per non-empty cell
   DeviceBuffer<std::uint64_t> cell_keys_, row_keys_;

@@ -9,6 +9,7 @@
 
 #include "cuda/device_buffer.cuh"
 #include "cuda/device_results.cuh"
+#include "raycut/detail/cuda/visit.cuh"
 
 namespace raycut::detail::cuda {
 namespace {
@@ -59,16 +60,12 @@ __global__ void count_kernel(Plan plan, const float* sources, std::uint32_t* cou
 
 struct Out {
   float* xyz;
-  std::uint32_t* source;
-  std::int32_t* shift;
+  PointImage* image;
   std::uint32_t* system;  // null: one system
   __device__ void place(std::uint64_t k, const float p[3], std::uint32_t src, std::uint32_t s,
                         const std::int32_t t[3]) const {
-    for (int c = 0; c < 3; ++c) {
-      xyz[3 * k + c] = p[c];
-      shift[3 * k + c] = t[c];
-    }
-    source[k] = src;
+    for (int c = 0; c < 3; ++c) xyz[3 * k + c] = p[c];
+    image[k] = PointImage{src, {t[0], t[1], t[2]}};
     if (system) system[k] = s;
   }
   __device__ void place_wrapped(std::uint64_t k, const ImageFrame& frame, const WrappedPoint& w,
@@ -117,13 +114,20 @@ struct CountOrZero {
 
 class DeviceImagePoints final : public ImagePoints {
  public:
-  DeviceImagePoints(const ImagePlan& plan, const float* sources, const float* queries,
-                    cudaStream_t stream);
+  MemorySpace space() const override { return MemorySpace::device; }
+  void expand(const ImagePlan& plan, const float* sources, const float* queries,
+              void* stream) override;
 
  private:
   DeviceBuffer<float> xyz_;
-  DeviceBuffer<std::uint32_t> source_, system_;
-  DeviceBuffer<std::int32_t> shift_;
+  DeviceBuffer<PointImage> image_;
+  DeviceBuffer<std::uint32_t> system_, counts_;
+  DeviceBuffer<ImageFrame> frames_;
+  DeviceBuffer<std::uint64_t> source_offsets_, query_offsets_, image_offset_;
+  DeviceBuffer<unsigned long long> bad_;  // atomics to mapped host memory are not portable
+  DeviceBuffer<unsigned char> temp_;
+  MappedValue<unsigned long long> bad_host_;
+  MappedValue<std::uint64_t> total_;
 };
 
 template <class T>
@@ -134,106 +138,99 @@ void upload_async(DeviceBuffer<T>& buffer, const std::vector<T>& host, cudaStrea
                                       cudaMemcpyHostToDevice, stream));
 }
 
-DeviceImagePoints::DeviceImagePoints(const ImagePlan& plan, const float* sources,
-                                     const float* queries, cudaStream_t stream) {
+void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, const float* queries,
+                               void* stream_ptr) {
+  const auto stream = static_cast<cudaStream_t>(stream_ptr);
   const std::uint32_t systems = plan.systems();
   const std::uint64_t n = plan.source_count(), targets = plan.target_count();
   const bool with_queries = plan.has_queries();
-  DeviceBuffer<ImageFrame> frames;
-  DeviceBuffer<std::uint64_t> source_offsets, query_offsets, image_offset;
-  DeviceBuffer<std::uint32_t> counts;
-  upload_async(frames, plan.frames, stream);
-  upload_async(source_offsets, plan.sources, stream);
-  if (with_queries) upload_async(query_offsets, plan.queries, stream);
-  Plan p{frames.data(),
-         source_offsets.data(),
-         with_queries ? query_offsets.data() : nullptr,
-         systems,
-         n,
-         targets,
-         0};
-  if (plan.own_frames)
+  upload_async(frames_, plan.frames, stream);
+  upload_async(source_offsets_, plan.sources, stream);
+  if (with_queries) upload_async(query_offsets_, plan.queries, stream);
+  Plan p{frames_.data(), source_offsets_.data(), with_queries ? query_offsets_.data() : nullptr,
+         systems, n, targets, 0};
+  if (plan.own_frames) {
     origins_kernel<<<blocks_for(systems, block), block, 0, stream>>>(p, sources, queries);
-  RAYCUT_CUDA_CHECK_LAUNCH();
+    RAYCUT_CUDA_CHECK_LAUNCH();
+  }
 
   // Count, scan (the total lands at image_offset[n]), read the total and any bad shift back.
-  // The bad index is kept in device memory (atomics to mapped host memory are not portable),
-  // then copied back with the total.
-  DeviceBuffer<unsigned long long> bad(1);
-  RAYCUT_CUDA_CHECK(cudaMemsetAsync(bad.data(), 0xFF, sizeof(unsigned long long), stream));
-  MappedValue<unsigned long long> bad_host;
-  MappedValue<std::uint64_t> total;
-  counts.resize(std::max<std::uint64_t>(n, 1));
-  image_offset.resize(n + 1);
+  bad_.resize(1);
+  RAYCUT_CUDA_CHECK(cudaMemsetAsync(bad_.data(), 0xFF, sizeof(unsigned long long), stream));
+  counts_.resize(std::max<std::uint64_t>(n, 1));
+  image_offset_.resize(n + 1);
   if (n > 0) {
-    count_kernel<<<blocks_for(n, block), block, 0, stream>>>(p, sources, counts.data(), bad.data());
+    count_kernel<<<blocks_for(n, block), block, 0, stream>>>(p, sources, counts_.data(),
+                                                             bad_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
   const auto input = thrust::make_transform_iterator(thrust::counting_iterator<std::uint64_t>(0),
-                                                     CountOrZero{counts.data(), n});
+                                                     CountOrZero{counts_.data(), n});
   std::size_t temp_bytes = 0;
-  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, input, image_offset.data(),
-                                                  n + 1, stream));
-  DeviceBuffer<unsigned char> temp(std::max<std::size_t>(temp_bytes, 1));
-  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(temp.data(), temp_bytes, input,
-                                                  image_offset.data(), n + 1, stream));
-  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(total.device(), image_offset.data() + n, sizeof(std::uint64_t),
-                                    cudaMemcpyDeviceToDevice, stream));
-  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(bad_host.device(), bad.data(), sizeof(unsigned long long),
+  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, input,
+                                                  image_offset_.data(), n + 1, stream));
+  temp_.resize(std::max<std::size_t>(temp_bytes, 1));
+  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(temp_.data(), temp_bytes, input,
+                                                  image_offset_.data(), n + 1, stream));
+  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(total_.device(), image_offset_.data() + n,
+                                    sizeof(std::uint64_t), cudaMemcpyDeviceToDevice, stream));
+  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(bad_host_.device(), bad_.data(), sizeof(unsigned long long),
                                     cudaMemcpyDeviceToDevice, stream));
   RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
-  if (bad_host.host() != ~0ull) {
+  if (bad_host_.host() != ~0ull) {
     float x[3];
     RAYCUT_CUDA_CHECK(
-        cudaMemcpy(x, sources + 3 * bad_host.host(), sizeof x, cudaMemcpyDeviceToHost));
+        cudaMemcpy(x, sources + 3 * bad_host_.host(), sizeof x, cudaMemcpyDeviceToHost));
     throw Error(ErrorCode::invalid_argument,
-                "particle " + std::to_string(bad_host.host()) + " at (" + std::to_string(x[0]) +
+                "particle " + std::to_string(bad_host_.host()) + " at (" + std::to_string(x[0]) +
                     ", " + std::to_string(x[1]) + ", " + std::to_string(x[2]) +
                     ") lies more than 2^31 boxes away: its image shift leaves the int32 range");
   }
   p.first_image = targets + (with_queries ? n : 0);
-  const std::uint64_t points = p.first_image + total.host();
+  const std::uint64_t points = p.first_image + total_.host();
   if (std::string why = too_many_points(points, targets); !why.empty())
     throw Error(ErrorCode::invalid_argument, why);
 
-  require_device_memory(static_cast<std::size_t>(32.0 * points), "points with periodic images");
+  const double held =
+      static_cast<double>(xyz_.bytes() + image_.bytes() + (systems > 1 ? system_.bytes() : 0));
+  const double need = (12.0 + 16.0 + (systems > 1 ? 4.0 : 0.0)) * static_cast<double>(points);
+  if (need > held)
+    require_device_memory(static_cast<std::size_t>(need - held), "points with periodic images");
   xyz_.resize(3 * points);
-  source_.resize(points);
-  shift_.resize(3 * points);
+  image_.resize(points);
   if (systems > 1) system_.resize(points);
-  const Out out{xyz_.data(), source_.data(), shift_.data(), systems > 1 ? system_.data() : nullptr};
+  const Out out{xyz_.data(), image_.data(), systems > 1 ? system_.data() : nullptr};
   if (with_queries && targets > 0) {
-    queries_kernel<<<blocks_for(targets, block), block, 0, stream>>>(p, queries, out, bad.data());
+    queries_kernel<<<blocks_for(targets, block), block, 0, stream>>>(p, queries, out,
+                                                                     bad_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
+    RAYCUT_CUDA_CHECK(cudaMemcpyAsync(bad_host_.device(), bad_.data(),
+                                      sizeof(unsigned long long), cudaMemcpyDeviceToDevice,
+                                      stream));
+    RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
+    if (bad_host_.host() != ~0ull)
+      throw Error(ErrorCode::invalid_argument,
+                  "query point " + std::to_string(bad_host_.host() - n) +
+                      " lies more than 2^31 boxes away: its image shift leaves the int32 range");
   }
   if (n > 0) {
-    particles_kernel<<<blocks_for(n, block), block, 0, stream>>>(p, sources, image_offset.data(),
+    particles_kernel<<<blocks_for(n, block), block, 0, stream>>>(p, sources, image_offset_.data(),
                                                                  with_queries, out);
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
-  // The temporaries above are freed on return: wait for the kernels that read them.
-  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(bad_host.device(), bad.data(), sizeof(unsigned long long),
-                                    cudaMemcpyDeviceToDevice, stream));
-  RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
-  if (bad_host.host() != ~0ull)
-    throw Error(ErrorCode::invalid_argument,
-                "query point " + std::to_string(bad_host.host() - n) +
-                    " lies more than 2^31 boxes away: its image shift leaves the int32 range");
 
   points_.xyz = xyz_.data();
   points_.size = points;
   points_.targets = targets;
-  points_.images = {source_.data(), shift_.data()};
+  points_.images = {image_.data()};
   points_.system = systems > 1 ? system_.data() : nullptr;
   points_.systems = systems;
 }
 
 }  // namespace
 
-std::shared_ptr<ImagePoints> expand_on_device(const ImagePlan& plan, const float* sources,
-                                              const float* queries, void* stream) {
-  return std::make_shared<DeviceImagePoints>(plan, sources, queries,
-                                             static_cast<cudaStream_t>(stream));
+std::unique_ptr<ImagePoints> make_device_image_points() {
+  return std::make_unique<DeviceImagePoints>();
 }
 
 }  // namespace raycut::detail::cuda

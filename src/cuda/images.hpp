@@ -9,8 +9,8 @@
 
 namespace raycut::detail::cuda {
 
-// Queued on `stream` (a cudaStream_t); reads the number of images back once, to size the points.
-std::shared_ptr<ImagePoints> expand_on_device(const ImagePlan& plan, const float* sources,
-                                              const float* queries, void* stream);
+// expand() queues its work on `stream` and reads the number of images back once, to size the
+// points.
+std::unique_ptr<ImagePoints> make_device_image_points();
 
 }  // namespace raycut::detail::cuda

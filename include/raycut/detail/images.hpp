@@ -14,34 +14,41 @@ namespace raycut::detail {
 
 struct NoImages {
   static constexpr bool active = false;
+  struct Target {};
+  RAYCUT_HD Target target(std::uint32_t) const { return {}; }
 };
 
 struct WithImages {
   static constexpr bool active = true;
-  const std::uint32_t* source;
-  const std::int32_t* shift;
-  // S = T_k - T_i of target i (a point index too: targets come first) and candidate point k.
-  RAYCUT_HD Shift pair_shift(std::uint32_t i, std::uint32_t k) const {
-    const std::int32_t* ti = shift + 3 * std::uint64_t{i};
-    const std::int32_t* tk = shift + 3 * std::uint64_t{k};
-    return {tk[0] - ti[0], tk[1] - ti[1], tk[2] - ti[2]};
+  const PointImage* image;  // by point, or by slot for the grid
+  struct Target {
+    std::int32_t shift[3];
+  };
+  RAYCUT_HD Target target(std::uint32_t index) const {
+    const PointImage& t = image[index];
+    return {{t.shift[0], t.shift[1], t.shift[2]}};
   }
 };
 
-// Candidate point k of target i, `in` by the shared predicate: whether functor f takes it, with
-// j (the caller's source; a valid index 0 when not taken, for calls fed r2 = +inf) and s set.
-// A query point is never a source; the shift is looked up only for functors that take it.
+// Candidate point k (at `index` in the image table: k, or its slot for the grid) of target i
+// (`ti` from images.target()), `in` by the shared predicate: whether functor f takes it, with j
+// (the caller's source; a valid index 0 when not taken, for calls fed r2 = +inf) and s set. A
+// query point is never a source.
 template <class F, class Images>
-RAYCUT_HD bool resolve(const F& f, const Images& images, bool in, std::uint32_t i, std::uint32_t k,
+RAYCUT_HD bool resolve(const F& f, const Images& images, const typename Images::Target& ti,
+                       bool in, std::uint32_t i, std::uint32_t k, std::uint32_t index,
                        std::uint32_t& j, Shift& s) {
   if constexpr (Images::active) {
+    (void)k;
     j = 0;
     if (!in) return false;
-    const std::uint32_t source = images.source[k];
-    if (source == not_a_source) return false;
-    j = source;
-    if constexpr (takes_shift<F>::value) s = images.pair_shift(i, k);
+    const PointImage p = images.image[index];
+    if (p.source == not_a_source) return false;
+    j = p.source;
+    s = {p.shift[0] - ti.shift[0], p.shift[1] - ti.shift[1], p.shift[2] - ti.shift[2]};
   } else {
+    (void)ti;
+    (void)index;
     j = k;
   }
   return in && accepts(f, i, j, s);
@@ -51,7 +58,7 @@ RAYCUT_HD bool resolve(const F& f, const Images& images, bool in, std::uint32_t 
 template <class Launch>
 void with_images(const PairPass& pass, Launch&& launch) {
   if (pass.images.active())
-    launch(WithImages{pass.images.source, pass.images.shift});
+    launch(WithImages{pass.images.image});
   else
     launch(NoImages{});
 }

@@ -96,12 +96,16 @@ struct GridPass {
 
 // Points with images (src/core/images.hpp): per point k the caller's source index (or
 // not_a_source: a query point) and its shift T_k, the point being x_source + T_k . cell; a pair
-// (target i, point k) has S = T_k - T_i. Null tables: the points are the caller's particles.
+// (target i, point k) has S = T_k - T_i. One 16-byte load per pair.
 constexpr std::uint32_t not_a_source = 0xFFFFFFFFu;
+struct alignas(16) PointImage {
+  std::uint32_t source;
+  std::int32_t shift[3];
+};
+// Null: the points are the caller's particles. The grid hands its traversal a copy in slot order.
 struct ImageTables {
-  const std::uint32_t* source = nullptr;  // per point
-  const std::int32_t* shift = nullptr;    // 3 per point
-  bool active() const { return source != nullptr; }
+  const PointImage* image = nullptr;
+  bool active() const { return image != nullptr; }
 };
 
 struct PairPass {

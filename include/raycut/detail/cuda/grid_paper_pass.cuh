@@ -37,7 +37,7 @@ __global__ void grid_paper_kernel(GridPaperPass p, std::uint32_t n, float cutoff
           if (s == t) continue;
           const Vec3 r{p.x[s] - xt, p.y[s] - yt, p.z[s] - zt};
           const float r2 = squared_distance(r.x, r.y, r.z);
-          visit(f, acc, in_range(r2, cutoff_squared), i, p.index[s], r, r2, NoImages{});
+          visit(f, acc, in_range(r2, cutoff_squared), i, p.index[s], s, r, r2, NoImages{}, {});
         }
       }
     }

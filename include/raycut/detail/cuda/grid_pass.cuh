@@ -152,7 +152,7 @@ __device__ __forceinline__ std::uint32_t original_index(const float4& q) {
   return __float_as_uint(q.w);
 }
 
-// Calls visit(q, r, r2) for every candidate source q (a float4, w = original index) of the
+// Calls visit(q, slot, r, r2) for every candidate source q (a float4, w = point index) of the
 // target p in slot t, self excluded: one thread per target, row after row. Self is excluded by
 // splitting its own row's range around it, not by a test per candidate, and the walk is by
 // pointer: the inner loop is a load and the distance.
@@ -163,9 +163,9 @@ __device__ __forceinline__ void for_each_candidate(const float4* __restrict__ po
   const TargetCell c = locate(view, p);
   const int reach = view.grid.reach;
   const float4* const self = pos + t;
-  const auto one = [&](const float4& v) {
+  const auto one = [&](const float4& v, const float4* at) {
     const Vec3 r{v.x - p.x, v.y - p.y, v.z - p.z};
-    visit(v, r, squared_distance(r.x, r.y, r.z));
+    visit(v, static_cast<Slot>(at - pos), r, squared_distance(r.x, r.y, r.z));
   };
   // Four loads in flight, one 32-bit count per four (a 64-bit pointer compare costs more); not
   // unrolled further, which would leave more lanes waiting on the remainders.
@@ -176,9 +176,9 @@ __device__ __forceinline__ void for_each_candidate(const float4* __restrict__ po
 #pragma unroll
       for (int u = 0; u < 4; ++u) v[u] = __ldg(q + u);
 #pragma unroll
-      for (int u = 0; u < 4; ++u) one(v[u]);
+      for (int u = 0; u < 4; ++u) one(v[u], q + u);
     }
-    for (; q < last; ++q) one(__ldg(q));
+    for (; q < last; ++q) one(__ldg(q), q);
   };
   const auto scan_row = [&](Slot s0, Slot s1) {
     const float4 *first = pos + s0, *last = pos + s1;
@@ -213,9 +213,10 @@ __global__ void __launch_bounds__(grid_block_size, ManyRegisters ? 1 : 0)
   const Slot t = target_slot(targets, tid);
   const float4 p = pos[t];
   const std::uint32_t i = original_index(p);
+  const typename Images::Target ti = images.target(t);
   typename F::Accumulator acc = initial_state(f, i);
-  for_each_candidate(pos, t, p, view, table, [&](const float4& q, Vec3 r, float r2) {
-    visit(f, acc, in_range(r2, cutoff_squared), i, original_index(q), r, r2, images);
+  for_each_candidate(pos, t, p, view, table, [&](const float4& q, Slot s, Vec3 r, float r2) {
+    visit(f, acc, in_range(r2, cutoff_squared), i, original_index(q), s, r, r2, images, ti);
   });
   f.finish(i, acc);
 }
@@ -289,6 +290,7 @@ __global__ void __launch_bounds__(grid_block_size)
   // independent loads in flight, then the U tests.
   constexpr int U = 4;
   const std::uint32_t i = original_index(p);
+  const typename Images::Target ti = images.target(t);
   typename F::Accumulator acc{};
   int r = 0;
   uint2 row = rows[group][0];
@@ -311,8 +313,8 @@ __global__ void __launch_bounds__(grid_block_size)
     for (int u = 0; u < U; ++u) {
       const Vec3 d{q[u].x - p.x, q[u].y - p.y, q[u].z - p.z};
       const float r2 = squared_distance(d.x, d.y, d.z);
-      visit(f, acc, in_range(r2, cutoff_squared) && s[u] != t, i, original_index(q[u]), d, r2,
-            images);
+      visit(f, acc, in_range(r2, cutoff_squared) && s[u] != t, i, original_index(q[u]), s[u], d,
+            r2, images, ti);
     }
   }
   combine_lanes<G, F>(acc);
@@ -342,6 +344,7 @@ __global__ void __launch_bounds__(grid_block_size)
   const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
   const Slot total = flatten_rows<G>(view, table, locate(view, p), active, lane, rows[group]);
   const std::uint32_t i = original_index(p);
+  const typename Images::Target ti = images.target(t);
   typename F::Accumulator next{};
   if (active) next = initial_state(f, i);
   const unsigned lanes_below = (1u << lane) - 1u;
@@ -360,8 +363,8 @@ __global__ void __launch_bounds__(grid_block_size)
       const float4 q = pos[s];
       d = Vec3{q.x - p.x, q.y - p.y, q.z - p.z};
       r2 = squared_distance(d.x, d.y, d.z);
-      take = resolve(f, images, in_range(r2, cutoff_squared) && s != t, i, original_index(q), j,
-                     shift);
+      take = resolve(f, images, ti, in_range(r2, cutoff_squared) && s != t, i, original_index(q), s,
+                     j, shift);
     }
     const unsigned taken = __ballot_sync(0xffffffffu, take);
     if (take) {

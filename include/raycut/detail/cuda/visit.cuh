@@ -14,18 +14,19 @@
 
 namespace raycut::detail::cuda {
 
-// One candidate point k of target i, `in` by the shared predicate: the functor's terms when
-// taken (detail/images.hpp maps k to the caller's source and shift). A functor whose terms
-// vanish at r2 = +inf is fed that instead of a branch (a few instructions per pair, and some
-// lane of a warp is in range at almost every step: the branch would only add its own cost); the
-// others branch.
+// One candidate point k (at `index` of the image table) of target i, `in` by the shared
+// predicate: the functor's terms when taken (detail/images.hpp maps k to the caller's source and
+// shift). A functor whose terms vanish at r2 = +inf is fed that instead of a branch (a few
+// instructions per pair, and some lane of a warp is in range at almost every step: the branch
+// would only add its own cost); the others branch.
 template <class F, class Images>
 __device__ __forceinline__ void visit(const F& f, typename F::Accumulator& acc, bool in,
-                                      std::uint32_t i, std::uint32_t k, Vec3 r, float r2,
-                                      const Images& images) {
+                                      std::uint32_t i, std::uint32_t k, std::uint32_t index,
+                                      Vec3 r, float r2, const Images& images,
+                                      const typename Images::Target& ti) {
   std::uint32_t j;
   Shift s{};
-  const bool take = resolve(f, images, in, i, k, j, s);
+  const bool take = resolve(f, images, ti, in, i, k, index, j, s);
   if constexpr (vanishes_at_infinity<F>::value) {
     apply(f, acc, i, j, r, take ? r2 : CUDART_INF_F, s);
   } else {

@@ -1,0 +1,201 @@
+// The distributed engine (docs/distributed.md): particles spread over the ranks of an MPI
+// communicator by a Cartesian grid of spatial domains, each rank computing the targets it owns
+// with any single-rank raycut method over its owned particles plus halo copies of the particles
+// within cutoff + skin of its domain (periodic images included). Indices are global throughout.
+//
+//   raycut::mpi::DistributedEngine engine(MPI_COMM_WORLD, {.method = "cell-list", .skin = 0.3f});
+//   engine.build({xyz.data(), n, raycut::MemorySpace::host}, ids.data(), cutoff, box);
+//   for (step...) {
+//     raycut::Results r = engine.compute(raycut::Kernel::lj_forces);  // rows: engine.ids()
+//     ... integrate engine.positions() (owned, in that order) into new_xyz ...
+//     if (engine.update(new_xyz.data())) { ... the owned set changed: read ids() again ... }
+//   }
+//
+// Host-only header; the only MPI type in it is MPI_Comm.
+#pragma once
+
+#include <mpi.h>
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "raycut/box.hpp"
+#include "raycut/engine.hpp"
+#include "raycut/error.hpp"
+#include "raycut/kernels.hpp"
+
+namespace raycut::mpi {
+
+// Moves per-rank blocks of bytes between the ranks of a communicator: the payload of a
+// migration or a halo exchange. Sizes are agreed beforehand over MPI (the engine's control
+// plane), so a transport only moves data: the seam where an NCCL transport (device buffers,
+// ncclSend/ncclRecv in a group) plugs in. This slice packs on the host and needs space() host.
+class Transport {
+ public:
+  virtual ~Transport() = default;
+  virtual std::string name() const = 0;
+  // Where send and receive buffers must live.
+  virtual MemorySpace space() const = 0;
+  // Collective over the communicator: to rank r, send_counts[r] bytes from send +
+  // send_offsets[r]; from rank r, recv_counts[r] bytes into recv + recv_offsets[r]. Every array
+  // has one entry per rank; what rank a sends to b is what b expects from a.
+  virtual void exchange(const std::byte* send, const std::uint64_t* send_counts,
+                        const std::uint64_t* send_offsets, std::byte* recv,
+                        const std::uint64_t* recv_counts, const std::uint64_t* recv_offsets) = 0;
+};
+
+// Host-staged MPI: nonblocking point-to-point sends and receives between the pairs of ranks
+// with something to move (the neighbours of a domain), not a dense all-to-all. The
+// communicator is duplicated, so its messages never mix with the caller's.
+std::unique_ptr<Transport> make_host_transport(MPI_Comm comm);
+
+// The Cartesian grid of domains over the global region. Along axis k the region is [0, L_k)
+// with L_k = box.cell[k][k] when that is > 0 (a periodic axis must have it); an open axis
+// with no length spans the particles' bounding box at build(). Domains split each axis into
+// dims[k] equal slabs; on an open axis the first and last slabs extend to -inf and +inf, so a
+// particle outside the region still has an owner. Domain (i, j, k) is rank (i dims[1] + j)
+// dims[2] + k.
+struct Decomposition {
+  std::array<int, 3> dims = {1, 1, 1};
+  std::array<double, 3> lo = {0, 0, 0}, width = {0, 0, 0};  // slab k of axis a: lo + k width
+  std::array<bool, 3> periodic = {false, false, false};
+  std::array<double, 3> length = {0, 0, 0};  // L_k: the period on periodic axes
+  int domains() const { return dims[0] * dims[1] * dims[2]; }
+  // Slab index along `axis` of a coordinate (clamped to the grid).
+  int slab(int axis, double x) const;
+  // The owning domain (= rank) of a position.
+  int owner(const float* xyz) const;
+  std::array<int, 3> coords(int domain) const;
+};
+
+struct DistributedOptions {
+  std::string method = "cell-list";  // any single-rank method of list_methods(), or "auto"
+  // Halos reach cutoff + skin; halos are refreshed in place (positions only, no migration)
+  // while no particle has moved more than skin / 2 since the last exchange. 0: every update()
+  // migrates and rebuilds the halos.
+  float skin = 0;
+  // Domains per axis; 0 entries are chosen by MPI_Dims_create. The product must be the
+  // communicator's size.
+  std::array<int, 3> dims = {0, 0, 0};
+  // Payload transport; null: make_host_transport(comm).
+  std::shared_ptr<Transport> transport;
+};
+
+// A neighbour list of the owned targets with global indices: the in-range sources of row t
+// (global index targets[t]) are indices[offsets[t] .. offsets[t+1]).
+struct DistributedList {
+  std::vector<std::uint64_t> targets;  // one per row, owned order (DistributedEngine::ids())
+  std::vector<std::uint64_t> offsets;  // rows + 1
+  std::vector<std::uint64_t> indices;  // global source indices
+  std::vector<float> distances;        // when asked
+  std::vector<float> vectors;          // when asked: r = x_j - x_i + S . cell, 3 per entry
+  // When asked: S per entry (3 int32), relative to the positions() of each particle's owner
+  // (a particle is wrapped into [0, L) on the periodic axes at every exchange).
+  std::vector<std::int32_t> shifts;
+};
+
+// What the last passes cost; counters accumulate from build().
+struct DistributedStats {
+  std::uint64_t owned = 0, halos = 0;  // on this rank now
+  std::uint64_t exchanges = 0;         // full exchanges: migration + new halo sets
+  std::uint64_t refreshes = 0;         // halo refreshes in place (skin)
+  std::uint64_t migrated_out = 0;      // particles sent to other ranks by the last exchange
+  std::uint64_t bytes_sent = 0;        // payload bytes sent to other ranks, last exchange/refresh
+  double exchange_ms = 0;              // wall time of the last exchange or refresh
+  double build_ms = 0;                 // the local engine's build/update, last pass
+};
+
+class DistributedEngine {
+ public:
+  // Collective over `comm` (kept, not duplicated: the caller keeps it alive). Throws
+  // Error(invalid_argument) for bad dims or options, Error(unsupported) for a transport that is
+  // not on the host.
+  explicit DistributedEngine(MPI_Comm comm, DistributedOptions options = {});
+  ~DistributedEngine();
+  DistributedEngine(const DistributedEngine&) = delete;
+  DistributedEngine& operator=(const DistributedEngine&) = delete;
+
+  // Collective. Each rank gives any subset of the particles (all on rank 0 and none elsewhere
+  // is fine): host positions, their global indices (distinct over all ranks), and `width`
+  // floats per particle that travel with it on migration (velocities, say; carried() reads them
+  // back). Then migrates every particle to its domain and builds the halos and the local engine.
+  // `box`: open or orthorhombic (periodic on any axes, rows along x, y, z); a triclinic cell is
+  // Error(unsupported). Every domain must be at least cutoff + skin wide along each axis split
+  // in more than one domain (and along a periodic one), else Error(invalid_argument) saying which.
+  // An error found on one rank (a non-finite coordinate) is thrown on every rank.
+  void build(PositionsView positions, const std::uint64_t* ids, float cutoff, const Box& box = {},
+             const float* carried = nullptr, std::size_t width = 0);
+
+  // Collective. New positions of the owned particles in owned order (3 floats each, ids()
+  // order), and optionally their carried floats. Refreshes the halos in place when the skin
+  // allows, else exchanges (migration, new halos). Returns true after an exchange: the owned set
+  // and order may have changed (ids(), positions(), carried() say how).
+  bool update(const float* positions, const float* carried = nullptr);
+  // Collective: an exchange now, whatever the skin.
+  void exchange();
+
+  // The kernel for every owned target; rows in ids() order. sph_force (it needs halo fields) is
+  // Error(unsupported) in this slice.
+  Results compute(Kernel kernel, const KernelOptions& options = {});
+  // The owned targets' neighbour lists with global indices. `half`: each pair (i, j, S) once
+  // over all ranks, in the row of the smaller global index (i == j: S lexicographically
+  // positive), as the single-rank half list orients local indices.
+  DistributedList neighbours(const ListOptions& options = {});
+
+  int rank() const { return rank_; }
+  int size() const { return size_; }
+  float cutoff() const { return cutoff_; }
+  std::size_t owned() const { return ids_.size(); }
+  std::size_t halos() const { return halo_ids_.size(); }
+  // The owned particles: global indices, positions (wrapped on periodic axes at the last
+  // exchange; as given since), carried floats (width() per particle).
+  const std::vector<std::uint64_t>& ids() const { return ids_; }
+  const std::vector<float>& positions() const { return xyz_; }
+  const std::vector<float>& carried() const { return carried_; }
+  std::size_t width() const { return width_; }
+  // The halo copies: global indices and image shifts (3 per halo).
+  const std::vector<std::uint64_t>& halo_ids() const { return halo_ids_; }
+  const std::vector<std::int32_t>& halo_shifts() const { return halo_shifts_; }
+  std::uint64_t global_size() const { return global_size_; }
+  const Decomposition& decomposition() const { return decomposition_; }
+  const DistributedStats& stats() const { return stats_; }
+  // The rank's engine over owned + halo particles (rows [0, owned()) are the owned ones).
+  const Engine& local_engine() const;
+
+ private:
+  struct HaloPlan;
+  void check_built(const char* call) const;
+  void agree(const std::string& local_error, ErrorCode code);
+  void migrate();
+  void build_halos();
+  void refresh_halos();
+  void build_local_engine(bool same_sources);
+  void exchange_counts(const std::vector<std::uint64_t>& send, std::vector<std::uint64_t>& recv);
+
+  MPI_Comm comm_;
+  int rank_ = 0, size_ = 1;
+  DistributedOptions options_;
+  std::shared_ptr<Transport> transport_;
+  Decomposition decomposition_;
+  float cutoff_ = 0;
+  double halo_width_ = 0;
+  bool built_ = false;
+  std::uint64_t global_size_ = 0;
+  std::size_t width_ = 0;
+
+  std::vector<std::uint64_t> ids_;
+  std::vector<float> xyz_, carried_;
+  std::vector<float> xyz_at_exchange_;  // the skin's reference
+  std::vector<std::uint64_t> halo_ids_;
+  std::vector<std::int32_t> halo_shifts_;
+  std::vector<float> local_xyz_;  // owned then halos: what the local engine is built over
+  std::unique_ptr<HaloPlan> plan_;
+  std::unique_ptr<Engine> engine_;
+  DistributedStats stats_;
+};
+
+}  // namespace raycut::mpi

@@ -1,0 +1,578 @@
+// The distributed engine: domain decomposition, migration, halos with periodic images, and a
+// plain open Engine per rank over owned + halo particles (docs/distributed.md).
+#include "raycut/mpi/distributed.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <numeric>
+#include <string>
+#include <vector>
+
+#include "mpi/mpi_check.hpp"
+
+namespace raycut::mpi {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double elapsed_ms(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+const char* axis_name(int axis) {
+  return axis == 0 ? "x" : axis == 1 ? "y" : "z";
+}
+
+std::string dims_text(const std::array<int, 3>& d) {
+  return "[" + std::to_string(d[0]) + " " + std::to_string(d[1]) + " " + std::to_string(d[2]) + "]";
+}
+
+template <class T>
+void put(std::byte*& at, const T* values, std::size_t n) {
+  std::memcpy(at, values, n * sizeof(T));
+  at += n * sizeof(T);
+}
+template <class T>
+void take(const std::byte*& at, T* values, std::size_t n) {
+  std::memcpy(values, at, n * sizeof(T));
+  at += n * sizeof(T);
+}
+
+std::vector<std::uint64_t> offsets_of(const std::vector<std::uint64_t>& counts,
+                                      std::uint64_t scale) {
+  std::vector<std::uint64_t> offsets(counts.size());
+  std::uint64_t at = 0;
+  for (std::size_t r = 0; r < counts.size(); ++r) {
+    offsets[r] = at;
+    at += counts[r] * scale;
+  }
+  return offsets;
+}
+
+std::vector<std::uint64_t> scaled(const std::vector<std::uint64_t>& counts, std::uint64_t scale) {
+  std::vector<std::uint64_t> out(counts);
+  for (auto& c : out) c *= scale;
+  return out;
+}
+
+// The image of a coordinate under a periodic shift: in double, then rounded to float, as the
+// halo copies are made.
+float image(float x, std::int32_t s, double length) {
+  return s == 0 ? x : static_cast<float>(static_cast<double>(x) + s * length);
+}
+
+// Wraps a coordinate into [0, L) in double (the float result may round up to L itself).
+float wrap_coordinate(float v, double length) {
+  const double x = v;
+  double w = x - std::floor(x / length) * length;
+  if (w >= length) w -= length;
+  if (w < 0) w += length;
+  return static_cast<float>(w);
+}
+
+}  // namespace
+
+// ---- decomposition ----------------------------------------------------------------------------
+
+int Decomposition::slab(int axis, double x) const {
+  const int d = dims[axis];
+  if (d == 1) return 0;
+  const double k = std::floor((x - lo[axis]) / width[axis]);
+  if (!(k >= 0)) return 0;  // also NaN
+  return k >= d - 1 ? d - 1 : static_cast<int>(k);
+}
+
+int Decomposition::owner(const float* xyz) const {
+  return (slab(0, xyz[0]) * dims[1] + slab(1, xyz[1])) * dims[2] + slab(2, xyz[2]);
+}
+
+std::array<int, 3> Decomposition::coords(int domain) const {
+  return {domain / (dims[1] * dims[2]), (domain / dims[2]) % dims[1], domain % dims[2]};
+}
+
+// Where halo records go: per destination rank, the owned particle and the image shift, in the
+// order they were sent (a refresh resends positions in the same order).
+struct DistributedEngine::HaloPlan {
+  std::vector<std::uint64_t> send_counts, recv_counts;  // halos per rank
+  std::vector<std::uint32_t> index;                     // owned index per record, by rank
+  std::vector<std::int32_t> shift;                      // 3 per record
+};
+
+// ---- construction -----------------------------------------------------------------------------
+
+DistributedEngine::DistributedEngine(MPI_Comm comm, DistributedOptions options)
+    : comm_(comm), options_(std::move(options)) {
+  check(MPI_Comm_rank(comm_, &rank_), "MPI_Comm_rank");
+  check(MPI_Comm_size(comm_, &size_), "MPI_Comm_size");
+  if (!std::isfinite(options_.skin) || options_.skin < 0)
+    throw Error(ErrorCode::invalid_argument,
+                "distributed skin must be finite and >= 0, got " + std::to_string(options_.skin));
+  std::array<int, 3> dims = options_.dims;
+  int fixed = 1;
+  for (int d : dims) {
+    if (d < 0)
+      throw Error(ErrorCode::invalid_argument, "distributed dims " + dims_text(dims) +
+                                                   ": entries must be >= 0 (0: MPI chooses)");
+    if (d > 0) fixed *= d;
+  }
+  if (size_ % fixed != 0)
+    throw Error(ErrorCode::invalid_argument, "distributed dims " + dims_text(dims) +
+                                                 " do not divide the " + std::to_string(size_) +
+                                                 " ranks of the communicator");
+  check(MPI_Dims_create(size_, 3, dims.data()), "MPI_Dims_create");
+  if (dims[0] * dims[1] * dims[2] != size_)
+    throw Error(ErrorCode::invalid_argument, "distributed dims " + dims_text(dims) + " make " +
+                                                 std::to_string(dims[0] * dims[1] * dims[2]) +
+                                                 " domains for " + std::to_string(size_) +
+                                                 " ranks");
+  decomposition_.dims = dims;
+  engine_ = std::make_unique<Engine>(options_.method);  // an unknown method throws here
+  transport_ = options_.transport ? options_.transport : make_host_transport(comm_);
+  if (transport_->space() != MemorySpace::host)
+    throw Error(ErrorCode::unsupported,
+                "distributed engine: transport '" + transport_->name() +
+                    "' works in device memory; this slice packs halos on the host only");
+  plan_ = std::make_unique<HaloPlan>();
+}
+
+DistributedEngine::~DistributedEngine() = default;
+
+const Engine& DistributedEngine::local_engine() const {
+  return *engine_;
+}
+
+void DistributedEngine::check_built(const char* call) const {
+  if (!built_)
+    throw Error(ErrorCode::invalid_argument,
+                std::string("DistributedEngine::") + call + "() called before build()");
+}
+
+// Every rank throws when any rank found an error: the first failing rank's message, so that no
+// rank is left waiting in a collective the others have abandoned.
+void DistributedEngine::agree(const std::string& local_error, ErrorCode code) {
+  int failed = local_error.empty() ? size_ : rank_;
+  int first = size_;
+  check(MPI_Allreduce(&failed, &first, 1, MPI_INT, MPI_MIN, comm_), "MPI_Allreduce");
+  if (first == size_) return;
+  std::string message = local_error;
+  int header[2] = {static_cast<int>(message.size()), static_cast<int>(code)};
+  MPI_Bcast(header, 2, MPI_INT, first, comm_);
+  message.resize(static_cast<std::size_t>(header[0]));
+  MPI_Bcast(message.data(), header[0], MPI_CHAR, first, comm_);
+  throw Error(static_cast<ErrorCode>(header[1]), "rank " + std::to_string(first) + ": " + message);
+}
+
+void DistributedEngine::exchange_counts(const std::vector<std::uint64_t>& send,
+                                        std::vector<std::uint64_t>& recv) {
+  recv.assign(static_cast<std::size_t>(size_), 0);
+  check(MPI_Alltoall(send.data(), 1, MPI_UINT64_T, recv.data(), 1, MPI_UINT64_T, comm_),
+        "MPI_Alltoall");
+}
+
+// ---- build ------------------------------------------------------------------------------------
+
+void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids, float cutoff,
+                              const Box& box, const float* carried, std::size_t width) {
+  built_ = false;
+  std::string error;
+  ErrorCode code = ErrorCode::invalid_argument;
+  std::array<double, 6> bounds = {std::numeric_limits<double>::infinity(),
+                                  std::numeric_limits<double>::infinity(),
+                                  std::numeric_limits<double>::infinity(),
+                                  std::numeric_limits<double>::infinity(),
+                                  std::numeric_limits<double>::infinity(),
+                                  std::numeric_limits<double>::infinity()};  // min, -max
+  try {
+    if (positions.space != MemorySpace::host)
+      throw Error(ErrorCode::unsupported, "distributed build takes host positions in this slice");
+    if (positions.size > 0 && (positions.xyz == nullptr || ids == nullptr))
+      throw Error(ErrorCode::invalid_argument, "distributed build: null positions or ids");
+    if (positions.size > 0 && width > 0 && carried == nullptr)
+      throw Error(ErrorCode::invalid_argument, "distributed build: null carried values");
+    if (!(cutoff > 0) || !std::isfinite(cutoff))
+      throw Error(ErrorCode::invalid_argument,
+                  "cutoff must be finite and > 0, got " + std::to_string(cutoff));
+    validate(box);
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b)
+        if (a != b && box.cell[a][b] != 0)
+          throw Error(ErrorCode::unsupported,
+                      "distributed engine: the cell must be orthorhombic (rows along x, y, z); "
+                      "triclinic cells are a later slice");
+    for (int a = 0; a < 3; ++a)
+      if (box.pbc[a] && !(box.cell[a][a] > 0))
+        throw Error(ErrorCode::invalid_argument, std::string("distributed engine: periodic axis ") +
+                                                     axis_name(a) + " needs a positive length");
+    for (std::size_t i = 0; i < positions.size; ++i)
+      for (int c = 0; c < 3; ++c) {
+        const float v = positions.xyz[3 * i + c];
+        if (!std::isfinite(v))
+          throw Error(ErrorCode::invalid_input, "distributed build: particle " +
+                                                    std::to_string(ids[i]) +
+                                                    " has a non-finite coordinate");
+        bounds[c] = std::min(bounds[c], static_cast<double>(v));
+        bounds[3 + c] = std::min(bounds[3 + c], -static_cast<double>(v));
+      }
+    // Every rank must describe the same system: compare with rank 0's.
+    double mine[8] = {box.cell[0][0],     box.cell[1][1],     box.cell[2][2], double(box.pbc[0]),
+                      double(box.pbc[1]), double(box.pbc[2]), double(cutoff), double(width)};
+    double root[8];
+    std::memcpy(root, mine, sizeof mine);
+    MPI_Bcast(root, 8, MPI_DOUBLE, 0, comm_);
+    if (std::memcmp(root, mine, sizeof mine) != 0)
+      throw Error(ErrorCode::invalid_argument,
+                  "distributed build: box, cutoff or carried width differ from rank 0's");
+  } catch (const Error& e) {
+    error = e.what();
+    code = e.code();
+  }
+  agree(error, code);
+
+  std::array<double, 6> global;
+  check(MPI_Allreduce(bounds.data(), global.data(), 6, MPI_DOUBLE, MPI_MIN, comm_),
+        "MPI_Allreduce");
+  std::uint64_t local_n = positions.size;
+  check(MPI_Allreduce(&local_n, &global_size_, 1, MPI_UINT64_T, MPI_SUM, comm_), "MPI_Allreduce");
+
+  cutoff_ = cutoff;
+  width_ = width;
+  halo_width_ = static_cast<double>(cutoff) + static_cast<double>(options_.skin);
+  Decomposition& dec = decomposition_;
+  for (int a = 0; a < 3; ++a) {
+    dec.periodic[a] = box.pbc[a];
+    if (box.cell[a][a] > 0) {
+      dec.lo[a] = 0;
+      dec.length[a] = box.cell[a][a];
+    } else {  // an open axis with no length: the particles' extent now
+      const bool any = global_size_ > 0;
+      dec.lo[a] = any ? global[a] : 0;
+      dec.length[a] = any ? -global[3 + a] - global[a] : 0;
+    }
+    dec.width[a] = dec.length[a] / dec.dims[a];
+    if ((dec.dims[a] > 1 || dec.periodic[a]) && !(dec.width[a] >= halo_width_))
+      throw Error(ErrorCode::invalid_argument,
+                  std::string("distributed engine: domains along ") + axis_name(a) + " are " +
+                      std::to_string(dec.width[a]) + " wide (" + std::to_string(dec.dims[a]) +
+                      " over " + std::to_string(dec.length[a]) +
+                      "), less than cutoff + skin = " + std::to_string(halo_width_) +
+                      "; use fewer domains along that axis (DistributedOptions::dims) or a "
+                      "larger box");
+  }
+
+  ids_.assign(ids, ids + positions.size);
+  xyz_.assign(positions.xyz, positions.xyz + 3 * positions.size);
+  if (carried)
+    carried_.assign(carried, carried + width * positions.size);
+  else
+    carried_.clear();
+  stats_ = {};
+  built_ = true;
+  exchange();
+}
+
+// ---- step loop ----------------------------------------------------------------------------------
+
+bool DistributedEngine::update(const float* positions, const float* carried) {
+  check_built("update");
+  const std::size_t n = ids_.size();
+  std::string error;
+  double moved2 = 0;
+  if (n > 0 && positions == nullptr) error = "distributed update: null positions";
+  for (std::size_t i = 0; error.empty() && i < n; ++i) {
+    double d2 = 0;
+    for (int c = 0; c < 3; ++c) {
+      const float v = positions[3 * i + c];
+      if (!std::isfinite(v)) {
+        error = "distributed update: particle " + std::to_string(ids_[i]) +
+                " has a non-finite coordinate";
+        break;
+      }
+      const double d = static_cast<double>(v) - xyz_at_exchange_[3 * i + c];
+      d2 += d * d;
+    }
+    moved2 = std::max(moved2, d2);
+  }
+  agree(error, ErrorCode::invalid_input);
+  std::copy(positions, positions + 3 * n, xyz_.begin());
+  if (carried) std::copy(carried, carried + width_ * n, carried_.begin());
+
+  double largest2 = 0;
+  check(MPI_Allreduce(&moved2, &largest2, 1, MPI_DOUBLE, MPI_MAX, comm_), "MPI_Allreduce");
+  const double half_skin = 0.5 * static_cast<double>(options_.skin);
+  if (options_.skin == 0 || largest2 > half_skin * half_skin) {
+    exchange();
+    return true;
+  }
+  refresh_halos();
+  build_local_engine(true);
+  return false;
+}
+
+void DistributedEngine::exchange() {
+  check_built("exchange");
+  const auto start = Clock::now();
+  const Decomposition& dec = decomposition_;
+  for (std::size_t i = 0; i < ids_.size(); ++i)
+    for (int a = 0; a < 3; ++a)
+      if (dec.periodic[a]) xyz_[3 * i + a] = wrap_coordinate(xyz_[3 * i + a], dec.length[a]);
+  stats_.bytes_sent = 0;
+  migrate();
+  build_halos();
+  xyz_at_exchange_ = xyz_;
+  ++stats_.exchanges;
+  stats_.exchange_ms = elapsed_ms(start);
+  build_local_engine(false);
+}
+
+// Every particle outside this rank's domain goes to its owner: [id][xyz][carried] records.
+void DistributedEngine::migrate() {
+  const std::size_t n = ids_.size();
+  const std::size_t record = sizeof(std::uint64_t) + (3 + width_) * sizeof(float);
+  std::vector<int> dest(n);
+  std::vector<std::uint64_t> send_counts(static_cast<std::size_t>(size_), 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    dest[i] = decomposition_.owner(&xyz_[3 * i]);
+    ++send_counts[static_cast<std::size_t>(dest[i])];
+  }
+  const std::uint64_t staying = send_counts[static_cast<std::size_t>(rank_)];
+  send_counts[static_cast<std::size_t>(rank_)] = 0;  // kept in place, not copied
+  std::vector<std::uint64_t> recv_counts;
+  exchange_counts(send_counts, recv_counts);
+
+  const auto send_offsets = offsets_of(send_counts, record);
+  const auto recv_offsets = offsets_of(recv_counts, record);
+  const std::uint64_t sent = std::accumulate(send_counts.begin(), send_counts.end(), 0ull);
+  const std::uint64_t received = std::accumulate(recv_counts.begin(), recv_counts.end(), 0ull);
+  std::vector<std::byte> send(sent * record), recv(received * record);
+  std::vector<std::byte*> cursor(static_cast<std::size_t>(size_));
+  for (int r = 0; r < size_; ++r) cursor[r] = send.data() + send_offsets[r];
+
+  std::vector<std::uint64_t> ids;
+  std::vector<float> xyz, carried;
+  ids.reserve(staying + received);
+  xyz.reserve(3 * (staying + received));
+  carried.reserve(width_ * (staying + received));
+  for (std::size_t i = 0; i < n; ++i) {
+    if (dest[i] == rank_) {
+      ids.push_back(ids_[i]);
+      xyz.insert(xyz.end(), &xyz_[3 * i], &xyz_[3 * i] + 3);
+      carried.insert(carried.end(), carried_.begin() + width_ * i,
+                     carried_.begin() + width_ * (i + 1));
+      continue;
+    }
+    std::byte*& at = cursor[static_cast<std::size_t>(dest[i])];
+    put(at, &ids_[i], 1);
+    put(at, &xyz_[3 * i], 3);
+    put(at, carried_.data() + width_ * i, width_);
+  }
+  transport_->exchange(send.data(), scaled(send_counts, record).data(), send_offsets.data(),
+                       recv.data(), scaled(recv_counts, record).data(), recv_offsets.data());
+  const std::byte* at = recv.data();
+  for (std::uint64_t k = 0; k < received; ++k) {
+    std::uint64_t id;
+    float p[3];
+    take(at, &id, 1);
+    take(at, p, 3);
+    ids.push_back(id);
+    xyz.insert(xyz.end(), p, p + 3);
+    const std::size_t base = carried.size();
+    carried.resize(base + width_);
+    take(at, carried.data() + base, width_);
+  }
+  ids_ = std::move(ids);
+  xyz_ = std::move(xyz);
+  carried_ = std::move(carried);
+  stats_.migrated_out = sent;
+  stats_.bytes_sent += sent * record;
+}
+
+// Every image of every owned particle within cutoff + skin of some domain (its own too, for an
+// image shifted by a period) goes there: [id][image xyz][shift] records.
+void DistributedEngine::build_halos() {
+  const Decomposition& dec = decomposition_;
+  const std::size_t n = ids_.size();
+  // Candidates a little beyond the halo width: extra halos are harmless (they are sources only),
+  // missing ones are not, and the slab and distance tests round in double.
+  double scale = halo_width_;
+  for (int a = 0; a < 3; ++a) scale = std::max(scale, std::abs(dec.lo[a]) + dec.length[a]);
+  const double reach = halo_width_ + 1e-5 * scale;
+  const double reach2 = reach * reach;
+
+  struct Candidate {
+    int slab;
+    std::int32_t shift;
+    double gap2;
+  };
+  HaloPlan& plan = *plan_;
+  std::vector<std::vector<std::uint32_t>> index(static_cast<std::size_t>(size_));
+  std::vector<std::vector<std::int32_t>> shift(static_cast<std::size_t>(size_));
+  std::vector<Candidate> axis[3];
+  for (std::size_t i = 0; i < n; ++i) {
+    for (int a = 0; a < 3; ++a) {
+      axis[a].clear();
+      const int d = dec.dims[a];
+      for (std::int32_t s = dec.periodic[a] ? -1 : 0; s <= (dec.periodic[a] ? 1 : 0); ++s) {
+        const double y = static_cast<double>(xyz_[3 * i + a]) + s * dec.length[a];
+        const int first = dec.slab(a, y - reach), last = dec.slab(a, y + reach);
+        for (int k = first; k <= last; ++k) {
+          // An open axis's end slabs extend to infinity.
+          const bool open_low = !dec.periodic[a] && k == 0;
+          const bool open_high = !dec.periodic[a] && k == d - 1;
+          const double lo = dec.lo[a] + k * dec.width[a], hi = lo + dec.width[a];
+          double gap = 0;
+          if (!open_low && y < lo) gap = lo - y;
+          if (!open_high && y > hi) gap = y - hi;
+          if (gap < reach) axis[a].push_back({k, s, gap * gap});
+        }
+      }
+    }
+    for (const Candidate& cx : axis[0])
+      for (const Candidate& cy : axis[1])
+        for (const Candidate& cz : axis[2]) {
+          if (cx.gap2 + cy.gap2 + cz.gap2 >= reach2) continue;
+          const int q = (cx.slab * dec.dims[1] + cy.slab) * dec.dims[2] + cz.slab;
+          if (q == rank_ && cx.shift == 0 && cy.shift == 0 && cz.shift == 0) continue;
+          index[q].push_back(static_cast<std::uint32_t>(i));
+          shift[q].insert(shift[q].end(), {cx.shift, cy.shift, cz.shift});
+        }
+  }
+
+  plan.send_counts.assign(static_cast<std::size_t>(size_), 0);
+  plan.index.clear();
+  plan.shift.clear();
+  for (int r = 0; r < size_; ++r) {
+    plan.send_counts[r] = index[r].size();
+    plan.index.insert(plan.index.end(), index[r].begin(), index[r].end());
+    plan.shift.insert(plan.shift.end(), shift[r].begin(), shift[r].end());
+  }
+  exchange_counts(plan.send_counts, plan.recv_counts);
+
+  const std::size_t record = sizeof(std::uint64_t) + 3 * sizeof(float) + 3 * sizeof(std::int32_t);
+  const auto send_offsets = offsets_of(plan.send_counts, record);
+  const auto recv_offsets = offsets_of(plan.recv_counts, record);
+  const std::uint64_t received =
+      std::accumulate(plan.recv_counts.begin(), plan.recv_counts.end(), 0ull);
+  std::vector<std::byte> send(plan.index.size() * record), recv(received * record);
+  std::byte* at = send.data();
+  for (std::size_t k = 0; k < plan.index.size(); ++k) {
+    const std::uint32_t i = plan.index[k];
+    const std::int32_t* s = &plan.shift[3 * k];
+    float p[3];
+    for (int a = 0; a < 3; ++a) p[a] = image(xyz_[3 * i + a], s[a], dec.length[a]);
+    put(at, &ids_[i], 1);
+    put(at, p, 3);
+    put(at, s, 3);
+  }
+  transport_->exchange(send.data(), scaled(plan.send_counts, record).data(), send_offsets.data(),
+                       recv.data(), scaled(plan.recv_counts, record).data(), recv_offsets.data());
+
+  halo_ids_.resize(received);
+  halo_shifts_.resize(3 * received);
+  local_xyz_.resize(3 * (n + received));
+  std::copy(xyz_.begin(), xyz_.end(), local_xyz_.begin());
+  const std::byte* from = recv.data();
+  for (std::uint64_t k = 0; k < received; ++k) {
+    take(from, &halo_ids_[k], 1);
+    take(from, &local_xyz_[3 * (n + k)], 3);
+    take(from, &halo_shifts_[3 * k], 3);
+  }
+  stats_.bytes_sent += (plan.index.size() - plan.send_counts[rank_]) * record;
+}
+
+// The same halos at their owners' new positions: 3 floats per record, in the plan's order.
+void DistributedEngine::refresh_halos() {
+  const auto start = Clock::now();
+  const Decomposition& dec = decomposition_;
+  const HaloPlan& plan = *plan_;
+  const std::size_t record = 3 * sizeof(float);
+  const std::size_t n = ids_.size();
+  std::vector<float> send(3 * plan.index.size());
+  for (std::size_t k = 0; k < plan.index.size(); ++k)
+    for (int a = 0; a < 3; ++a)
+      send[3 * k + a] = image(xyz_[3 * plan.index[k] + a], plan.shift[3 * k + a], dec.length[a]);
+  std::copy(xyz_.begin(), xyz_.end(), local_xyz_.begin());
+  transport_->exchange(
+      reinterpret_cast<const std::byte*>(send.data()), scaled(plan.send_counts, record).data(),
+      offsets_of(plan.send_counts, record).data(),
+      reinterpret_cast<std::byte*>(local_xyz_.data() + 3 * n),
+      scaled(plan.recv_counts, record).data(), offsets_of(plan.recv_counts, record).data());
+  ++stats_.refreshes;
+  stats_.bytes_sent = (plan.index.size() - plan.send_counts[rank_]) * record;
+  stats_.exchange_ms = elapsed_ms(start);
+}
+
+void DistributedEngine::build_local_engine(bool same_sources) {
+  std::string error;
+  ErrorCode code = ErrorCode::internal;
+  const auto start = Clock::now();
+  try {
+    const PositionsView view{local_xyz_.data(), local_xyz_.size() / 3, MemorySpace::host};
+    if (same_sources)
+      engine_->update(view);
+    else
+      engine_->build(view, cutoff_);
+  } catch (const Error& e) {
+    error = e.what();
+    code = e.code();
+  }
+  agree(error, code);
+  stats_.build_ms = elapsed_ms(start);
+  stats_.owned = ids_.size();
+  stats_.halos = halo_ids_.size();
+}
+
+// ---- results ------------------------------------------------------------------------------------
+
+Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options) {
+  check_built("compute");
+  if (kernel == Kernel::sph_force)
+    throw Error(ErrorCode::unsupported,
+                "distributed engine: sph_force needs halo velocities, densities and pressures "
+                "(a later slice)");
+  Results r = engine_->compute(kernel, options);
+  const std::size_t n = ids_.size();
+  auto keep = [n](auto& v, std::size_t per) {
+    if (!v.empty()) v.resize(per * n);
+  };
+  keep(r.count, 1);
+  keep(r.energy, 1);
+  keep(r.force, 3);
+  keep(r.virial, 6);
+  keep(r.density, 1);
+  return r;
+}
+
+DistributedList DistributedEngine::neighbours(const ListOptions& options) {
+  check_built("neighbours");
+  ListOptions local = options;
+  local.half = false;  // oriented here by global index
+  local.shifts = false;
+  const NeighbourList list = engine_->neighbours(local);
+  const std::size_t n = ids_.size();
+  DistributedList out;
+  out.targets = ids_;
+  out.offsets.assign(n + 1, 0);
+  static constexpr std::int32_t zero[3] = {0, 0, 0};
+  for (std::size_t i = 0; i < n; ++i) {
+    for (std::uint64_t e = list.offsets[i]; e < list.offsets[i + 1]; ++e) {
+      const std::uint32_t j = list.indices[e];
+      const std::uint64_t id = j < n ? ids_[j] : halo_ids_[j - n];
+      const std::int32_t* s = j < n ? zero : &halo_shifts_[3 * (j - n)];
+      if (options.half) {
+        const Shift shift{s[0], s[1], s[2]};
+        if (id < ids_[i] || (id == ids_[i] && !shift.positive())) continue;
+      }
+      out.indices.push_back(id);
+      if (options.distances) out.distances.push_back(list.distances[e]);
+      if (options.vectors)
+        out.vectors.insert(out.vectors.end(), &list.vectors[3 * e], &list.vectors[3 * e] + 3);
+      if (options.shifts) out.shifts.insert(out.shifts.end(), s, s + 3);
+    }
+    out.offsets[i + 1] = out.indices.size();
+  }
+  return out;
+}
+
+}  // namespace raycut::mpi

@@ -1,0 +1,76 @@
+// Host-staged MPI transport: point-to-point messages between the ranks that have something to
+// move, on a duplicate of the caller's communicator.
+#include <algorithm>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "mpi/mpi_check.hpp"
+#include "raycut/mpi/distributed.hpp"
+
+namespace raycut::mpi {
+namespace {
+
+// MPI counts are int: larger blocks go as several messages of at most this many bytes.
+constexpr std::uint64_t chunk_bytes = std::uint64_t{1} << 30;
+
+class HostTransport final : public Transport {
+ public:
+  explicit HostTransport(MPI_Comm comm) {
+    check(MPI_Comm_dup(comm, &comm_), "MPI_Comm_dup");
+    MPI_Comm_rank(comm_, &rank_);
+    MPI_Comm_size(comm_, &size_);
+  }
+  ~HostTransport() override {
+    int finalized = 0;
+    MPI_Finalized(&finalized);
+    if (!finalized) MPI_Comm_free(&comm_);
+  }
+  std::string name() const override { return "mpi-host"; }
+  MemorySpace space() const override { return MemorySpace::host; }
+
+  void exchange(const std::byte* send, const std::uint64_t* send_counts,
+                const std::uint64_t* send_offsets, std::byte* recv,
+                const std::uint64_t* recv_counts, const std::uint64_t* recv_offsets) override {
+    std::vector<MPI_Request> requests;
+    // Receives first, so that every send finds its receive posted.
+    for (int r = 0; r < size_; ++r) {
+      if (r == rank_) continue;
+      for (std::uint64_t at = 0, tag = 0; at < recv_counts[r]; at += chunk_bytes, ++tag) {
+        const int n = static_cast<int>(std::min(chunk_bytes, recv_counts[r] - at));
+        requests.emplace_back();
+        check(MPI_Irecv(recv + recv_offsets[r] + at, n, MPI_BYTE, r, static_cast<int>(tag), comm_,
+                        &requests.back()),
+              "MPI_Irecv");
+      }
+    }
+    for (int r = 0; r < size_; ++r) {
+      if (r == rank_) continue;
+      for (std::uint64_t at = 0, tag = 0; at < send_counts[r]; at += chunk_bytes, ++tag) {
+        const int n = static_cast<int>(std::min(chunk_bytes, send_counts[r] - at));
+        requests.emplace_back();
+        check(MPI_Isend(send + send_offsets[r] + at, n, MPI_BYTE, r, static_cast<int>(tag), comm_,
+                        &requests.back()),
+              "MPI_Isend");
+      }
+    }
+    if (send_counts[rank_] != recv_counts[rank_])
+      throw Error(ErrorCode::internal, "host transport: self block sizes differ");
+    if (send_counts[rank_] > 0)
+      std::memcpy(recv + recv_offsets[rank_], send + send_offsets[rank_], send_counts[rank_]);
+    check(MPI_Waitall(static_cast<int>(requests.size()), requests.data(), MPI_STATUSES_IGNORE),
+          "MPI_Waitall");
+  }
+
+ private:
+  MPI_Comm comm_ = MPI_COMM_NULL;
+  int rank_ = 0, size_ = 1;
+};
+
+}  // namespace
+
+std::unique_ptr<Transport> make_host_transport(MPI_Comm comm) {
+  return std::make_unique<HostTransport>(comm);
+}
+
+}  // namespace raycut::mpi
