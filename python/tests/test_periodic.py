@@ -396,6 +396,29 @@ def test_engine_queries_and_shifts(system_method):
     assert len(engine.neighbours()) == 2
 
 
+def test_engine_periodic_update_and_kernels(system_method):
+    x, cell, pbc, cutoff = case("small-triclinic", seed=33)
+    engine = raycut.Engine(system_method)
+    engine.build(x, cutoff, cell=cell, pbc=pbc)
+    moved = unwrapped(inside_cell(len(x), cell, pbc, seed=34), cell, pbc, 2, seed=35)
+    engine.update(moved)  # the box kept
+    offsets, indices, S = engine.neighbours(shifts=True)
+    rows = np.repeat(np.arange(len(x)), np.diff(offsets))
+    inside, edge = reference(moved, moved, cutoff, cell, pbc)
+    assert triples(rows, indices, S) - edge == inside - edge
+    np.testing.assert_array_equal(engine.compute("count")["count"], np.diff(offsets))
+    # A pair kernel sums over every image: the smooth kernel's energy from the list's vectors.
+    out = engine.compute("smooth")
+    r = moved[indices].astype(np.float64) - moved[rows] + S @ np.asarray(cell)
+    w = cutoff**2 - (r**2).sum(1)
+    np.testing.assert_allclose(out["energy"], np.bincount(rows, w**2, minlength=len(x)),
+                               rtol=1e-3, atol=1e-9)
+    # Queries are built, not updated.
+    engine.build(x, cutoff, cell=cell, pbc=pbc, queries=x[:3])
+    with pytest.raises(NotImplementedError):
+        engine.update(x)
+
+
 # ---- errors ------------------------------------------------------------------------------------
 
 
