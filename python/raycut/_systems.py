@@ -81,7 +81,7 @@ def boxes(cell: Any, pbc: Any) -> Optional[Boxes]:
     return Boxes(cells, flags)
 
 
-def _system_index(batch: Any, n: int, name: str) -> np.ndarray:
+def _system_index(batch: Any, n: Optional[int], name: str) -> np.ndarray:
     b = np.asarray(_arrays.to_numpy(batch))
     if b.dtype == bool or not np.issubdtype(b.dtype, np.integer):
         if b.size == 0 and b.ndim == 1:
@@ -89,9 +89,10 @@ def _system_index(batch: Any, n: int, name: str) -> np.ndarray:
         else:
             raise ValueError(f"{name} must be integers (the system of each particle), got "
                              f"{b.dtype}")
-    if b.shape != (n,):
-        raise ValueError(f"{name} must have one system index per particle, shape ({n},), got "
-                         f"shape {b.shape}")
+    if b.ndim != 1 or (n is not None and len(b) != n):
+        raise ValueError(f"{name} must have one system index per particle, shape "
+                         f"({'N' if n is None else n},), got shape {b.shape}")
+    n = len(b)
     if n and b[0] < 0:
         raise ValueError(f"{name} holds a negative system index ({int(b.min())})")
     if n > 1:
@@ -120,7 +121,7 @@ class Batch:
     query_offsets: Optional[np.ndarray]  # queries, S + 1
 
 
-def batch(boxes_: Optional[Boxes], n: int, batch_: Any, m: Optional[int] = None,
+def batch(boxes_: Optional[Boxes], n: Optional[int], batch_: Any, m: Optional[int] = None,
           batch_queries: Any = None) -> Batch:
     """Offsets of the batch (sources ``batch_`` of n particles; queries ``batch_queries`` of m
     points when m is not None). None for one index with the other given: every point in system
@@ -133,6 +134,9 @@ def batch(boxes_: Optional[Boxes], n: int, batch_: Any, m: Optional[int] = None,
                              "but no batch says which particles belong to which: pass batch=")
         return Batch(boxes_, 1, None, None)
     names = ("batch", "batch_queries") if m is None else ("batch_points", "batch_queries")
+    if batch_ is None and n is None:
+        raise ValueError(f"positions without a shape (known only through DLPack) need "
+                         f"{names[0]} given")
     index = _system_index(batch_, n, names[0]) if batch_ is not None else np.zeros(n, np.int64)
     query_index = None
     if m is not None:
