@@ -17,8 +17,13 @@ cutoff <= 0; unknown method or kernel), ``MemoryError`` when it does not fit,
 ``CapacityError`` (a ``RuntimeError``) when a padded list is asked to raise on overflow,
 ``OSError`` for files and ``RuntimeError`` for device faults.
 
-Periodic boxes (``cell``, ``pbc``, shifts ``"S"``) and batches are not supported yet: passing them
-raises ``ValueError``.
+Periodic boxes (``cell``: rows are the lattice vectors, ASE's convention; ``pbc`` per axis),
+batches of independent systems (``batch``: the system of each particle, sorted, as
+torch_cluster's) and query sets (``radius``) follow spec/NEIGHBOURS.md: a pair is (i, j, S) with
+``r_ij = x_j - x_i + S @ cell``, S the integer image shift (``"S"``), every image within the
+cutoff (boxes thinner than twice the cutoff give a pair once per image, and a particle its own
+images). The CPU methods and the CUDA ``grid`` and ``brute-force-gpu`` support them; the others
+raise ``NotImplementedError``.
 """
 from __future__ import annotations
 
@@ -27,6 +32,7 @@ from typing import Any, Optional
 
 from . import _arrays
 from . import _raycut
+from . import _systems
 from ._raycut import CapacityError
 
 __version__ = "0.1.0"
@@ -39,6 +45,7 @@ __all__ = [
     "cuda_available",
     "methods",
     "neighbor_list",
+    "radius",
 ]
 
 #: The built-in kernels of ``Engine.compute`` and what each returns.
@@ -80,21 +87,6 @@ def _cutoff(cutoff: Any) -> float:
     return float(cutoff)
 
 
-def _no_periodic(cell: Any, pbc: Any, batch: Any) -> None:
-    if cell is not None:
-        raise ValueError("periodic boxes are not supported yet: pass cell=None (open boundaries)")
-    if pbc is not None:
-        try:
-            flags = [bool(p) for p in (pbc if hasattr(pbc, "__iter__") else [pbc])]
-        except TypeError:
-            flags = [True]
-        if any(flags):
-            raise ValueError("periodic boxes are not supported yet: pass pbc=None (open "
-                             "boundaries)")
-    if batch is not None:
-        raise ValueError("batches are not supported yet: pass batch=None (one system per call)")
-
-
 class Engine:
     """A method built over positions: fused pair kernels and neighbour lists.
 
@@ -102,6 +94,8 @@ class Engine:
     >>> engine.build(positions, cutoff=0.1)      # (N, 3) float32, NumPy or a CUDA tensor
     >>> engine.compute("lj_forces")["force"]     # (N, 3), in the positions' framework
     >>> offsets, indices = engine.neighbours()   # CSR, on the positions' device
+    >>> engine.build(x, 2.5, cell=cell, pbc=True, batch=batch)   # periodic boxes, a batch
+    >>> offsets, indices, shifts = engine.neighbours(shifts=True)
 
     The outputs of every call are new arrays of the framework and device of the positions given
     to the last ``build``/``update``: later calls never change them (neighbour lists are fresh
@@ -111,6 +105,8 @@ class Engine:
     def __init__(self, method: str = "auto") -> None:
         self._engine = _raycut.Engine(method)
         self._like = _arrays.HOST
+        self._queries = False
+        self._batch = _systems.Batch(None, 1, None, None)
 
     def __repr__(self) -> str:
         return (f"raycut.Engine(method={self.method!r}, space={self.space!r}, size={self.size}, "
@@ -128,8 +124,14 @@ class Engine:
 
     @property
     def size(self) -> int:
-        """N, the number of particles of the last build."""
+        """The number of targets (rows of lists, entries of results) of the last build: N, or M
+        with query points."""
         return self._engine.size
+
+    @property
+    def sources(self) -> int:
+        """N, the number of particles (sources) of the last build."""
+        return self._engine.sources
 
     @property
     def cutoff(self) -> float:
@@ -146,15 +148,46 @@ class Engine:
             self._engine.set_stream(_arrays.stream_of(like))
             return function(*args)
 
-    def build(self, positions: Any, cutoff: float) -> None:
+    def build(self, positions: Any, cutoff: float, *, cell: Any = None, pbc: Any = None,
+              batch: Any = None, queries: Any = None, batch_queries: Any = None) -> None:
         """Validates (finite coordinates, cutoff finite and > 0) and builds the method's structure
-        over (N, 3) float32 positions. Raises ValueError naming the first bad index."""
+        over (N, 3) float32 positions. Raises ValueError naming the first bad index.
+
+        ``cell``, ``pbc``, ``batch``: periodic boxes and batches, as ``neighbor_list`` takes
+        them. ``queries``: (M, 3) float32 query points (the same framework and device as the
+        positions), the targets of the lists and kernels, the positions their sources; their
+        systems in ``batch_queries`` (see ``radius``). Raises ValueError for a bad box (a
+        singular cell, with the library's message) or batch, NotImplementedError for a method
+        without boxes, batches or queries.
+        """
         x, like = _arrays.prepare(positions)
-        self._call(like, self._engine.build, x, _cutoff(cutoff))
+        n = _points(x)
+        boxes = _systems.boxes(cell, pbc)
+        q = None
+        m = None
+        if queries is not None:
+            q, query_like = _arrays.prepare(queries, "queries")
+            if query_like.host != like.host:
+                raise ValueError("queries and positions must be in the same memory space (both "
+                                 "on the host or both on the CUDA device)")
+            m = _points(q)
+        elif batch_queries is not None:
+            raise ValueError("batch_queries without queries")
+        b = _systems.batch(boxes, n, batch, m, batch_queries)
+        # No periodic axis anywhere: no images, an open build (which every method has).
+        periodic = boxes is not None and boxes.periodic
+        cells = boxes.cells if periodic else None
+        flags = boxes.pbc if periodic else None
+        self._call(like, self._engine.build, x, _cutoff(cutoff), cells, flags, b.offsets, q,
+                   b.query_offsets)
         self._like = like
+        self._queries = queries is not None
+        self._batch = b
 
     def update(self, positions: Any, skin: float = 0.0) -> None:
-        """New positions of the same N particles, cutoff unchanged. ``skin`` > 0 lets the OptiX
+        """New positions of the same N particles, cutoff, boxes and batch unchanged (with boxes
+        or a batch: a rebuild; after a build with queries: NotImplementedError, build again).
+        ``skin`` > 0 lets the OptiX
         methods refit their structure instead of rebuilding it while no particle has moved more
         than skin / 2 since the last full build."""
         x, like = _arrays.prepare(positions)
@@ -194,22 +227,30 @@ class Engine:
         out = self._call(like, self._engine.results, kernel, like.host)
         return {name: _arrays.output(array, like) for name, array in out.items()}
 
-    def neighbours(self, half: bool = False, distances: bool = False,
-                   vectors: bool = False) -> tuple:
+    def neighbours(self, half: bool = False, distances: bool = False, vectors: bool = False,
+                   shifts: bool = False) -> tuple:
         """The CSR neighbour list of the built positions: ``(offsets, indices)`` then
-        ``distances`` and ``vectors`` when asked.
+        ``distances``, ``vectors`` and ``shifts`` when asked.
 
-        The neighbours of particle i are ``indices[offsets[i]:offsets[i+1]]`` (order within a
-        row unspecified). offsets (N + 1,) int64, indices int32, distances ``|r_ij|`` float32,
-        vectors ``r_ij = x_j - x_i`` (P, 3) float32. ``half``: each unordered pair once, in the
-        row of its smaller index. On the device for device positions and GPU methods, wrapping
-        the list's own buffer (zero-copy; each call fills a new buffer).
+        The neighbours of target i are ``indices[offsets[i]:offsets[i+1]]`` (order within a
+        row unspecified). offsets (size + 1,) int64, indices int32, distances ``|r_ij|``
+        float32, vectors ``r_ij = x_j - x_i + S @ cell`` (P, 3) float32, shifts S (P, 3) int32
+        (zeros without a box). ``half``: each pair once: of (i, j, S) and (j, i, -S) the one
+        with i < j, or i == j and S lexicographically positive, in row i (not with queries:
+        ValueError). On the device for device positions and GPU methods, wrapping the list's
+        own buffer (zero-copy; each call fills a new buffer).
         """
+        self._no_half_with_queries(half)
         like = self._like
-        offsets, indices, d, v = self._call(like, self._engine.neighbours, bool(half),
-                                            bool(distances), bool(vectors), like.host)
-        out = [offsets, indices] + ([d] if distances else []) + ([v] if vectors else [])
-        return tuple(_arrays.output(a, like) for a in out)
+        out = self._call(like, self._engine.neighbours, bool(half), bool(distances),
+                         bool(vectors), like.host, bool(shifts))
+        asked = (True, True, distances, vectors, shifts)
+        return tuple(_arrays.output(a, like) for a, keep in zip(out, asked) if keep)
+
+    def _no_half_with_queries(self, half: bool) -> None:
+        if half and self._queries:
+            raise ValueError("half lists are not defined for query sets: their pairs (query, "
+                             "point) are not symmetric (pass half=False)")
 
     def padded_neighbours(self, k: int, raise_on_overflow: bool = False) -> tuple:
         """The padded [N, K] neighbour matrix: ``(indices, counts, report)``.
@@ -226,10 +267,11 @@ class Engine:
                                              bool(raise_on_overflow), like.host)
         return _arrays.output(indices, like), _arrays.output(counts, like), report
 
-    def _pairs(self, half: bool, distances: bool, vectors: bool) -> tuple:
+    def _pairs(self, half: bool, distances: bool, vectors: bool, shifts: bool = False) -> tuple:
+        self._no_half_with_queries(half)
         like = self._like
         out = self._call(like, self._engine.pairs, bool(half), bool(distances), bool(vectors),
-                         like.host)
+                         like.host, bool(shifts))
         return tuple(_arrays.output(a, like) for a in out)
 
 
@@ -334,55 +376,156 @@ class VerletList:
 _QUANTITIES = "ijdDS"
 
 
-def _requires_grad(positions: Any) -> bool:
-    return _arrays.framework_of(positions) == "torch" and bool(positions.requires_grad)
+def _points(x: Any) -> Optional[int]:
+    """The number of rows of an input the extension reads (None when it has no shape: an unknown
+    framework's array, known only through DLPack; the library checks its size then)."""
+    shape = getattr(x, "shape", None)
+    if shape is None and hasattr(x, "__cuda_array_interface__"):
+        shape = x.__cuda_array_interface__.get("shape")
+    return int(shape[0]) if shape is not None and len(shape) else None
+
+
+def _letters(quantities: Any) -> str:
+    if not isinstance(quantities, str) or not quantities:
+        raise ValueError("quantities must be a non-empty string of the letters i, j, d, D, S")
+    for letter in quantities:
+        if letter not in _QUANTITIES:
+            raise ValueError(f"unknown quantity {letter!r} in {quantities!r} (known: i, j, d, D, "
+                             "S)")
+    return quantities
+
+
+def _requires_grad(x: Any) -> bool:
+    return _arrays.framework_of(x) == "torch" and bool(x.requires_grad)
+
+
+def _search_input(x: Any, grad: bool) -> Any:
+    """What the pair search reads: on the autograd path a detached float32 C-contiguous copy of
+    a PyTorch tensor of any float dtype (gradcheck runs in float64); the input itself otherwise."""
+    if not grad:
+        return x
+    import torch
+
+    x = x.detach()
+    return x if x.dtype == torch.float32 and x.is_contiguous() else x.to(torch.float32).contiguous()
+
+
+def _pair_quantities(letters: str, engine: Engine, half: bool, grad: bool, sources: Any,
+                     targets: Any, cell: Any) -> Any:
+    """The letters of the built engine's pairs, in the order asked. On the autograd path ``d``
+    and ``D`` are computed in PyTorch from i, j and S (spec/NEIGHBOURS.md, 7)."""
+    batch = engine._batch
+    periodic = batch.boxes is not None and batch.boxes.periodic
+    metric = "d" in letters or "D" in letters
+    grad = grad and metric
+    i, j, d, v, shifts = engine._pairs(half, "d" in letters and not grad,
+                                       "D" in letters and not grad,
+                                       "S" in letters or (grad and periodic))
+    if grad:
+        import torch
+
+        rows = batch.query_offsets if batch.query_offsets is not None else batch.offsets
+        v = _systems.torch_vectors(torch, sources, targets, i, j, shifts, cell, batch.boxes,
+                                   rows)
+        if "d" in letters:
+            d = torch.linalg.vector_norm(v, dim=1)
+    found = {"i": i, "j": j, "d": d, "D": v, "S": shifts}
+    out = tuple(found[letter] for letter in letters)
+    return out[0] if len(out) == 1 else out
 
 
 def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = None,
                   pbc: Any = None, batch: Any = None, half: bool = False,
                   method: str = "auto") -> Any:
-    """ASE-style neighbour list (``ase.neighborlist.neighbor_list``) of open-boundary positions.
+    """ASE-style neighbour list (``ase.neighborlist.neighbor_list``): every pair of particles
+    within ``cutoff``, in open or periodic boxes, of one system or a batch of them.
+
+    A pair is (i, j, S), S an integer image shift, with ``r_ij = x_j - x_i + S @ cell``; it is
+    listed iff ``|r_ij| < cutoff``, for every such S (a box thinner than twice the cutoff gives a
+    pair once per image, and particle i its own images (i, i, S != 0); (i, i, 0) never).
 
     ``quantities`` is a string of letters, returned in that order (one letter: the array alone,
     as ASE does):
 
-    - ``"i"``, ``"j"``: the pairs (int64), sorted by i; every ordered pair (i, j) and (j, i)
-      within the cutoff, no self pairs (with ``half=True``: each pair once, i < j);
-    - ``"d"``: distances ``|x_j - x_i|`` (float32);
-    - ``"D"``: vectors ``x_j - x_i`` (P, 3) float32;
-    - ``"S"``: shifts, for periodic boxes: not supported yet (ValueError).
+    - ``"i"``, ``"j"``: the pairs (int64), sorted by i; every ordered pair (i, j, S) and
+      (j, i, -S) (with ``half=True`` each pair once: the one with i < j, or i == j and S
+      lexicographically positive);
+    - ``"d"``: distances ``|r_ij|`` (float32);
+    - ``"D"``: vectors ``r_ij = x_j - x_i + S @ cell`` (P, 3) float32;
+    - ``"S"``: image shifts S (P, 3) int32 (zeros on open axes and without a cell).
 
-    ``positions``: (N, 3) float32 (NumPy: any float, converted). The outputs are of the
-    positions' framework and device (CUDA tensors in: CUDA tensors out, zero-copy). For PyTorch
-    positions that require grad, ``d`` and ``D`` are computed in PyTorch from the pairs
-    (``x[j] - x[i]``), so that gradients flow back to the positions.
-    ``cell``/``pbc``: periodic boxes are not supported yet (ValueError unless None or all
-    False); ``batch``: not supported yet (ValueError unless None). ``method``: a name from
-    ``methods()`` or ``"auto"``.
+    ``positions``: (N, 3) float32 (NumPy: any float, converted), wrapped into the cell or not
+    (S refers to the positions as given). ``cell``: the box, rows the lattice vectors a, b, c
+    (ASE's convention): (3, 3), or 3 numbers for an orthorhombic box, or (B, 3, 3) for one box
+    per system of a batch; None: open boundaries. ``pbc``: which lattice vectors repeat: one
+    bool, 3 bools, or (B, 3) per system; None: all three when a cell is given. Open axes take
+    no images (their cell row may be zero). A singular cell raises ValueError.
+
+    ``batch``: many independent systems in one call, as torch_cluster's ``batch``: the system
+    index of each particle, (N,) integers, sorted (each system's particles contiguous; unsorted
+    raises ValueError). Pairs never cross systems; indices stay global; systems may be empty.
+    The number of systems B is that of a per-system ``cell``/``pbc``, else ``batch.max() + 1``.
+
+    The outputs are of the positions' framework and device (CUDA tensors in: CUDA tensors out,
+    zero-copy). For PyTorch positions or cell that require grad, ``d`` and ``D`` are computed in
+    PyTorch from i, j and S (``x[j] - x[i] + S @ cell``), so that gradients flow back to both
+    (positions of any float dtype then; the search itself runs in float32). ``method``: a name
+    from ``methods()`` or ``"auto"``; methods without periodic boxes or batches raise
+    NotImplementedError for them.
+
+    >>> i, j, S = raycut.neighbor_list("ijS", x, 3.0, cell=[10.0, 10.0, 10.0], pbc=True)
+    >>> i, j = raycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
     """
-    if not isinstance(quantities, str) or not quantities:
-        raise ValueError("quantities must be a non-empty string of the letters i, j, d, D")
-    for letter in quantities:
-        if letter not in _QUANTITIES:
-            raise ValueError(f"unknown quantity {letter!r} in {quantities!r} (known: i, j, d, D; "
-                             "S for periodic boxes)")
-    if "S" in quantities:
-        raise ValueError("quantity 'S' (cell shifts): periodic boxes are not supported yet")
-    _no_periodic(cell, pbc, batch)
+    letters = _letters(quantities)
+    grad = _requires_grad(positions) or (_arrays.framework_of(positions) == "torch"
+                                         and _requires_grad(cell))
     engine = Engine(method)
-    engine.build(positions, cutoff)
-    i, j, d, v = engine._pairs(half, "d" in quantities, "D" in quantities)
-    if ("d" in quantities or "D" in quantities) and _requires_grad(positions):
-        # PyTorch autograd: d and D recomputed in the framework from the pairs, so gradients flow
-        # to the positions (the same float32 values as the library's x_j - x_i).
-        v = positions.index_select(0, j) - positions.index_select(0, i)
-        if "d" in quantities:
-            import torch
+    engine.build(_search_input(positions, grad), cutoff, cell=_host_cell(cell), pbc=pbc,
+                 batch=batch)
+    return _pair_quantities(letters, engine, half, grad, positions, positions, cell)
 
-            d = torch.linalg.vector_norm(v, dim=1)
-    found = {"i": i, "j": j, "d": d, "D": v}
-    out = tuple(found[letter] for letter in quantities)
-    return out[0] if len(out) == 1 else out
+
+def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any = None,
+           batch_points: Any = None, batch_queries: Any = None, method: str = "auto",
+           quantities: str = "ij") -> Any:
+    """Radius search between two point sets: for every query q, the points p within ``cutoff``
+    (``torch_cluster.radius(x=points, y=queries, r=cutoff, batch_x, batch_y)``, scipy's
+    ``cKDTree(points).query_ball_point(queries, cutoff)``, periodic and batched).
+
+    Returns the letters of ``quantities`` (default ``"ij"``), as ``neighbor_list`` does, with
+    ``i`` indexing ``queries`` (sorted) and ``j`` indexing ``points``: torch_cluster's
+    ``edge_index = stack([i, j])``, scipy's row ``i`` holding ``j``. Pairs (i, j, S) with
+    ``|points[j] - queries[i] + S @ cell| < cutoff``, every image, no self-exclusion (the sets
+    differ); ``"D"`` is that vector, ``"d"`` its length, ``"S"`` the image shift (int32).
+    Unlimited neighbours per query (torch_cluster's ``max_num_neighbors`` has no equivalent:
+    nothing is cut).
+
+    ``points`` (N, 3) and ``queries`` (M, 3) float32, in the same framework and memory space.
+    ``cell`` and ``pbc`` as in ``neighbor_list``. ``batch_points``/``batch_queries``: the
+    sorted system index of each point and query (torch_cluster's ``batch_x``/``batch_y``; one
+    of them None: all of that set in system 0); queries meet only the points of their system.
+    Gradients flow to points, queries and cell for PyTorch inputs that require grad.
+
+    >>> i, j = raycut.radius(points, queries, 0.05)           # query i, point j
+    >>> i, j, S = raycut.radius(points, queries, 0.05, cell=[1, 1, 1], quantities="ijS")
+    """
+    letters = _letters(quantities)
+    torch_in = _arrays.framework_of(points) == "torch"
+    grad = torch_in and (_requires_grad(points) or _requires_grad(queries) or
+                         _requires_grad(cell))
+    engine = Engine(method)
+    engine.build(_search_input(points, grad), cutoff, cell=_host_cell(cell), pbc=pbc,
+                 batch=batch_points, queries=_search_input(queries, grad),
+                 batch_queries=batch_queries)
+    return _pair_quantities(letters, engine, False, grad, points, queries, cell)
+
+
+def _host_cell(cell: Any) -> Any:
+    """The cell as the extension takes it (host numbers; a PyTorch cell that requires grad is
+    read detached: the gradient path uses the caller's tensor)."""
+    if _arrays.framework_of(cell) == "torch":
+        return cell.detach()
+    return cell
 
 
 from . import ase  # noqa: E402  raycut.ase.neighbor_list: ASE Atoms in, ASE's types out

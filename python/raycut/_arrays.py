@@ -105,6 +105,12 @@ def stream_of(like: Like) -> int:
 
 def to_host(x: Any) -> np.ndarray:
     """A host float32 copy of an input array of any framework (kernel inputs of a CPU method)."""
+    return np.ascontiguousarray(to_numpy(x), dtype=np.float32)
+
+
+def to_numpy(x: Any) -> np.ndarray:
+    """A host NumPy view or copy of an array of any framework, its dtype kept (small inputs: cells,
+    pbc flags, batch indices; a device array is copied to the host)."""
     framework = framework_of(x)
     if framework == "torch":
         x = x.detach().cpu().numpy()
@@ -118,7 +124,7 @@ def to_host(x: Any) -> np.ndarray:
         except (RuntimeError, BufferError, TypeError):
             raise ValueError("cannot read a device array of an unknown framework on the host: "
                              "pass a NumPy array") from None
-    return np.ascontiguousarray(np.asarray(x), dtype=np.float32)
+    return np.asarray(x)
 
 
 class DLPackCapsule:

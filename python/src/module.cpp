@@ -5,6 +5,7 @@
 // device that the Python layer hands to the caller's framework (from_dlpack, zero-copy).
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/optional.h>
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/string_view.h>
 #include <nanobind/stl/vector.h>
@@ -15,6 +16,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -148,6 +150,59 @@ raycut::PositionsView positions_view(const FloatInput& in) {
   return {in.data, in.shape[0], in.space};
 }
 
+// ---- systems (boxes, batches, query points) ---------------------------------------------------
+
+using HostCells = nb::ndarray<const double, nb::ndim<3>, nb::c_contig, nb::device::cpu>;
+using HostFlags = nb::ndarray<const bool, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
+using HostOffsets = nb::ndarray<const std::uint64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+
+// raycut::Systems from what the Python layer prepared: cells (B, 3, 3) float64 and pbc (B, 3)
+// bool (B = 1: one box for every system), batch offsets, query points and their offsets. The
+// query points are read in place: `queries` keeps them alive until build() returns.
+raycut::Systems make_systems(const std::optional<HostCells>& cells,
+                             const std::optional<HostFlags>& pbc,
+                             const std::optional<HostOffsets>& offsets, nb::handle query_points,
+                             const std::optional<HostOffsets>& query_offsets, FloatInput& queries) {
+  raycut::Systems systems;
+  if (cells.has_value() != pbc.has_value())
+    value_error("cells and pbc go together (the raycut package passes both)");
+  if (cells) {
+    const std::size_t count = cells->shape(0);
+    if (cells->shape(1) != 3 || cells->shape(2) != 3 || pbc->shape(0) != count ||
+        pbc->shape(1) != 3)
+      value_error("cells must have shape (B, 3, 3) and pbc (B, 3), got cells (" +
+                  std::to_string(cells->shape(0)) + ", " + std::to_string(cells->shape(1)) + ", " +
+                  std::to_string(cells->shape(2)) + ") and pbc (" + std::to_string(pbc->shape(0)) +
+                  ", " + std::to_string(pbc->shape(1)) + ")");
+    std::vector<raycut::Box> boxes(count);
+    for (std::size_t b = 0; b < count; ++b)
+      for (int r = 0; r < 3; ++r) {
+        boxes[b].pbc[r] = (*pbc)(b, r);
+        for (int c = 0; c < 3; ++c) boxes[b].cell[r][c] = (*cells)(b, r, c);
+      }
+    if (count == 1)
+      systems.box = boxes[0];
+    else
+      systems.boxes = std::move(boxes);
+  }
+  if (offsets) systems.offsets.assign(offsets->data(), offsets->data() + offsets->shape(0));
+  if (!query_points.is_none()) {
+    queries = float_input(query_points, "queries");
+    if (queries.shape.size() != 2 || queries.shape[1] != 3)
+      value_error("queries must have shape (M, 3), got " + describe_shape(queries.shape));
+    // No query points is still a query set (no pairs), not "no queries": a non-null pointer.
+    static const float none[3] = {0, 0, 0};
+    systems.queries = {queries.data != nullptr ? queries.data : none, queries.shape[0],
+                       queries.space};
+    if (query_offsets)
+      systems.query_offsets.assign(query_offsets->data(),
+                                   query_offsets->data() + query_offsets->shape(0));
+  } else if (query_offsets) {
+    value_error("query offsets without query points");
+  }
+  return systems;
+}
+
 // ---- outputs -----------------------------------------------------------------------------------
 
 template <class T>
@@ -207,44 +262,52 @@ nb::dlpack::dtype index_dtype(std::size_t n) {
 // The list of `engine`'s positions where the method works (a new buffer: earlier results stay
 // valid).
 std::shared_ptr<raycut::NeighbourListBuffer> fill_list(raycut::Engine& engine, bool half,
-                                                       bool distances, bool vectors) {
+                                                       bool distances, bool vectors, bool shifts) {
   auto list = std::make_shared<raycut::NeighbourListBuffer>();
   nb::gil_scoped_release release;
-  engine.neighbours(*list, raycut::ListOptions{half, distances, vectors});
+  engine.neighbours(*list, raycut::ListOptions{half, distances, vectors, shifts});
   return list;
 }
 
-// CSR: (offsets int64 [N+1], indices int32 [P], distances [P] or None, vectors [P, 3] or None).
-nb::tuple neighbours(raycut::Engine& engine, bool half, bool distances, bool vectors,
-                     bool to_host) {
-  auto list = fill_list(engine, half, distances, vectors);
+// CSR: (offsets int64 [N+1], indices int32 [P], distances [P] or None, vectors [P, 3] or None,
+// shifts int32 [P, 3] or None).
+nb::tuple neighbours(raycut::Engine& engine, bool half, bool distances, bool vectors, bool to_host,
+                     bool shifts) {
+  auto list = fill_list(engine, half, distances, vectors, shifts);
   const std::size_t n = list->size();
   const std::size_t pairs = list->pairs();
   if (to_host && list->space() == MemorySpace::device) {
     auto host = std::make_shared<raycut::NeighbourList>(list->to_host());
     list.reset();
-    auto opt = [&](const std::vector<float>& v, std::vector<std::size_t> shape) -> nb::object {
-      if (!v.empty() || pairs == 0)
-        return wrap(v.data(), std::move(shape), dtype_of<float>(), host, MemorySpace::host);
-      return nb::none();
+    auto opt = [&](bool asked, const auto& v, std::vector<std::size_t> shape) -> nb::object {
+      using T = typename std::decay_t<decltype(v)>::value_type;
+      if (!asked) return nb::none();
+      return wrap(v.data(), std::move(shape), dtype_of<T>(), host, MemorySpace::host);
     };
     return nb::make_tuple(
         wrap(host->offsets.data(), {n + 1}, dtype_of<std::int64_t>(), host, MemorySpace::host),
         wrap(host->indices.data(), {pairs}, index_dtype(n), host, MemorySpace::host),
-        distances ? opt(host->distances, {pairs}) : nb::none(),
-        vectors ? opt(host->vectors, {pairs, 3}) : nb::none());
+        opt(distances, host->distances, {pairs}), opt(vectors, host->vectors, {pairs, 3}),
+        opt(shifts, host->shifts, {pairs, 3}));
   }
   const MemorySpace space = list->space();
-  return nb::make_tuple(
-      wrap(list->offsets(), {n + 1}, dtype_of<std::int64_t>(), list, space),
-      wrap(list->indices(), {pairs}, index_dtype(n), list, space),
-      distances ? wrap(list->distances(), {pairs}, dtype_of<float>(), list, space) : nb::none(),
-      vectors ? wrap(list->vectors(), {pairs, 3}, dtype_of<float>(), list, space) : nb::none());
+  auto opt = [&](bool asked, const auto* data, std::vector<std::size_t> shape) -> nb::object {
+    using T = std::remove_cv_t<std::remove_pointer_t<decltype(data)>>;
+    if (!asked) return nb::none();
+    return wrap(data, std::move(shape), dtype_of<T>(), list, space);
+  };
+  return nb::make_tuple(wrap(list->offsets(), {n + 1}, dtype_of<std::int64_t>(), list, space),
+                        wrap(list->indices(), {pairs}, index_dtype(n), list, space),
+                        opt(distances, list->distances(), {pairs}),
+                        opt(vectors, list->vectors(), {pairs, 3}),
+                        opt(shifts, list->shifts(), {pairs, 3}));
 }
 
-// COO pairs (i int64 [P], j int64 [P], d [P] or None, D [P, 3] or None): ASE's "ijdD".
-nb::tuple pairs(raycut::Engine& engine, bool half, bool distances, bool vectors, bool to_host) {
-  auto list = fill_list(engine, half, distances, vectors);
+// COO pairs (i int64 [P], j int64 [P], d [P] or None, D [P, 3] or None, S int32 [P, 3] or
+// None): ASE's "ijdDS".
+nb::tuple pairs(raycut::Engine& engine, bool half, bool distances, bool vectors, bool to_host,
+                bool shifts) {
+  auto list = fill_list(engine, half, distances, vectors, shifts);
   const std::size_t n = list->size();
   const std::size_t count = list->pairs();
   if (list->space() == MemorySpace::device && !to_host) {
@@ -267,7 +330,9 @@ nb::tuple pairs(raycut::Engine& engine, bool half, bool distances, bool vectors,
         wrap(i.get(), {count}, dtype_of<std::int64_t>(), i, space),
         wrap(j.get(), {count}, dtype_of<std::int64_t>(), j, space),
         distances ? wrap(list->distances(), {count}, dtype_of<float>(), list, space) : nb::none(),
-        vectors ? wrap(list->vectors(), {count, 3}, dtype_of<float>(), list, space) : nb::none());
+        vectors ? wrap(list->vectors(), {count, 3}, dtype_of<float>(), list, space) : nb::none(),
+        shifts ? wrap(list->shifts(), {count, 3}, dtype_of<std::int32_t>(), list, space)
+               : nb::none());
 #else
     throw raycut::Error(raycut::ErrorCode::internal, "device list without CUDA");
 #endif
@@ -278,12 +343,14 @@ nb::tuple pairs(raycut::Engine& engine, bool half, bool distances, bool vectors,
   const std::uint32_t* indices = list->indices();
   const float* d = list->distances();
   const float* v = list->vectors();
+  const std::int32_t* sh = list->shifts();
   if (list->space() == MemorySpace::device) {
     auto host = std::make_shared<raycut::NeighbourList>(list->to_host());
     offsets = host->offsets.data();
     indices = host->indices.data();
     d = host->distances.empty() ? nullptr : host->distances.data();
     v = host->vectors.empty() ? nullptr : host->vectors.data();
+    sh = host->shifts.empty() ? nullptr : host->shifts.data();
     owner = host;
   }
   std::vector<std::int64_t> i(count), j(count);
@@ -298,7 +365,8 @@ nb::tuple pairs(raycut::Engine& engine, bool half, bool distances, bool vectors,
   return nb::make_tuple(
       host_array(std::move(i), {count}), host_array(std::move(j), {count}),
       distances ? wrap(d, {count}, dtype_of<float>(), owner, space) : nb::none(),
-      vectors ? wrap(v, {count, 3}, dtype_of<float>(), owner, space) : nb::none());
+      vectors ? wrap(v, {count, 3}, dtype_of<float>(), owner, space) : nb::none(),
+      shifts ? wrap(sh, {count, 3}, dtype_of<std::int32_t>(), owner, space) : nb::none());
 }
 
 // Padded [N, K] (int32; N marks an empty slot), counts [N] (int32), report.
@@ -589,6 +657,7 @@ NB_MODULE(_raycut, m) {
       .def_prop_ro("method", &raycut::Engine::method)
       .def_prop_ro("space", [](const raycut::Engine& e) { return space_name(e.space()); })
       .def_prop_ro("size", &raycut::Engine::size)
+      .def_prop_ro("sources", &raycut::Engine::sources)
       .def_prop_ro("cutoff", &raycut::Engine::cutoff)
       .def(
           "set_stream",
@@ -598,13 +667,25 @@ NB_MODULE(_raycut, m) {
           nb::arg("stream"))
       .def(
           "build",
-          [](raycut::Engine& e, nb::handle positions, double cutoff) {
+          [](raycut::Engine& e, nb::handle positions, double cutoff,
+             const std::optional<HostCells>& cells, const std::optional<HostFlags>& pbc,
+             const std::optional<HostOffsets>& offsets, nb::handle queries,
+             const std::optional<HostOffsets>& query_offsets) {
             const FloatInput in = float_input(positions, "positions");
             const raycut::PositionsView view = positions_view(in);
+            FloatInput query_input;
+            const raycut::Systems systems =
+                make_systems(cells, pbc, offsets, queries, query_offsets, query_input);
             nb::gil_scoped_release release;
-            e.build(view, static_cast<float>(cutoff));  // beyond float: inf, refused
+            // Beyond float: inf, refused.
+            if (systems.plain())
+              e.build(view, static_cast<float>(cutoff));
+            else
+              e.build(view, static_cast<float>(cutoff), systems);
           },
-          nb::arg("positions"), nb::arg("cutoff"))
+          nb::arg("positions"), nb::arg("cutoff"), nb::arg("cells").none() = nb::none(),
+          nb::arg("pbc").none() = nb::none(), nb::arg("offsets").none() = nb::none(),
+          nb::arg("queries").none() = nb::none(), nb::arg("query_offsets").none() = nb::none())
       .def(
           "update",
           [](raycut::Engine& e, nb::handle positions) {
@@ -624,9 +705,9 @@ NB_MODULE(_raycut, m) {
            nb::arg("pressure").none() = nb::none())
       .def("results", &results, nb::arg("kernel"), nb::arg("to_host"))
       .def("neighbours", &neighbours, nb::arg("half"), nb::arg("distances"), nb::arg("vectors"),
-           nb::arg("to_host"))
+           nb::arg("to_host"), nb::arg("shifts") = false)
       .def("pairs", &pairs, nb::arg("half"), nb::arg("distances"), nb::arg("vectors"),
-           nb::arg("to_host"))
+           nb::arg("to_host"), nb::arg("shifts") = false)
       .def("padded", &padded, nb::arg("k"), nb::arg("raise_on_overflow"), nb::arg("to_host"))
       .def("timings", [](const raycut::Engine& e) {
         const raycut::Timings& t = e.last_timings();

@@ -10,6 +10,9 @@ import raycut
 
 AVAILABLE = [m["name"] for m in raycut.methods() if m["available"]]
 DEVICE_METHODS = [m for m in AVAILABLE if m not in ("brute-force", "cell-list")]
+# Methods with periodic boxes, batches and query sets (the others raise NotImplementedError).
+SYSTEM_METHODS = [m for m in AVAILABLE
+                  if m in ("brute-force", "cell-list", "brute-force-gpu", "grid")]
 CUTOFF = 0.1
 
 
@@ -96,4 +99,9 @@ def pytest_report_header(config):
 
 @pytest.fixture(params=AVAILABLE)
 def method(request):
+    return request.param
+
+
+@pytest.fixture(params=SYSTEM_METHODS)
+def system_method(request):
     return request.param

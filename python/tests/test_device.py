@@ -3,8 +3,8 @@ on its device, zero-copy, equal to the host path. Skipped (with the reason) with
 a CUDA device, or raycut's CUDA methods."""
 import numpy as np
 import pytest
-from conftest import (AVAILABLE, CUTOFF, DEVICE_METHODS, INPUTS, cupy_cuda, pair_set, torch_cuda,
-                      uniform)
+from conftest import (AVAILABLE, CUTOFF, DEVICE_METHODS, INPUTS, SYSTEM_METHODS, cupy_cuda, pair_set,
+                      torch_cuda, uniform)
 
 import raycut
 
@@ -195,3 +195,108 @@ def test_torch_cuda_gradients():
 
     torch = torch_cuda()
     check_torch_gradients(torch, torch.from_numpy(uniform(1000)).cuda())
+
+
+# ---- periodic boxes, batches, query sets on the device ------------------------------------------
+
+SYSTEM_DEVICE = [m for m in DEVICE_METHODS if m in SYSTEM_METHODS] + ["cell-list"]
+TRICLINIC = np.array([[1.0, 0.0, 0.0], [0.4, 0.9, 0.0], [0.3, -0.2, 0.8]])
+
+
+def periodic_batch(seed=0):
+    """Three systems (one empty) with their own cells, thinner than 2C in the last: (x, batch,
+    cells, pbc, cutoff), x unwrapped by a few cells."""
+    rng = np.random.default_rng(seed)
+    sizes = [200, 0, 30]
+    cells = np.stack([2.0 * TRICLINIC, np.eye(3), 0.35 * np.eye(3)])
+    pbc = np.array([[True, True, True], [True, True, True], [True, False, True]])
+    xs = [(rng.random((n, 3)) + rng.integers(-2, 3, (n, 3)) * p) @ c
+          for n, c, p in zip(sizes, cells, pbc)]
+    return (np.concatenate(xs).astype(np.float32), np.repeat(np.arange(3), sizes), cells, pbc,
+            0.4)
+
+
+def sorted_triples(i, j, S, *rest):
+    i, j, S = (np.asarray(a) for a in (i, j, S))
+    order = np.lexsort((S[:, 2], S[:, 1], S[:, 0], j, i))
+    return [np.asarray(a)[order] for a in (i, j, S) + rest]
+
+
+def same_triples(got, want):
+    got = sorted_triples(*got)
+    want = sorted_triples(*want)
+    for g, w in zip(got[:3], want[:3]):
+        np.testing.assert_array_equal(g, w)
+    for g, w in zip(got[3:], want[3:]):
+        np.testing.assert_allclose(g, w, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("method", SYSTEM_DEVICE)
+def test_torch_periodic_batch_equals_host(method):
+    torch = torch_cuda()
+    x, batch, cells, pbc, cutoff = periodic_batch()
+    host = raycut.neighbor_list("ijSdD", x, cutoff, cell=cells, pbc=pbc, batch=batch,
+                                method=method)
+    xd = torch.from_numpy(x).cuda()
+    torch.cuda.synchronize()
+    before = torch.cuda.memory_allocated()
+    out = raycut.neighbor_list("ijSdD", xd, cutoff, cell=torch.from_numpy(cells).cuda(),
+                               pbc=torch.from_numpy(pbc), batch=torch.from_numpy(batch).cuda(),
+                               method=method)
+    for t, dtype in zip(out, (torch.int64, torch.int64, torch.int32, torch.float32,
+                              torch.float32)):
+        assert isinstance(t, torch.Tensor) and t.device == xd.device and t.dtype == dtype
+    assert out[2].shape == (len(out[0]), 3)
+    if method in DEVICE_METHODS:  # the library's device buffers, wrapped: no torch allocation
+        assert torch.cuda.memory_allocated() == before
+    same_triples([t.cpu().numpy() for t in out], host)
+    assert any(a == b for a, b in zip(host[0].tolist(), host[1].tolist())), "self-images"
+    half = raycut.neighbor_list("ijS", xd, cutoff, cell=cells, pbc=pbc, batch=batch, half=True,
+                                method=method)
+    same_triples([t.cpu().numpy() for t in half],
+                 raycut.neighbor_list("ijS", x, cutoff, cell=cells, pbc=pbc, batch=batch,
+                                      half=True, method=method))
+
+
+@pytest.mark.parametrize("method", SYSTEM_DEVICE)
+def test_torch_radius_equals_host(method):
+    torch = torch_cuda()
+    x, batch, cells, pbc, cutoff = periodic_batch(1)
+    q, bq, _, _, _ = periodic_batch(2)
+    host = raycut.radius(x, q, cutoff, cell=cells, pbc=pbc, batch_points=batch,
+                         batch_queries=bq, method=method, quantities="ijSD")
+    out = raycut.radius(torch.from_numpy(x).cuda(), torch.from_numpy(q).cuda(), cutoff,
+                        cell=cells, pbc=pbc, batch_points=torch.from_numpy(batch).cuda(),
+                        batch_queries=torch.from_numpy(bq).cuda(), method=method,
+                        quantities="ijSD")
+    assert all(t.device.type == "cuda" for t in out)
+    same_triples([t.cpu().numpy() for t in out], host)
+
+
+@pytest.mark.parametrize("method", SYSTEM_DEVICE)
+def test_cupy_periodic_equals_host(method):
+    cupy = cupy_cuda()
+    x, batch, cells, pbc, cutoff = periodic_batch(3)
+    host = raycut.neighbor_list("ijSd", x, cutoff, cell=cells, pbc=pbc, batch=batch,
+                                method=method)
+    out = raycut.neighbor_list("ijSd", cupy.asarray(x), cutoff, cell=cupy.asarray(cells),
+                               pbc=pbc, batch=cupy.asarray(batch), method=method)
+    assert all(isinstance(a, cupy.ndarray) for a in out)
+    same_triples([a.get() for a in out], host)
+
+
+@pytest.mark.parametrize("method", SYSTEM_DEVICE)
+def test_torch_cuda_periodic_gradcheck(method):
+    torch = torch_cuda()
+    x, batch, cells, pbc, cutoff = periodic_batch(4)
+    keep = np.flatnonzero(batch == 2)  # the small cell: images and self-images
+    xd = torch.tensor(x[keep], dtype=torch.float64, device="cuda", requires_grad=True)
+    cd = torch.tensor(cells[2], dtype=torch.float64, device="cuda", requires_grad=True)
+
+    def f(x, c):
+        i, d, D = raycut.neighbor_list("idD", x, cutoff, cell=c, pbc=pbc[2], method=method)
+        energy = torch.zeros(len(x), dtype=d.dtype, device=d.device).index_add(0, i, d.cos())
+        field = torch.zeros(len(x), 3, dtype=D.dtype, device=D.device).index_add(0, i, D.sin())
+        return energy, field
+
+    assert torch.autograd.gradcheck(f, (xd, cd), eps=1e-6, atol=1e-6)

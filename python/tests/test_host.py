@@ -179,16 +179,11 @@ def test_errors():
             raycut.neighbor_list("ij", x, cutoff)
     with pytest.raises(ValueError, match="one number"):
         raycut.neighbor_list("ij", x, [0.1] * 10)
-    with pytest.raises(ValueError, match="periodic boxes are not supported yet"):
-        raycut.neighbor_list("ij", x, CUTOFF, cell=np.eye(3))
-    with pytest.raises(ValueError, match="periodic boxes are not supported yet"):
+    with pytest.raises(ValueError, match="pbc without a cell"):
         raycut.neighbor_list("ij", x, CUTOFF, pbc=True)
-    with pytest.raises(ValueError, match="periodic boxes are not supported yet"):
-        raycut.neighbor_list("ijS", x, CUTOFF)
-    with pytest.raises(ValueError, match="batches are not supported yet"):
-        raycut.neighbor_list("ij", x, CUTOFF, batch=np.zeros(10, np.int64))
-    i = raycut.neighbor_list("i", x, CUTOFF, pbc=[False, False, False])  # open: fine
-    assert i.dtype == np.int64
+    i, S = raycut.neighbor_list("iS", x, CUTOFF, pbc=[False, False, False])  # open: zero shifts
+    assert i.dtype == np.int64 and S.dtype == np.int32 and S.shape == (len(i), 3)
+    assert not S.any()
     with pytest.raises(ValueError, match="unknown quantity"):
         raycut.neighbor_list("ijx", x, CUTOFF)
     with pytest.raises(ValueError, match="shape"):

@@ -1,0 +1,178 @@
+"""Periodic boxes, batches and query sets as the extension takes them (raycut::Systems): cells
+(B, 3, 3) float64 and pbc (B, 3) bool, B = 1 for a box shared by every system; per-system index
+arrays (torch_cluster's ``batch``) turned into offsets; and the differentiable vectors of the
+PyTorch path (spec/NEIGHBOURS.md, 7).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Optional
+
+import numpy as np
+
+from . import _arrays
+
+
+@dataclass
+class Boxes:
+    """cells (B, 3, 3) float64 and pbc (B, 3) bool; B = 1: one box for every system."""
+
+    cells: np.ndarray
+    pbc: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return len(self.cells)
+
+    @property
+    def periodic(self) -> bool:
+        return bool(self.pbc.any())
+
+
+def _flags(pbc: Any) -> np.ndarray:
+    flags = _arrays.to_numpy(pbc) if not isinstance(pbc, (bool, np.bool_)) else np.asarray(pbc)
+    flags = np.asarray(flags)
+    if flags.dtype != bool:
+        if not np.issubdtype(flags.dtype, np.integer) or not np.isin(flags, (0, 1)).all():
+            raise ValueError(f"pbc must be booleans (one, 3, or (B, 3)), got {flags.dtype} "
+                             f"{flags.tolist() if flags.size <= 9 else flags.shape}")
+        flags = flags.astype(bool)
+    if flags.ndim == 0:
+        return np.full((1, 3), bool(flags))
+    if flags.shape == (3,):
+        return flags.reshape(1, 3)
+    if flags.ndim == 2 and flags.shape[1] == 3:
+        return flags
+    raise ValueError(f"pbc must be one bool, 3 bools or (B, 3) bools (one row per system), got "
+                     f"shape {flags.shape}")
+
+
+def _cells(cell: Any) -> np.ndarray:
+    try:
+        c = np.asarray(_arrays.to_numpy(cell), dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"cell must be numbers: 3 (orthorhombic), (3, 3) or (B, 3, 3), rows the "
+                         f"lattice vectors ({e})") from None
+    if c.shape == (3,):
+        return np.diag(c).reshape(1, 3, 3)  # orthorhombic edge lengths, as ASE takes them
+    if c.shape == (3, 3):
+        return c.reshape(1, 3, 3)
+    if c.ndim == 3 and c.shape[1:] == (3, 3):
+        return c
+    raise ValueError(f"cell must have shape (3,) (orthorhombic edges), (3, 3) (rows: lattice "
+                     f"vectors a, b, c) or (B, 3, 3) (one per system of a batch), got {c.shape}")
+
+
+def boxes(cell: Any, pbc: Any) -> Optional[Boxes]:
+    """The boxes of ``cell`` and ``pbc``, or None for open boundaries (no cell, pbc None or all
+    False). A cell without pbc is periodic on all three axes."""
+    if cell is None:
+        if pbc is not None and _flags(pbc).any():
+            raise ValueError("pbc without a cell: periodic axes need their lattice vectors "
+                             "(pass cell=..., rows a, b, c)")
+        return None
+    cells = _cells(cell)
+    flags = np.ones((1, 3), bool) if pbc is None else _flags(pbc)
+    if len(cells) != len(flags) and 1 not in (len(cells), len(flags)):
+        raise ValueError(f"cell gives {len(cells)} systems but pbc {len(flags)}")
+    count = max(len(cells), len(flags))
+    cells = np.ascontiguousarray(np.broadcast_to(cells, (count, 3, 3)), dtype=np.float64)
+    flags = np.ascontiguousarray(np.broadcast_to(flags, (count, 3)), dtype=bool)
+    return Boxes(cells, flags)
+
+
+def _system_index(batch: Any, n: Optional[int], name: str) -> np.ndarray:
+    b = np.asarray(_arrays.to_numpy(batch))
+    if b.dtype == bool or not np.issubdtype(b.dtype, np.integer):
+        if b.size == 0 and b.ndim == 1:
+            b = b.astype(np.int64)
+        else:
+            raise ValueError(f"{name} must be integers (the system of each particle), got "
+                             f"{b.dtype}")
+    if b.ndim != 1 or (n is not None and len(b) != n):
+        raise ValueError(f"{name} must have one system index per particle, shape "
+                         f"({'N' if n is None else n},), got shape {b.shape}")
+    n = len(b)
+    if n and b[0] < 0:
+        raise ValueError(f"{name} holds a negative system index ({int(b.min())})")
+    if n > 1:
+        down = np.flatnonzero(np.diff(b) < 0)
+        if len(down):
+            k = int(down[0])
+            raise ValueError(f"{name} must be sorted (each system's particles contiguous, "
+                             f"systems in order): {name}[{k}] = {int(b[k])} > {name}[{k + 1}] = "
+                             f"{int(b[k + 1])}; sort the particles by system first")
+    return b.astype(np.int64, copy=False)
+
+
+def offsets(index: np.ndarray, systems: int) -> np.ndarray:
+    """Systems::offsets (S + 1, uint64) of a sorted per-particle system index."""
+    counts = np.bincount(index, minlength=systems)
+    return np.concatenate([[0], np.cumsum(counts)]).astype(np.uint64)
+
+
+@dataclass
+class Batch:
+    """What build() passes for boxes and batches, and what the PyTorch path needs again."""
+
+    boxes: Optional[Boxes]
+    systems: int  # S (1 without a batch)
+    offsets: Optional[np.ndarray]  # sources, S + 1
+    query_offsets: Optional[np.ndarray]  # queries, S + 1
+
+
+def batch(boxes_: Optional[Boxes], n: Optional[int], batch_: Any, m: Optional[int] = None,
+          batch_queries: Any = None) -> Batch:
+    """Offsets of the batch (sources ``batch_`` of n particles; queries ``batch_queries`` of m
+    points when m is not None). None for one index with the other given: every point in system
+    0 (torch_cluster.radius's convention). The number of systems: the boxes' count when they are
+    per system, else the largest index + 1."""
+    per_system = boxes_ is not None and boxes_.count > 1
+    if batch_ is None and batch_queries is None:
+        if per_system:
+            raise ValueError(f"cell/pbc give {boxes_.count} systems (shape (B, 3, 3) / (B, 3)) "
+                             "but no batch says which particles belong to which: pass batch=")
+        return Batch(boxes_, 1, None, None)
+    names = ("batch", "batch_queries") if m is None else ("batch_points", "batch_queries")
+    if batch_ is None and n is None:
+        raise ValueError(f"positions without a shape (known only through DLPack) need "
+                         f"{names[0]} given")
+    index = _system_index(batch_, n, names[0]) if batch_ is not None else np.zeros(n, np.int64)
+    query_index = None
+    if m is not None:
+        query_index = (_system_index(batch_queries, m, names[1]) if batch_queries is not None
+                       else np.zeros(m, np.int64))
+    largest = max([int(a[-1]) for a in (index, query_index) if a is not None and len(a)],
+                  default=-1)
+    systems = boxes_.count if per_system else max(largest + 1, 1)
+    if largest >= systems:
+        raise ValueError(f"the batch has system index {largest} but cell/pbc give {systems} "
+                         "systems")
+    return Batch(boxes_, systems, offsets(index, systems),
+                 None if query_index is None else offsets(query_index, systems))
+
+
+def torch_vectors(torch: Any, sources: Any, targets: Any, i: Any, j: Any, shifts: Any,
+                  cell: Any, boxes_: Optional[Boxes], target_offsets: Any) -> Any:
+    """r_ij = x_j - x_i + S . cell in PyTorch from the pairs, so that autograd flows to the
+    positions and the cell (``cell`` as the caller gave it: a tensor that may require grad)."""
+    vectors = sources.index_select(0, j) - targets.index_select(0, i)
+    if boxes_ is None or not boxes_.periodic or shifts is None:
+        return vectors
+    dtype, device = vectors.dtype, vectors.device
+    if isinstance(cell, torch.Tensor):
+        c = cell.to(device=device, dtype=dtype)
+    else:
+        c = torch.as_tensor(np.asarray(_arrays.to_numpy(cell), np.float64), dtype=dtype,
+                            device=device)
+    if c.shape == (3,):
+        c = torch.diag(c)
+    if c.dim() == 3 and (c.shape[0] == 1 or boxes_.count == 1):
+        c = c[0]  # one box for every system
+    s = shifts.to(device=device, dtype=dtype)
+    if c.dim() == 2:
+        return vectors + s @ c
+    # One cell per system: the system of each pair is that of its target row.
+    rows = torch.as_tensor(np.asarray(target_offsets, np.int64), device=device)
+    system = torch.searchsorted(rows, i, right=True) - 1
+    return vectors + torch.bmm(s.unsqueeze(1), c.index_select(0, system)).squeeze(1)
