@@ -1229,7 +1229,7 @@ TEST(PeriodicUnsupported, GridPaperAndOptixRefuseSystems) {
       });
       EXPECT_TRUE(contains(message, m.name)) << message;
     }
-    EXPECT_NO_THROW(engine.build({xyz.data(), 2, MemorySpace::host}, 0.5f, Systems{}));
+    EXPECT_NO_THROW(engine.build({xyz.data(), 2, MemorySpace::host}, 0.6f, Systems{}));  // |r| = 0.52
     EXPECT_EQ(engine.compute(Kernel::count).count, (std::vector<std::uint32_t>{1, 1}));
   }
   if (tried == 0) {
