@@ -20,6 +20,9 @@
 //                                    // and adds one. The grid may then give each call its
 //                                    // position itself, so that the lanes sharing a target
 //                                    // write its entries together (coalesced lists)
+//     static constexpr bool uses_source = false;  // operator() reads neither j nor the shift:
+//                                    // with periodic images the traversal may skip looking
+//                                    // the source up (a load per pair)
 //     static constexpr bool takes_shift = true;  // operator() and accepts() take the pair's
 //                                    // image shift S as a last argument (const Shift&)
 //     RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b);  // a += b: lets
@@ -144,6 +147,11 @@ struct Shift {
 // ---- what the traversals ask of a functor (defaults for the optional members) ----------------
 
 template <class F, class = void>
+struct uses_source : std::true_type {};
+template <class F>
+struct uses_source<F, std::enable_if_t<!F::uses_source>> : std::false_type {};
+
+template <class F, class = void>
 struct takes_shift : std::false_type {};
 template <class F>
 struct takes_shift<F, std::enable_if_t<F::takes_shift>> : std::true_type {};
@@ -220,6 +228,7 @@ RAYCUT_HD typename F::Accumulator initial_state(const F& f, std::uint32_t i) {
 
 struct CountKernel {
   using Accumulator = std::uint32_t;
+  static constexpr bool uses_source = false;
   std::uint32_t* count;
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float) const {
     ++acc;
@@ -234,6 +243,7 @@ struct CountKernel {
 struct LennardJonesKernel {
   using Accumulator = float;
   static constexpr bool vanishes_at_infinity = true;
+  static constexpr bool uses_source = false;
   float sigma6;               // sigma^6
   float four_epsilon_sigma6;  // 4 eps sigma^6
   float* energy;
@@ -259,6 +269,7 @@ struct LennardJonesForceKernel {
     float energy = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0};
   };
   static constexpr bool vanishes_at_infinity = true;
+  static constexpr bool uses_source = false;
   float sigma6;               // sigma^6
   float four_epsilon_sigma6;  // 4 eps sigma^6
   float* energy;              // 1 per target
@@ -299,6 +310,7 @@ struct SmoothKernel {
   struct Accumulator {
     float energy = 0, f[3] = {0, 0, 0};
   };
+  static constexpr bool uses_source = false;
   float cutoff_squared;
   float* energy;
   float* force;
@@ -323,6 +335,7 @@ struct SmoothKernel {
 // rho_i contribution m W_poly6(r, h) = m 315 / (64 pi h^9) (h^2 - r^2)^3 (Mueller et al. 2003).
 struct SphDensityKernel {
   using Accumulator = float;
+  static constexpr bool uses_source = false;
   float mass_poly6;  // m 315 / (64 pi h^9)
   float h_squared;
   float* density;

@@ -21,7 +21,19 @@ struct HalfFilter {
   }
 };
 
-struct ListCount : HalfFilter {
+// The full list's count reads no source (no lookup with images); the half list's filters.
+struct ListCount {
+  using Accumulator = std::uint32_t;
+  static constexpr bool uses_source = false;
+  std::uint32_t* counts;
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float) const {
+    ++acc;
+  }
+  RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
+  RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { counts[i] = acc; }
+};
+
+struct HalfListCount : HalfFilter {
   using Accumulator = std::uint32_t;
   std::uint32_t* counts;
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float,

@@ -53,7 +53,10 @@ class HostMethod : public Method {
     std::uint64_t* offsets = list.prepare_offsets(n_, options);
     // The count pass writes counts[i] at offsets[i + 1], then a running sum makes the offsets.
     std::vector<std::uint32_t> counts(n_);
-    run(ListCount{options.half, counts.data()});
+    if (options.half)
+      run(HalfListCount{{true}, counts.data()});
+    else
+      run(ListCount{counts.data()});
     offsets[0] = 0;
     for (std::size_t i = 0; i < n_; ++i) offsets[i + 1] = offsets[i] + counts[i];
     run(list.prepare_fill(offsets[n_], options.half));

@@ -149,7 +149,11 @@ class GpuMethod : public Method {
   void device_neighbours(ListStorage& storage, std::size_t n, const ListOptions& options,
                          Run&& run) {
     auto& list = static_cast<DeviceListStorage&>(storage);
-    run(ListCount{options.half, list.prepare_counts(n, options)});
+    std::uint32_t* counts = list.prepare_counts(n, options);
+    if (options.half)
+      run(HalfListCount{{true}, counts});
+    else
+      run(ListCount{counts});
     run(list.prepare_fill(list.scan_counts(stream_)));
   }
   template <class Run>

@@ -222,7 +222,7 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
   points_.xyz = xyz_.data();
   points_.size = points;
   points_.targets = targets;
-  points_.images = {image_.data()};
+  points_.images = {image_.data(), !with_queries};
   points_.system = systems > 1 ? system_.data() : nullptr;
   points_.systems = systems;
 }

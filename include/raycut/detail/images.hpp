@@ -21,6 +21,7 @@ struct NoImages {
 struct WithImages {
   static constexpr bool active = true;
   const PointImage* image;  // by point, or by slot for the grid
+  bool all_sources;         // no query points: every point is some particle's image
   struct Target {
     std::int32_t shift[3];
   };
@@ -42,6 +43,9 @@ RAYCUT_HD bool resolve(const F& f, const Images& images, const typename Images::
     (void)k;
     j = 0;
     if (!in) return false;
+    // A functor that reads neither j nor S, and filters nothing, needs no lookup at all.
+    if constexpr (!uses_source<F>::value && !has_accepts<F>::value)
+      if (images.all_sources) return true;
     const PointImage p = images.image[index];
     if (p.source == not_a_source) return false;
     j = p.source;
@@ -58,7 +62,7 @@ RAYCUT_HD bool resolve(const F& f, const Images& images, const typename Images::
 template <class Launch>
 void with_images(const PairPass& pass, Launch&& launch) {
   if (pass.images.active())
-    launch(WithImages{pass.images.image});
+    launch(WithImages{pass.images.image, pass.images.all_sources});
   else
     launch(NoImages{});
 }

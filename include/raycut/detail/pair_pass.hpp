@@ -105,6 +105,7 @@ struct alignas(16) PointImage {
 // Null: the points are the caller's particles. The grid hands its traversal a copy in slot order.
 struct ImageTables {
   const PointImage* image = nullptr;
+  bool all_sources = true;  // no query points
   bool active() const { return image != nullptr; }
 };
 
