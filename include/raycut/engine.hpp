@@ -234,6 +234,7 @@ bool cuda_device_available();
 namespace detail {
 class Method;
 class ImagePoints;
+struct ImagePlan;
 struct PairPass;
 }  // namespace detail
 
@@ -319,7 +320,13 @@ class Engine {
   Systems systems_;
   // The points a method builds over with images (core/images.hpp), reused by later builds.
   std::shared_ptr<detail::ImagePoints> images_;
-  bool queries_ = false;          // built with query points
+  // The plan of the last build with Systems (core/images.hpp), kept for the same layout.
+  std::shared_ptr<const detail::ImagePlan> plan_;
+  Systems plan_key_;
+  std::size_t plan_sources_ = 0;
+  float plan_cutoff_ = 0;
+  bool plan_queries_ = false;
+  bool queries_ = false;  // built with query points
   bool built_ = false;
   bool has_run_ = false;
   Timings timings_;

@@ -34,6 +34,12 @@ const detail::MethodEntry& find_entry(std::string_view name) {
 }
 
 // Checks coordinates where they live, before any work on them; throws naming the first bad one.
+// The same systems, boxes and batch layout (the query count included, not their pointer).
+bool same_layout(const Systems& a, const Systems& b) {
+  return a.box == b.box && a.boxes == b.boxes && a.offsets == b.offsets &&
+         a.query_offsets == b.query_offsets && a.queries.size == b.queries.size;
+}
+
 void validate_positions(const PositionsView& positions) {
   if (positions.size > 0 && positions.xyz == nullptr)
     throw Error(ErrorCode::invalid_argument, "positions pointer is null for N = " +
@@ -161,7 +167,19 @@ void Engine::build(PositionsView positions, float cutoff, const Systems& systems
                                             "' does not take periodic boxes, batches or query "
                                             "points: " +
                                             why);
-  const detail::ImagePlan plan = detail::plan_images(systems, positions.size, cutoff);
+  // A step loop builds the same systems again: their plan (validation, frames) is kept.
+  if (!plan_ || plan_queries_ != systems.has_queries() || !same_layout(systems, plan_key_) ||
+      positions.size != plan_sources_ || cutoff != plan_cutoff_) {
+    plan_.reset();
+    plan_ = std::make_shared<const detail::ImagePlan>(
+        detail::plan_images(systems, positions.size, cutoff));
+    plan_key_ = systems;
+    plan_key_.queries.xyz = nullptr;  // not kept beyond build(); same_layout reads the size
+    plan_queries_ = systems.has_queries();
+    plan_sources_ = positions.size;
+    plan_cutoff_ = cutoff;
+  }
+  const detail::ImagePlan& plan = *plan_;
   built_ = false;
   has_run_ = false;
   size_ = plan.target_count();

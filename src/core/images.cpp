@@ -1,6 +1,7 @@
 #include "core/images.hpp"
 
 #include <algorithm>
+#include <cstring>
 #include <string>
 
 #include "core/validation.hpp"
@@ -40,6 +41,7 @@ std::vector<std::uint64_t> checked_offsets(const std::vector<std::uint64_t>& off
 // A system's frame; errors name the system in a batch.
 ImageFrame frame_of(const Box& box, double cutoff, std::size_t system, bool batch) {
   ImageFrame frame;
+  std::memset(&frame, 0, sizeof frame);  // padding too: frames are compared bytewise
   try {
     const auto g = reciprocal_rows(box);  // validates the box
     image_range(box, cutoff);             // refuses cells far too thin for the cutoff
@@ -61,8 +63,7 @@ ImageFrame frame_of(const Box& box, double cutoff, std::size_t system, bool batc
 class HostImagePoints final : public ImagePoints {
  public:
   MemorySpace space() const override { return MemorySpace::host; }
-  void expand(const ImagePlan& plan, const float* sources, const float* queries,
-              void*) override;
+  void expand(const ImagePlan& plan, const float* sources, const float* queries, void*) override;
 
  private:
   std::vector<float> xyz_;

@@ -4,6 +4,7 @@
 #include <thrust/iterator/transform_iterator.h>
 #include <cub/device/device_scan.cuh>
 
+#include <cstring>
 #include <string>
 #include <vector>
 
@@ -128,7 +129,15 @@ class DeviceImagePoints final : public ImagePoints {
   DeviceBuffer<unsigned char> temp_;
   MappedValue<unsigned long long> bad_host_;
   MappedValue<std::uint64_t> total_;
+  // What frames_ and the offsets hold: a step loop's next expansion uploads nothing.
+  std::vector<ImageFrame> uploaded_frames_;
+  std::vector<std::uint64_t> uploaded_sources_, uploaded_queries_;
 };
+
+bool same_frames(const std::vector<ImageFrame>& a, const std::vector<ImageFrame>& b) {
+  return a.size() == b.size() &&
+         (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(ImageFrame)) == 0);
+}
 
 template <class T>
 void upload_async(DeviceBuffer<T>& buffer, const std::vector<T>& host, cudaStream_t stream) {
@@ -144,11 +153,25 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
   const std::uint32_t systems = plan.systems();
   const std::uint64_t n = plan.source_count(), targets = plan.target_count();
   const bool with_queries = plan.has_queries();
-  upload_async(frames_, plan.frames, stream);
-  upload_async(source_offsets_, plan.sources, stream);
-  if (with_queries) upload_async(query_offsets_, plan.queries, stream);
-  Plan p{frames_.data(), source_offsets_.data(), with_queries ? query_offsets_.data() : nullptr,
-         systems, n, targets, 0};
+  if (!same_frames(plan.frames, uploaded_frames_)) {
+    upload_async(frames_, plan.frames, stream);
+    uploaded_frames_ = plan.frames;
+  }
+  if (plan.sources != uploaded_sources_) {
+    upload_async(source_offsets_, plan.sources, stream);
+    uploaded_sources_ = plan.sources;
+  }
+  if (with_queries && plan.queries != uploaded_queries_) {
+    upload_async(query_offsets_, plan.queries, stream);
+    uploaded_queries_ = plan.queries;
+  }
+  Plan p{frames_.data(),
+         source_offsets_.data(),
+         with_queries ? query_offsets_.data() : nullptr,
+         systems,
+         n,
+         targets,
+         0};
   if (plan.own_frames) {
     origins_kernel<<<blocks_for(systems, block), block, 0, stream>>>(p, sources, queries);
     RAYCUT_CUDA_CHECK_LAUNCH();
@@ -167,8 +190,8 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
   const auto input = thrust::make_transform_iterator(thrust::counting_iterator<std::uint64_t>(0),
                                                      CountOrZero{counts_.data(), n});
   std::size_t temp_bytes = 0;
-  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, input,
-                                                  image_offset_.data(), n + 1, stream));
+  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, input, image_offset_.data(),
+                                                  n + 1, stream));
   temp_.resize(std::max<std::size_t>(temp_bytes, 1));
   RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(temp_.data(), temp_bytes, input,
                                                   image_offset_.data(), n + 1, stream));
@@ -201,12 +224,10 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
   if (systems > 1) system_.resize(points);
   const Out out{xyz_.data(), image_.data(), systems > 1 ? system_.data() : nullptr};
   if (with_queries && targets > 0) {
-    queries_kernel<<<blocks_for(targets, block), block, 0, stream>>>(p, queries, out,
-                                                                     bad_.data());
+    queries_kernel<<<blocks_for(targets, block), block, 0, stream>>>(p, queries, out, bad_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
-    RAYCUT_CUDA_CHECK(cudaMemcpyAsync(bad_host_.device(), bad_.data(),
-                                      sizeof(unsigned long long), cudaMemcpyDeviceToDevice,
-                                      stream));
+    RAYCUT_CUDA_CHECK(cudaMemcpyAsync(bad_host_.device(), bad_.data(), sizeof(unsigned long long),
+                                      cudaMemcpyDeviceToDevice, stream));
     RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
     if (bad_host_.host() != ~0ull)
       throw Error(ErrorCode::invalid_argument,

@@ -36,9 +36,9 @@ struct WithImages {
 // (the caller's source; a valid index 0 when not taken, for calls fed r2 = +inf) and s set. A
 // query point is never a source.
 template <class F, class Images>
-RAYCUT_HD bool resolve(const F& f, const Images& images, const typename Images::Target& ti,
-                       bool in, std::uint32_t i, std::uint32_t k, std::uint32_t index,
-                       std::uint32_t& j, Shift& s) {
+RAYCUT_HD bool resolve(const F& f, const Images& images, const typename Images::Target& ti, bool in,
+                       std::uint32_t i, std::uint32_t k, std::uint32_t index, std::uint32_t& j,
+                       Shift& s) {
   if constexpr (Images::active) {
     (void)k;
     j = 0;
