@@ -20,9 +20,10 @@ enum class RayMode : int {
   smooth,
   sph_density,
   sph_force,
-  list_count,  // neighbour list, pass 1: neighbours per target
-  list_fill,   // neighbour list, pass 2: write them at their offsets
-  padded,      // the padded [N, K] matrix
+  list_count,       // neighbour list, pass 1: neighbours per target
+  half_list_count,  // the same for a half list
+  list_fill,        // neighbour list, pass 2: write them at their offsets
+  padded,           // the padded [N, K] matrix
 };
 
 struct LaunchParams {
@@ -43,6 +44,7 @@ struct LaunchParams {
   SphDensityKernel sph_density;
   SphForceKernel sph_force;
   ListCount list_count;
+  HalfListCount half_list_count;
   ListFill list_fill;
   PaddedFill padded;
 };
@@ -75,6 +77,10 @@ inline void set_functor(LaunchParams& p, const SphForceKernel& f) {
 inline void set_functor(LaunchParams& p, const ListCount& f) {
   p.mode = RayMode::list_count;
   p.list_count = f;
+}
+inline void set_functor(LaunchParams& p, const HalfListCount& f) {
+  p.mode = RayMode::half_list_count;
+  p.half_list_count = f;
 }
 inline void set_functor(LaunchParams& p, const ListFill& f) {
   p.mode = RayMode::list_fill;
@@ -109,6 +115,9 @@ __host__ __device__ __forceinline__ void with_functor(const LaunchParams& p, Vis
       break;
     case RayMode::list_count:
       visit(p.list_count);
+      break;
+    case RayMode::half_list_count:
+      visit(p.half_list_count);
       break;
     case RayMode::list_fill:
       visit(p.list_fill);
