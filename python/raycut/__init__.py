@@ -354,6 +354,22 @@ class VerletList:
         """How many times the list was built (the first ``update`` included)."""
         return self._list.rebuilds
 
+    @property
+    def half(self) -> bool:
+        return self._list.half
+
+    @property
+    def distances(self) -> bool:
+        return self._list.distances
+
+    @property
+    def vectors(self) -> bool:
+        return self._list.vectors
+
+    @property
+    def shifts(self) -> bool:
+        return self._list.shifts
+
     def update(self, positions: Any) -> bool:
         """New (N, 3) float32 positions (the same N after the first call): rebuilds the list at
         ``cutoff + skin`` when some particle has moved more than ``skin / 2`` since the last
