@@ -106,3 +106,41 @@ def test_neighbor_list_keeps_device_data_on_the_device(tmp_path, batched, cache)
     c = torch.tensor(cell, device="cuda").diag()
     d = (x[j] - x[i] + S.to(torch.float32) @ c).norm(dim=1)
     assert bool((d < CUTOFF * (1 + 1e-5)).all())
+
+
+def test_device_batch_index_matches_the_host_one():
+    """The CUDA batch index path (validated and turned into offsets on the device) gives the host
+    path's offsets and raises its errors, word for word."""
+    torch = torch_cuda()
+    from raycut import _systems
+
+    rng = np.random.default_rng(7)
+    index = np.sort(rng.choice([0, 2, 3, 3, 6], 300))  # systems 1, 4 and 5 empty
+    for dtype in (torch.int64, torch.int32, torch.uint8):
+        device = torch.from_numpy(index).to(dtype).cuda()
+        for boxes in (None, _systems.boxes(np.eye(3)[None].repeat(9, 0), True)):
+            got = _systems.batch(boxes, len(index), device)
+            want = _systems.batch(boxes, len(index), index)
+            assert got.systems == want.systems
+            np.testing.assert_array_equal(got.offsets, want.offsets)
+            assert got.offsets.dtype == np.uint64
+    empty = _systems.batch(None, 0, torch.zeros(0, dtype=torch.int64, device="cuda"))
+    assert empty.offsets.tolist() == [0, 0]
+    single = _systems.batch(None, 1, torch.full((1,), 2, device="cuda"))
+    assert single.offsets.tolist() == [0, 0, 0, 1]
+    bad = {
+        "unsorted": np.array([0, 0, 2, 1, 3]),
+        "negative": np.array([-1, 0, 0]),
+        "float": np.array([0.0, 1.0]),
+        "shape": np.zeros((2, 2), np.int64),
+    }
+    for label, b in bad.items():
+        with pytest.raises(ValueError) as host:
+            _systems.batch(None, None, b)
+        with pytest.raises(ValueError) as device:
+            _systems.batch(None, None, torch.from_numpy(b).cuda())
+        message = str(device.value).replace("torch.float64", "float64")
+        assert message == str(host.value), label
+    with pytest.raises(ValueError, match="cell/pbc give 2"):
+        _systems.batch(_systems.boxes(np.eye(3)[None].repeat(2, 0), True), 3,
+                       torch.tensor([0, 1, 2], device="cuda"))
