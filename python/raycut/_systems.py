@@ -76,9 +76,12 @@ def boxes(cell: Any, pbc: Any) -> Optional[Boxes]:
     if len(cells) != len(flags) and 1 not in (len(cells), len(flags)):
         raise ValueError(f"cell gives {len(cells)} systems but pbc {len(flags)}")
     count = max(len(cells), len(flags))
-    cells = np.ascontiguousarray(np.broadcast_to(cells, (count, 3, 3)), dtype=np.float64)
-    flags = np.ascontiguousarray(np.broadcast_to(flags, (count, 3)), dtype=bool)
-    return Boxes(cells, flags)
+    if len(cells) != count:  # broadcast_to only where needed: it costs more than the rest here
+        cells = np.broadcast_to(cells, (count, 3, 3))
+    if len(flags) != count:
+        flags = np.broadcast_to(flags, (count, 3))
+    return Boxes(np.ascontiguousarray(cells, dtype=np.float64),
+                 np.ascontiguousarray(flags, dtype=bool))
 
 
 def _not_integers(name: str, dtype: Any) -> ValueError:
