@@ -24,6 +24,10 @@ torch_cluster's) and query sets (``radius``) follow spec/NEIGHBOURS.md: a pair i
 cutoff (boxes thinner than twice the cutoff give a pair once per image, and a particle its own
 images). The CPU methods and the CUDA ``grid`` and ``brute-force-gpu`` support them; the others
 raise ``NotImplementedError``.
+
+``neighbor_list`` and ``radius`` reuse one engine per method and CUDA device from call to call
+(its structure buffers are not allocated again); ``clear_engine_cache()`` frees them and
+``set_engine_cache(False)`` turns the reuse off. Their outputs are new arrays every call.
 """
 from __future__ import annotations
 
@@ -538,13 +542,16 @@ def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = No
     index of each particle, (N,) integers, sorted (each system's particles contiguous; unsorted
     raises ValueError). Pairs never cross systems; indices stay global; systems may be empty.
     The number of systems B is that of a per-system ``cell``/``pbc``, else ``batch.max() + 1``.
+    A CUDA PyTorch ``batch`` is checked and turned into offsets on the device (only B + 1
+    offsets and 4 scalars reach the host); other device arrays are copied to the host first.
 
     The outputs are of the positions' framework and device (CUDA tensors in: CUDA tensors out,
     zero-copy). For PyTorch positions or cell that require grad, ``d`` and ``D`` are computed in
     PyTorch from i, j and S (``x[j] - x[i] + S @ cell``), so that gradients flow back to both
     (positions of any float dtype then; the search itself runs in float32). ``method``: a name
     from ``methods()`` or ``"auto"``; methods without periodic boxes or batches raise
-    NotImplementedError for them.
+    NotImplementedError for them. CUDA positions are never copied to the host, nor are the pairs.
+    The engine is reused from call to call (see ``clear_engine_cache``).
 
     >>> i, j, S = raycut.neighbor_list("ijS", x, 3.0, cell=[10.0, 10.0, 10.0], pbc=True)
     >>> i, j = raycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
