@@ -106,8 +106,9 @@ class Input:
         self.offsets = b.offsets
 
 
-def make_variants(inp: Input, method: str) -> dict:
-    """name -> a function doing one call and returning its pair count."""
+def make_variants(inp: Input, method: str) -> tuple:
+    """name -> a function doing one call and returning (its outputs, the index of an array with
+    one entry per pair); the bound engine; where the outputs live."""
     like = _arrays.prepare(inp.x)[1]
     stream = _arrays.stream_of(like)
     engine = raycut._raycut.Engine(method)
@@ -116,27 +117,32 @@ def make_variants(inp: Input, method: str) -> dict:
     def cpp_list():
         engine.set_stream(stream)
         engine.build(inp.x, inp.cutoff, inp.cells, inp.flags, inp.offsets)
-        out = engine.neighbours(inp.half, False, False, False, shifts)
-        return int(out[1].shape[0])
+        return engine.neighbours(inp.half, False, False, False, shifts), 1
 
     def cpp_pairs():
         engine.set_stream(stream)
         engine.build(inp.x, inp.cutoff, inp.cells, inp.flags, inp.offsets)
-        out = engine.pairs(inp.half, False, False, False, shifts)
-        return int(out[0].shape[0])
+        return engine.pairs(inp.half, False, False, False, shifts), 0
 
     def python(cache=True):
         raycut.set_engine_cache(cache)
-        out = raycut.neighbor_list(inp.quantities, inp.x, inp.cutoff, cell=inp.cell, pbc=inp.pbc,
-                                   batch=inp.batch, half=inp.half, method=method)
-        return int(out[0].shape[0])
+        return raycut.neighbor_list(inp.quantities, inp.x, inp.cutoff, cell=inp.cell,
+                                    pbc=inp.pbc, batch=inp.batch, half=inp.half,
+                                    method=method), 0
 
-    return {"cpp_list": cpp_list, "cpp_pairs": cpp_pairs, "python": python,
-            "python_nocache": lambda: python(False)}, engine
+    return ({"cpp_list": cpp_list, "cpp_pairs": cpp_pairs, "python": python,
+             "python_nocache": lambda: python(False)}, engine, like)
 
 
-def time_variants(variants: dict, engine, torch, reps: int, warmup: int) -> dict:
-    """name -> (times ms, wall ms, engine build ms, pair counts)."""
+def entries(out: tuple, k: int, like) -> int:
+    """The length of out[k] (the extension's device arrays through the caller's framework:
+    a zero-copy view), read after the timing."""
+    return int(_arrays.output(out[k], like).shape[0])
+
+
+def time_variants(variants: dict, engine, like, torch, reps: int, warmup: int) -> dict:
+    """name -> (times ms, wall ms, engine build ms, pair counts). Outputs are counted and freed
+    outside the timing."""
     out = {name: ([], [], [], []) for name in variants}
     for rep in range(warmup + reps):
         for name, fn in variants.items():
@@ -147,16 +153,18 @@ def time_variants(variants: dict, engine, torch, reps: int, warmup: int) -> dict
                 torch.cuda.synchronize()
                 t0 = time.perf_counter()
                 start.record()
-                count = fn()
+                result, k = fn()
                 stop.record()
                 stop.synchronize()
                 t1 = time.perf_counter()
                 elapsed = start.elapsed_time(stop)
             else:
                 t0 = time.perf_counter()
-                count = fn()
+                result, k = fn()
                 t1 = time.perf_counter()
                 elapsed = (t1 - t0) * 1e3
+            count = entries(result, k, like)
+            del result
             if rep < warmup:
                 continue
             ms.append(elapsed)
@@ -264,9 +272,9 @@ def main(argv=None) -> list:
         if args.workload and spec[0] not in args.workload:
             continue
         inp = Input(*spec, torch=torch, seed=args.seed)
-        variants, engine = make_variants(inp, args.method)
+        variants, engine, like = make_variants(inp, args.method)
         try:
-            measured = time_variants(variants, engine, torch, reps, args.warmup)
+            measured = time_variants(variants, engine, like, torch, reps, args.warmup)
         except (NotImplementedError, ValueError) as e:
             print(f"skipped {inp.name} on {args.method}: {e}", file=sys.stderr)
             continue
