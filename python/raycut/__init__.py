@@ -24,6 +24,10 @@ torch_cluster's) and query sets (``radius``) follow spec/NEIGHBOURS.md: a pair i
 cutoff (boxes thinner than twice the cutoff give a pair once per image, and a particle its own
 images). The CPU methods and the CUDA ``grid`` and ``brute-force-gpu`` support them; the others
 raise ``NotImplementedError``.
+
+``neighbor_list`` and ``radius`` reuse one engine per method and CUDA device from call to call
+(its structure buffers are not allocated again); ``clear_engine_cache()`` frees them and
+``set_engine_cache(False)`` turns the reuse off. Their outputs are new arrays every call.
 """
 from __future__ import annotations
 
@@ -42,10 +46,12 @@ __all__ = [
     "KERNELS",
     "VerletList",
     "auto_method",
+    "clear_engine_cache",
     "cuda_available",
     "methods",
     "neighbor_list",
     "radius",
+    "set_engine_cache",
 ]
 
 #: The built-in kernels of ``Engine.compute`` and what each returns.
@@ -278,34 +284,46 @@ class Engine:
 class VerletList:
     """A Verlet neighbour list: every pair within ``cutoff + skin``, rebuilt only when some
     particle has moved more than ``skin / 2`` since the last rebuild (until then no pair within
-    ``cutoff`` can be missing from it).
+    ``cutoff`` can be missing from it), in open or periodic boxes, of one system or a batch.
 
-    >>> verlet = raycut.VerletList(cutoff=0.1, skin=0.02)
+    >>> verlet = raycut.VerletList(cutoff=2.5, skin=0.3, shifts=True, cell=cell, pbc=True)
     >>> for step in range(steps):
     ...     x = integrate(x)                          # (N, 3) float32, NumPy or a CUDA tensor
     ...     verlet.update(x)                          # True when it rebuilt the list
-    ...     offsets, indices = verlet.neighbours()    # pairs within cutoff + skin
+    ...     offsets, indices, S = verlet.neighbours() # pairs within cutoff + skin
 
-    The list holds every pair within ``cutoff + skin`` of the positions of its last rebuild, not
-    only those within ``cutoff``: the caller filters by the cutoff (compute ``|x_j - x_i|`` from
-    the current positions and drop pairs at or beyond ``cutoff``). ``distances`` and ``vectors``
-    are those of the last rebuild's positions, not of the current ones. The displacement check
-    runs where the positions are (on the device for device positions: one reduction, no copy to
-    the host).
+    The list holds every pair (i, j, S) within ``cutoff + skin`` of the positions of its last
+    rebuild, not only those within ``cutoff``: the caller filters by the cutoff (compute
+    ``r_ij = x[j] - x[i] + S @ cell`` from the current positions and drop pairs at or beyond
+    ``cutoff``). ``distances`` and ``vectors`` are those of the last rebuild's positions, not of
+    the current ones. The displacement check runs where the positions are (on the device for
+    device positions: one reduction, no copy to the host). Pass unwrapped positions (do not wrap
+    particles back into the cell between rebuilds): S refers to the positions as given, and a
+    particle wrapped across the box moves by a whole cell, which forces a rebuild.
 
-    ``method``: a name from ``methods()`` or ``"auto"``. ``half``: each unordered pair once, in
-    the row of its smaller index. ``distances``/``vectors``: also ``|r_ij|`` and
-    ``r_ij = x_j - x_i`` per entry. Raises ValueError for a cutoff or skin out of range
-    (``skin`` >= 0), for positions of another N than the first ``update``, and for bad positions,
-    as ``Engine.build`` does.
+    ``method``: a name from ``methods()`` or ``"auto"``. ``half``: each pair once, as
+    ``Engine.neighbours`` says. ``distances``/``vectors``/``shifts``: also ``|r_ij|``,
+    ``r_ij = x_j - x_i + S @ cell`` and S (int32; zeros without a cell) per entry. ``cell``,
+    ``pbc``, ``batch``: periodic boxes and a batch of independent systems, as ``neighbor_list``
+    takes them, fixed for the list's life (``batch`` gives N: every ``update`` passes that
+    many particles). Raises ValueError for a cutoff or skin out of range (``skin`` >= 0), a bad
+    cell or batch, positions of another N than the first ``update`` (or than the batch), and
+    bad positions, as ``Engine.build`` does; NotImplementedError for a method without boxes or
+    batches (see ``neighbor_list``), at the first ``update``.
     """
 
     def __init__(self, cutoff: float, skin: float, method: str = "auto", half: bool = False,
-                 distances: bool = False, vectors: bool = False) -> None:
+                 distances: bool = False, vectors: bool = False, shifts: bool = False,
+                 cell: Any = None, pbc: Any = None, batch: Any = None) -> None:
         if not isinstance(skin, numbers.Real):
             raise ValueError(f"skin must be a real number, got {type(skin).__name__}")
+        boxes = _systems.boxes(_host_cell(cell), pbc)
+        b = _systems.batch(boxes, None, batch)
+        periodic = boxes is not None and boxes.periodic
         self._list = _raycut.VerletList(_cutoff(cutoff), float(skin), method, bool(half),
-                                        bool(distances), bool(vectors))
+                                        bool(distances), bool(vectors), bool(shifts),
+                                        boxes.cells if periodic else None,
+                                        boxes.pbc if periodic else None, b.offsets)
         self._like = _arrays.HOST
 
     def __repr__(self) -> str:
@@ -340,6 +358,22 @@ class VerletList:
         """How many times the list was built (the first ``update`` included)."""
         return self._list.rebuilds
 
+    @property
+    def half(self) -> bool:
+        return self._list.half
+
+    @property
+    def distances(self) -> bool:
+        return self._list.distances
+
+    @property
+    def vectors(self) -> bool:
+        return self._list.vectors
+
+    @property
+    def shifts(self) -> bool:
+        return self._list.shifts
+
     def update(self, positions: Any) -> bool:
         """New (N, 3) float32 positions (the same N after the first call): rebuilds the list at
         ``cutoff + skin`` when some particle has moved more than ``skin / 2`` since the last
@@ -354,9 +388,10 @@ class VerletList:
         return rebuilt
 
     def neighbours(self) -> tuple:
-        """The CSR list of the last rebuild: ``(offsets, indices)``, then ``distances`` and
-        ``vectors`` when the list was made with them; dtypes, shapes and framework as
-        ``Engine.neighbours`` (on the device for device positions and GPU methods).
+        """The CSR list of the last rebuild: ``(offsets, indices)``, then ``distances``,
+        ``vectors`` and ``shifts`` when the list was made with them; dtypes, shapes and
+        framework as ``Engine.neighbours`` (on the device for device positions and GPU
+        methods).
 
         Every pair within ``cutoff + skin``: filter by the cutoff yourself. The arrays stay valid
         and unchanged for as long as you hold them, across later rebuilds: the library reuses its
@@ -368,9 +403,51 @@ class VerletList:
         like = self._like
         with _arrays.device_context(like):
             self._list.set_stream(_arrays.stream_of(like))
-            offsets, indices, d, v = self._list.neighbours(like.host)
-        out = [offsets, indices] + ([d] if d is not None else []) + ([v] if v is not None else [])
-        return tuple(_arrays.output(a, like) for a in out)
+            out = self._list.neighbours(like.host)
+        return tuple(_arrays.output(a, like) for k, a in enumerate(out) if k < 2 or a is not None)
+
+
+# ---- the engines neighbor_list and radius reuse ------------------------------------------------
+
+# (method, CUDA device) -> an idle Engine. neighbor_list and radius take one out for the call and
+# put it back after, so a series of calls rebuilds into the same structure buffers (grid cells,
+# sort keys, image points: host and device memory that only grows) instead of allocating and
+# freeing them every call; the outputs are fresh buffers every call all the same. Taking one out
+# makes concurrent calls (threads) use engines of their own.
+_ENGINES: dict = {}
+_ENGINE_CACHE = [True]
+
+
+def clear_engine_cache() -> None:
+    """Frees the engines that ``neighbor_list`` and ``radius`` keep between calls (one per method
+    and CUDA device, each holding the structure of its last call: memory that grows to the
+    largest system it has seen). Arrays already returned are not affected."""
+    _ENGINES.clear()
+
+
+def set_engine_cache(enabled: bool) -> None:
+    """Whether ``neighbor_list`` and ``radius`` keep their engine between calls (the default:
+    True). Off: a new engine per call, which allocates its buffers and frees them after;
+    ``clear_engine_cache()`` is called."""
+    _ENGINE_CACHE[0] = bool(enabled)
+    clear_engine_cache()
+
+
+def _take_engine(method: str, like: _arrays.Like) -> tuple:
+    """An engine for one call, and its cache key (None when the cache is off). The key's device
+    is where a GPU method will allocate: the CUDA device current during the call."""
+    if not _ENGINE_CACHE[0]:
+        return Engine(method), None
+    with _arrays.device_context(like):
+        key = (method, _raycut.current_device())
+    engine = _ENGINES.pop(key, None)
+    return (engine if engine is not None else Engine(method)), key
+
+
+def _put_back(key: Any, engine: Engine) -> None:
+    """After a call that succeeded (an engine whose call raised is dropped)."""
+    if key is not None and _ENGINE_CACHE[0]:
+        _ENGINES[key] = engine
 
 
 _QUANTITIES = "ijdDS"
@@ -465,13 +542,16 @@ def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = No
     index of each particle, (N,) integers, sorted (each system's particles contiguous; unsorted
     raises ValueError). Pairs never cross systems; indices stay global; systems may be empty.
     The number of systems B is that of a per-system ``cell``/``pbc``, else ``batch.max() + 1``.
+    A CUDA PyTorch ``batch`` is checked and turned into offsets on the device (only B + 1
+    offsets and 4 scalars reach the host); other device arrays are copied to the host first.
 
     The outputs are of the positions' framework and device (CUDA tensors in: CUDA tensors out,
     zero-copy). For PyTorch positions or cell that require grad, ``d`` and ``D`` are computed in
     PyTorch from i, j and S (``x[j] - x[i] + S @ cell``), so that gradients flow back to both
     (positions of any float dtype then; the search itself runs in float32). ``method``: a name
     from ``methods()`` or ``"auto"``; methods without periodic boxes or batches raise
-    NotImplementedError for them.
+    NotImplementedError for them. CUDA positions are never copied to the host, nor are the pairs.
+    The engine is reused from call to call (see ``clear_engine_cache``).
 
     >>> i, j, S = raycut.neighbor_list("ijS", x, 3.0, cell=[10.0, 10.0, 10.0], pbc=True)
     >>> i, j = raycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
@@ -479,10 +559,12 @@ def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = No
     letters = _letters(quantities)
     grad = _requires_grad(positions) or (_arrays.framework_of(positions) == "torch"
                                          and _requires_grad(cell))
-    engine = Engine(method)
-    engine.build(_search_input(positions, grad), cutoff, cell=_host_cell(cell), pbc=pbc,
-                 batch=batch)
-    return _pair_quantities(letters, engine, half, grad, positions, positions, cell)
+    x, like = _arrays.prepare(_search_input(positions, grad))
+    engine, key = _take_engine(method, like)
+    engine.build(x, cutoff, cell=_host_cell(cell), pbc=pbc, batch=batch)
+    out = _pair_quantities(letters, engine, half, grad, positions, positions, cell)
+    _put_back(key, engine)
+    return out
 
 
 def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any = None,
@@ -513,11 +595,13 @@ def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any 
     torch_in = _arrays.framework_of(points) == "torch"
     grad = torch_in and (_requires_grad(points) or _requires_grad(queries) or
                          _requires_grad(cell))
-    engine = Engine(method)
-    engine.build(_search_input(points, grad), cutoff, cell=_host_cell(cell), pbc=pbc,
-                 batch=batch_points, queries=_search_input(queries, grad),
-                 batch_queries=batch_queries)
-    return _pair_quantities(letters, engine, False, grad, points, queries, cell)
+    x, like = _arrays.prepare(_search_input(points, grad))
+    engine, key = _take_engine(method, like)
+    engine.build(x, cutoff, cell=_host_cell(cell), pbc=pbc, batch=batch_points,
+                 queries=_search_input(queries, grad), batch_queries=batch_queries)
+    out = _pair_quantities(letters, engine, False, grad, points, queries, cell)
+    _put_back(key, engine)
+    return out
 
 
 def _host_cell(cell: Any) -> Any:

@@ -1,7 +1,7 @@
 """Periodic boxes, batches and query sets as the extension takes them (raycut::Systems): cells
 (B, 3, 3) float64 and pbc (B, 3) bool, B = 1 for a box shared by every system; per-system index
-arrays (torch_cluster's ``batch``) turned into offsets; and the differentiable vectors of the
-PyTorch path (spec/NEIGHBOURS.md, 7).
+arrays (torch_cluster's ``batch``) turned into offsets (on the device for CUDA PyTorch indices);
+and the differentiable vectors of the PyTorch path (spec/NEIGHBOURS.md, 7).
 """
 from __future__ import annotations
 
@@ -76,22 +76,90 @@ def boxes(cell: Any, pbc: Any) -> Optional[Boxes]:
     if len(cells) != len(flags) and 1 not in (len(cells), len(flags)):
         raise ValueError(f"cell gives {len(cells)} systems but pbc {len(flags)}")
     count = max(len(cells), len(flags))
-    cells = np.ascontiguousarray(np.broadcast_to(cells, (count, 3, 3)), dtype=np.float64)
-    flags = np.ascontiguousarray(np.broadcast_to(flags, (count, 3)), dtype=bool)
-    return Boxes(cells, flags)
+    if len(cells) != count:  # broadcast_to only where needed: it costs more than the rest here
+        cells = np.broadcast_to(cells, (count, 3, 3))
+    if len(flags) != count:
+        flags = np.broadcast_to(flags, (count, 3))
+    return Boxes(np.ascontiguousarray(cells, dtype=np.float64),
+                 np.ascontiguousarray(flags, dtype=bool))
 
 
-def _system_index(batch: Any, n: Optional[int], name: str) -> np.ndarray:
+def _not_integers(name: str, dtype: Any) -> ValueError:
+    return ValueError(f"{name} must be integers (the system of each particle), got {dtype}")
+
+
+def _wrong_length(name: str, n: Optional[int], shape: Any) -> ValueError:
+    return ValueError(f"{name} must have one system index per particle, shape "
+                      f"({'N' if n is None else n},), got shape {tuple(shape)}")
+
+
+def _unsorted(name: str, k: int, here: int, after: int) -> ValueError:
+    return ValueError(f"{name} must be sorted (each system's particles contiguous, systems in "
+                      f"order): {name}[{k}] = {here} > {name}[{k + 1}] = {after}; sort the "
+                      "particles by system first")
+
+
+class HostIndex:
+    """A sorted per-particle system index on the host, validated."""
+
+    def __init__(self, index: np.ndarray):
+        self.index = index
+        self.last = int(index[-1]) if len(index) else None
+
+    def offsets(self, systems: int) -> np.ndarray:
+        return offsets(self.index, systems)
+
+
+class TorchCudaIndex:
+    """A sorted per-particle system index in a CUDA tensor, validated and turned into offsets on
+    the device: what reaches the host is 4 scalars (first, last, unsorted?, where) and then the
+    S + 1 offsets, never the N indices (an error message reads the 2 values it names)."""
+
+    def __init__(self, torch: Any, b: Any, n: Optional[int], name: str):
+        if b.dtype == torch.bool or b.is_floating_point() or b.is_complex():
+            raise _not_integers(name, b.dtype)
+        if b.dim() != 1 or (n is not None and len(b) != n):
+            raise _wrong_length(name, n, b.shape)
+        if b.dtype not in (torch.int32, torch.int64):
+            b = b.to(torch.int64)  # what searchsorted takes on CUDA
+        self.torch, self.index, self.last = torch, b.contiguous(), None
+        if len(b) == 0:
+            return
+        first, last = b[0].to(torch.int64), b[-1].to(torch.int64)
+        if len(b) > 1:
+            down = b[1:] < b[:-1]
+            unsorted, where = down.any().to(torch.int64), down.to(torch.int64).argmax()
+        else:
+            unsorted = where = torch.zeros((), dtype=torch.int64, device=b.device)
+        first, last, unsorted, where = torch.stack([first, last, unsorted, where]).tolist()
+        if first < 0:
+            raise ValueError(f"{name} holds a negative system index ({int(b.min())})")
+        if unsorted:
+            raise _unsorted(name, where, int(b[where]), int(b[where + 1]))
+        self.last = last
+
+    def offsets(self, systems: int) -> np.ndarray:
+        """offsets[s] = the number of particles of systems below s (searchsorted on the sorted
+        index), copied to the host: S + 1 integers."""
+        torch = self.torch
+        bounds = torch.arange(systems + 1, dtype=self.index.dtype, device=self.index.device)
+        found = torch.searchsorted(self.index, bounds)
+        return found.cpu().numpy().astype(np.uint64)
+
+
+def _system_index(batch: Any, n: Optional[int], name: str) -> Any:
+    if _arrays.framework_of(batch) == "torch" and batch.device.type == "cuda":
+        import torch
+
+        return TorchCudaIndex(torch, batch.detach(), n, name)
     b = np.asarray(_arrays.to_numpy(batch))
     if b.dtype == bool or not np.issubdtype(b.dtype, np.integer):
         if b.size == 0 and b.ndim == 1:
             b = b.astype(np.int64)
         else:
-            raise ValueError(f"{name} must be integers (the system of each particle), got "
-                             f"{b.dtype}")
+            raise _not_integers(name, b.dtype)
     if b.ndim != 1 or (n is not None and len(b) != n):
-        raise ValueError(f"{name} must have one system index per particle, shape "
-                         f"({'N' if n is None else n},), got shape {b.shape}")
+        raise _wrong_length(name, n, b.shape)
     n = len(b)
     if n and b[0] < 0:
         raise ValueError(f"{name} holds a negative system index ({int(b.min())})")
@@ -99,10 +167,8 @@ def _system_index(batch: Any, n: Optional[int], name: str) -> np.ndarray:
         down = np.flatnonzero(np.diff(b) < 0)
         if len(down):
             k = int(down[0])
-            raise ValueError(f"{name} must be sorted (each system's particles contiguous, "
-                             f"systems in order): {name}[{k}] = {int(b[k])} > {name}[{k + 1}] = "
-                             f"{int(b[k + 1])}; sort the particles by system first")
-    return b.astype(np.int64, copy=False)
+            raise _unsorted(name, k, int(b[k]), int(b[k + 1]))
+    return HostIndex(b.astype(np.int64, copy=False))
 
 
 def offsets(index: np.ndarray, systems: int) -> np.ndarray:
@@ -126,7 +192,8 @@ def batch(boxes_: Optional[Boxes], n: Optional[int], batch_: Any, m: Optional[in
     """Offsets of the batch (sources ``batch_`` of n particles; queries ``batch_queries`` of m
     points when m is not None). None for one index with the other given: every point in system
     0 (torch_cluster.radius's convention). The number of systems: the boxes' count when they are
-    per system, else the largest index + 1."""
+    per system, else the largest index + 1. A CUDA PyTorch index is read on the device (only its
+    offsets come to the host); other device arrays are copied to the host."""
     per_system = boxes_ is not None and boxes_.count > 1
     if batch_ is None and batch_queries is None:
         if per_system:
@@ -137,19 +204,20 @@ def batch(boxes_: Optional[Boxes], n: Optional[int], batch_: Any, m: Optional[in
     if batch_ is None and n is None:
         raise ValueError(f"positions without a shape (known only through DLPack) need "
                          f"{names[0]} given")
-    index = _system_index(batch_, n, names[0]) if batch_ is not None else np.zeros(n, np.int64)
+    index = (_system_index(batch_, n, names[0]) if batch_ is not None
+             else HostIndex(np.zeros(n, np.int64)))
     query_index = None
     if m is not None:
         query_index = (_system_index(batch_queries, m, names[1]) if batch_queries is not None
-                       else np.zeros(m, np.int64))
-    largest = max([int(a[-1]) for a in (index, query_index) if a is not None and len(a)],
+                       else HostIndex(np.zeros(m, np.int64)))
+    largest = max([a.last for a in (index, query_index) if a is not None and a.last is not None],
                   default=-1)
     systems = boxes_.count if per_system else max(largest + 1, 1)
     if largest >= systems:
         raise ValueError(f"the batch has system index {largest} but cell/pbc give {systems} "
                          "systems")
-    return Batch(boxes_, systems, offsets(index, systems),
-                 None if query_index is None else offsets(query_index, systems))
+    return Batch(boxes_, systems, index.offsets(systems),
+                 None if query_index is None else query_index.offsets(systems))
 
 
 def torch_vectors(torch: Any, sources: Any, targets: Any, i: Any, j: Any, shifts: Any,

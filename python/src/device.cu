@@ -52,6 +52,15 @@ int current_device() {
   return device;
 }
 
+int current_device_or_none() noexcept {
+  int device = 0;
+  if (cudaGetDevice(&device) != cudaSuccess) {
+    (void)cudaGetLastError();
+    return -1;
+  }
+  return device;
+}
+
 void device_copy(void* dst, const void* src, std::size_t bytes, void* stream) {
   if (bytes == 0) return;
   const auto s = static_cast<cudaStream_t>(stream);

@@ -11,10 +11,10 @@ namespace raycut_py {
 // Device memory owned by the Python arrays that wrap it (freed by their capsule).
 void* device_alloc(std::size_t bytes);  // throws raycut::Error(out_of_memory)
 void device_free(void* p) noexcept;
-int current_device();
+int current_device();  // the CUDA device of this thread (cudaGetDevice); throws on failure
+int current_device_or_none() noexcept;  // the same, or -1 where no device is usable
 // dst <- src, both device memory, on `stream`, synchronised before returning.
-void device_copy(void* dst, const void* src, std::size_t bytes,
-                 void* stream);  // the CUDA device of this thread (cudaGetDevice)
+void device_copy(void* dst, const void* src, std::size_t bytes, void* stream);
 
 // COO pairs of a device CSR list: i[e] = the row of entry e, j[e] = indices[e], both int64, on
 // `stream` (a cudaStream_t; null: the legacy default stream), synchronised before returning.

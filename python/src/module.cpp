@@ -494,6 +494,7 @@ struct Verlet {
     const void* indices = nullptr;
     const float* distances = nullptr;
     const float* vectors = nullptr;
+    const std::int32_t* shifts = nullptr;
     std::size_t n = 0;
     std::uint64_t pairs = 0;
     MemorySpace space = MemorySpace::host;
@@ -505,8 +506,9 @@ struct Verlet {
   raycut::ListOptions options;
   std::optional<Snapshot> snapshot;
 
-  Verlet(std::string_view method, float cutoff, float skin, raycut::ListOptions opts)
-      : list(method, cutoff, skin, opts), options(opts) {}
+  Verlet(std::string_view method, float cutoff, float skin, raycut::ListOptions opts,
+         const raycut::Systems& systems)
+      : list(method, cutoff, skin, opts, systems), options(opts) {}
 };
 
 Verlet::Snapshot take_snapshot(Verlet& v, bool to_host) {
@@ -526,6 +528,7 @@ Verlet::Snapshot take_snapshot(Verlet& v, bool to_host) {
     s.indices = host->indices.data();
     s.distances = host->distances.empty() ? nullptr : host->distances.data();
     s.vectors = host->vectors.empty() ? nullptr : host->vectors.data();
+    s.shifts = host->shifts.empty() ? nullptr : host->shifts.data();
     s.space = MemorySpace::host;
     s.owner = host;
     return s;
@@ -554,6 +557,9 @@ Verlet::Snapshot take_snapshot(Verlet& v, bool to_host) {
     s.distances = static_cast<const float*>(copy(list.distances(), s.pairs * sizeof(float)));
   if (v.options.vectors)
     s.vectors = static_cast<const float*>(copy(list.vectors(), 3 * s.pairs * sizeof(float)));
+  if (v.options.shifts)
+    s.shifts =
+        static_cast<const std::int32_t*>(copy(list.shifts(), 3 * s.pairs * sizeof(std::int32_t)));
   s.space = MemorySpace::device;
   s.owner = copies;
   return s;
@@ -563,7 +569,7 @@ Verlet::Snapshot take_snapshot(Verlet& v, bool to_host) {
 }
 
 // CSR of the last rebuild, as Engine.neighbours returns it: (offsets int64 [N+1], indices int32
-// [P], distances [P] or None, vectors [P, 3] or None).
+// [P], distances [P] or None, vectors [P, 3] or None, shifts int32 [P, 3] or None).
 nb::tuple verlet_neighbours(Verlet& v, bool to_host) {
   if (v.list.rebuilds() == 0)
     value_error("VerletList.neighbours(): no list yet, call update(positions) first");
@@ -571,14 +577,16 @@ nb::tuple verlet_neighbours(Verlet& v, bool to_host) {
     v.snapshot = take_snapshot(v, to_host);
   const Verlet::Snapshot& s = *v.snapshot;
   const std::size_t pairs = s.pairs;
-  auto opt = [&](bool asked, const float* data, std::vector<std::size_t> shape) -> nb::object {
+  auto opt = [&](bool asked, const auto* data, std::vector<std::size_t> shape) -> nb::object {
+    using T = std::remove_cv_t<std::remove_pointer_t<decltype(data)>>;
     if (!asked) return nb::none();
-    return wrap(data, std::move(shape), dtype_of<float>(), s.owner, s.space);
+    return wrap(data, std::move(shape), dtype_of<T>(), s.owner, s.space);
   };
   return nb::make_tuple(wrap(s.offsets, {s.n + 1}, dtype_of<std::int64_t>(), s.owner, s.space),
                         wrap(s.indices, {pairs}, index_dtype(s.n), s.owner, s.space),
                         opt(v.options.distances, s.distances, {pairs}),
-                        opt(v.options.vectors, s.vectors, {pairs, 3}));
+                        opt(v.options.vectors, s.vectors, {pairs, 3}),
+                        opt(v.options.shifts, s.shifts, {pairs, 3}));
 }
 
 const char* space_name(MemorySpace space) {
@@ -645,6 +653,16 @@ NB_MODULE(_raycut, m) {
       "Every method raycut knows, available here or not.");
   m.def("auto_method", &raycut::auto_method, "What method='auto' picks on this machine.");
   m.def("cuda_device_available", &raycut::cuda_device_available);
+  m.def(
+      "current_device",
+      [] {
+#if defined(RAYCUT_PY_CUDA)
+        return raycut_py::current_device_or_none();
+#else
+        return -1;
+#endif
+      },
+      "The CUDA device current in this thread (where a GPU method allocates), -1 without one.");
   m.attr("has_cuda") =
 #if defined(RAYCUT_PY_CUDA)
       true;
@@ -724,12 +742,18 @@ NB_MODULE(_raycut, m) {
       .def(
           "__init__",
           [](Verlet* self, double cutoff, double skin, std::string_view method, bool half,
-             bool distances, bool vectors) {
+             bool distances, bool vectors, bool shifts, const std::optional<HostCells>& cells,
+             const std::optional<HostFlags>& pbc, const std::optional<HostOffsets>& offsets) {
+            FloatInput no_queries;
+            const raycut::Systems systems =
+                make_systems(cells, pbc, offsets, nb::none(), std::nullopt, no_queries);
             new (self) Verlet(method, static_cast<float>(cutoff), static_cast<float>(skin),
-                              raycut::ListOptions{half, distances, vectors});
+                              raycut::ListOptions{half, distances, vectors, shifts}, systems);
           },
           nb::arg("cutoff"), nb::arg("skin"), nb::arg("method") = "auto", nb::arg("half") = false,
-          nb::arg("distances") = false, nb::arg("vectors") = false)
+          nb::arg("distances") = false, nb::arg("vectors") = false, nb::arg("shifts") = false,
+          nb::arg("cells").none() = nb::none(), nb::arg("pbc").none() = nb::none(),
+          nb::arg("offsets").none() = nb::none())
       .def_prop_ro("method", [](Verlet& v) { return v.list.engine().method(); })
       .def_prop_ro("space", [](Verlet& v) { return space_name(v.list.engine().space()); })
       .def_prop_ro("size", [](Verlet& v) { return v.list.engine().size(); })
@@ -739,6 +763,7 @@ NB_MODULE(_raycut, m) {
       .def_prop_ro("half", [](const Verlet& v) { return v.options.half; })
       .def_prop_ro("distances", [](const Verlet& v) { return v.options.distances; })
       .def_prop_ro("vectors", [](const Verlet& v) { return v.options.vectors; })
+      .def_prop_ro("shifts", [](const Verlet& v) { return v.options.shifts; })
       .def(
           "set_stream",
           [](Verlet& v, std::uintptr_t stream) {

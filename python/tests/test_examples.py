@@ -51,3 +51,40 @@ def test_python_overhead_bench_runs(tmp_path):
     assert {r["api"] for r in rows} == {"count", "build+count", "neighbor_list"}
     assert out.read_text().startswith("input,method,")
     assert all(r["pairs"] > 0 and r["api_us_median"] > 0 for r in rows)
+
+
+def test_python_lists_bench_runs_tiny(tmp_path):
+    spec = importlib.util.spec_from_file_location(
+        "raycut_bench_python_lists", EXAMPLES.parents[1] / "bench" / "python_lists.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    out = tmp_path / "lists.csv"
+    rows = bench.main(["--tiny", "--numpy", "--reps", "2", "--warmup", "1", "--out", str(out)])
+    variants = {"cpp_list", "cpp_pairs", "python", "python_nocache"}
+    by = {}
+    for r in rows:
+        by.setdefault(r["workload"], {})[r["variant"]] = r
+    assert set(by) == {"lj-pbc-full", "lj-pbc-half", "batch-pbc", "uniform-open"}
+    for workload, v in by.items():
+        assert set(v) == variants, workload
+        assert all(r["check"] == "ok" and r["ms"] > 0 and r["reps"] == 2 for r in v.values())
+        assert all(r["engine_build_ms"] > 0 for k, r in v.items() if k.startswith("cpp"))
+    # ~55 neighbours each in the liquid (4 pi rc^3 / 3 x density), half of them in the half list
+    full, half = by["lj-pbc-full"]["python"], by["lj-pbc-half"]["python"]
+    assert 45 < full["pairs"] / full["n"] < 65
+    assert half["pairs"] * 2 == full["pairs"]
+    assert by["batch-pbc"]["python"]["systems"] == 8
+    assert out.read_text().startswith("workload,input,method,")
+    table = (tmp_path / "lists.md").read_text()
+    assert "| lj-pbc-full | numpy |" in table and "Python / C++ list" in table
+    # neighbour_bench's figures of the same workload, operation and method, matched by key.
+    native = tmp_path / "native.csv"
+    native.write_text("suite,param,p,method,N,cutoff,operation,mode,ms,min,max\n"
+                      "lj-liquid-pbc,1,4096,cell-list,4096,2.5,list_full_s,prepared,1.5,1,2\n"
+                      "lj-liquid-pbc,1,4096,cell-list,4096,2.5,list_half_s,prepared,9.0,9,9\n")
+    rows = bench.main(["--tiny", "--numpy", "--reps", "1", "--warmup", "0", "--method",
+                       "cell-list", "--workload", "lj-pbc-full", "--native", str(native),
+                       "--out", str(tmp_path / "native-lists.csv")])
+    assert {r["native_prepared_ms"] for r in rows} == {1.5}
+    assert all(r["native_cold_ms"] != r["native_cold_ms"] for r in rows)  # NaN: no cold row
+    assert "native prepared ms" in (tmp_path / "native-lists.md").read_text()
