@@ -152,12 +152,7 @@ void HostImagePoints::expand(const ImagePlan& plan, const float* sources, const 
     }
   }
 
-  points_.xyz = xyz_.data();
-  points_.size = total;
-  points_.targets = targets;
-  points_.images = {image_.data(), !with_queries};
-  points_.system = systems > 1 ? system_.data() : nullptr;
-  points_.systems = systems;
+  publish(plan, xyz_.data(), total, image_.data(), system_.data());
 }
 
 }  // namespace

@@ -52,6 +52,18 @@ class ImagePoints {
   const Points& points() const { return points_; }
 
  protected:
+  // What points() hands the method after an expansion into these arrays.
+  void publish(const ImagePlan& plan, const float* xyz, std::size_t size, const PointImage* image,
+               const std::uint32_t* system) {
+    points_.xyz = xyz;
+    points_.size = size;
+    points_.targets = plan.target_count();
+    points_.images = {image, !plan.has_queries()};
+    points_.systems = plan.systems();
+    points_.system = plan.systems() > 1 ? system : nullptr;
+  }
+
+ private:
   Points points_;
 };
 

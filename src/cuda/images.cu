@@ -240,12 +240,7 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
 
-  points_.xyz = xyz_.data();
-  points_.size = points;
-  points_.targets = targets;
-  points_.images = {image_.data(), !with_queries};
-  points_.system = systems > 1 ? system_.data() : nullptr;
-  points_.systems = systems;
+  publish(plan, xyz_.data(), points, image_.data(), system_.data());
 }
 
 }  // namespace
