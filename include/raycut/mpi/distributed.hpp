@@ -1,7 +1,8 @@
 // The distributed engine (docs/distributed.md): particles spread over the ranks of an MPI
 // communicator by a Cartesian grid of spatial domains, each rank computing the targets it owns
 // with any single-rank raycut method over its owned particles plus halo copies of the particles
-// within cutoff + skin of its domain (periodic images included). Indices are global throughout.
+// within cutoff + skin of its domain (periodic images included), owned rows only where the
+// method takes query points. Indices are global throughout.
 //
 //   raycut::mpi::DistributedEngine engine(MPI_COMM_WORLD, {.method = "cell-list", .skin = 0.3f});
 //   engine.build({xyz.data(), n, raycut::MemorySpace::host}, ids.data(), cutoff, box);
@@ -83,6 +84,10 @@ struct DistributedOptions {
   std::array<int, 3> dims = {0, 0, 0};
   // Payload transport; null: make_host_transport(comm).
   std::shared_ptr<Transport> transport;
+  // Owned rows only: one engine over the owned particles (pairs among them) and one with the
+  // owned as query points over the halos (pairs with halos), summed. false, or a method without
+  // query points (grid-paper, OptiX): one engine over owned + halos, halo rows discarded.
+  bool owned_rows_only = true;
 };
 
 // A neighbour list of the owned targets with global indices: the in-range sources of row t
@@ -163,8 +168,9 @@ class DistributedEngine {
   std::uint64_t global_size() const { return global_size_; }
   const Decomposition& decomposition() const { return decomposition_; }
   const DistributedStats& stats() const { return stats_; }
-  // The rank's engine over owned + halo particles (rows [0, owned()) are the owned ones).
-  const Engine& local_engine() const;
+  // Whether the local passes compute the owned rows only (DistributedOptions::owned_rows_only
+  // and a method that takes query points), or every row of owned + halos.
+  bool owned_rows_only() const { return split_; }
 
  private:
   struct HaloPlan;
@@ -194,7 +200,11 @@ class DistributedEngine {
   std::vector<std::int32_t> halo_shifts_;
   std::vector<float> local_xyz_;  // owned then halos: what the local engine is built over
   std::unique_ptr<HaloPlan> plan_;
-  std::unique_ptr<Engine> engine_;
+  // Owned rows only: engine_ over the owned particles, halo_engine_ with the owned as queries
+  // over the halos (built when both exist). Otherwise engine_ over owned + halos.
+  std::unique_ptr<Engine> engine_, halo_engine_;
+  bool split_ = false;
+  bool halo_engine_built_ = false;
   DistributedStats stats_;
 };
 
