@@ -518,9 +518,44 @@ void DistributedEngine::refresh_halos() {
 // infinite at r = 0), and a query point does not exclude itself. So the owned particles are
 // never sources of the query engine: pairs among owned particles come from a plain engine over
 // them (which excludes (i, i, 0) by index, as a single rank does), pairs with halos from the
-// owned as queries over the halos only. Every pair of an owned target is in exactly one of the
-// two; the halo copies of a particle's own periodic images are halos, so (i, i, S != 0) is
-// kept. Counts and lists are then exact; kernel sums are the two partial sums added.
+// owned particles near a face as queries over the halos only. Every pair of an owned target is
+// in exactly one of the two; the halo copies of a particle's own periodic images are halos, so
+// (i, i, S != 0) is kept. Counts and lists are then exact; kernel sums are two partial sums added.
+//
+// Only owned particles within cutoff + skin of a face of the domain that has something across it
+// are queries (the others meet no halo): every halo was outside the domain at the exchange and
+// has moved at most skin / 2 since, so an owned particle within the cutoff of one is within
+// cutoff + skin / 2 of such a face. The query engine's structure holds its queries too (they are
+// candidates it rejects), so fewer queries is most of what makes this cheaper than all rows.
+void DistributedEngine::select_boundary() {
+  const Decomposition& dec = decomposition_;
+  const auto c = dec.coords(rank_);
+  double scale = halo_width_;
+  for (int a = 0; a < 3; ++a) scale = std::max(scale, std::abs(dec.lo[a]) + dec.length[a]);
+  const double reach = halo_width_ + 1e-5 * scale;  // as build_halos(): a hair wide is harmless
+  double low[3], high[3];  // the faces with something across, else -inf / +inf
+  for (int a = 0; a < 3; ++a) {
+    const bool split = dec.dims[a] > 1 || dec.periodic[a];
+    low[a] = split && (dec.periodic[a] || c[a] > 0) ? dec.lo[a] + c[a] * dec.width[a]
+                                                    : -std::numeric_limits<double>::infinity();
+    high[a] = split && (dec.periodic[a] || c[a] < dec.dims[a] - 1)
+                  ? dec.lo[a] + (c[a] + 1) * dec.width[a]
+                  : std::numeric_limits<double>::infinity();
+  }
+  boundary_.clear();
+  boundary_xyz_.clear();
+  for (std::size_t i = 0; i < ids_.size(); ++i) {
+    bool near = false;
+    for (int a = 0; a < 3; ++a) {
+      const double x = xyz_[3 * i + a];
+      near = near || x - low[a] < reach || high[a] - x < reach;
+    }
+    if (!near) continue;
+    boundary_.push_back(static_cast<std::uint32_t>(i));
+    boundary_xyz_.insert(boundary_xyz_.end(), &xyz_[3 * i], &xyz_[3 * i] + 3);
+  }
+}
+
 void DistributedEngine::build_local_engine(bool same_sources) {
   std::string error;
   ErrorCode code = ErrorCode::internal;
@@ -532,10 +567,11 @@ void DistributedEngine::build_local_engine(bool same_sources) {
       engine_->update(local);
     else
       engine_->build(local, cutoff_);
-    halo_engine_built_ = split_ && n > 0 && h > 0;
+    if (split_) select_boundary();
+    halo_engine_built_ = split_ && !boundary_.empty() && h > 0;
     if (halo_engine_built_) {  // with query points update() refuses: build again
       Systems systems;
-      systems.queries = local;
+      systems.queries = {boundary_xyz_.data(), boundary_.size(), MemorySpace::host};
       halo_engine_->build({local_xyz_.data() + 3 * n, h, MemorySpace::host}, cutoff_, systems);
     }
   } catch (const Error& e) {
@@ -546,6 +582,7 @@ void DistributedEngine::build_local_engine(bool same_sources) {
   stats_.build_ms = elapsed_ms(start);
   stats_.owned = ids_.size();
   stats_.halos = halo_ids_.size();
+  stats_.boundary = split_ ? boundary_.size() : ids_.size();
 }
 
 // ---- results ------------------------------------------------------------------------------------
@@ -569,14 +606,16 @@ Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options) 
     keep(r.density, 1);
   } else if (halo_engine_built_) {
     const Results halo = halo_engine_->compute(kernel, options);
-    auto add = [](auto& into, const auto& from) {
-      for (std::size_t k = 0; k < from.size(); ++k) into[k] += from[k];
+    // Query row b is owned row boundary_[b].
+    auto add = [this](auto& into, const auto& from, std::size_t per) {
+      for (std::size_t b = 0; b < boundary_.size(); ++b)
+        for (std::size_t k = 0; k < per; ++k) into[per * boundary_[b] + k] += from[per * b + k];
     };
-    add(r.count, halo.count);
-    add(r.energy, halo.energy);
-    add(r.force, halo.force);
-    add(r.virial, halo.virial);
-    add(r.density, halo.density);
+    add(r.count, halo.count, halo.count.empty() ? 0 : 1);
+    add(r.energy, halo.energy, halo.energy.empty() ? 0 : 1);
+    add(r.force, halo.force, halo.force.empty() ? 0 : 3);
+    add(r.virial, halo.virial, halo.virial.empty() ? 0 : 6);
+    add(r.density, halo.density, halo.density.empty() ? 0 : 1);
   }
   return r;
 }
@@ -608,12 +647,15 @@ DistributedList DistributedEngine::neighbours(const ListOptions& options) {
       out.vectors.insert(out.vectors.end(), &from.vectors[3 * e], &from.vectors[3 * e] + 3);
     if (options.shifts) out.shifts.insert(out.shifts.end(), s, s + 3);
   };
+  std::size_t b = 0;  // the next query row: boundary_ ascends
   for (std::size_t i = 0; i < n; ++i) {
     for (std::uint64_t e = list.offsets[i]; e < list.offsets[i + 1]; ++e)
       emit(i, list, e, list.indices[e]);
-    if (halo_engine_built_)
-      for (std::uint64_t e = halo_list.offsets[i]; e < halo_list.offsets[i + 1]; ++e)
+    if (halo_engine_built_ && b < boundary_.size() && boundary_[b] == i) {
+      for (std::uint64_t e = halo_list.offsets[b]; e < halo_list.offsets[b + 1]; ++e)
         emit(i, halo_list, e, n + halo_list.indices[e]);
+      ++b;
+    }
     out.offsets[i + 1] = out.indices.size();
   }
   return out;

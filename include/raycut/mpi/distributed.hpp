@@ -106,6 +106,7 @@ struct DistributedList {
 // What the last passes cost; counters accumulate from build().
 struct DistributedStats {
   std::uint64_t owned = 0, halos = 0;  // on this rank now
+  std::uint64_t boundary = 0;          // owned rows that meet halos (owned rows only: queries)
   std::uint64_t exchanges = 0;         // full exchanges: migration + new halo sets
   std::uint64_t refreshes = 0;         // halo refreshes in place (skin)
   std::uint64_t migrated_out = 0;      // particles sent to other ranks by the last exchange
@@ -180,6 +181,7 @@ class DistributedEngine {
   void build_halos();
   void refresh_halos();
   void build_local_engine(bool same_sources);
+  void select_boundary();
   void exchange_counts(const std::vector<std::uint64_t>& send, std::vector<std::uint64_t>& recv);
 
   MPI_Comm comm_;
@@ -200,11 +202,14 @@ class DistributedEngine {
   std::vector<std::int32_t> halo_shifts_;
   std::vector<float> local_xyz_;  // owned then halos: what the local engine is built over
   std::unique_ptr<HaloPlan> plan_;
-  // Owned rows only: engine_ over the owned particles, halo_engine_ with the owned as queries
-  // over the halos (built when both exist). Otherwise engine_ over owned + halos.
+  // Owned rows only: engine_ over the owned particles, halo_engine_ with the owned particles
+  // near a face (boundary_, owned indices ascending; their positions boundary_xyz_) as queries
+  // over the halos, built when both exist. Otherwise engine_ over owned + halos.
   std::unique_ptr<Engine> engine_, halo_engine_;
   bool split_ = false;
   bool halo_engine_built_ = false;
+  std::vector<std::uint32_t> boundary_;
+  std::vector<float> boundary_xyz_;
   DistributedStats stats_;
 };
 
