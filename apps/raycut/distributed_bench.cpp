@@ -14,7 +14,6 @@
 #include <ctime>
 #include <memory>
 #include <numeric>
-#include <random>
 #include <string>
 #include <vector>
 
@@ -48,8 +47,17 @@ struct MpiSession {
   }
 };
 
+// splitmix64: coordinate k of the liquid from (seed, k) alone, so that N particles are the same
+// system whatever the number of ranks (strong scaling compares like with like).
+std::uint64_t mix(std::uint64_t x) {
+  x += 0x9e3779b97f4a7c15ULL;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+  return x ^ (x >> 31);
+}
+
 // This rank's share of the liquid: n / size particles (the first n % size ranks one more), ids
-// contiguous by rank, uniform in [0, side)^3 from a stream of its own.
+// contiguous by rank, uniform in [0, side)^3.
 struct Share {
   std::vector<float> xyz;
   std::vector<std::uint64_t> ids;
@@ -58,14 +66,15 @@ Share liquid_share(std::uint64_t n, double side, int rank, int size, std::uint64
   const std::uint64_t base = n / size, extra = n % size;
   const std::uint64_t mine = base + (static_cast<std::uint64_t>(rank) < extra);
   const std::uint64_t first = rank * base + std::min<std::uint64_t>(rank, extra);
-  std::mt19937_64 rng(seed * 0x9e3779b97f4a7c15ULL + static_cast<std::uint64_t>(rank));
-  std::uniform_real_distribution<double> u(0.0, side);
   Share s;
   s.xyz.resize(3 * mine);
   s.ids.resize(mine);
   std::iota(s.ids.begin(), s.ids.end(), first);
-  for (float& x : s.xyz) {
-    x = static_cast<float>(u(rng));
+  const std::uint64_t stream = mix(seed);
+  for (std::size_t k = 0; k < s.xyz.size(); ++k) {
+    const double u = static_cast<double>(mix(stream ^ (3 * first + k)) >> 11) * 0x1p-53;
+    float& x = s.xyz[k];
+    x = static_cast<float>(u * side);
     if (static_cast<double>(x) >= side) x = std::nextafter(x, 0.0f);  // stay in [0, side)
   }
   return s;
