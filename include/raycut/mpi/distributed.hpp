@@ -85,8 +85,9 @@ struct DistributedOptions {
   // Payload transport; null: make_host_transport(comm).
   std::shared_ptr<Transport> transport;
   // Owned rows only: one engine over the owned particles (pairs among them) and one with the
-  // owned as query points over the halos (pairs with halos), summed. false, or a method without
-  // query points (grid-paper, OptiX): one engine over owned + halos, halo rows discarded.
+  // owned particles near a face as query points over the halos (pairs with halos), summed.
+  // false, or a method without query points (grid-paper, OptiX): one engine over owned + halos,
+  // halo rows discarded. docs/distributed.md measures both.
   bool owned_rows_only = true;
 };
 
