@@ -21,6 +21,12 @@
 #include "raycut/generators.hpp"
 
 namespace raycut::cli {
+
+std::string environment_columns(const SystemInfo& sys, bool with_optix) {
+  const std::string gpu = sys.gpu == "none" ? "cpu: " + sys.cpu : sys.gpu;
+  return gpu + "," + sys.driver + "," + sys.cuda + "," + (with_optix ? sys.optix : "none");
+}
+
 namespace {
 
 struct BenchOptions {
@@ -38,9 +44,14 @@ struct BenchOptions {
   int large_reps = 2;        // ... time this many repetitions instead (the CSV says how many)
   BoxOptions box_options;
   Box box;  // resolved from box_options
+#if defined(RAYCUT_CLI_MPI)
+  DistributedBenchOptions distributed;
+#endif
   // The suite column: the suite's name, with "-periodic" in a periodic box, so that rows of
   // both never mix under one name.
-  std::string suite_column() const { return box.periodic() ? suite + "-periodic" : suite; }
+  std::string suite_column() const {
+    return box.periodic() ? suite + "-periodic" : suite;
+  }
 };
 
 struct Samples {
@@ -51,12 +62,6 @@ struct Samples {
     total.push_back(b + c);
   }
 };
-
-// The CSV row tail every row carries: what it ran on.
-std::string environment_columns(const SystemInfo& sys, bool with_optix) {
-  const std::string gpu = sys.gpu == "none" ? "cpu: " + sys.cpu : sys.gpu;
-  return gpu + "," + sys.driver + "," + sys.cuda + "," + (with_optix ? sys.optix : "none");
-}
 
 // Runs the paper's own CUDA grid (Cuda-version/cudaLJ.cu of berenger-eu/particle-interaction-
 // with-optix, built by the user) in a scratch folder and turns its results-*.csv (one line per
@@ -285,7 +290,16 @@ Command add_bench(CLI::App& app) {
                   "after ours and merge its rows as method paper-cudaLJ")
       ->check(CLI::ExistingFile);
   add_box_options(*cmd, o->box_options);
+#if defined(RAYCUT_CLI_MPI)
+  add_distributed_bench_options(*cmd, o->distributed);
+  return [o] {
+    if (o->distributed.enabled)
+      return run_distributed_bench(o->distributed, o->methods, o->reps, o->seed, o->out);
+    return run_bench(*o);
+  };
+#else
   return [o] { return run_bench(*o); };
+#endif
 }
 
 }  // namespace raycut::cli

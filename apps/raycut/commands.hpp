@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "raycut/box.hpp"
+#include "raycut/engine.hpp"
 #include "raycut/generators.hpp"
 
 namespace raycut::cli {
@@ -62,5 +63,20 @@ std::string describe_box(const Box& box);
 
 // The median of samples (mean of the middle two for an even count).
 double median(std::vector<double> samples);
+
+// The CSV columns every benchmark row ends with: what it ran on (gpu,driver,cuda,optix).
+std::string environment_columns(const SystemInfo& sys, bool with_optix);
+
+// raycut bench --distributed (distributed_bench.cpp, built with raycut::mpi).
+struct DistributedBenchOptions {
+  bool enabled = false;
+  std::vector<std::uint64_t> n_per_rank, n_total;  // weak or strong scaling
+  float skin = 0.3f;
+  std::vector<int> dims;  // empty: MPI_Dims_create
+  bool all_rows = false;  // DistributedOptions::owned_rows_only = false
+};
+void add_distributed_bench_options(CLI::App& bench, DistributedBenchOptions& o);
+int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<std::string>& methods,
+                          int reps, std::uint64_t seed, const std::string& out);
 
 }  // namespace raycut::cli

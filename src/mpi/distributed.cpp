@@ -1,5 +1,5 @@
-// The distributed engine: domain decomposition, migration, halos with periodic images, and a
-// plain open Engine per rank over owned + halo particles (docs/distributed.md).
+// The distributed engine: domain decomposition, migration, halos with periodic images, and
+// plain open Engines per rank over owned and halo particles (docs/distributed.md).
 #include "raycut/mpi/distributed.hpp"
 
 #include <algorithm>
@@ -129,6 +129,21 @@ DistributedEngine::DistributedEngine(MPI_Comm comm, DistributedOptions options)
                                                  " ranks");
   decomposition_.dims = dims;
   engine_ = std::make_unique<Engine>(options_.method);  // an unknown method throws here
+  if (options_.owned_rows_only) {
+    // Does the method take query points? One point asked of itself: grid-paper and the OptiX
+    // methods refuse with unsupported (every rank alike: the method is the same).
+    halo_engine_ = std::make_unique<Engine>(engine_->method());
+    const float origin[3] = {0, 0, 0};
+    Systems probe;
+    probe.queries = {origin, 1, MemorySpace::host};
+    try {
+      halo_engine_->build({origin, 1, MemorySpace::host}, 1.0f, probe);
+      split_ = true;
+    } catch (const Error& e) {
+      if (e.code() != ErrorCode::unsupported) throw;
+      halo_engine_.reset();
+    }
+  }
   transport_ = options_.transport ? options_.transport : make_host_transport(comm_);
   if (transport_->space() != MemorySpace::host)
     throw Error(ErrorCode::unsupported,
@@ -138,10 +153,6 @@ DistributedEngine::DistributedEngine(MPI_Comm comm, DistributedOptions options)
 }
 
 DistributedEngine::~DistributedEngine() = default;
-
-const Engine& DistributedEngine::local_engine() const {
-  return *engine_;
-}
 
 void DistributedEngine::check_built(const char* call) const {
   if (!built_)
@@ -503,16 +514,66 @@ void DistributedEngine::refresh_halos() {
   stats_.exchange_ms = elapsed_ms(start);
 }
 
+// Owned rows only, exactly: the self pair (i, i, 0) must never reach a kernel (Lennard-Jones is
+// infinite at r = 0), and a query point does not exclude itself. So the owned particles are
+// never sources of the query engine: pairs among owned particles come from a plain engine over
+// them (which excludes (i, i, 0) by index, as a single rank does), pairs with halos from the
+// owned particles near a face as queries over the halos only. Every pair of an owned target is
+// in exactly one of the two; the halo copies of a particle's own periodic images are halos, so
+// (i, i, S != 0) is kept. Counts and lists are then exact; kernel sums are two partial sums added.
+//
+// Only owned particles within cutoff + skin of a face of the domain that has something across it
+// are queries (the others meet no halo): every halo was outside the domain at the exchange and
+// has moved at most skin / 2 since, so an owned particle within the cutoff of one is within
+// cutoff + skin / 2 of such a face. The query engine's structure holds its queries too (they are
+// candidates it rejects), so fewer queries is most of what makes this cheaper than all rows.
+void DistributedEngine::select_boundary() {
+  const Decomposition& dec = decomposition_;
+  const auto c = dec.coords(rank_);
+  double scale = halo_width_;
+  for (int a = 0; a < 3; ++a) scale = std::max(scale, std::abs(dec.lo[a]) + dec.length[a]);
+  const double reach = halo_width_ + 1e-5 * scale;  // as build_halos(): a hair wide is harmless
+  double low[3], high[3];  // the faces with something across, else -inf / +inf
+  for (int a = 0; a < 3; ++a) {
+    const bool split = dec.dims[a] > 1 || dec.periodic[a];
+    low[a] = split && (dec.periodic[a] || c[a] > 0) ? dec.lo[a] + c[a] * dec.width[a]
+                                                    : -std::numeric_limits<double>::infinity();
+    high[a] = split && (dec.periodic[a] || c[a] < dec.dims[a] - 1)
+                  ? dec.lo[a] + (c[a] + 1) * dec.width[a]
+                  : std::numeric_limits<double>::infinity();
+  }
+  boundary_.clear();
+  boundary_xyz_.clear();
+  for (std::size_t i = 0; i < ids_.size(); ++i) {
+    bool near = false;
+    for (int a = 0; a < 3; ++a) {
+      const double x = xyz_[3 * i + a];
+      near = near || x - low[a] < reach || high[a] - x < reach;
+    }
+    if (!near) continue;
+    boundary_.push_back(static_cast<std::uint32_t>(i));
+    boundary_xyz_.insert(boundary_xyz_.end(), &xyz_[3 * i], &xyz_[3 * i] + 3);
+  }
+}
+
 void DistributedEngine::build_local_engine(bool same_sources) {
   std::string error;
   ErrorCode code = ErrorCode::internal;
   const auto start = Clock::now();
   try {
-    const PositionsView view{local_xyz_.data(), local_xyz_.size() / 3, MemorySpace::host};
+    const std::size_t n = ids_.size(), h = halo_ids_.size();
+    const PositionsView local{local_xyz_.data(), split_ ? n : n + h, MemorySpace::host};
     if (same_sources)
-      engine_->update(view);
+      engine_->update(local);
     else
-      engine_->build(view, cutoff_);
+      engine_->build(local, cutoff_);
+    if (split_) select_boundary();
+    halo_engine_built_ = split_ && !boundary_.empty() && h > 0;
+    if (halo_engine_built_) {  // with query points update() refuses: build again
+      Systems systems;
+      systems.queries = {boundary_xyz_.data(), boundary_.size(), MemorySpace::host};
+      halo_engine_->build({local_xyz_.data() + 3 * n, h, MemorySpace::host}, cutoff_, systems);
+    }
   } catch (const Error& e) {
     error = e.what();
     code = e.code();
@@ -521,6 +582,7 @@ void DistributedEngine::build_local_engine(bool same_sources) {
   stats_.build_ms = elapsed_ms(start);
   stats_.owned = ids_.size();
   stats_.halos = halo_ids_.size();
+  stats_.boundary = split_ ? boundary_.size() : ids_.size();
 }
 
 // ---- results ------------------------------------------------------------------------------------
@@ -533,14 +595,28 @@ Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options) 
                 "(a later slice)");
   Results r = engine_->compute(kernel, options);
   const std::size_t n = ids_.size();
-  auto keep = [n](auto& v, std::size_t per) {
-    if (!v.empty()) v.resize(per * n);
-  };
-  keep(r.count, 1);
-  keep(r.energy, 1);
-  keep(r.force, 3);
-  keep(r.virial, 6);
-  keep(r.density, 1);
+  if (!split_) {  // rows past n are the halos'
+    auto keep = [n](auto& v, std::size_t per) {
+      if (!v.empty()) v.resize(per * n);
+    };
+    keep(r.count, 1);
+    keep(r.energy, 1);
+    keep(r.force, 3);
+    keep(r.virial, 6);
+    keep(r.density, 1);
+  } else if (halo_engine_built_) {
+    const Results halo = halo_engine_->compute(kernel, options);
+    // Query row b is owned row boundary_[b].
+    auto add = [this](auto& into, const auto& from, std::size_t per) {
+      for (std::size_t b = 0; b < boundary_.size(); ++b)
+        for (std::size_t k = 0; k < per; ++k) into[per * boundary_[b] + k] += from[per * b + k];
+    };
+    add(r.count, halo.count, halo.count.empty() ? 0 : 1);
+    add(r.energy, halo.energy, halo.energy.empty() ? 0 : 1);
+    add(r.force, halo.force, halo.force.empty() ? 0 : 3);
+    add(r.virial, halo.virial, halo.virial.empty() ? 0 : 6);
+    add(r.density, halo.density, halo.density.empty() ? 0 : 1);
+  }
   return r;
 }
 
@@ -550,25 +626,35 @@ DistributedList DistributedEngine::neighbours(const ListOptions& options) {
   local.half = false;  // oriented here by global index
   local.shifts = false;
   const NeighbourList list = engine_->neighbours(local);
+  NeighbourList halo_list;
+  if (halo_engine_built_) halo_list = halo_engine_->neighbours(local);
   const std::size_t n = ids_.size();
+  // Local slot j of the engine over owned (+ halos): owned below n, else halo j - n.
+  static constexpr std::int32_t zero[3] = {0, 0, 0};
   DistributedList out;
   out.targets = ids_;
   out.offsets.assign(n + 1, 0);
-  static constexpr std::int32_t zero[3] = {0, 0, 0};
+  auto emit = [&](std::size_t i, const NeighbourList& from, std::uint64_t e, std::size_t j) {
+    const std::uint64_t id = j < n ? ids_[j] : halo_ids_[j - n];
+    const std::int32_t* s = j < n ? zero : &halo_shifts_[3 * (j - n)];
+    if (options.half) {
+      const Shift shift{s[0], s[1], s[2]};
+      if (id < ids_[i] || (id == ids_[i] && !shift.positive())) return;
+    }
+    out.indices.push_back(id);
+    if (options.distances) out.distances.push_back(from.distances[e]);
+    if (options.vectors)
+      out.vectors.insert(out.vectors.end(), &from.vectors[3 * e], &from.vectors[3 * e] + 3);
+    if (options.shifts) out.shifts.insert(out.shifts.end(), s, s + 3);
+  };
+  std::size_t b = 0;  // the next query row: boundary_ ascends
   for (std::size_t i = 0; i < n; ++i) {
-    for (std::uint64_t e = list.offsets[i]; e < list.offsets[i + 1]; ++e) {
-      const std::uint32_t j = list.indices[e];
-      const std::uint64_t id = j < n ? ids_[j] : halo_ids_[j - n];
-      const std::int32_t* s = j < n ? zero : &halo_shifts_[3 * (j - n)];
-      if (options.half) {
-        const Shift shift{s[0], s[1], s[2]};
-        if (id < ids_[i] || (id == ids_[i] && !shift.positive())) continue;
-      }
-      out.indices.push_back(id);
-      if (options.distances) out.distances.push_back(list.distances[e]);
-      if (options.vectors)
-        out.vectors.insert(out.vectors.end(), &list.vectors[3 * e], &list.vectors[3 * e] + 3);
-      if (options.shifts) out.shifts.insert(out.shifts.end(), s, s + 3);
+    for (std::uint64_t e = list.offsets[i]; e < list.offsets[i + 1]; ++e)
+      emit(i, list, e, list.indices[e]);
+    if (halo_engine_built_ && b < boundary_.size() && boundary_[b] == i) {
+      for (std::uint64_t e = halo_list.offsets[b]; e < halo_list.offsets[b + 1]; ++e)
+        emit(i, halo_list, e, n + halo_list.indices[e]);
+      ++b;
     }
     out.offsets[i + 1] = out.indices.size();
   }

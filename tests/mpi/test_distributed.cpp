@@ -253,14 +253,21 @@ TEST(Distributed, PeriodicBoxMatchesSingleProcess) {
   const std::vector<float> xyz = lattice(10, 1.2, 0.15, 7);
   const float cutoff = 2.0f;
   const Reference ref = reference(xyz, box, cutoff);
-  for (Spread spread : {Spread::strided, Spread::all_on_rank0}) {
-    DistributedEngine engine(MPI_COMM_WORLD);
-    build(engine, xyz, cutoff, box, spread);
-    expect_matches(engine, ref, "periodic");
-    if (world_size() > 1) {
-      EXPECT_GT(engine.halos(), 0u);
+  for (Spread spread : {Spread::strided, Spread::all_on_rank0})
+    for (bool owned_rows_only : {true, false}) {
+      DistributedOptions options;
+      options.owned_rows_only = owned_rows_only;
+      DistributedEngine engine(MPI_COMM_WORLD, options);
+      EXPECT_EQ(engine.owned_rows_only(), owned_rows_only);  // cell-list takes query points
+      build(engine, xyz, cutoff, box, spread);
+      expect_matches(engine, ref, owned_rows_only ? "periodic" : "periodic, every local row");
+      EXPECT_GT(engine.halos(), 0u);  // the box's own images at one rank
+      // Owned rows only: the particles deeper than cutoff + skin inside the domain are no
+      // queries of the halo engine (at 1 rank [2, 10)^3 of the box holds ~30% of them).
+      const std::uint64_t boundary = engine.stats().boundary;
+      if (owned_rows_only && world_size() == 1) EXPECT_LT(boundary, engine.owned());
+      if (!owned_rows_only) EXPECT_EQ(boundary, engine.owned());
     }
-  }
 }
 
 TEST(Distributed, OpenBoxMatchesSingleProcess) {
@@ -396,7 +403,7 @@ TEST(Distributed, HaloCountsMatchTheCostModel) {
 
 // Particles with constant velocities (carried through migration) for `steps` steps; every step
 // the owned rows are checked against a reference over the positions the engine holds.
-void step_loop(const Box& box, float skin, int steps) {
+void step_loop(const Box& box, float skin, int steps, bool owned_rows_only = true) {
   const float cutoff = 1.5f, dt = 1.0f;
   const std::vector<float> start = lattice(10, 1.2, 0.15, 21);
   const std::size_t n = start.size() / 3;
@@ -407,6 +414,7 @@ void step_loop(const Box& box, float skin, int steps) {
 
   DistributedOptions options;
   options.skin = skin;
+  options.owned_rows_only = owned_rows_only;
   DistributedEngine engine(MPI_COMM_WORLD, options);
   build(engine, start, cutoff, box, Spread::strided, velocity, 3);
 
@@ -480,6 +488,11 @@ TEST(Distributed, StepLoopOpenRegionNoSkin) {
 
 TEST(Distributed, StepLoopMixedAxesWithSkin) {
   step_loop(Box::orthorhombic(12, 12, 12, true, false, true), 0.5f, 6);
+}
+
+TEST(Distributed, StepLoopEveryLocalRow) {
+  // The scheme of methods without query points: one engine over owned + halos, refreshed.
+  step_loop(Box::orthorhombic(12, 12, 12), 0.4f, 5, false);
 }
 
 // ---- errors, thrown on every rank ---------------------------------------------------------------

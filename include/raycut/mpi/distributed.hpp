@@ -1,7 +1,8 @@
 // The distributed engine (docs/distributed.md): particles spread over the ranks of an MPI
 // communicator by a Cartesian grid of spatial domains, each rank computing the targets it owns
 // with any single-rank raycut method over its owned particles plus halo copies of the particles
-// within cutoff + skin of its domain (periodic images included). Indices are global throughout.
+// within cutoff + skin of its domain (periodic images included), owned rows only where the
+// method takes query points. Indices are global throughout.
 //
 //   raycut::mpi::DistributedEngine engine(MPI_COMM_WORLD, {.method = "cell-list", .skin = 0.3f});
 //   engine.build({xyz.data(), n, raycut::MemorySpace::host}, ids.data(), cutoff, box);
@@ -83,6 +84,11 @@ struct DistributedOptions {
   std::array<int, 3> dims = {0, 0, 0};
   // Payload transport; null: make_host_transport(comm).
   std::shared_ptr<Transport> transport;
+  // Owned rows only: one engine over the owned particles (pairs among them) and one with the
+  // owned particles near a face as query points over the halos (pairs with halos), summed.
+  // false, or a method without query points (grid-paper, OptiX): one engine over owned + halos,
+  // halo rows discarded. docs/distributed.md measures both.
+  bool owned_rows_only = true;
 };
 
 // A neighbour list of the owned targets with global indices: the in-range sources of row t
@@ -101,6 +107,7 @@ struct DistributedList {
 // What the last passes cost; counters accumulate from build().
 struct DistributedStats {
   std::uint64_t owned = 0, halos = 0;  // on this rank now
+  std::uint64_t boundary = 0;          // owned rows that meet halos (owned rows only: queries)
   std::uint64_t exchanges = 0;         // full exchanges: migration + new halo sets
   std::uint64_t refreshes = 0;         // halo refreshes in place (skin)
   std::uint64_t migrated_out = 0;      // particles sent to other ranks by the last exchange
@@ -163,8 +170,9 @@ class DistributedEngine {
   std::uint64_t global_size() const { return global_size_; }
   const Decomposition& decomposition() const { return decomposition_; }
   const DistributedStats& stats() const { return stats_; }
-  // The rank's engine over owned + halo particles (rows [0, owned()) are the owned ones).
-  const Engine& local_engine() const;
+  // Whether the local passes compute the owned rows only (DistributedOptions::owned_rows_only
+  // and a method that takes query points), or every row of owned + halos.
+  bool owned_rows_only() const { return split_; }
 
  private:
   struct HaloPlan;
@@ -174,6 +182,7 @@ class DistributedEngine {
   void build_halos();
   void refresh_halos();
   void build_local_engine(bool same_sources);
+  void select_boundary();
   void exchange_counts(const std::vector<std::uint64_t>& send, std::vector<std::uint64_t>& recv);
 
   MPI_Comm comm_;
@@ -194,7 +203,14 @@ class DistributedEngine {
   std::vector<std::int32_t> halo_shifts_;
   std::vector<float> local_xyz_;  // owned then halos: what the local engine is built over
   std::unique_ptr<HaloPlan> plan_;
-  std::unique_ptr<Engine> engine_;
+  // Owned rows only: engine_ over the owned particles, halo_engine_ with the owned particles
+  // near a face (boundary_, owned indices ascending; their positions boundary_xyz_) as queries
+  // over the halos, built when both exist. Otherwise engine_ over owned + halos.
+  std::unique_ptr<Engine> engine_, halo_engine_;
+  bool split_ = false;
+  bool halo_engine_built_ = false;
+  std::vector<std::uint32_t> boundary_;
+  std::vector<float> boundary_xyz_;
   DistributedStats stats_;
 };
 

@@ -1,0 +1,308 @@
+// raycut bench --distributed, under mpirun: the LJ liquid (density 0.8442, rc 2.5, uniform random
+// in a periodic cube) through raycut::mpi::DistributedEngine. Per repetition and phase the time
+// is MPI_Wtime's, the largest over the ranks (the slowest rank sets the step); one warm-up, then
+// medians over the repetitions, one CSV row per (method, size) written by rank 0. A step is a
+// halo refresh (the skin keeps the halo set) plus the fused lj_forces pass; a full exchange
+// (migration, new halos, local builds) is timed apart. Weak scaling: --n-per-rank particles on
+// every rank; strong: --n in total.
+#include <mpi.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <ctime>
+#include <memory>
+#include <numeric>
+#include <string>
+#include <vector>
+
+#include "commands.hpp"
+#include "raycut/engine.hpp"
+#include "raycut/files.hpp"
+#include "raycut/mpi/distributed.hpp"
+
+namespace raycut::cli {
+namespace {
+
+constexpr double lj_density = 0.8442;
+constexpr float lj_cutoff = 2.5f;
+
+// MPI_Init when the process has not (the raycut tool does not otherwise use MPI), and
+// MPI_Finalize on the way out, also when an error unwinds every rank.
+struct MpiSession {
+  bool owner = false;
+  MpiSession() {
+    int initialized = 0;
+    MPI_Initialized(&initialized);
+    if (!initialized) {
+      MPI_Init(nullptr, nullptr);
+      owner = true;
+    }
+  }
+  ~MpiSession() {
+    int finalized = 0;
+    MPI_Finalized(&finalized);
+    if (owner && !finalized) MPI_Finalize();
+  }
+};
+
+// splitmix64: coordinate k of the liquid from (seed, k) alone, so that N particles are the same
+// system whatever the number of ranks (strong scaling compares like with like).
+std::uint64_t mix(std::uint64_t x) {
+  x += 0x9e3779b97f4a7c15ULL;
+  x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
+  x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
+  return x ^ (x >> 31);
+}
+
+// This rank's share of the liquid: n / size particles (the first n % size ranks one more), ids
+// contiguous by rank, uniform in [0, side)^3.
+struct Share {
+  std::vector<float> xyz;
+  std::vector<std::uint64_t> ids;
+};
+Share liquid_share(std::uint64_t n, double side, int rank, int size, std::uint64_t seed) {
+  const std::uint64_t base = n / size, extra = n % size;
+  const std::uint64_t mine = base + (static_cast<std::uint64_t>(rank) < extra);
+  const std::uint64_t first = rank * base + std::min<std::uint64_t>(rank, extra);
+  Share s;
+  s.xyz.resize(3 * mine);
+  s.ids.resize(mine);
+  std::iota(s.ids.begin(), s.ids.end(), first);
+  const std::uint64_t stream = mix(seed);
+  for (std::size_t k = 0; k < s.xyz.size(); ++k) {
+    const double u = static_cast<double>(mix(stream ^ (3 * first + k)) >> 11) * 0x1p-53;
+    float& x = s.xyz[k];
+    x = static_cast<float>(u * side);
+    if (static_cast<double>(x) >= side) x = std::nextafter(x, 0.0f);  // stay in [0, side)
+  }
+  return s;
+}
+
+// Per repetition: full exchange, refresh, compute (lj_forces after the refresh), step = refresh
+// + compute, each the largest over the ranks; then the CPU time of the compute and the step,
+// summed over the ranks: the work, whatever the ranks share cores with (the step's includes
+// what MPI spends polling while it waits).
+enum Phase {
+  exchange_phase,
+  refresh_phase,
+  compute_phase,
+  step_phase,
+  wall_phases,
+  compute_cpu = wall_phases,
+  step_cpu,
+  phases
+};
+
+double cpu_seconds() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+struct Run {
+  std::vector<double> samples[phases];
+  double build_ms = 0;
+  std::uint64_t pairs = 0, halos = 0, owned_min = 0, owned_max = 0;
+  bool owned_rows_only = false;
+  std::array<int, 3> dims{};
+};
+
+Run run_method(MPI_Comm comm, const DistributedBenchOptions& o, const std::string& method,
+               std::uint64_t n, double side, int reps, std::uint64_t seed) {
+  int rank = 0, size = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &size);
+  mpi::DistributedOptions options;
+  options.method = method;
+  options.skin = o.skin;
+  options.owned_rows_only = !o.all_rows;
+  for (std::size_t a = 0; a < o.dims.size(); ++a) options.dims[a] = o.dims[a];
+  mpi::DistributedEngine engine(comm, options);
+  const Share share = liquid_share(n, side, rank, size, seed);
+  const Box box = Box::orthorhombic(side, side, side);
+
+  Run run;
+  MPI_Barrier(comm);
+  double start = MPI_Wtime();
+  engine.build({share.xyz.data(), share.ids.size(), MemorySpace::host}, share.ids.data(), lj_cutoff,
+               box);
+  double local = 1e3 * (MPI_Wtime() - start);
+  MPI_Allreduce(&local, &run.build_ms, 1, MPI_DOUBLE, MPI_MAX, comm);
+
+  // Warm-up, and what the rows report: pairs (each counted from both ends), halos, balance.
+  const Results counts = engine.compute(Kernel::count);
+  std::uint64_t mine[4] = {0, engine.halos(), engine.owned(), engine.owned()};
+  for (std::uint32_t c : counts.count) mine[0] += c;
+  std::uint64_t sums[2], owned_min = 0, owned_max = 0;
+  MPI_Allreduce(mine, sums, 2, MPI_UINT64_T, MPI_SUM, comm);
+  MPI_Allreduce(&mine[2], &owned_min, 1, MPI_UINT64_T, MPI_MIN, comm);
+  MPI_Allreduce(&mine[3], &owned_max, 1, MPI_UINT64_T, MPI_MAX, comm);
+  run.pairs = sums[0] / 2;
+  run.halos = sums[1];
+  run.owned_min = owned_min;
+  run.owned_max = owned_max;
+  run.owned_rows_only = engine.owned_rows_only();
+  run.dims = engine.decomposition().dims;
+  engine.compute(Kernel::lj_forces);
+
+  for (int r = 0; r < reps; ++r) {
+    double t[phases];
+    MPI_Barrier(comm);
+    start = MPI_Wtime();
+    engine.exchange();
+    t[exchange_phase] = MPI_Wtime() - start;
+    const std::vector<float> xyz = engine.positions();  // untimed: the integrator's output
+    MPI_Barrier(comm);
+    start = MPI_Wtime();
+    const double cpu_start = cpu_seconds();
+    if (engine.update(xyz.data()))  // nothing moved: within the skin
+      throw Error(ErrorCode::internal, "bench --distributed: update() exchanged, not refreshed");
+    const double refreshed = MPI_Wtime(), cpu_refreshed = cpu_seconds();
+    engine.compute(Kernel::lj_forces);
+    const double computed = MPI_Wtime(), cpu_computed = cpu_seconds();
+    t[refresh_phase] = refreshed - start;
+    t[compute_phase] = computed - refreshed;
+    t[step_phase] = computed - start;
+    t[compute_cpu] = cpu_computed - cpu_refreshed;
+    t[step_cpu] = cpu_computed - cpu_start;
+    double reduced[phases];
+    MPI_Allreduce(t, reduced, wall_phases, MPI_DOUBLE, MPI_MAX, comm);
+    MPI_Allreduce(t + wall_phases, reduced + wall_phases, phases - wall_phases, MPI_DOUBLE, MPI_SUM,
+                  comm);
+    for (int p = 0; p < phases; ++p) run.samples[p].push_back(1e3 * reduced[p]);
+  }
+  return run;
+}
+
+}  // namespace
+
+void add_distributed_bench_options(CLI::App& bench, DistributedBenchOptions& o) {
+  auto* flag = bench.add_flag(
+      "--distributed", o.enabled,
+      "Under mpirun: the periodic LJ liquid (density 0.8442, rc 2.5) through the distributed "
+      "engine, a step = halo refresh + lj_forces (uses -m, -r, -o, --seed; the suite options "
+      "do not apply)");
+  auto* weak = bench
+                   .add_option("--n-per-rank", o.n_per_rank,
+                               "--distributed, weak scaling: particles per rank (list)")
+                   ->delimiter(',')
+                   ->check(count_option())
+                   ->needs(flag);
+  bench.add_option("--n", o.n_total, "--distributed, strong scaling: particles in total (list)")
+      ->delimiter(',')
+      ->check(count_option())
+      ->needs(flag)
+      ->excludes(weak);
+  bench.add_option("--skin", o.skin, "--distributed: halo skin (> 0; halos reach rc + skin)")
+      ->check(positive_finite())
+      ->needs(flag);
+  bench.add_option("--dims", o.dims, "--distributed: domains per axis, 0 = MPI chooses")
+      ->delimiter(',')
+      ->expected(3)
+      ->needs(flag);
+  bench
+      .add_flag("--all-rows", o.all_rows,
+                "--distributed: one local engine over owned + halos, halo rows discarded (the "
+                "scheme of methods without query points), instead of owned rows only")
+      ->needs(flag);
+}
+
+int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<std::string>& names,
+                          int reps, std::uint64_t seed, const std::string& out) {
+  if (o.n_per_rank.empty() == o.n_total.empty())
+    throw Error(ErrorCode::invalid_argument,
+                "bench --distributed: give --n-per-rank (weak scaling) or --n (strong scaling)");
+  const MpiSession session;
+  MPI_Comm comm = MPI_COMM_WORLD;
+  int rank = 0, size = 1;
+  MPI_Comm_rank(comm, &rank);
+  MPI_Comm_size(comm, &size);
+  const auto methods = resolve_methods(names);
+  const bool weak = !o.n_per_rank.empty();
+  std::vector<std::uint64_t> sizes;
+  for (std::uint64_t n : weak ? o.n_per_rank : o.n_total) sizes.push_back(weak ? n * size : n);
+
+  // Rank 0 writes; an output it cannot open stops every rank before any work.
+  std::unique_ptr<io::OutputFile> csv;
+  std::string open_error;
+  if (rank == 0) try {
+      csv = std::make_unique<io::OutputFile>(out);
+    } catch (const Error& e) {
+      open_error = e.what();
+    }
+  int failed = !open_error.empty();
+  MPI_Bcast(&failed, 1, MPI_INT, 0, comm);
+  if (failed) throw Error(ErrorCode::io, rank == 0 ? open_error : "rank 0 cannot write " + out);
+
+  const SystemInfo sys = system_info();
+  const std::string environment = environment_columns(sys, true);
+  if (rank == 0) {
+    csv->write(
+        "suite,method,rows,ranks,dims,scaling,N,N_per_rank,cutoff,skin,pairs,halos,owned_min,"
+        "owned_max,build_ms,exchange_ms,refresh_ms,compute_ms,step_ms,step_ms_min,step_ms_max,"
+        "compute_cpu_ms,step_cpu_ms,reps,timer,gpu,driver,cuda,optix\n");
+    std::fprintf(stderr, "raycut bench --distributed: %d ranks, %s scaling, %d reps, on %s -> %s\n",
+                 size, weak ? "weak" : "strong", reps,
+                 environment.substr(0, environment.find(',')).c_str(), out.c_str());
+  }
+  int status = 0;
+  for (std::uint64_t n : sizes) {
+    const double side = std::cbrt(static_cast<double>(n) / lj_density);
+    // In a periodic box no wider than 2 rc each pair is one image: E[pairs] = N (N - 1) / 2 times
+    // the sphere's share of the box, the same for every target, so the count is exact to ~1 /
+    // sqrt(pairs). Missing or duplicated halos move it by far more than 2 %.
+    const double sphere = 4.0 / 3.0 * M_PI * std::pow(static_cast<double>(lj_cutoff), 3);
+    const double expected =
+        0.5 * static_cast<double>(n) * (n - 1.0) * sphere / (side * side * side);
+    for (const auto& method : methods) {
+      const Run run = run_method(comm, o, method, n, side, reps, seed);
+      const auto& s = run.samples;
+      const bool pairs_ok = side < 2 * lj_cutoff ||
+                            std::abs(static_cast<double>(run.pairs) - expected) <= 0.02 * expected;
+      if (rank != 0) {
+        status = pairs_ok ? status : 1;
+        continue;
+      }
+      char row[1024];
+      std::snprintf(
+          row, sizeof row,
+          "lj-liquid-pbc,%s,%s,%d,%dx%dx%d,%s,%llu,%llu,%g,%g,%llu,%llu,%llu,%llu,%.4f,%.4f,"
+          "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%d,mpi_wtime_max,%s\n",
+          method.c_str(), run.owned_rows_only ? "owned" : "all", size, run.dims[0], run.dims[1],
+          run.dims[2], weak ? "weak" : "strong", static_cast<unsigned long long>(n),
+          static_cast<unsigned long long>(n / size), lj_cutoff, o.skin,
+          static_cast<unsigned long long>(run.pairs), static_cast<unsigned long long>(run.halos),
+          static_cast<unsigned long long>(run.owned_min),
+          static_cast<unsigned long long>(run.owned_max), run.build_ms, median(s[exchange_phase]),
+          median(s[refresh_phase]), median(s[compute_phase]), median(s[step_phase]),
+          *std::min_element(s[step_phase].begin(), s[step_phase].end()),
+          *std::max_element(s[step_phase].begin(), s[step_phase].end()), median(s[compute_cpu]),
+          median(s[step_cpu]), reps, environment.c_str());
+      csv->write(row);
+      csv->flush();
+      std::fprintf(
+          stderr,
+          "  N=%llu %s (%s rows): step %.3f ms = refresh %.3f + lj_forces %.3f; exchange "
+          "%.3f ms; CPU over ranks: step %.3f ms, lj_forces %.3f ms; %llu pairs, %llu "
+          "halos\n",
+          static_cast<unsigned long long>(n), method.c_str(), run.owned_rows_only ? "owned" : "all",
+          median(s[step_phase]), median(s[refresh_phase]), median(s[compute_phase]),
+          median(s[exchange_phase]), median(s[step_cpu]), median(s[compute_cpu]),
+          static_cast<unsigned long long>(run.pairs), static_cast<unsigned long long>(run.halos));
+      if (!pairs_ok) {
+        std::fprintf(stderr, "  check failed: %llu pairs, expected %.0f +- 2%%\n",
+                     static_cast<unsigned long long>(run.pairs), expected);
+        status = 1;
+      }
+    }
+  }
+  if (rank == 0) {
+    csv->commit();
+    std::fprintf(stderr, "wrote %s\n", out.c_str());
+  }
+  return status;
+}
+
+}  // namespace raycut::cli
