@@ -1060,6 +1060,51 @@ TEST_P(PeriodicEdgeCases, UpdateKeepsTheSystems) {
   EXPECT_TRUE(contains(m, "query")) << m;
 }
 
+// The padded matrix with shifts holds each row's (j, S) entries of the CSR list (a source once
+// per image in a thin box), then padding with index N and S = 0; without shifts it has none.
+TEST_P(PeriodicEdgeCases, PaddedRowsCarryShifts) {
+  const std::string& method = GetParam();
+  SKIP_UNAVAILABLE(method);
+  for (const char* name : {"cubic_0_3C", "very_skewed", "slab"}) {
+    const Family f = find_family(name);
+    const Batch& b = family_batch(f);
+    Engine engine(method);
+    engine.build({b.xyz.data(), b.sources(), MemorySpace::host}, static_cast<float>(f.cutoff),
+                 f.box);
+    const NeighbourList l = engine.neighbours({false, false, false, true});
+    const std::size_t n = b.sources();
+    std::uint32_t k = 1;
+    for (std::size_t i = 0; i < n; ++i)
+      k = std::max<std::uint32_t>(k, static_cast<std::uint32_t>(l.offsets[i + 1] - l.offsets[i]));
+    raycut::PaddedNeighbourBuffer padded;
+    ASSERT_FALSE(engine.padded_neighbours(padded, k + 1, false, true).overflowed());
+    const std::vector<std::uint32_t> idx = padded.indices_to_host();
+    const std::vector<std::int32_t> sh = padded.shifts_to_host();
+    ASSERT_EQ(sh.size(), 3 * idx.size()) << name;
+    using Entry = std::array<std::int64_t, 4>;
+    for (std::size_t i = 0; i < n; ++i) {
+      std::vector<Entry> want, got;
+      for (std::uint64_t e = l.offsets[i]; e < l.offsets[i + 1]; ++e)
+        want.push_back({l.indices[e], l.shifts[3 * e], l.shifts[3 * e + 1], l.shifts[3 * e + 2]});
+      for (std::uint32_t c = 0; c <= k; ++c) {
+        const std::size_t e = i * (k + 1) + c;
+        if (c < want.size())
+          got.push_back({idx[e], sh[3 * e], sh[3 * e + 1], sh[3 * e + 2]});
+        else
+          EXPECT_EQ((Entry{idx[e], sh[3 * e], sh[3 * e + 1], sh[3 * e + 2]}),
+                    (Entry{static_cast<std::int64_t>(n), 0, 0, 0}))
+              << name << " padding of row " << i;
+      }
+      std::sort(want.begin(), want.end());
+      std::sort(got.begin(), got.end());
+      EXPECT_EQ(got, want) << method << " " << name << " row " << i;
+    }
+    ASSERT_FALSE(engine.padded_neighbours(padded, k + 1).overflowed());
+    EXPECT_EQ(padded.shifts(), nullptr);
+    EXPECT_TRUE(padded.shifts_to_host().empty());
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Methods, PeriodicEdgeCases, ::testing::ValuesIn(methods),
                          [](const auto& info) {
                            std::string name = info.param;
@@ -1229,7 +1274,8 @@ TEST(PeriodicUnsupported, GridPaperAndOptixRefuseSystems) {
       });
       EXPECT_TRUE(contains(message, m.name)) << message;
     }
-    EXPECT_NO_THROW(engine.build({xyz.data(), 2, MemorySpace::host}, 0.6f, Systems{}));  // |r| = 0.52
+    EXPECT_NO_THROW(
+        engine.build({xyz.data(), 2, MemorySpace::host}, 0.6f, Systems{}));  // |r| = 0.52
     EXPECT_EQ(engine.compute(Kernel::count).count, (std::vector<std::uint32_t>{1, 1}));
   }
   if (tried == 0) {

@@ -158,11 +158,13 @@ class PaddedNeighbourBuffer {
   std::uint32_t width() const;           // K
   const std::uint32_t* indices() const;  // N * K, row-major
   const std::uint32_t* counts() const;   // N: the true number of neighbours of each row
+  const std::int32_t* shifts() const;    // 3 N K: S of each entry (0 in padding), or null
   MemorySpace space() const;
   const PaddedReport& report() const;
   // Host copies.
   std::vector<std::uint32_t> indices_to_host() const;
   std::vector<std::uint32_t> counts_to_host() const;
+  std::vector<std::int32_t> shifts_to_host() const;  // empty when not asked
 
  private:
   friend class Engine;
@@ -292,8 +294,10 @@ class Engine {
   NeighbourList neighbours(const ListOptions& options = {});
   // The padded [N, K] matrix in one pass. Overflowing rows are reported (and raise
   // Error(capacity_exceeded) when `throw_on_overflow`), never truncated silently.
+  // `shifts`: the image shift S of each entry too (3 int32; with a periodic box a row can hold
+  // one source once per image).
   PaddedReport padded_neighbours(PaddedNeighbourBuffer& list, std::uint32_t k,
-                                 bool throw_on_overflow = false);
+                                 bool throw_on_overflow = false, bool shifts = false);
 
   const Timings& last_timings() const { return timings_; }
   // The number of targets (rows of lists, entries of results): N, or M with query points.

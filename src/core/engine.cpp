@@ -344,7 +344,7 @@ NeighbourList Engine::neighbours(const ListOptions& options) {
 }
 
 PaddedReport Engine::padded_neighbours(PaddedNeighbourBuffer& list, std::uint32_t k,
-                                       bool throw_on_overflow) {
+                                       bool throw_on_overflow, bool shifts) {
   detail::Method& m = impl("padded_neighbours");
   if (!built_)
     throw Error(ErrorCode::invalid_argument, "Engine::padded_neighbours() called before build()");
@@ -355,10 +355,11 @@ PaddedReport Engine::padded_neighbours(PaddedNeighbourBuffer& list, std::uint32_
   if (size_ == 0) {
     list.storage_->n = 0;
     list.storage_->k = k;
+    list.storage_->shifts = nullptr;
     list.storage_->report = {};
     return {};
   }
-  m.padded_neighbours(*list.storage_, k, false);
+  m.padded_neighbours(*list.storage_, k, false, shifts);
   m.synchronize();
   detail::report_padded(*list.storage_, throw_on_overflow);
   return list.storage_->report;
@@ -455,6 +456,12 @@ const PaddedReport& PaddedNeighbourBuffer::report() const {
 }
 std::vector<std::uint32_t> PaddedNeighbourBuffer::indices_to_host() const {
   return filled(storage_).n ? filled(storage_).indices_to_host() : std::vector<std::uint32_t>{};
+}
+const std::int32_t* PaddedNeighbourBuffer::shifts() const {
+  return filled(storage_).shifts;
+}
+std::vector<std::int32_t> PaddedNeighbourBuffer::shifts_to_host() const {
+  return filled(storage_).n ? filled(storage_).shifts_to_host() : std::vector<std::int32_t>{};
 }
 std::vector<std::uint32_t> PaddedNeighbourBuffer::counts_to_host() const {
   return filled(storage_).n ? filled(storage_).counts_to_host() : std::vector<std::uint32_t>{};

@@ -88,15 +88,28 @@ struct PaddedFill : HalfFilter {
   std::uint32_t n;
   std::uint32_t* indices;
   std::uint32_t* counts;
+  std::int32_t* shifts;  // 3 per entry, or null; padding entries get S = 0
   PaddedOverflow* overflow;
   RAYCUT_HD void operator()(Accumulator& count, std::uint32_t i, std::uint32_t j, Vec3, float,
-                            const Shift&) const {
-    if (count < k) indices[std::uint64_t{i} * k + count] = j;
+                            const Shift& s) const {
+    if (count < k) {
+      const std::uint64_t e = std::uint64_t{i} * k + count;
+      indices[e] = j;
+      if (shifts) {
+        shifts[3 * e] = s.a;
+        shifts[3 * e + 1] = s.b;
+        shifts[3 * e + 2] = s.c;
+      }
+    }
     ++count;
   }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& count) const {
     counts[i] = count;
-    for (std::uint32_t c = count; c < k; ++c) indices[std::uint64_t{i} * k + c] = n;
+    for (std::uint32_t c = count; c < k; ++c) {
+      const std::uint64_t e = std::uint64_t{i} * k + c;
+      indices[e] = n;
+      if (shifts) shifts[3 * e] = shifts[3 * e + 1] = shifts[3 * e + 2] = 0;
+    }
     if (count > k) {
 #if defined(__CUDA_ARCH__)
       atomicAdd(&overflow->rows, 1ull);

@@ -74,15 +74,18 @@ double bytes_per_entry(const ListOptions& options) {
 }
 
 PaddedFill HostPaddedStorage::prepare(std::size_t targets, std::uint32_t width, bool half,
-                                      PaddedOverflow* overflow) {
+                                      bool with_shifts, PaddedOverflow* overflow) {
   n = targets;
   k = width;
   indices_.resize(targets * std::size_t{width});
   counts_.resize(targets);
+  if (with_shifts) shifts_.resize(3 * targets * std::size_t{width});
   indices = data_or_null(indices_);
   counts = data_or_null(counts_);
+  shifts = with_shifts ? data_or_null(shifts_) : nullptr;
   return {{half},          width,          static_cast<std::uint32_t>(targets),
-          indices_.data(), counts_.data(), overflow};
+          indices_.data(), counts_.data(), with_shifts ? shifts_.data() : nullptr,
+          overflow};
 }
 
 void report_padded(const PaddedStorage& storage, bool throw_on_overflow) {

@@ -51,6 +51,8 @@ class PaddedStorage {
   PaddedReport report;
   const std::uint32_t* indices = nullptr;
   const std::uint32_t* counts = nullptr;
+  const std::int32_t* shifts = nullptr;                          // 3 per entry, when asked
+  virtual std::vector<std::int32_t> shifts_to_host() const = 0;  // empty when not asked
 };
 
 // Host memory (the CPU methods).
@@ -79,11 +81,17 @@ class HostPaddedStorage final : public PaddedStorage {
   MemorySpace space() const override { return MemorySpace::host; }
   std::vector<std::uint32_t> indices_to_host() const override { return indices_; }
   std::vector<std::uint32_t> counts_to_host() const override { return counts_; }
-  // Sizes the matrix [n, k] and returns the functor filling it (overflow in `overflow`).
-  PaddedFill prepare(std::size_t n, std::uint32_t k, bool half, PaddedOverflow* overflow);
+  std::vector<std::int32_t> shifts_to_host() const override {
+    return shifts ? shifts_ : std::vector<std::int32_t>{};
+  }
+  // Sizes the matrix [n, k] (and its shifts when asked) and returns the functor filling it
+  // (overflow in `overflow`).
+  PaddedFill prepare(std::size_t n, std::uint32_t k, bool half, bool shifts,
+                     PaddedOverflow* overflow);
 
  private:
   std::vector<std::uint32_t> indices_, counts_;
+  std::vector<std::int32_t> shifts_;
 };
 
 // Throws Error(capacity_exceeded) for an overflowing padded list when asked to.

@@ -44,8 +44,9 @@ class Method {
   // Build over points with images, batches or queries. Methods that cannot say so
   // (supports_points() names why) and keep the default.
   virtual void build_points(const Points&, float) {
-    throw Error(ErrorCode::unsupported, "this method does not take periodic boxes, batches or "
-                                        "query points");
+    throw Error(ErrorCode::unsupported,
+                "this method does not take periodic boxes, batches or "
+                "query points");
   }
   // Empty when build_points() works; otherwise why not, for the engine's message.
   virtual std::string points_unsupported() const {
@@ -70,7 +71,7 @@ class Method {
   virtual std::unique_ptr<ListStorage> make_list_storage() const = 0;
   virtual std::unique_ptr<PaddedStorage> make_padded_storage() const = 0;
   virtual void neighbours(ListStorage& list, const ListOptions& options) = 0;
-  virtual void padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half) = 0;
+  virtual void padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half, bool shifts) = 0;
 
   // The traversal a caller's functor runs through (kind none: the method cannot run one).
   virtual PairPass pair_pass() const { return {}; }

@@ -62,10 +62,10 @@ class HostMethod : public Method {
     run(list.prepare_fill(offsets[n_], options.half));
   }
 
-  void padded_neighbours(PaddedStorage& storage, std::uint32_t k, bool half) override {
+  void padded_neighbours(PaddedStorage& storage, std::uint32_t k, bool half, bool shifts) override {
     auto& list = static_cast<HostPaddedStorage&>(storage);
     PaddedOverflow overflow{0, 0};
-    run(list.prepare(n_, k, half, &overflow));
+    run(list.prepare(n_, k, half, shifts, &overflow));
     list.report = {overflow.rows, overflow.largest};
   }
 

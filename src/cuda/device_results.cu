@@ -194,11 +194,18 @@ std::vector<std::uint32_t> DevicePaddedStorage::counts_to_host() const {
   return host;
 }
 
+std::vector<std::int32_t> DevicePaddedStorage::shifts_to_host() const {
+  std::vector<std::int32_t> host;
+  if (shifts) copy_to_host(host, shifts, 3 * n * std::size_t{k});
+  return host;
+}
+
 PaddedFill DevicePaddedStorage::prepare(std::size_t targets, std::uint32_t width, bool half,
-                                        cudaStream_t stream) {
+                                        bool with_shifts, cudaStream_t stream) {
   n = targets;
   k = width;
-  const double need = 4.0 * static_cast<double>(targets) * (static_cast<double>(width) + 1);
+  const double need = 4.0 * static_cast<double>(targets) *
+                      ((with_shifts ? 4.0 : 1.0) * static_cast<double>(width) + 1);
   if (need > static_cast<double>(indices_.bytes() + counts_.bytes())) {
     const std::string what =
         "a padded neighbour list of " + std::to_string(targets) + " x " + std::to_string(width);
@@ -208,12 +215,15 @@ PaddedFill DevicePaddedStorage::prepare(std::size_t targets, std::uint32_t width
   }
   indices_.resize(targets * std::size_t{width});
   counts_.resize(targets);
+  if (with_shifts) shifts_.resize(3 * targets * std::size_t{width});
   indices = indices_.data();
   counts = counts_.data();
+  shifts = with_shifts ? shifts_.data() : nullptr;
   overflow_.resize(1);
   RAYCUT_CUDA_CHECK(cudaMemsetAsync(overflow_.data(), 0, sizeof(PaddedOverflow), stream));
   return {{half},          width,          static_cast<std::uint32_t>(targets),
-          indices_.data(), counts_.data(), overflow_.data()};
+          indices_.data(), counts_.data(), with_shifts ? shifts_.data() : nullptr,
+          overflow_.data()};
 }
 
 void DevicePaddedStorage::read_report(cudaStream_t stream) {

@@ -102,12 +102,14 @@ class DevicePaddedStorage final : public PaddedStorage {
   MemorySpace space() const override { return MemorySpace::device; }
   std::vector<std::uint32_t> indices_to_host() const override;
   std::vector<std::uint32_t> counts_to_host() const override;
-  PaddedFill prepare(std::size_t n, std::uint32_t k, bool half, cudaStream_t stream);
+  PaddedFill prepare(std::size_t n, std::uint32_t k, bool half, bool shifts, cudaStream_t stream);
+  std::vector<std::int32_t> shifts_to_host() const override;
   // After the pass: the overflow into `report`.
   void read_report(cudaStream_t stream);
 
  private:
   DeviceBuffer<std::uint32_t> indices_, counts_;
+  DeviceBuffer<std::int32_t> shifts_;
   // The kernel's atomics go to device memory (to mapped host memory they cost microseconds
   // each: 2.3x the whole padded pass at 1M particles); the report is copied back after.
   DeviceBuffer<PaddedOverflow> overflow_;
@@ -157,9 +159,10 @@ class GpuMethod : public Method {
     run(list.prepare_fill(list.scan_counts(stream_)));
   }
   template <class Run>
-  void device_padded(PaddedStorage& storage, std::size_t n, std::uint32_t k, bool half, Run&& run) {
+  void device_padded(PaddedStorage& storage, std::size_t n, std::uint32_t k, bool half, bool shifts,
+                     Run&& run) {
     auto& list = static_cast<DevicePaddedStorage&>(storage);
-    run(list.prepare(n, k, half, stream_));
+    run(list.prepare(n, k, half, shifts, stream_));
     list.read_report(stream_);
   }
 
@@ -182,8 +185,8 @@ class CudaPairMethod : public GpuMethod {
   void neighbours(ListStorage& list, const ListOptions& options) override {
     device_neighbours(list, self().size(), options, [&](const auto& f) { self().run(f); });
   }
-  void padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half) override {
-    device_padded(list, self().size(), k, half, [&](const auto& f) { self().run(f); });
+  void padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half, bool shifts) override {
+    device_padded(list, self().size(), k, half, shifts, [&](const auto& f) { self().run(f); });
   }
 
  private:

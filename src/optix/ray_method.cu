@@ -206,8 +206,9 @@ void RayTracingMethod::neighbours(ListStorage& list, const ListOptions& options)
   device_neighbours(list, n_, options, [&](const auto& f) { launch(f); });
 }
 
-void RayTracingMethod::padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half) {
-  device_padded(list, n_, k, half, [&](const auto& f) { launch(f); });
+void RayTracingMethod::padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half,
+                                         bool shifts) {
+  device_padded(list, n_, k, half, shifts, [&](const auto& f) { launch(f); });
 }
 
 }  // namespace raycut::detail::optix

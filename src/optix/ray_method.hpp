@@ -26,7 +26,7 @@ class RayTracingMethod : public cuda::GpuMethod {
   void set_update_policy(const UpdatePolicy& policy) override { policy_ = policy; }
   void compute(Kernel kernel, const KernelOptions& options) override;
   void neighbours(ListStorage& list, const ListOptions& options) override;
-  void padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half) override;
+  void padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half, bool shifts) override;
 
  protected:
   RayTracingMethod(bool sorted, const PipelineSpec& programs);
