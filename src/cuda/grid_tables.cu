@@ -265,7 +265,7 @@ __global__ void gather_images_kernel(const float4* pos, const PointImage* image,
 void GridTables::gather_images(const PointImage* image, cudaStream_t stream) {
   slot_images_.resize(std::max<std::uint32_t>(n_, 1));
   gather_images_kernel<<<blocks_for(n_, 256), 256, 0, stream>>>(pos_.data(), image, n_,
-                                                                 slot_images_.data());
+                                                                slot_images_.data());
   RAYCUT_CUDA_CHECK_LAUNCH();
 }
 

@@ -49,10 +49,10 @@ class GridTables {
   DeviceBuffer<std::uint32_t> index_, index_alt_, run_start_;
   std::uint32_t* order_ = nullptr;  // index_ or index_alt_: sorted slot -> original index
   DeviceBuffer<float4> pos_;
-  DeviceBuffer<std::uint32_t> targets_;  // select_targets()
+  DeviceBuffer<std::uint32_t> targets_;   // select_targets()
   DeviceBuffer<PointImage> slot_images_;  // gather_images()
   DeviceBuffer<std::uint32_t> selected_;  // its count (device; the number is known)
-  DeviceBuffer<std::uint32_t> start_;  // dense: per cell; compact: per non-empty cell
+  DeviceBuffer<std::uint32_t> start_;     // dense: per cell; compact: per non-empty cell
   DeviceBuffer<std::uint64_t> cell_keys_, row_keys_;
   DeviceBuffer<uint2> row_cells_;
   std::uint64_t row_mask_ = 0;

@@ -85,7 +85,7 @@ enum class GridKernel {
 };
 
 struct GridPass {
-  const void* particles = nullptr;  // float4 per slot, in cell order: x y z, w = point index
+  const void* particles = nullptr;         // float4 per slot, in cell order: x y z, w = point index
   const std::uint32_t* targets = nullptr;  // the slots of the targets in slot order; null: all
   GridGeometry geometry;
   bool dense = true;
@@ -112,8 +112,8 @@ struct ImageTables {
 struct PairPass {
   PassKind kind = PassKind::none;
   const char* method = "";
-  std::size_t n = 0;        // targets: points [0, n)
-  std::size_t points = 0;   // every point a candidate source (n without images)
+  std::size_t n = 0;       // targets: points [0, n)
+  std::size_t points = 0;  // every point a candidate source (n without images)
   ImageTables images;
   float cutoff_squared = 0;
   HostPass host;

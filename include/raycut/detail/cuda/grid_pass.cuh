@@ -313,8 +313,8 @@ __global__ void __launch_bounds__(grid_block_size)
     for (int u = 0; u < U; ++u) {
       const Vec3 d{q[u].x - p.x, q[u].y - p.y, q[u].z - p.z};
       const float r2 = squared_distance(d.x, d.y, d.z);
-      visit(f, acc, in_range(r2, cutoff_squared) && s[u] != t, i, original_index(q[u]), s[u], d,
-            r2, images, ti);
+      visit(f, acc, in_range(r2, cutoff_squared) && s[u] != t, i, original_index(q[u]), s[u], d, r2,
+            images, ti);
     }
   }
   combine_lanes<G, F>(acc);

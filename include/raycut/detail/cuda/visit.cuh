@@ -21,8 +21,8 @@ namespace raycut::detail::cuda {
 // would only add its own cost); the others branch.
 template <class F, class Images>
 __device__ __forceinline__ void visit(const F& f, typename F::Accumulator& acc, bool in,
-                                      std::uint32_t i, std::uint32_t k, std::uint32_t index,
-                                      Vec3 r, float r2, const Images& images,
+                                      std::uint32_t i, std::uint32_t k, std::uint32_t index, Vec3 r,
+                                      float r2, const Images& images,
                                       const typename Images::Target& ti) {
   std::uint32_t j;
   Shift s{};
