@@ -25,11 +25,10 @@ from typing import Any
 
 import numpy as np
 
+from . import _letters
 from . import neighbor_list as _neighbor_list
 
 __all__ = ["neighbor_list"]
-
-_QUANTITIES = "ijdDS"
 
 
 def _effective_cell(cell: np.ndarray, pbc: np.ndarray) -> np.ndarray:
@@ -78,12 +77,7 @@ def neighbor_list(quantities: str, atoms: Any, cutoff: float, self_interaction: 
     Raises ValueError for a singular cell or a periodic axis with a zero cell row (the library's
     message), and for per-atom cutoffs.
     """
-    if not isinstance(quantities, str) or not quantities:
-        raise ValueError("quantities must be a non-empty string of the letters i, j, d, D, S")
-    for letter in quantities:
-        if letter not in _QUANTITIES:
-            raise ValueError(f"unknown quantity {letter!r} in {quantities!r} (known: i, j, d, "
-                             "D, S)")
+    _letters(quantities)
     try:
         pbc = np.broadcast_to(np.asarray(atoms.pbc, dtype=bool), (3,)).copy()
         positions = np.asarray(atoms.positions, dtype=np.float64).reshape(-1, 3)

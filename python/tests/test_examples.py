@@ -40,11 +40,17 @@ def test_lj_md_torch_skips_cleanly_without_torch(monkeypatch, capsys):
     assert "PyTorch is not installed" in capsys.readouterr().out
 
 
-def test_python_overhead_bench_runs(tmp_path):
-    spec = importlib.util.spec_from_file_location(
-        "raycut_bench_python_overhead", EXAMPLES.parents[1] / "bench" / "python_overhead.py")
+def load_bench(name):
+    """bench/<name>.py as a module (the benches are scripts, not part of the package)."""
+    spec = importlib.util.spec_from_file_location(f"raycut_bench_{name}",
+                                                  EXAMPLES.parents[1] / "bench" / f"{name}.py")
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
+    return bench
+
+
+def test_python_overhead_bench_runs(tmp_path):
+    bench = load_bench("python_overhead")
     out = tmp_path / "overhead.csv"
     rows = bench.main(["--n", "200", "--calls", "5", "--warmup", "2", "--method", "cell-list",
                        "--out", str(out)])
@@ -54,10 +60,7 @@ def test_python_overhead_bench_runs(tmp_path):
 
 
 def test_python_lists_bench_runs_tiny(tmp_path):
-    spec = importlib.util.spec_from_file_location(
-        "raycut_bench_python_lists", EXAMPLES.parents[1] / "bench" / "python_lists.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_bench("python_lists")
     out = tmp_path / "lists.csv"
     # NumPy input with a CPU method: the bench's bound-engine variants read host arrays.
     rows = bench.main(["--tiny", "--numpy", "--method", "cell-list", "--reps", "2", "--warmup", "1",
