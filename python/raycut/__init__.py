@@ -258,20 +258,24 @@ class Engine:
             raise ValueError("half lists are not defined for query sets: their pairs (query, "
                              "point) are not symmetric (pass half=False)")
 
-    def padded_neighbours(self, k: int, raise_on_overflow: bool = False) -> tuple:
-        """The padded [N, K] neighbour matrix: ``(indices, counts, report)``.
+    def padded_neighbours(self, k: int, raise_on_overflow: bool = False,
+                          shifts: bool = False) -> tuple:
+        """The padded [N, K] neighbour matrix: ``(indices, counts, report)``, and with
+        ``shifts`` also S, (N, K, 3) int32 (0 in empty slots): ``(indices, counts, report, S)``.
 
-        Row i holds min(counts[i], K) neighbours, then N (an invalid index). Rows with more than
-        K neighbours are never truncated silently: ``report`` says how many overflowed
-        (``overflowed_rows``) and the largest count (grow K to ``largest_count`` and retry);
-        with ``raise_on_overflow`` an overflow raises ``CapacityError``.
+        Row i holds min(counts[i], K) neighbours, then N (an invalid index); in a periodic box a
+        row can hold a source once per image, S says which. Rows with more than K neighbours
+        are never truncated silently: ``report`` says how many overflowed (``overflowed_rows``)
+        and the largest count (grow K to ``largest_count`` and retry); with
+        ``raise_on_overflow`` an overflow raises ``CapacityError``.
         """
         if int(k) < 0:
             raise ValueError(f"padded neighbour list: K must be >= 1, got {k}")
         like = self._like
-        indices, counts, report = self._call(like, self._engine.padded, int(k),
-                                             bool(raise_on_overflow), like.host)
-        return _arrays.output(indices, like), _arrays.output(counts, like), report
+        indices, counts, report, s = self._call(like, self._engine.padded, int(k),
+                                                bool(raise_on_overflow), like.host, bool(shifts))
+        out = (_arrays.output(indices, like), _arrays.output(counts, like), report)
+        return out + (_arrays.output(s, like),) if shifts else out
 
     def _pairs(self, half: bool, distances: bool, vectors: bool, shifts: bool = False) -> tuple:
         self._no_half_with_queries(half)

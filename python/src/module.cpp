@@ -369,13 +369,15 @@ nb::tuple pairs(raycut::Engine& engine, bool half, bool distances, bool vectors,
       shifts ? wrap(sh, {count, 3}, dtype_of<std::int32_t>(), owner, space) : nb::none());
 }
 
-// Padded [N, K] (int32; N marks an empty slot), counts [N] (int32), report.
-nb::tuple padded(raycut::Engine& engine, std::uint32_t k, bool raise_on_overflow, bool to_host) {
+// Padded [N, K] (int32; N marks an empty slot), counts [N] (int32), report, and with `shifts`
+// S [N, K, 3] (int32; 0 in empty slots).
+nb::tuple padded(raycut::Engine& engine, std::uint32_t k, bool raise_on_overflow, bool to_host,
+                 bool shifts) {
   auto list = std::make_shared<raycut::PaddedNeighbourBuffer>();
   raycut::PaddedReport report;
   {
     nb::gil_scoped_release release;
-    report = engine.padded_neighbours(*list, k, raise_on_overflow);
+    report = engine.padded_neighbours(*list, k, raise_on_overflow, shifts);
   }
   const std::size_t n = list->size();
   nb::dict info;
@@ -385,10 +387,13 @@ nb::tuple padded(raycut::Engine& engine, std::uint32_t k, bool raise_on_overflow
   info["k"] = k;
   if (to_host && list->space() == MemorySpace::device)
     return nb::make_tuple(host_array(list->indices_to_host(), {n, k}, index_dtype(n + 1)),
-                          host_array(list->counts_to_host(), {n}, index_dtype(n + 1)), info);
+                          host_array(list->counts_to_host(), {n}, index_dtype(n + 1)), info,
+                          shifts ? host_array(list->shifts_to_host(), {n, k, 3}) : nb::none());
   const MemorySpace space = list->space();
-  return nb::make_tuple(wrap(list->indices(), {n, k}, index_dtype(n + 1), list, space),
-                        wrap(list->counts(), {n}, index_dtype(n + 1), list, space), info);
+  return nb::make_tuple(
+      wrap(list->indices(), {n, k}, index_dtype(n + 1), list, space),
+      wrap(list->counts(), {n}, index_dtype(n + 1), list, space), info,
+      shifts ? wrap(list->shifts(), {n, k, 3}, dtype_of<std::int32_t>(), list, space) : nb::none());
 }
 
 // The results of the last run() of `kernel`, as new arrays (host copies, or device copies on
@@ -726,7 +731,8 @@ NB_MODULE(_raycut, m) {
            nb::arg("to_host"), nb::arg("shifts") = false)
       .def("pairs", &pairs, nb::arg("half"), nb::arg("distances"), nb::arg("vectors"),
            nb::arg("to_host"), nb::arg("shifts") = false)
-      .def("padded", &padded, nb::arg("k"), nb::arg("raise_on_overflow"), nb::arg("to_host"))
+      .def("padded", &padded, nb::arg("k"), nb::arg("raise_on_overflow"), nb::arg("to_host"),
+           nb::arg("shifts") = false)
       .def("timings", [](const raycut::Engine& e) {
         const raycut::Timings& t = e.last_timings();
         nb::dict d;

@@ -422,6 +422,28 @@ def test_engine_periodic_update_and_kernels(system_method):
 # ---- errors ------------------------------------------------------------------------------------
 
 
+def test_padded_rows_carry_shifts(system_method):
+    """The padded matrix with S holds each CSR row's (j, S) entries, then N with S = 0: in a cell
+    thinner than the cutoff a row holds a source once per image."""
+    cell = np.array([[0.6, 0.0, 0.0], [0.2, 0.7, 0.0], [0.1, 0.1, 0.8]])
+    x = inside_cell(12, cell, seed=5)
+    engine = raycut.Engine(system_method)
+    engine.build(x, 1.0, cell=cell, pbc=True)
+    offsets, indices, shifts = (np.asarray(a) for a in engine.neighbours(shifts=True))
+    k = int(np.diff(offsets).max()) + 1
+    idx, counts, report, s = engine.padded_neighbours(k, shifts=True)
+    idx, counts, s = np.asarray(idx), np.asarray(counts), np.asarray(s)
+    assert not report["overflowed"] and s.shape == (len(x), k, 3)
+    for i in range(len(x)):
+        row = slice(offsets[i], offsets[i + 1])
+        want = sorted(zip(indices[row].tolist(), map(tuple, shifts[row].tolist())))
+        c = int(counts[i])
+        assert c == offsets[i + 1] - offsets[i]
+        assert sorted(zip(idx[i, :c].tolist(), map(tuple, s[i, :c].tolist()))) == want
+        assert np.all(idx[i, c:] == len(x)) and np.all(s[i, c:] == 0)
+    assert len(engine.padded_neighbours(k)) == 3  # no shifts asked: the three outputs as before
+
+
 def test_errors():
     x = inside_cell(10, np.eye(3))
     method = SYSTEM_METHODS[0]
