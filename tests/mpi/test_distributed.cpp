@@ -620,6 +620,39 @@ std::vector<TriclinicCase> triclinic_cases() {
           {"tilted slab, open axis split", slab, slab_rows, {1, 1, 0}}};
 }
 
+// What the skin relies on: every image (j, S) within `reach` of an owned particle is owned
+// (S = 0) or a halo of this rank; the Engine at cutoff `reach` over the positions held lists
+// them. Stricter than the lists of pairs within the cutoff (and a Euclidean halo test in a
+// skewed frame fails it: it drops images near the domains' obtuse corners). Collective.
+void expect_complete_halos(const DistributedEngine& engine, const Box& box, float reach) {
+  const std::size_t n = engine.global_size();
+  const std::vector<float> held = gather_positions(engine, n);
+  raycut::Engine all("cell-list");
+  all.build({held.data(), n, MemorySpace::host}, reach, box);
+  raycut::ListOptions options;
+  options.shifts = true;
+  const raycut::NeighbourList list = all.neighbours(options);
+  std::vector<bool> owned(n, false);
+  for (std::uint64_t id : engine.ids()) owned[id] = true;
+  std::vector<Entry> halos;
+  for (std::size_t k = 0; k < engine.halos(); ++k)
+    halos.push_back({static_cast<std::int64_t>(engine.halo_ids()[k]), engine.halo_shifts()[3 * k],
+                     engine.halo_shifts()[3 * k + 1], engine.halo_shifts()[3 * k + 2]});
+  std::sort(halos.begin(), halos.end());
+  std::size_t missing = 0, checked = 0;
+  for (std::uint64_t t : engine.ids())
+    for (std::uint64_t e = list.offsets[t]; e < list.offsets[t + 1]; ++e) {
+      const std::int32_t* s = &list.shifts[3 * e];
+      const std::uint32_t j = list.indices[e];
+      ++checked;
+      if (s[0] == 0 && s[1] == 0 && s[2] == 0 && owned[j]) continue;
+      missing += !std::binary_search(halos.begin(), halos.end(),
+                                     Entry{static_cast<std::int64_t>(j), s[0], s[1], s[2]});
+    }
+  EXPECT_EQ(missing, 0u) << "rank " << engine.rank() << ": images within cutoff + skin not held";
+  EXPECT_GT(checked, engine.owned());
+}
+
 TEST(Distributed, TriclinicCellsMatchTheEngine) {
   const float cutoff = 1.5f;
   for (const TriclinicCase& c : triclinic_cases()) {
@@ -650,6 +683,32 @@ TEST(Distributed, TriclinicCellsMatchTheEngine) {
         }
       }
     }
+  }
+}
+
+TEST(Distributed, TriclinicHalosHoldEverySourceWithinTheSkin) {
+  // Uniform and dense (about 2.5 per unit volume), so that the thin regions near the domains'
+  // corners and edges hold particles.
+  for (const TriclinicCase& c : triclinic_cases()) {
+    std::mt19937_64 rng(53);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    const auto& r = c.rows;
+    const double volume = std::abs(r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1]) -
+                                   r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0]) +
+                                   r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]));
+    std::vector<float> xyz;
+    for (std::size_t i = 0; i < static_cast<std::size_t>(2.5 * volume); ++i) {
+      const double f[3] = {u(rng), u(rng), u(rng)};
+      for (int k = 0; k < 3; ++k)
+        xyz.push_back(static_cast<float>(f[0] * r[0][k] + f[1] * r[1][k] + f[2] * r[2][k]));
+    }
+    DistributedOptions options;
+    options.dims = c.dims;
+    options.skin = 0.4f;
+    DistributedEngine engine(MPI_COMM_WORLD, options);
+    build(engine, xyz, 1.5f, c.box, Spread::strided);
+    SCOPED_TRACE(c.name);
+    expect_complete_halos(engine, c.box, 1.5f + options.skin);
   }
 }
 
