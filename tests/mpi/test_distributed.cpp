@@ -9,7 +9,8 @@
 // -1, 0, 1 periods per periodic axis (in double, rounded to float, as the halos are), rows of
 // the unshifted copies kept: the same float coordinates as the halos, so neighbour sets must be
 // identical, not merely close. A double-precision brute-force oracle (tests/periodic_oracle.hpp)
-// checks the thin-box lists independently.
+// checks the thin-box lists independently. Triclinic cells are checked against the
+// single-process Engine built with the same Box instead (see the triclinic section).
 #include <gtest/gtest.h>
 #include <mpi.h>
 
