@@ -57,10 +57,65 @@ std::vector<std::uint64_t> scaled(const std::vector<std::uint64_t>& counts, std:
   return out;
 }
 
-// The image of a coordinate under a periodic shift: in double, then rounded to float, as the
-// halo copies are made.
-float image(float x, std::int32_t s, double length) {
-  return s == 0 ? x : static_cast<float>(static_cast<double>(x) + s * length);
+// The image x + S . cell of a position: in double, then rounded to float, as the halo copies are
+// made (and as the single-rank engine makes its images, core/image_frame.hpp).
+void image(const float* x, const std::int32_t* s, const Decomposition& dec, float* out) {
+  for (int c = 0; c < 3; ++c) {
+    if (s[0] == 0 && s[1] == 0 && s[2] == 0) {
+      out[c] = x[c];
+      continue;
+    }
+    out[c] = static_cast<float>(static_cast<double>(x[c]) + s[0] * dec.cell[0][c] +
+                                s[1] * dec.cell[1][c] + s[2] * dec.cell[2][c]);
+  }
+}
+
+// The unit vector of a row (zero stays zero).
+std::array<double, 3> unit(const std::array<double, 3>& v) {
+  const double norm = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  return norm > 0 ? std::array<double, 3>{v[0] / norm, v[1] / norm, v[2] / norm} : v;
+}
+
+double dot(const std::array<double, 3>& a, const std::array<double, 3>& b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+// The box's part of the decomposition (Decomposition in the header): normals, periods, rows.
+// Validates the box first.
+void set_geometry(Decomposition& dec, const Box& box) {
+  validate(box);
+  const auto g = reciprocal_rows(box);
+  dec.aligned = true;
+  bool open_cartesian = true;  // every open e_k orthogonal to every periodic row
+  for (int k = 0; k < 3; ++k) {
+    dec.periodic[k] = box.pbc[k];
+    for (int c = 0; c < 3; ++c) dec.cell[k][c] = box.cell[k][c];
+    if (!box.pbc[k]) continue;
+    for (int c = 0; c < 3; ++c) {
+      if (c != k && box.cell[k][c] != 0) dec.aligned = false;
+      if (c != k && !box.pbc[c] && box.cell[k][c] != 0) open_cartesian = false;
+    }
+    if (!(box.cell[k][k] > 0)) dec.aligned = false;
+  }
+  for (int k = 0; k < 3; ++k) {
+    std::array<double, 3> e = {0, 0, 0};
+    e[k] = 1;
+    if (box.pbc[k] && dec.aligned) {
+      dec.normal[k] = e;  // exactly: u_k = x_k, as orthorhombic boxes always had it
+      dec.length[k] = box.cell[k][k];
+    } else if (box.pbc[k]) {
+      dec.normal[k] = unit(g[k]);
+      dec.length[k] = face_width(box, k);
+    } else {
+      // The reciprocal row of a completion row is that row (unit, orthogonal to the others).
+      dec.normal[k] = open_cartesian ? e : unit(g[k]);
+      dec.length[k] = 0;
+    }
+  }
+  dec.orthogonal = true;
+  for (int a = 0; a < 3; ++a)
+    for (int b = a + 1; b < 3; ++b)
+      if (std::abs(dot(dec.normal[a], dec.normal[b])) > 1e-12) dec.orthogonal = false;
 }
 
 // Wraps a coordinate into [0, L) in double (the float result may round up to L itself).
@@ -76,16 +131,23 @@ float wrap_coordinate(float v, double length) {
 
 // ---- decomposition ----------------------------------------------------------------------------
 
-int Decomposition::slab(int axis, double x) const {
+double Decomposition::coordinate(int axis, const float* xyz) const {
+  const auto& n = normal[axis];
+  return static_cast<double>(xyz[0]) * n[0] + static_cast<double>(xyz[1]) * n[1] +
+         static_cast<double>(xyz[2]) * n[2];
+}
+
+int Decomposition::slab(int axis, double u) const {
   const int d = dims[axis];
   if (d == 1) return 0;
-  const double k = std::floor((x - lo[axis]) / width[axis]);
+  const double k = std::floor((u - lo[axis]) / width[axis]);
   if (!(k >= 0)) return 0;  // also NaN
   return k >= d - 1 ? d - 1 : static_cast<int>(k);
 }
 
 int Decomposition::owner(const float* xyz) const {
-  return (slab(0, xyz[0]) * dims[1] + slab(1, xyz[1])) * dims[2] + slab(2, xyz[2]);
+  return (slab(0, coordinate(0, xyz)) * dims[1] + slab(1, coordinate(1, xyz))) * dims[2] +
+         slab(2, coordinate(2, xyz));
 }
 
 std::array<int, 3> Decomposition::coords(int domain) const {
@@ -205,33 +267,30 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
     if (!(cutoff > 0) || !std::isfinite(cutoff))
       throw Error(ErrorCode::invalid_argument,
                   "cutoff must be finite and > 0, got " + std::to_string(cutoff));
-    validate(box);
-    for (int a = 0; a < 3; ++a)
-      for (int b = 0; b < 3; ++b)
-        if (a != b && box.cell[a][b] != 0)
-          throw Error(ErrorCode::unsupported,
-                      "distributed engine: the cell must be orthorhombic (rows along x, y, z); "
-                      "triclinic cells are a later slice");
-    for (int a = 0; a < 3; ++a)
-      if (box.pbc[a] && !(box.cell[a][a] > 0))
-        throw Error(ErrorCode::invalid_argument, std::string("distributed engine: periodic axis ") +
-                                                     axis_name(a) + " needs a positive length");
-    for (std::size_t i = 0; i < positions.size; ++i)
-      for (int c = 0; c < 3; ++c) {
-        const float v = positions.xyz[3 * i + c];
-        if (!std::isfinite(v))
+    set_geometry(decomposition_, box);  // validates the box
+    for (std::size_t i = 0; i < positions.size; ++i) {
+      for (int c = 0; c < 3; ++c)
+        if (!std::isfinite(positions.xyz[3 * i + c]))
           throw Error(ErrorCode::invalid_input, "distributed build: particle " +
                                                     std::to_string(ids[i]) +
                                                     " has a non-finite coordinate");
-        bounds[c] = std::min(bounds[c], static_cast<double>(v));
-        bounds[3 + c] = std::min(bounds[3 + c], -static_cast<double>(v));
+      for (int a = 0; a < 3; ++a) {
+        const double u = decomposition_.coordinate(a, &positions.xyz[3 * i]);
+        bounds[a] = std::min(bounds[a], u);
+        bounds[3 + a] = std::min(bounds[3 + a], -u);
       }
+    }
     // Every rank must describe the same system: compare with rank 0's.
-    double mine[8] = {box.cell[0][0],     box.cell[1][1],     box.cell[2][2], double(box.pbc[0]),
-                      double(box.pbc[1]), double(box.pbc[2]), double(cutoff), double(width)};
-    double root[8];
+    double mine[14];
+    for (int a = 0; a < 3; ++a) {
+      for (int c = 0; c < 3; ++c) mine[3 * a + c] = box.cell[a][c];
+      mine[9 + a] = box.pbc[a];
+    }
+    mine[12] = cutoff;
+    mine[13] = static_cast<double>(width);
+    double root[14];
     std::memcpy(root, mine, sizeof mine);
-    MPI_Bcast(root, 8, MPI_DOUBLE, 0, comm_);
+    MPI_Bcast(root, 14, MPI_DOUBLE, 0, comm_);
     if (std::memcmp(root, mine, sizeof mine) != 0)
       throw Error(ErrorCode::invalid_argument,
                   "distributed build: box, cutoff or carried width differ from rank 0's");
@@ -252,24 +311,32 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
   halo_width_ = static_cast<double>(cutoff) + static_cast<double>(options_.skin);
   Decomposition& dec = decomposition_;
   for (int a = 0; a < 3; ++a) {
-    dec.periodic[a] = box.pbc[a];
-    if (box.cell[a][a] > 0) {
+    const double along = dot(dec.cell[a], dec.normal[a]);  // the open row's extent along u_a
+    if (dec.periodic[a] || along > 0) {
       dec.lo[a] = 0;
-      dec.length[a] = box.cell[a][a];
+      if (!dec.periodic[a]) dec.length[a] = along;
     } else {  // an open axis with no length: the particles' extent now
       const bool any = global_size_ > 0;
       dec.lo[a] = any ? global[a] : 0;
       dec.length[a] = any ? -global[3 + a] - global[a] : 0;
     }
     dec.width[a] = dec.length[a] / dec.dims[a];
-    if ((dec.dims[a] > 1 || dec.periodic[a]) && !(dec.width[a] >= halo_width_))
+    if ((dec.dims[a] > 1 || dec.periodic[a]) && !(dec.width[a] >= halo_width_)) {
+      // Orthorhombic axes by coordinate, triclinic ones by cell row and face width.
+      const std::string axis = dec.aligned ? axis_name(a)
+                                           : std::string("cell row ") + "abc"[a] + " (normal " +
+                                                 std::to_string(dec.normal[a][0]) + ", " +
+                                                 std::to_string(dec.normal[a][1]) + ", " +
+                                                 std::to_string(dec.normal[a][2]) + ")";
       throw Error(ErrorCode::invalid_argument,
-                  std::string("distributed engine: domains along ") + axis_name(a) + " are " +
+                  "distributed engine: domains along " + axis + " are " +
                       std::to_string(dec.width[a]) + " wide (" + std::to_string(dec.dims[a]) +
-                      " over " + std::to_string(dec.length[a]) +
+                      " over " + (dec.periodic[a] ? "face width " : "") +
+                      std::to_string(dec.length[a]) +
                       "), less than cutoff + skin = " + std::to_string(halo_width_) +
                       "; use fewer domains along that axis (DistributedOptions::dims) or a "
                       "larger box");
+    }
   }
 
   ids_.assign(ids, ids + positions.size);
@@ -325,9 +392,24 @@ void DistributedEngine::exchange() {
   check_built("exchange");
   const auto start = Clock::now();
   const Decomposition& dec = decomposition_;
-  for (std::size_t i = 0; i < ids_.size(); ++i)
-    for (int a = 0; a < 3; ++a)
-      if (dec.periodic[a]) xyz_[3 * i + a] = wrap_coordinate(xyz_[3 * i + a], dec.length[a]);
+  for (std::size_t i = 0; i < ids_.size(); ++i) {
+    float* x = &xyz_[3 * i];
+    if (dec.aligned) {
+      for (int a = 0; a < 3; ++a)
+        if (dec.periodic[a]) x[a] = wrap_coordinate(x[a], dec.length[a]);
+      continue;
+    }
+    // Through the fractional coordinates f_k = u_k / w_k, as raycut::wrap: x - floor(f) . cell.
+    double w[3] = {x[0], x[1], x[2]};
+    for (int k = 0; k < 3; ++k) {
+      if (!dec.periodic[k]) continue;
+      const double f = dec.coordinate(k, x) / dec.length[k];
+      double s = std::floor(f);
+      if (f - s >= 1) s += 1;
+      for (int c = 0; c < 3; ++c) w[c] -= s * dec.cell[k][c];
+    }
+    for (int c = 0; c < 3; ++c) x[c] = static_cast<float>(w[c]);
+  }
   stats_.bytes_sent = 0;
   migrate();
   build_halos();
@@ -401,6 +483,15 @@ void DistributedEngine::migrate() {
 
 // Every image of every owned particle within cutoff + skin of some domain (its own too, for an
 // image shifted by a period) goes there: [id][image xyz][shift] records.
+//
+// Why this is complete, in any cell: normal[k] is a unit vector, so for a target t and an image
+// p' of a source, |u_k(p') - u_k(t)| <= |p' - t|. A pair within h = cutoff + skin therefore
+// has, along every axis, the image within h of the slab of t's domain: h / w_k in fractional
+// units on a periodic axis. Positions are wrapped (u_k in [0, w_k)) and domains are at least h
+// wide, so w_k >= h and |S_k| <= 1 reaches every such image (as image_range() gives for w >= C).
+// With orthogonal normals the domain is a box and the Euclidean distance to it is exact; with
+// skewed ones the per-axis test alone is kept (a parallelepiped's corner and edge regions are
+// larger than the rounded shell: extra halos, sources only, harmless).
 void DistributedEngine::build_halos() {
   const Decomposition& dec = decomposition_;
   const std::size_t n = ids_.size();
@@ -424,8 +515,10 @@ void DistributedEngine::build_halos() {
     for (int a = 0; a < 3; ++a) {
       axis[a].clear();
       const int d = dec.dims[a];
+      const double u = dec.coordinate(a, &xyz_[3 * i]);
       for (std::int32_t s = dec.periodic[a] ? -1 : 0; s <= (dec.periodic[a] ? 1 : 0); ++s) {
-        const double y = static_cast<double>(xyz_[3 * i + a]) + s * dec.length[a];
+        // A shift by cell row a moves u_a by one face width; the other rows leave it.
+        const double y = u + s * dec.length[a];
         const int first = dec.slab(a, y - reach), last = dec.slab(a, y + reach);
         for (int k = first; k <= last; ++k) {
           // An open axis's end slabs extend to infinity.
@@ -442,7 +535,7 @@ void DistributedEngine::build_halos() {
     for (const Candidate& cx : axis[0])
       for (const Candidate& cy : axis[1])
         for (const Candidate& cz : axis[2]) {
-          if (cx.gap2 + cy.gap2 + cz.gap2 >= reach2) continue;
+          if (dec.orthogonal && cx.gap2 + cy.gap2 + cz.gap2 >= reach2) continue;
           const int q = (cx.slab * dec.dims[1] + cy.slab) * dec.dims[2] + cz.slab;
           if (q == rank_ && cx.shift == 0 && cy.shift == 0 && cz.shift == 0) continue;
           index[q].push_back(static_cast<std::uint32_t>(i));
@@ -471,7 +564,7 @@ void DistributedEngine::build_halos() {
     const std::uint32_t i = plan.index[k];
     const std::int32_t* s = &plan.shift[3 * k];
     float p[3];
-    for (int a = 0; a < 3; ++a) p[a] = image(xyz_[3 * i + a], s[a], dec.length[a]);
+    image(&xyz_[3 * i], s, dec, p);
     put(at, &ids_[i], 1);
     put(at, p, 3);
     put(at, s, 3);
@@ -501,8 +594,7 @@ void DistributedEngine::refresh_halos() {
   const std::size_t n = ids_.size();
   std::vector<float> send(3 * plan.index.size());
   for (std::size_t k = 0; k < plan.index.size(); ++k)
-    for (int a = 0; a < 3; ++a)
-      send[3 * k + a] = image(xyz_[3 * plan.index[k] + a], plan.shift[3 * k + a], dec.length[a]);
+    image(&xyz_[3 * plan.index[k]], &plan.shift[3 * k], dec, &send[3 * k]);
   std::copy(xyz_.begin(), xyz_.end(), local_xyz_.begin());
   transport_->exchange(
       reinterpret_cast<const std::byte*>(send.data()), scaled(plan.send_counts, record).data(),
@@ -547,8 +639,8 @@ void DistributedEngine::select_boundary() {
   for (std::size_t i = 0; i < ids_.size(); ++i) {
     bool near = false;
     for (int a = 0; a < 3; ++a) {
-      const double x = xyz_[3 * i + a];
-      near = near || x - low[a] < reach || high[a] - x < reach;
+      const double u = dec.coordinate(a, &xyz_[3 * i]);
+      near = near || u - low[a] < reach || high[a] - u < reach;
     }
     if (!near) continue;
     boundary_.push_back(static_cast<std::uint32_t>(i));

@@ -9,7 +9,8 @@
 // -1, 0, 1 periods per periodic axis (in double, rounded to float, as the halos are), rows of
 // the unshifted copies kept: the same float coordinates as the halos, so neighbour sets must be
 // identical, not merely close. A double-precision brute-force oracle (tests/periodic_oracle.hpp)
-// checks the thin-box lists independently.
+// checks the thin-box lists independently. Triclinic cells are checked against the
+// single-process Engine built with the same Box instead (see the triclinic section).
 #include <gtest/gtest.h>
 #include <mpi.h>
 
@@ -182,8 +183,8 @@ std::vector<float> gather_positions(const DistributedEngine& engine, std::size_t
 
 // Float sums in another order: within a few ulps of the row's largest value (a force component
 // near 0 can be the difference of large terms).
-bool close(float got, float want, float scale) {
-  return std::abs(got - want) <= 1e-4f + 2e-5f * scale;
+bool close(float got, float want, float scale, float relative = 2e-5f) {
+  return std::abs(got - want) <= 1e-4f + relative * scale;
 }
 
 Row row_of(const raycut::mpi::DistributedList& list, std::size_t t) {
@@ -198,8 +199,9 @@ Row row_of(const raycut::mpi::DistributedList& list, std::size_t t) {
 // The owned rows of this rank against the reference: counts and neighbour sets (full and half)
 // exactly, Lennard-Jones energy, force and virial to float summation order. Collective.
 void expect_matches(DistributedEngine& engine, const Reference& ref, const std::string& what,
-                    bool exchanged = true) {
-  const raycut::Results lj = engine.compute(Kernel::lj_forces);
+                    bool exchanged = true, const raycut::KernelOptions& lj_options = {},
+                    float relative = 2e-5f) {
+  const raycut::Results lj = engine.compute(Kernel::lj_forces, lj_options);
   const raycut::Results count = engine.compute(Kernel::count);
   raycut::ListOptions options;
   options.shifts = true;
@@ -223,11 +225,11 @@ void expect_matches(DistributedEngine& engine, const Reference& ref, const std::
     float scale = std::abs(ref.results.energy[id]);
     for (int c = 0; c < 3; ++c) scale = std::max(scale, std::abs(ref.results.force[3 * id + c]));
     for (int c = 0; c < 6; ++c) scale = std::max(scale, std::abs(ref.results.virial[6 * id + c]));
-    bool ok_lj = close(lj.energy[t], ref.results.energy[id], scale);
+    bool ok_lj = close(lj.energy[t], ref.results.energy[id], scale, relative);
     for (int c = 0; c < 3; ++c)
-      ok_lj = ok_lj && close(lj.force[3 * t + c], ref.results.force[3 * id + c], scale);
+      ok_lj = ok_lj && close(lj.force[3 * t + c], ref.results.force[3 * id + c], scale, relative);
     for (int c = 0; c < 6; ++c)
-      ok_lj = ok_lj && close(lj.virial[6 * t + c], ref.results.virial[6 * id + c], scale);
+      ok_lj = ok_lj && close(lj.virial[6 * t + c], ref.results.virial[6 * id + c], scale, relative);
     if (ok_count && ok_rows && ok_lj) continue;
     ++failures;
     ADD_FAILURE() << what << ": rank " << engine.rank() << ", particle " << id << ": count "
@@ -495,6 +497,301 @@ TEST(Distributed, StepLoopEveryLocalRow) {
   step_loop(Box::orthorhombic(12, 12, 12), 0.4f, 5, false);
 }
 
+// ---- triclinic cells
+// ------------------------------------------------------------------------------------
+//
+// Against the single-process Engine built with the same Box (its own images, core/images.hpp):
+// not the same float coordinates as the halos (it wraps in double and works in its own frame),
+// but the same rounding of x + S . cell, so neighbour sets come out identical on these systems.
+
+Box cell_of(std::array<std::array<double, 3>, 3> rows,
+            std::array<bool, 3> pbc = {true, true, true}) {
+  Box box;
+  for (int a = 0; a < 3; ++a) {
+    for (int c = 0; c < 3; ++c) box.cell[a][c] = rows[a][c];
+    box.pbc[a] = pbc[a];
+  }
+  return box;
+}
+
+// A jittered lattice in fractional coordinates of `rows` (x = f . rows, f in (0, 1)), its
+// layers about 1.15 apart across each pair of faces: no two particles very close, whatever the
+// skew, and each layer 0.2 of a spacing below a lattice plane f = k / m, so that particles cross
+// domain faces and periodic faces soon. An open axis gets the row given for it here.
+std::vector<float> fractional_lattice(const std::array<std::array<double, 3>, 3>& rows,
+                                      unsigned seed) {
+  int m[3];
+  const Box full = cell_of(rows);
+  for (int a = 0; a < 3; ++a) m[a] = static_cast<int>(raycut::face_width(full, a) / 1.15);
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-0.12, 0.12);
+  std::vector<float> xyz;
+  for (int i = 0; i < m[0]; ++i)
+    for (int j = 0; j < m[1]; ++j)
+      for (int k = 0; k < m[2]; ++k) {
+        const double f[3] = {(i + 0.8 + u(rng)) / m[0], (j + 0.8 + u(rng)) / m[1],
+                             (k + 0.8 + u(rng)) / m[2]};
+        for (int c = 0; c < 3; ++c)
+          xyz.push_back(
+              static_cast<float>(f[0] * rows[0][c] + f[1] * rows[1][c] + f[2] * rows[2][c]));
+      }
+  return xyz;
+}
+
+// The reference rounds coordinates in its own frame (wrapped in double, its origin), so a pair's
+// r differs by up to an ulp of the coordinates (1e-6 at 10) and an LJ term by 12 dr / r
+// relative: 3e-5 for a pair the step loop brings to r = 0.3. Hence 1e-4 of the row's scale (not
+// the 2e-5 of identical coordinates), and sigma 0.5 for a lattice ~1.15 apart, so that such
+// pairs keep moderate terms.
+constexpr float triclinic_relative = 1e-4f;
+raycut::KernelOptions triclinic_lj() {
+  raycut::KernelOptions options;
+  options.lj_sigma = 0.5f;
+  return options;
+}
+
+Reference engine_reference(const std::vector<float>& xyz, const Box& box, float cutoff) {
+  Reference ref;
+  ref.n = xyz.size() / 3;
+  raycut::Engine engine("cell-list");
+  engine.build({xyz.data(), ref.n, MemorySpace::host}, cutoff, box);
+  ref.results = engine.compute(Kernel::lj_forces, triclinic_lj());
+  ref.count = engine.compute(Kernel::count).count;
+  raycut::ListOptions options;
+  options.shifts = true;
+  const raycut::NeighbourList list = engine.neighbours(options);
+  ref.rows.resize(ref.n);
+  ref.half_rows.resize(ref.n);
+  for (std::size_t i = 0; i < ref.n; ++i) {
+    for (std::uint64_t e = list.offsets[i]; e < list.offsets[i + 1]; ++e) {
+      const std::int32_t* s = &list.shifts[3 * e];
+      const Entry entry{list.indices[e], s[0], s[1], s[2]};
+      ref.rows[i].push_back(entry);
+      if (list.indices[e] > i ||
+          (list.indices[e] == i && raycut::Shift{s[0], s[1], s[2]}.positive()))
+        ref.half_rows[i].push_back(entry);
+    }
+    std::sort(ref.rows[i].begin(), ref.rows[i].end());
+    std::sort(ref.half_rows[i].begin(), ref.half_rows[i].end());
+  }
+  return ref;
+}
+
+const std::array<std::array<double, 3>, 3> hexagonal = {
+    {{12, 0, 0}, {6, 12 * 0.86602540378443864676, 0}, {0, 0, 12}}};  // a, b at 60 degrees
+// a, b at 23 degrees and c leaning over both: face widths 6.45, 6.85, 13.5.
+const std::array<std::array<double, 3>, 3> skewed = {{{18, 0, 0}, {15, 7.5, 0}, {-10.5, 6, 13.5}}};
+// det < 0: face widths 11.6, 11.8, 11.
+const std::array<std::array<double, 3>, 3> left_handed = {{{12, 0, 0}, {0, 0, 12}, {3, 11, 2}}};
+// A tilted periodic plane (a, b; face widths 10.1, 10.2) and an open c, particles along
+// the plane's normal (10 deep): the open axis is the effective cell's completion row, not z.
+const std::array<std::array<double, 3>, 3> slab_rows = {
+    {{11, 0, 2},
+     {5, 10, -1},
+     {-0.17581101331384747 * 10, 0.18460156397953983 * 10, 0.96696057322616102 * 10}}};
+
+// Domains along c too (MPI_Dims_create would split a and b only).
+std::array<int, 3> skewed_dims() {
+  switch (world_size()) {
+    case 2:
+      return {2, 1, 1};
+    case 3:
+      return {1, 1, 3};
+    case 4:
+      return {1, 2, 2};
+    default:
+      return {1, 1, 1};
+  }
+}
+
+struct TriclinicCase {
+  const char* name;
+  Box box;
+  std::array<std::array<double, 3>, 3> rows;
+  std::array<int, 3> dims;
+};
+
+std::vector<TriclinicCase> triclinic_cases() {
+  Box slab = cell_of(slab_rows, {true, true, false});
+  for (double& v : slab.cell[2]) v = 0;  // the open row takes no part
+  return {{"60-degree", cell_of(hexagonal), hexagonal, {0, 0, 0}},
+          {"skewed", cell_of(skewed), skewed, skewed_dims()},
+          {"left-handed", cell_of(left_handed), left_handed, {0, 0, 0}},
+          {"tilted slab", slab, slab_rows, {0, 0, 0}},
+          {"tilted slab, open axis split", slab, slab_rows, {1, 1, 0}}};
+}
+
+// What the skin relies on: every image (j, S) within `reach` of an owned particle is owned
+// (S = 0) or a halo of this rank; the Engine at cutoff `reach` over the positions held lists
+// them. Stricter than the lists of pairs within the cutoff (and a Euclidean halo test in a
+// skewed frame fails it: it drops images near the domains' obtuse corners). Collective.
+void expect_complete_halos(const DistributedEngine& engine, const Box& box, float reach) {
+  const std::size_t n = engine.global_size();
+  const std::vector<float> held = gather_positions(engine, n);
+  raycut::Engine all("cell-list");
+  all.build({held.data(), n, MemorySpace::host}, reach, box);
+  raycut::ListOptions options;
+  options.shifts = true;
+  const raycut::NeighbourList list = all.neighbours(options);
+  std::vector<bool> owned(n, false);
+  for (std::uint64_t id : engine.ids()) owned[id] = true;
+  std::vector<Entry> halos;
+  for (std::size_t k = 0; k < engine.halos(); ++k)
+    halos.push_back({static_cast<std::int64_t>(engine.halo_ids()[k]), engine.halo_shifts()[3 * k],
+                     engine.halo_shifts()[3 * k + 1], engine.halo_shifts()[3 * k + 2]});
+  std::sort(halos.begin(), halos.end());
+  std::size_t missing = 0, checked = 0;
+  for (std::uint64_t t : engine.ids())
+    for (std::uint64_t e = list.offsets[t]; e < list.offsets[t + 1]; ++e) {
+      const std::int32_t* s = &list.shifts[3 * e];
+      const std::uint32_t j = list.indices[e];
+      ++checked;
+      if (s[0] == 0 && s[1] == 0 && s[2] == 0 && owned[j]) continue;
+      missing += !std::binary_search(halos.begin(), halos.end(),
+                                     Entry{static_cast<std::int64_t>(j), s[0], s[1], s[2]});
+    }
+  EXPECT_EQ(missing, 0u) << "rank " << engine.rank() << ": images within cutoff + skin not held";
+  EXPECT_GT(checked, engine.owned());
+}
+
+TEST(Distributed, TriclinicCellsMatchTheEngine) {
+  const float cutoff = 1.5f;
+  for (const TriclinicCase& c : triclinic_cases()) {
+    const std::vector<float> xyz = fractional_lattice(c.rows, 31);
+    const Reference ref = engine_reference(xyz, c.box, cutoff);
+    for (bool owned_rows_only : {true, false}) {
+      DistributedOptions options;
+      options.dims = c.dims;
+      options.skin = 0.4f;
+      options.owned_rows_only = owned_rows_only;
+      DistributedEngine engine(MPI_COMM_WORLD, options);
+      build(engine, xyz, cutoff, c.box, Spread::strided);
+      expect_matches(engine, ref, std::string(c.name) + (owned_rows_only ? "" : ", every row"),
+                     true, triclinic_lj(), triclinic_relative);
+      const auto& dec = engine.decomposition();
+      EXPECT_FALSE(dec.aligned) << c.name;
+      EXPECT_FALSE(dec.orthogonal) << c.name;
+      // Periodic normals: unit, across the faces (orthogonal to the other periodic rows).
+      for (int k = 0; k < 3; ++k) {
+        if (!c.box.pbc[k]) continue;
+        EXPECT_NEAR(dec.length[k], raycut::face_width(c.box, k), 1e-9) << c.name;
+        const auto& nk = dec.normal[k];
+        EXPECT_NEAR(nk[0] * nk[0] + nk[1] * nk[1] + nk[2] * nk[2], 1.0, 1e-12) << c.name;
+        for (int m = 0; m < 3; ++m) {
+          const double along =
+              nk[0] * c.box.cell[m][0] + nk[1] * c.box.cell[m][1] + nk[2] * c.box.cell[m][2];
+          if (c.box.pbc[m]) EXPECT_NEAR(along, m == k ? dec.length[k] : 0.0, 1e-9) << c.name;
+        }
+      }
+    }
+  }
+}
+
+TEST(Distributed, TriclinicHalosHoldEverySourceWithinTheSkin) {
+  // Uniform and dense (about 2.5 per unit volume), so that the thin regions near the domains'
+  // corners and edges hold particles.
+  for (const TriclinicCase& c : triclinic_cases()) {
+    std::mt19937_64 rng(53);
+    std::uniform_real_distribution<double> u(0.0, 1.0);
+    const auto& r = c.rows;
+    const double volume = std::abs(r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1]) -
+                                   r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0]) +
+                                   r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0]));
+    std::vector<float> xyz;
+    for (std::size_t i = 0; i < static_cast<std::size_t>(2.5 * volume); ++i) {
+      const double f[3] = {u(rng), u(rng), u(rng)};
+      for (int k = 0; k < 3; ++k)
+        xyz.push_back(static_cast<float>(f[0] * r[0][k] + f[1] * r[1][k] + f[2] * r[2][k]));
+    }
+    DistributedOptions options;
+    options.dims = c.dims;
+    options.skin = 0.4f;
+    DistributedEngine engine(MPI_COMM_WORLD, options);
+    build(engine, xyz, 1.5f, c.box, Spread::strided);
+    SCOPED_TRACE(c.name);
+    expect_complete_halos(engine, c.box, 1.5f + options.skin);
+  }
+}
+
+// Constant velocities for `steps` steps with a skin, as step_loop, in a triclinic cell: every
+// step against the Engine over the positions held; after an exchange they are wrapped into the
+// cell (fractional coordinates in [0, 1]) and differ from the integrated ones by lattice vectors.
+void triclinic_step_loop(const TriclinicCase& c, int steps) {
+  const float cutoff = 1.5f;
+  const std::vector<float> start = fractional_lattice(c.rows, 41);
+  const std::size_t n = start.size() / 3;
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(-0.08, 0.08);  // under skin / 2 a step
+  std::vector<float> velocity(3 * n);
+  for (float& v : velocity) v = static_cast<float>(u(rng));
+  DistributedOptions options;
+  options.dims = c.dims;
+  options.skin = 0.4f;
+  DistributedEngine engine(MPI_COMM_WORLD, options);
+  build(engine, start, cutoff, c.box, Spread::strided, velocity, 3);
+  const auto g = raycut::reciprocal_rows(c.box);
+  auto fractional = [&](const double* x, int k) {
+    return x[0] * g[k][0] + x[1] * g[k][1] + x[2] * g[k][2];
+  };
+
+  std::vector<float> expected = start;
+  std::vector<double> unwrapped(start.begin(), start.end());
+  std::uint64_t migrated = 0, exchanges = 0;
+  for (int step = 0; step < steps; ++step) {
+    std::vector<float> next(engine.positions());
+    for (std::size_t t = 0; t < 3 * engine.owned(); ++t) next[t] += engine.carried()[t];
+    for (std::size_t i = 0; i < 3 * n; ++i) {
+      expected[i] += velocity[i];
+      unwrapped[i] += velocity[i];
+    }
+    const bool exchanged = engine.update(next.data());
+    exchanges += exchanged;
+    migrated += exchanged ? engine.stats().migrated_out : 0;
+    const std::vector<float> held = gather_positions(engine, n);
+    std::size_t wrong = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double x[3] = {held[3 * i], held[3 * i + 1], held[3 * i + 2]};
+      double d[3];
+      for (int a = 0; a < 3; ++a) d[a] = x[a] - expected[3 * i + a];
+      for (int k = 0; k < 3; ++k) {
+        const double f = fractional(x, k), df = fractional(d, k);
+        if (!exchanged)
+          wrong += df != 0;
+        else if (!c.box.pbc[k])  // wrapping moves along periodic rows only
+          wrong += std::abs(df) > 1e-5;
+        else
+          wrong += !(f >= -1e-6 && f <= 1 + 1e-6) || std::abs(df - std::round(df)) > 1e-5;
+      }
+    }
+    EXPECT_EQ(wrong, 0u) << c.name << ", step " << step << ": positions not as integrated";
+    expected = held;
+    std::size_t carried_wrong = 0;
+    for (std::size_t t = 0; t < 3 * engine.owned(); ++t)
+      carried_wrong += engine.carried()[t] != velocity[3 * engine.ids()[t / 3] + t % 3];
+    EXPECT_EQ(carried_wrong, 0u) << c.name << ", step " << step;
+    expect_matches(engine, engine_reference(expected, c.box, cutoff),
+                   std::string(c.name) + ", step " + std::to_string(step), exchanged,
+                   triclinic_lj());
+  }
+  std::uint64_t total_migrated = 0;
+  MPI_Allreduce(&migrated, &total_migrated, 1, MPI_UINT64_T, MPI_SUM, MPI_COMM_WORLD);
+  if (world_size() > 1) EXPECT_GT(total_migrated, 0u) << c.name << ": no particle crossed a face";
+  EXPECT_GT(engine.stats().refreshes, 0u) << c.name;
+  EXPECT_GT(exchanges, 0u) << c.name;
+  std::size_t outside = 0;  // particles that left the cell through a periodic face
+  for (std::size_t i = 0; i < n; ++i)
+    for (int k = 0; k < 3; ++k) {
+      const double f = fractional(&unwrapped[3 * i], k);
+      outside += c.box.pbc[k] && (f < 0 || f >= 1);
+    }
+  EXPECT_GT(outside, 0u) << c.name;
+}
+
+TEST(Distributed, StepLoopTriclinicCells) {
+  for (const TriclinicCase& c : triclinic_cases())
+    if (c.dims[0] != 1 || c.dims[1] != 1 || c.dims[2] != 0) triclinic_step_loop(c, 10);
+}
+
 // ---- errors, thrown on every rank ---------------------------------------------------------------
 
 TEST(Distributed, Errors) {
@@ -509,12 +806,14 @@ TEST(Distributed, Errors) {
     EXPECT_TRUE(contains(m, "along z") && contains(m, "cutoff + skin")) << m;
   }
   {
+    // Rows 6 long but a and b at 9.5 degrees: their faces are 1.0 apart, under cutoff + skin.
     DistributedEngine engine(MPI_COMM_WORLD);
-    Box triclinic = Box::orthorhombic(4, 4, 4);
-    triclinic.cell[1][0] = 1;
-    const std::string m = error_message(
-        ErrorCode::unsupported, [&] { build(engine, xyz, 1.0f, triclinic, Spread::strided); });
-    EXPECT_TRUE(contains(m, "triclinic")) << m;
+    const Box thin = cell_of({{{6, 0, 0}, {5.9, 1, 0}, {0, 0, 6}}});
+    const std::string m = error_message(ErrorCode::invalid_argument,
+                                        [&] { build(engine, xyz, 1.5f, thin, Spread::strided); });
+    EXPECT_TRUE(contains(m, "along cell row a") && contains(m, "face width") &&
+                contains(m, "cutoff + skin"))
+        << m;
   }
   {
     // A bad coordinate on the last rank only: every rank throws, naming it.

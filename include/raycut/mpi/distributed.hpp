@@ -54,9 +54,16 @@ class Transport {
 // communicator is duplicated, so its messages never mix with the caller's.
 std::unique_ptr<Transport> make_host_transport(MPI_Comm comm);
 
-// The Cartesian grid of domains over the global region. Along axis k the region is [0, L_k)
-// with L_k = box.cell[k][k] when that is > 0 (a periodic axis must have it); an open axis
-// with no length spans the particles' bounding box at build(). Domains split each axis into
+// The Cartesian grid of domains over the global region, in domain coordinates
+// u_k = x . normal[k] (unit vectors, so u is in lengths and a halo of width h is h along every
+// axis). A periodic axis k: normal[k] is the unit normal of the cell's faces across k,
+// reciprocal_rows(box)[k] scaled to unit length, so u_k = f_k w_k (f the fractional coordinate,
+// w_k = face_width(box, k)) and the region is [0, w_k); a shift by cell row m moves u_k by
+// w_k if m == k, else not at all. An open axis k: e_k when every open e_k is orthogonal to every
+// periodic row (orthorhombic boxes, slabs whose periodic rows lie in a coordinate plane), else
+// the effective cell's unit completion row (box.hpp), orthogonal to the periodic rows; either
+// way no periodic shift moves u_k. Its region is [0, L_k) with L_k = cell[k] . normal[k] when
+// that is > 0, else the particles' extent along u_k at build(). Domains split each axis into
 // dims[k] equal slabs; on an open axis the first and last slabs extend to -inf and +inf, so a
 // particle outside the region still has an owner. Domain (i, j, k) is rank (i dims[1] + j)
 // dims[2] + k.
@@ -64,10 +71,19 @@ struct Decomposition {
   std::array<int, 3> dims = {1, 1, 1};
   std::array<double, 3> lo = {0, 0, 0}, width = {0, 0, 0};  // slab k of axis a: lo + k width
   std::array<bool, 3> periodic = {false, false, false};
-  std::array<double, 3> length = {0, 0, 0};  // L_k: the period on periodic axes
+  std::array<double, 3> length = {0, 0, 0};  // the period (face width) on periodic axes
+  std::array<std::array<double, 3>, 3> normal = {{{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}};
+  std::array<std::array<double, 3>, 3> cell = {};  // the box's rows: images are x + S . cell
+  // The normals are orthogonal (the domains are boxes): the halo test is Euclidean, else per
+  // axis (docs/distributed.md).
+  bool orthogonal = true;
+  // The periodic rows lie along x, y, z with their normals: wrapped coordinate by coordinate.
+  bool aligned = true;
   int domains() const { return dims[0] * dims[1] * dims[2]; }
-  // Slab index along `axis` of a coordinate (clamped to the grid).
-  int slab(int axis, double x) const;
+  // u_axis of a position.
+  double coordinate(int axis, const float* xyz) const;
+  // Slab index along `axis` of a domain coordinate (clamped to the grid).
+  int slab(int axis, double u) const;
   // The owning domain (= rank) of a position.
   int owner(const float* xyz) const;
   std::array<int, 3> coords(int domain) const;
@@ -100,7 +116,8 @@ struct DistributedList {
   std::vector<float> distances;        // when asked
   std::vector<float> vectors;          // when asked: r = x_j - x_i + S . cell, 3 per entry
   // When asked: S per entry (3 int32), relative to the positions() of each particle's owner
-  // (a particle is wrapped into [0, L) on the periodic axes at every exchange).
+  // (a particle is wrapped into the cell, fractional coordinates in [0, 1) on the periodic
+  // axes, at every exchange).
   std::vector<std::int32_t> shifts;
 };
 
@@ -130,9 +147,10 @@ class DistributedEngine {
   // is fine): host positions, their global indices (distinct over all ranks), and `width`
   // floats per particle that travel with it on migration (velocities, say; carried() reads them
   // back). Then migrates every particle to its domain and builds the halos and the local engine.
-  // `box`: open or orthorhombic (periodic on any axes, rows along x, y, z); a triclinic cell is
-  // Error(unsupported). Every domain must be at least cutoff + skin wide along each axis split
-  // in more than one domain (and along a periodic one), else Error(invalid_argument) saying which.
+  // `box`: any box validate() accepts (open, orthorhombic or triclinic, periodic on any axes;
+  // Decomposition says how domains follow it). Every domain must be at least cutoff + skin wide
+  // (face width / dims) along each axis split in more than one domain (and along a periodic
+  // one), else Error(invalid_argument) saying which.
   // An error found on one rank (a non-finite coordinate) is thrown on every rank.
   void build(PositionsView positions, const std::uint64_t* ids, float cutoff, const Box& box = {},
              const float* carried = nullptr, std::size_t width = 0);
@@ -158,8 +176,8 @@ class DistributedEngine {
   float cutoff() const { return cutoff_; }
   std::size_t owned() const { return ids_.size(); }
   std::size_t halos() const { return halo_ids_.size(); }
-  // The owned particles: global indices, positions (wrapped on periodic axes at the last
-  // exchange; as given since), carried floats (width() per particle).
+  // The owned particles: global indices, positions (wrapped into the cell at the last exchange;
+  // as given since), carried floats (width() per particle).
   const std::vector<std::uint64_t>& ids() const { return ids_; }
   const std::vector<float>& positions() const { return xyz_; }
   const std::vector<float>& carried() const { return carried_; }
