@@ -9,9 +9,11 @@
 #include <limits>
 #include <numeric>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "mpi/mpi_check.hpp"
+#include "raycut/pairs.hpp"
 
 namespace raycut::mpi {
 namespace {
@@ -126,6 +128,21 @@ float wrap_coordinate(float v, double length) {
   if (w < 0) w += length;
   return static_cast<float>(w);
 }
+
+// sph_force over the query engine (owned particles near a face over the halos): query b is
+// owned particle boundary[b] and source j is halo j, local index owned + j, of the fields in the
+// local order (halo_fields()). The single-rank kernel indexes targets and sources in one array,
+// which query points do not share, hence the remapping; the pair terms are the kernel's own.
+struct BoundarySphForce {
+  using Accumulator = SphForceKernel::Accumulator;
+  SphForceKernel kernel;  // its force: one row per query
+  const std::uint32_t* boundary;
+  std::uint32_t owned;
+  void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3 r, float r2) const {
+    kernel(acc, boundary[i], owned + j, r, r2);
+  }
+  void finish(std::uint32_t i, Accumulator& acc) const { kernel.finish(i, acc); }
+};
 
 }  // namespace
 
@@ -280,24 +297,24 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
         bounds[3 + a] = std::min(bounds[3 + a], -u);
       }
     }
-    // Every rank must describe the same system: compare with rank 0's.
-    double mine[14];
-    for (int a = 0; a < 3; ++a) {
-      for (int c = 0; c < 3; ++c) mine[3 * a + c] = box.cell[a][c];
-      mine[9 + a] = box.pbc[a];
-    }
-    mine[12] = cutoff;
-    mine[13] = static_cast<double>(width);
-    double root[14];
-    std::memcpy(root, mine, sizeof mine);
-    MPI_Bcast(root, 14, MPI_DOUBLE, 0, comm_);
-    if (std::memcmp(root, mine, sizeof mine) != 0)
-      throw Error(ErrorCode::invalid_argument,
-                  "distributed build: box, cutoff or carried width differ from rank 0's");
   } catch (const Error& e) {
     error = e.what();
     code = e.code();
   }
+  // Every rank must describe the same system: compare with rank 0's. Outside the try, so that a
+  // rank that threw above still takes part (a skipped broadcast would be matched by a later one).
+  double mine[14];
+  for (int a = 0; a < 3; ++a) {
+    for (int c = 0; c < 3; ++c) mine[3 * a + c] = box.cell[a][c];
+    mine[9 + a] = box.pbc[a];
+  }
+  mine[12] = cutoff;
+  mine[13] = static_cast<double>(width);
+  double root[14];
+  std::memcpy(root, mine, sizeof mine);
+  check(MPI_Bcast(root, 14, MPI_DOUBLE, 0, comm_), "MPI_Bcast");
+  if (error.empty() && std::memcmp(root, mine, sizeof mine) != 0)
+    error = "distributed build: box, cutoff or carried width differ from rank 0's";
   agree(error, code);
 
   std::array<double, 6> global;
@@ -683,8 +700,9 @@ Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options) 
   check_built("compute");
   if (kernel == Kernel::sph_force)
     throw Error(ErrorCode::unsupported,
-                "distributed engine: sph_force needs halo velocities, densities and pressures "
-                "(a later slice)");
+                "distributed engine: sph_force needs its neighbours' velocities, densities and "
+                "pressures: call compute(Kernel::sph_force, options, SphFields{...}) with the "
+                "owned particles' fields");
   Results r = engine_->compute(kernel, options);
   const std::size_t n = ids_.size();
   if (!split_) {  // rows past n are the halos'
@@ -708,6 +726,91 @@ Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options) 
     add(r.force, halo.force, halo.force.empty() ? 0 : 3);
     add(r.virial, halo.virial, halo.virial.empty() ? 0 : 6);
     add(r.density, halo.density, halo.density.empty() ? 0 : 1);
+  }
+  return r;
+}
+
+std::vector<float> DistributedEngine::halo_fields(const float* owned, std::size_t width) {
+  check_built("halo_fields");
+  const std::size_t n = ids_.size(), h = halo_ids_.size();
+  // Record sizes are agreed by the width alone (the halo counts are the plan's): check it.
+  const std::uint64_t w = width;
+  std::uint64_t widths[2] = {w, ~w}, agreed[2];
+  check(MPI_Allreduce(widths, agreed, 2, MPI_UINT64_T, MPI_MAX, comm_), "MPI_Allreduce");
+  std::string error;
+  if (agreed[0] != w || ~agreed[1] != w)
+    error = "distributed halo_fields: width " + std::to_string(width) + " differs between ranks";
+  else if (width > 0 && n > 0 && owned == nullptr)
+    error = "distributed halo_fields: null owned values";
+  agree(error, ErrorCode::invalid_argument);
+  std::vector<float> local(width * (n + h));
+  if (width == 0) return local;
+  std::copy(owned, owned + width * n, local.begin());
+  const HaloPlan& plan = *plan_;
+  std::vector<float> send(width * plan.index.size());
+  for (std::size_t k = 0; k < plan.index.size(); ++k)
+    std::copy_n(owned + width * plan.index[k], width, &send[width * k]);
+  const std::size_t record = width * sizeof(float);
+  transport_->exchange(
+      reinterpret_cast<const std::byte*>(send.data()), scaled(plan.send_counts, record).data(),
+      offsets_of(plan.send_counts, record).data(),
+      reinterpret_cast<std::byte*>(local.data() + width * n),
+      scaled(plan.recv_counts, record).data(), offsets_of(plan.recv_counts, record).data());
+  return local;
+}
+
+Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options,
+                                   const SphFields& owned) {
+  check_built("compute");
+  if (kernel != Kernel::sph_force) return compute(kernel, options);
+  const std::size_t n = ids_.size();
+  std::string error;
+  ErrorCode code = ErrorCode::invalid_argument;
+  if (engine_->space() != MemorySpace::host) {
+    error = "distributed sph_force: method '" + engine_->method() +
+            "' works in device memory; this slice passes fields on the host only";
+    code = ErrorCode::unsupported;
+  } else if (n > 0 && (!owned.velocity || !owned.density || !owned.pressure)) {
+    error =
+        "distributed sph_force needs velocity, density and pressure of the owned particles "
+        "(SphFields)";
+  }
+  agree(error, code);
+
+  // The three fields in one exchange: 5 floats per particle.
+  std::vector<float> packed(5 * n);
+  for (std::size_t i = 0; i < n; ++i) {
+    std::copy_n(owned.velocity + 3 * i, 3, &packed[5 * i]);
+    packed[5 * i + 3] = owned.density[i];
+    packed[5 * i + 4] = owned.pressure[i];
+  }
+  const std::vector<float> local = halo_fields(packed.data(), 5);
+  const std::size_t m = local.size() / 5;
+  std::vector<float> velocity(3 * m), density(m), pressure(m);
+  for (std::size_t i = 0; i < m; ++i) {
+    std::copy_n(&local[5 * i], 3, &velocity[3 * i]);
+    density[i] = local[5 * i + 3];
+    pressure[i] = local[5 * i + 4];
+  }
+  KernelOptions with_fields = options;
+  with_fields.sph = {velocity.data(), density.data(), pressure.data()};
+
+  // Owned rows only: engine_ is over the owned particles (local indices < n), the query engine
+  // adds the pairs with halos. Else engine_ is over owned + halos, halo rows discarded.
+  Results r = engine_->compute(Kernel::sph_force, with_fields);
+  if (!split_) {
+    if (!r.force.empty()) r.force.resize(3 * n);
+  } else if (halo_engine_built_) {
+    std::vector<float> halo_force(3 * boundary_.size());
+    KernelOutputs out;
+    out.force = halo_force.data();
+    with_kernel(Kernel::sph_force, with_fields, squared_cutoff(cutoff_), out, [&](const auto& f) {
+      if constexpr (std::is_same_v<std::decay_t<decltype(f)>, SphForceKernel>)
+        for_each_pair(*halo_engine_,
+                      BoundarySphForce{f, boundary_.data(), static_cast<std::uint32_t>(n)});
+    });
+    for (std::size_t b = 0; b < boundary_.size(); ++b)
+      for (int c = 0; c < 3; ++c) r.force[3 * boundary_[b] + c] += halo_force[3 * b + c];
   }
   return r;
 }

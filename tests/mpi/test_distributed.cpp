@@ -792,6 +792,179 @@ TEST(Distributed, StepLoopTriclinicCells) {
     if (c.dims[0] != 1 || c.dims[1] != 1 || c.dims[2] != 0) triclinic_step_loop(c, 10);
 }
 
+// ---- SPH: halo fields
+// ----------------------------------------------------------------------------------
+//
+// sph_density over the distributed engine, a pressure from it (p = k (rho - mean rho)),
+// velocities per global index, then sph_force with those fields for the owned particles against
+// the single-process Engine over the same positions and the same fields (gathered by global
+// index, so both runs read identical values). The Engine works in its own frame (a periodic box
+// wraps in double), so coordinates may differ by an ulp: 1e-4 of the row's scale, as triclinic.
+
+raycut::KernelOptions sph_options() {
+  raycut::KernelOptions options;
+  options.sph_mass = 1.0f;
+  options.sph_viscosity = 0.3f;
+  return options;
+}
+
+// Every rank's owned values (width per particle, ids() order) by global index (collective).
+std::vector<float> gather_by_id(const DistributedEngine& engine, const std::vector<float>& owned,
+                                std::size_t width, std::size_t n) {
+  std::vector<float> mine(width * n, 0.0f), all(width * n, 0.0f);
+  for (std::size_t t = 0; t < engine.owned(); ++t)
+    for (std::size_t c = 0; c < width; ++c)
+      mine[width * engine.ids()[t] + c] = owned[width * t + c];
+  MPI_Allreduce(mine.data(), all.data(), static_cast<int>(width * n), MPI_FLOAT, MPI_SUM,
+                MPI_COMM_WORLD);
+  return all;
+}
+
+// Density, pressure and force of the owned rows against the Engine over the positions held.
+// `velocity` by global index. Collective.
+void expect_sph_matches(DistributedEngine& engine, const Box& box,
+                        const std::vector<float>& velocity, const std::string& what) {
+  const std::size_t n = engine.global_size();
+  const raycut::KernelOptions options = sph_options();
+  const std::vector<float> held = gather_positions(engine, n);
+  raycut::Engine single("cell-list");
+  single.build({held.data(), n, MemorySpace::host}, engine.cutoff(), box);
+  const raycut::Results want_density = single.compute(Kernel::sph_density, options);
+
+  const raycut::Results density = engine.compute(Kernel::sph_density, options);
+  ASSERT_EQ(density.density.size(), engine.owned()) << what;
+  const std::vector<float> rho = gather_by_id(engine, density.density, 1, n);
+  double mean = 0;
+  for (float v : rho) mean += v;
+  mean /= static_cast<double>(n);
+  std::vector<float> pressure(n);
+  for (std::size_t i = 0; i < n; ++i) pressure[i] = 2.0f * (rho[i] - static_cast<float>(mean));
+
+  std::vector<float> owned_velocity, owned_density, owned_pressure;
+  for (std::uint64_t id : engine.ids()) {
+    owned_velocity.insert(owned_velocity.end(), &velocity[3 * id], &velocity[3 * id] + 3);
+    owned_density.push_back(rho[id]);
+    owned_pressure.push_back(pressure[id]);
+  }
+  const raycut::Results force =
+      engine.compute(Kernel::sph_force, options,
+                     {owned_velocity.data(), owned_density.data(), owned_pressure.data()});
+  raycut::KernelOptions single_options = options;
+  single_options.sph = {velocity.data(), rho.data(), pressure.data()};
+  const raycut::Results want = single.compute(Kernel::sph_force, single_options);
+
+  ASSERT_EQ(force.force.size(), 3 * engine.owned()) << what;
+  int failures = 0;
+  std::size_t boundary_rows = 0;  // rows with a neighbour owned by another rank or an image
+  for (std::size_t t = 0; t < engine.owned() && failures < 5; ++t) {
+    const std::uint64_t id = engine.ids()[t];
+    bool ok = close(density.density[t], want_density.density[id],
+                    std::abs(want_density.density[id]), 1e-4f);
+    float scale = 0;
+    for (int c = 0; c < 3; ++c) scale = std::max(scale, std::abs(want.force[3 * id + c]));
+    for (int c = 0; c < 3; ++c)
+      ok = ok && close(force.force[3 * t + c], want.force[3 * id + c], scale, 1e-4f);
+    if (ok) continue;
+    ++failures;
+    ADD_FAILURE() << what << ": rank " << engine.rank() << ", particle " << id << ": density "
+                  << density.density[t] << " vs " << want_density.density[id] << ", force "
+                  << force.force[3 * t] << " " << force.force[3 * t + 1] << " "
+                  << force.force[3 * t + 2] << " vs " << want.force[3 * id] << " "
+                  << want.force[3 * id + 1] << " " << want.force[3 * id + 2];
+  }
+  // The test tests the halo fields only if owned rows have neighbours that are halos here
+  // (owned by another rank, or an image) and pressures have both signs.
+  raycut::ListOptions list_options;
+  list_options.shifts = true;
+  const raycut::NeighbourList list = single.neighbours(list_options);
+  std::vector<bool> mine(n, false);
+  for (std::uint64_t id : engine.ids()) mine[id] = true;
+  for (std::uint64_t id : engine.ids()) {
+    bool meets = false;
+    for (std::uint64_t e = list.offsets[id]; e < list.offsets[id + 1]; ++e) {
+      const std::int32_t* s = &list.shifts[3 * e];
+      meets = meets || !mine[list.indices[e]] || s[0] != 0 || s[1] != 0 || s[2] != 0;
+    }
+    boundary_rows += meets;
+  }
+  std::uint64_t local_rows = boundary_rows, total_rows = 0;
+  MPI_Allreduce(&local_rows, &total_rows, 1, MPI_UINT64_T, MPI_SUM, MPI_COMM_WORLD);
+  if (box.is_open() && world_size() == 1) {
+    EXPECT_EQ(total_rows, 0u) << what;
+  } else {
+    EXPECT_GT(total_rows, 0u) << what;
+  }
+  EXPECT_LT(*std::min_element(pressure.begin(), pressure.end()), 0.0f) << what;
+  EXPECT_GT(*std::max_element(pressure.begin(), pressure.end()), 0.0f) << what;
+}
+
+std::vector<float> random_velocities(std::size_t n, unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  std::vector<float> v(3 * n);
+  for (float& x : v) x = static_cast<float>(u(rng));
+  return v;
+}
+
+TEST(Distributed, SphForceWithHaloFieldsMatchesSingleProcess) {
+  const float h = 1.5f;
+  struct Case {
+    const char* name;
+    Box box;
+    std::vector<float> xyz;
+    std::string method;
+  };
+  std::vector<float> open = uniform(700, {0, 0, 0}, {6, 6, 6}, 11);
+  const std::vector<float> sparse = uniform(300, {6, 0, 0}, {14, 8, 8}, 12);
+  open.insert(open.end(), sparse.begin(), sparse.end());
+  const std::vector<Case> cases = {
+      {"periodic", Box::orthorhombic(12, 12, 12), lattice(10, 1.2, 0.15, 7), "cell-list"},
+      {"open", Box{}, open, "brute-force"},
+      {"60-degree", cell_of(hexagonal), fractional_lattice(hexagonal, 31), "cell-list"}};
+  for (const Case& c : cases)
+    for (bool owned_rows_only : {true, false}) {
+      const std::string what = std::string(c.name) + (owned_rows_only ? "" : ", every row");
+      const std::vector<float> velocity = random_velocities(c.xyz.size() / 3, 5);
+      DistributedOptions options;
+      options.method = c.method;
+      options.owned_rows_only = owned_rows_only;
+      options.skin = 0.4f;
+      DistributedEngine engine(MPI_COMM_WORLD, options);
+      build(engine, c.xyz, h, c.box, Spread::strided);
+      EXPECT_EQ(engine.owned_rows_only(), owned_rows_only) << what;
+      expect_sph_matches(engine, c.box, velocity, what);
+      if (std::string(c.name) != "periodic") continue;
+      // After a refresh in place (the same halo routes) and after an exchange (new ones).
+      std::vector<float> next(engine.positions());
+      // Moves under skin / 2 (|v| < sqrt 3, 0.1 v): a refresh, not an exchange.
+      for (std::size_t k = 0; k < next.size(); ++k)
+        next[k] += 0.1f * velocity[3 * engine.ids()[k / 3] + k % 3];
+      EXPECT_FALSE(engine.update(next.data())) << what;
+      expect_sph_matches(engine, c.box, velocity, what + ", refreshed");
+      engine.exchange();
+      expect_sph_matches(engine, c.box, velocity, what + ", exchanged");
+    }
+}
+
+TEST(Distributed, HaloFieldsFollowTheHalos) {
+  // Each owned particle's field is its global index (twice): every halo must read its own.
+  const Box box = Box::orthorhombic(12, 12, 12);
+  DistributedEngine engine(MPI_COMM_WORLD);
+  build(engine, lattice(10, 1.2, 0.15, 3), 1.5f, box, Spread::strided);
+  std::vector<float> owned;
+  for (std::uint64_t id : engine.ids()) owned.insert(owned.end(), {float(id), -float(id)});
+  const std::vector<float> local = engine.halo_fields(owned.data(), 2);
+  ASSERT_EQ(local.size(), 2 * (engine.owned() + engine.halos()));
+  std::size_t wrong = 0;
+  for (std::size_t k = 0; k < engine.owned() + engine.halos(); ++k) {
+    const std::uint64_t id =
+        k < engine.owned() ? engine.ids()[k] : engine.halo_ids()[k - engine.owned()];
+    wrong += local[2 * k] != float(id) || local[2 * k + 1] != -float(id);
+  }
+  EXPECT_EQ(wrong, 0u) << "rank " << engine.rank();
+  EXPECT_GT(engine.halos(), 0u);
+}
+
 // ---- errors, thrown on every rank ---------------------------------------------------------------
 
 TEST(Distributed, Errors) {
@@ -816,7 +989,8 @@ TEST(Distributed, Errors) {
         << m;
   }
   {
-    // A bad coordinate on the last rank only: every rank throws, naming it.
+    // A bad coordinate on the last rank only: every rank throws, naming it (and takes part in
+    // build()'s collectives alike: a broadcast skipped here broke the collectives below).
     DistributedEngine engine(MPI_COMM_WORLD);
     std::vector<float> bad = xyz;
     const std::size_t last = (world_size() - 1) % xyz.size();
@@ -842,6 +1016,18 @@ TEST(Distributed, Errors) {
     DistributedEngine engine(MPI_COMM_WORLD);
     build(engine, xyz, 1.0f, Box{}, Spread::strided);
     error_message(ErrorCode::unsupported, [&] { engine.compute(Kernel::sph_force); });
+    // Null fields: every rank throws (those without owned particles too).
+    const std::string m = error_message(ErrorCode::invalid_argument, [&] {
+      engine.compute(Kernel::sph_force, sph_options(), raycut::mpi::SphFields{});
+    });
+    EXPECT_TRUE(contains(m, "SphFields")) << m;
+    if (world_size() > 1) {
+      const std::vector<float> values(2 * engine.owned() + 2, 1.0f);
+      const std::string w = error_message(ErrorCode::invalid_argument, [&] {
+        engine.halo_fields(values.data(), world_rank() == 0 ? 1 : 2);
+      });
+      EXPECT_TRUE(contains(w, "differs between ranks")) << w;
+    }
   }
 }
 

@@ -121,6 +121,14 @@ struct DistributedList {
   std::vector<std::int32_t> shifts;
 };
 
+// The inputs of sph_force for the owned particles: host arrays in ids() order, velocity (3 per
+// particle), density and pressure. DistributedEngine::compute sends their halo copies.
+struct SphFields {
+  const float* velocity = nullptr;
+  const float* density = nullptr;
+  const float* pressure = nullptr;
+};
+
 // What the last passes cost; counters accumulate from build().
 struct DistributedStats {
   std::uint64_t owned = 0, halos = 0;  // on this rank now
@@ -163,9 +171,22 @@ class DistributedEngine {
   // Collective: an exchange now, whatever the skin.
   void exchange();
 
-  // The kernel for every owned target; rows in ids() order. sph_force (it needs halo fields) is
-  // Error(unsupported) in this slice.
+  // The kernel for every owned target; rows in ids() order. sph_force reads its neighbours'
+  // fields: Error(unsupported) here, use the overload below.
   Results compute(Kernel kernel, const KernelOptions& options = {});
+  // Collective for sph_force: the owned particles' fields, their halo copies sent by
+  // halo_fields() (one exchange for all three), then sph_force over owned + halos, rows in ids()
+  // order. options.sph is replaced by the local arrays. Error(invalid_argument) on every rank
+  // when a rank with owned particles gives a null field; Error(unsupported) for a method that
+  // works in device memory (the fields are host arrays in this slice). Other kernels ignore
+  // `owned` (no exchange: compute(kernel, options)).
+  Results compute(Kernel kernel, const KernelOptions& options, const SphFields& owned);
+  // Collective: `width` floats per owned particle (host, ids() order) extended to the local
+  // order of the engines: the owned values as given, then one copy per halo in halo_ids() order
+  // (a periodic image gets its particle's values unchanged). Sent along the halo routes of the
+  // last exchange or refresh: the same neighbours and record order as the positions. `width`
+  // must be the same on every rank (else Error(invalid_argument) on every rank).
+  std::vector<float> halo_fields(const float* owned, std::size_t width);
   // The owned targets' neighbour lists with global indices. `half`: each pair (i, j, S) once
   // over all ranks, in the row of the smaller global index (i == j: S lexicographically
   // positive), as the single-rank half list orients local indices.
