@@ -56,13 +56,19 @@ bool smooth_in_range(float cutoff) {
   }
 }
 
-// Builds over the cloud in its box: the plain build when the box has no periodic axis (a file's
-// Lattice with pbc F F F has no images), so methods without boxes check such files as before.
+// Builds over the cloud in its box (a box without a periodic axis is a plain build: methods
+// without boxes check such files as before).
 void build_in_box(Engine& engine, const PositionsView& view, const PointCloud& cloud) {
-  if (cloud.box.periodic())
-    engine.build(view, cloud.cutoff, cloud.box);
-  else
-    engine.build(view, cloud.cutoff);
+  engine.build(view, cloud.cutoff, cloud.box);
+}
+
+// The row of an input or a method that is not compared, and why, under it.
+void print_not_compared(const PointCloud& cloud, const std::string& method, const char* status,
+                        const Error& e) {
+  std::printf("%-18s %8zu %7g  %-16s %12s %10s %10s  %s\n", cloud.name.c_str(), cloud.size(),
+              cloud.cutoff, method.c_str(), "-", "-", "-", status);
+  std::printf("    %s\n", e.what());
+  std::fflush(stdout);
 }
 
 int run_check(const CheckOptions& o) {
@@ -107,9 +113,7 @@ int run_check(const CheckOptions& o) {
       // images) is refused by the oracle as by every method: say so and check the others.
       if (!periodic || e.code() != ErrorCode::invalid_argument) throw;
       ++refused;
-      std::printf("%-18s %8zu %7g  %-16s %12s %10s %10s  %s\n", cloud.name.c_str(), cloud.size(),
-                  cloud.cutoff, oracle_name.c_str(), "-", "-", "-", "refused");
-      std::printf("    %s\n", e.what());
+      print_not_compared(cloud, oracle_name, "refused", e);
       continue;
     }
     // In a box an entry is (j, S): the same j through two images is two entries.
@@ -143,10 +147,7 @@ int run_check(const CheckOptions& o) {
         // mismatch and not the end of the check.
         if (!periodic || e.code() != ErrorCode::unsupported) throw;
         ++skipped;
-        std::printf("%-18s %8zu %7g  %-16s %12s %10s %10s  %s\n", cloud.name.c_str(), cloud.size(),
-                    cloud.cutoff, method.c_str(), "-", "-", "-", "unsupported");
-        std::printf("    %s\n", e.what());
-        std::fflush(stdout);
+        print_not_compared(cloud, method, "unsupported", e);
         continue;
       }
       ++compared;

@@ -55,10 +55,10 @@ struct Systems {
     s.box = b;
     return s;
   }
-  // Open, one system, no queries: what build(positions, cutoff) means.
+  // No periodic axis, one system, no queries: what build(positions, cutoff) means (a cell
+  // without a periodic axis, a file's Lattice with pbc F F F, makes no images).
   bool plain() const {
-    return box.is_open() && boxes.empty() && offsets.empty() && queries.xyz == nullptr &&
-           queries.size == 0;
+    return !box.periodic() && boxes.empty() && offsets.empty() && !has_queries();
   }
   bool has_queries() const { return queries.xyz != nullptr || queries.size > 0; }
 };

@@ -33,13 +33,13 @@ const detail::MethodEntry& find_entry(std::string_view name) {
               "unknown method '" + std::string(name) + "' (known: auto, " + known + ")");
 }
 
-// Checks coordinates where they live, before any work on them; throws naming the first bad one.
 // The same systems, boxes and batch layout (the query count included, not their pointer).
 bool same_layout(const Systems& a, const Systems& b) {
   return a.box == b.box && a.boxes == b.boxes && a.offsets == b.offsets &&
          a.query_offsets == b.query_offsets && a.queries.size == b.queries.size;
 }
 
+// Checks coordinates where they live, before any work on them; throws naming the first bad one.
 void validate_positions(const PositionsView& positions) {
   if (positions.size > 0 && positions.xyz == nullptr)
     throw Error(ErrorCode::invalid_argument, "positions pointer is null for N = " +
@@ -540,7 +540,7 @@ bool VerletList::update(PositionsView positions) {
   if (!first) {
     if (positions.size != engine_.sources())
       throw Error(ErrorCode::invalid_argument,
-                  "VerletList::update() needs the " + std::to_string(engine_.size()) +
+                  "VerletList::update() needs the " + std::to_string(engine_.sources()) +
                       " particles of its first call, got " + std::to_string(positions.size));
     validate_positions(positions);
     if (!moved_beyond(positions, *static_cast<const KeptPositions*>(built_.get()),

@@ -33,27 +33,27 @@ class HostTransport final : public Transport {
                 const std::uint64_t* send_offsets, std::byte* recv,
                 const std::uint64_t* recv_counts, const std::uint64_t* recv_offsets) override {
     std::vector<MPI_Request> requests;
+    // Each other rank's block in chunks of at most chunk_bytes (MPI counts are int), one request
+    // a chunk: post(at, n, rank, tag, request) posts one.
+    const auto each_chunk = [&](const std::uint64_t* counts, auto&& post) {
+      for (int r = 0; r < size_; ++r) {
+        if (r == rank_) continue;
+        for (std::uint64_t at = 0, tag = 0; at < counts[r]; at += chunk_bytes, ++tag) {
+          requests.emplace_back();
+          post(at, static_cast<int>(std::min(chunk_bytes, counts[r] - at)), r,
+               static_cast<int>(tag), &requests.back());
+        }
+      }
+    };
     // Receives first, so that every send finds its receive posted.
-    for (int r = 0; r < size_; ++r) {
-      if (r == rank_) continue;
-      for (std::uint64_t at = 0, tag = 0; at < recv_counts[r]; at += chunk_bytes, ++tag) {
-        const int n = static_cast<int>(std::min(chunk_bytes, recv_counts[r] - at));
-        requests.emplace_back();
-        check(MPI_Irecv(recv + recv_offsets[r] + at, n, MPI_BYTE, r, static_cast<int>(tag), comm_,
-                        &requests.back()),
-              "MPI_Irecv");
-      }
-    }
-    for (int r = 0; r < size_; ++r) {
-      if (r == rank_) continue;
-      for (std::uint64_t at = 0, tag = 0; at < send_counts[r]; at += chunk_bytes, ++tag) {
-        const int n = static_cast<int>(std::min(chunk_bytes, send_counts[r] - at));
-        requests.emplace_back();
-        check(MPI_Isend(send + send_offsets[r] + at, n, MPI_BYTE, r, static_cast<int>(tag), comm_,
-                        &requests.back()),
-              "MPI_Isend");
-      }
-    }
+    each_chunk(recv_counts, [&](std::uint64_t at, int n, int r, int tag, MPI_Request* request) {
+      check(MPI_Irecv(recv + recv_offsets[r] + at, n, MPI_BYTE, r, tag, comm_, request),
+            "MPI_Irecv");
+    });
+    each_chunk(send_counts, [&](std::uint64_t at, int n, int r, int tag, MPI_Request* request) {
+      check(MPI_Isend(send + send_offsets[r] + at, n, MPI_BYTE, r, tag, comm_, request),
+            "MPI_Isend");
+    });
     if (send_counts[rank_] != recv_counts[rank_])
       throw Error(ErrorCode::internal, "host transport: self block sizes differ");
     if (send_counts[rank_] > 0)
