@@ -124,14 +124,15 @@ def make_variants(inp: Input, method: str) -> tuple:
         engine.build(inp.x, inp.cutoff, inp.cells, inp.flags, inp.offsets)
         return engine.pairs(inp.half, False, False, False, shifts), 0
 
-    def python(cache=True):
-        raycut.set_engine_cache(cache)
+    def python():
         return raycut.neighbor_list(inp.quantities, inp.x, inp.cutoff, cell=inp.cell,
                                     pbc=inp.pbc, batch=inp.batch, half=inp.half,
                                     method=method), 0
 
-    return ({"cpp_list": cpp_list, "cpp_pairs": cpp_pairs, "python": python,
-             "python_nocache": lambda: python(False)}, engine, like)
+    # python_nocache is timed in a loop of its own (time_variants' `cache`): turning the cache
+    # off drops the cached engine, which would make every `python` call a cold one.
+    return ({"cpp_list": cpp_list, "cpp_pairs": cpp_pairs, "python": python}, {
+        "python_nocache": python}, engine, like)
 
 
 def entries(out: tuple, k: int, like) -> int:
@@ -140,9 +141,11 @@ def entries(out: tuple, k: int, like) -> int:
     return int(_arrays.output(out[k], like).shape[0])
 
 
-def time_variants(variants: dict, engine, like, torch, reps: int, warmup: int) -> dict:
-    """name -> (times ms, wall ms, engine build ms, pair counts). Outputs are counted and freed
-    outside the timing."""
+def time_variants(variants: dict, engine, like, torch, reps: int, warmup: int,
+                  cache: bool = True) -> dict:
+    """name -> (times ms, wall ms, engine build ms, pair counts), with neighbor_list's engine
+    cache on or off. Outputs are counted and freed outside the timing."""
+    raycut.set_engine_cache(cache)
     out = {name: ([], [], [], []) for name in variants}
     for rep in range(warmup + reps):
         for name, fn in variants.items():
@@ -272,9 +275,11 @@ def main(argv=None) -> list:
         if args.workload and spec[0] not in args.workload:
             continue
         inp = Input(*spec, torch=torch, seed=args.seed)
-        variants, engine, like = make_variants(inp, args.method)
+        variants, uncached, engine, like = make_variants(inp, args.method)
         try:
             measured = time_variants(variants, engine, like, torch, reps, args.warmup)
+            measured.update(time_variants(uncached, engine, like, torch, reps, args.warmup,
+                                          cache=False))
         except (NotImplementedError, ValueError) as e:
             print(f"skipped {inp.name} on {args.method}: {e}", file=sys.stderr)
             continue

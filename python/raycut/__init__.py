@@ -150,6 +150,8 @@ class Engine:
         return self._engine.timings()
 
     def _call(self, like: _arrays.Like, function, *args):
+        """function(*args) on the caller's CUDA device and stream (one lookup per API call: at
+        1,000 particles each costs a visible share of the call)."""
         with _arrays.device_context(like):
             self._engine.set_stream(_arrays.stream_of(like))
             return function(*args)
@@ -184,8 +186,8 @@ class Engine:
         periodic = boxes is not None and boxes.periodic
         cells = boxes.cells if periodic else None
         flags = boxes.pbc if periodic else None
-        self._call(like, self._engine.build, x, _cutoff(cutoff), cells, flags, b.offsets, q,
-                   b.query_offsets)
+        self._call(like, self._engine.build, _arrays.readable(x), _cutoff(cutoff), cells, flags,
+                   b.offsets, None if q is None else _arrays.readable(q), b.query_offsets)
         self._like = like
         self._queries = queries is not None
         self._batch = b
@@ -198,7 +200,7 @@ class Engine:
         than skin / 2 since the last full build."""
         x, like = _arrays.prepare(positions)
         self._engine.set_skin(float(skin))
-        self._call(like, self._engine.update, x)
+        self._call(like, self._engine.update, _arrays.readable(x))
         self._like = like
 
     def _kernel_input(self, value: Any, name: str) -> Any:
@@ -207,7 +209,7 @@ class Engine:
         if self.space == "host":
             return _arrays.to_host(value)
         x, _ = _arrays.prepare(value, name, points=False)
-        return x
+        return _arrays.readable(x)
 
     def compute(self, kernel: str = "count", *, lj_epsilon: float = 1.0, lj_sigma: float = 1.0,
                 sph_mass: float = 0.0, sph_viscosity: float = 0.0, velocity: Any = None,
@@ -228,9 +230,14 @@ class Engine:
         density = self._kernel_input(density, "density")
         pressure = self._kernel_input(pressure, "pressure")
         like = self._like
-        self._call(like, self._engine.run, kernel, float(lj_epsilon), float(lj_sigma),
-                   float(sph_mass), float(sph_viscosity), velocity, density, pressure)
-        out = self._call(like, self._engine.results, kernel, like.host)
+        engine = self._engine
+
+        def run():
+            engine.run(kernel, float(lj_epsilon), float(lj_sigma), float(sph_mass),
+                       float(sph_viscosity), velocity, density, pressure)
+            return engine.results(kernel, like.host)
+
+        out = self._call(like, run)
         return {name: _arrays.output(array, like) for name, array in out.items()}
 
     def neighbours(self, half: bool = False, distances: bool = False, vectors: bool = False,
@@ -387,7 +394,7 @@ class VerletList:
         x, like = _arrays.prepare(positions)
         with _arrays.device_context(like):
             self._list.set_stream(_arrays.stream_of(like))
-            rebuilt = bool(self._list.update(x))
+            rebuilt = bool(self._list.update(_arrays.readable(x)))
         self._like = like
         return rebuilt
 

@@ -259,6 +259,33 @@ def test_torch_periodic_batch_equals_host(method):
 
 
 @pytest.mark.parametrize("method", SYSTEM_DEVICE)
+def test_torch_padded_shifts_equal_host(method):
+    """The padded matrix with S from CUDA positions: CUDA tensors (the library's buffers, wrapped,
+    for a device method) holding the host engine's rows, S included, in a cell thinner than 2C."""
+    torch = torch_cuda()
+    x, batch, cells, pbc, cutoff = periodic_batch()
+    x, cell = x[batch == 2], cells[2]
+    host, dev = raycut.Engine(method), raycut.Engine(method)
+    host.build(x, cutoff, cell=cell, pbc=pbc[2])
+    dev.build(torch.from_numpy(x).cuda(), cutoff, cell=cell, pbc=pbc[2])
+    k = int(host.compute("count")["count"].max()) + 2
+    want = host.padded_neighbours(k, shifts=True)
+    got = dev.padded_neighbours(k, shifts=True)
+    for t in (got[0], got[1], got[3]):
+        assert isinstance(t, torch.Tensor) and t.device.type == "cuda"
+    assert got[3].shape == (len(x), k, 3) and got[2] == want[2] and not got[2]["overflowed"]
+    idx, counts, s = (t.cpu().numpy() for t in (got[0], got[1], got[3]))
+    np.testing.assert_array_equal(counts, want[1])
+    assert np.any(s != 0), "images in a cell thinner than 2C"
+    for i in range(len(x)):
+        c = int(counts[i])
+        rows = [sorted(zip(a[i, :c].tolist(), map(tuple, b[i, :c].tolist())))
+                for a, b in ((idx, s), (want[0], want[3]))]
+        assert rows[0] == rows[1]
+        assert np.all(idx[i, c:] == len(x)) and np.all(s[i, c:] == 0)
+
+
+@pytest.mark.parametrize("method", SYSTEM_DEVICE)
 def test_torch_radius_equals_host(method):
     torch = torch_cuda()
     x, batch, cells, pbc, cutoff = periodic_batch(1)

@@ -39,8 +39,9 @@ bool same_layout(const Systems& a, const Systems& b) {
          a.query_offsets == b.query_offsets && a.queries.size == b.queries.size;
 }
 
-// Checks coordinates where they live, before any work on them; throws naming the first bad one.
-void validate_positions(const PositionsView& positions) {
+// Checks coordinates where they live, before any work on them (device ones on `stream`); throws
+// naming the first bad one.
+void validate_positions(const PositionsView& positions, void* stream) {
   if (positions.size > 0 && positions.xyz == nullptr)
     throw Error(ErrorCode::invalid_argument, "positions pointer is null for N = " +
                                                  std::to_string(positions.size) + " particles");
@@ -53,13 +54,14 @@ void validate_positions(const PositionsView& positions) {
   if (!detail::cuda::device_available())
     throw Error(ErrorCode::unsupported,
                 "positions are in device memory but no CUDA device is usable in this process");
-  const std::size_t bad = detail::cuda::first_non_finite(positions.xyz, positions.size);
+  const std::size_t bad = detail::cuda::first_non_finite(positions.xyz, positions.size, stream);
   if (bad < positions.size) {
     float xyz[3];
     detail::cuda::download(xyz, positions.xyz + 3 * bad, sizeof xyz);
     detail::throw_non_finite(bad, xyz);
   }
 #else
+  (void)stream;
   throw Error(ErrorCode::unsupported,
               "positions are in device memory but raycut was built without CUDA");
 #endif
@@ -124,7 +126,7 @@ void Engine::set_stream(void* cuda_stream) {
 void Engine::build(PositionsView positions, float cutoff) {
   detail::Method& m = impl("build");
   detail::validate_cutoff(cutoff);
-  validate_positions(positions);
+  validate_positions(positions, stream_);
   built_ = false;
   has_run_ = false;
   size_ = sources_ = positions.size;
@@ -155,12 +157,12 @@ void Engine::build(PositionsView positions, float cutoff, const Systems& systems
   }
   detail::Method& m = impl("build");
   detail::validate_cutoff(cutoff);
-  validate_positions(positions);
+  validate_positions(positions, stream_);
   if (systems.has_queries()) {
     if (systems.queries.space != positions.space)
       throw Error(ErrorCode::invalid_argument,
                   "query points and sources must be in the same memory space (host or device)");
-    validate_positions(systems.queries);
+    validate_positions(systems.queries, stream_);
   }
   if (const std::string why = m.points_unsupported(); !why.empty())
     throw Error(ErrorCode::unsupported, "method '" + method_ +
@@ -232,7 +234,7 @@ void Engine::update(PositionsView positions) {
     build(positions, cutoff_, systems);
     return;
   }
-  validate_positions(positions);
+  validate_positions(positions, stream_);
   has_run_ = false;
   timings_ = {};
   if (size_ == 0) return;
@@ -542,7 +544,7 @@ bool VerletList::update(PositionsView positions) {
       throw Error(ErrorCode::invalid_argument,
                   "VerletList::update() needs the " + std::to_string(engine_.sources()) +
                       " particles of its first call, got " + std::to_string(positions.size));
-    validate_positions(positions);
+    validate_positions(positions, engine_.stream());
     if (!moved_beyond(positions, *static_cast<const KeptPositions*>(built_.get()),
                       0.5f * skin_ * (1.0f - 1e-5f), engine_.stream()))
       return false;

@@ -14,7 +14,22 @@ namespace raycut::detail::cuda {
 // Throws Error(out_of_memory) saying what needed how much, when `bytes` exceeds free memory.
 void require_device_memory(std::size_t bytes, const char* what);
 
-template <class T>
+// Where a DeviceBuffer's memory comes from.
+enum class Allocation {
+  // cudaMalloc / cudaFree: structures that live as long as their method and only grow.
+  dedicated,
+  // raycut's stream-ordered pool of the current device, whose freed blocks stay mapped for the
+  // next allocation: outputs made afresh per call (a list per Python call). cudaMalloc and
+  // cudaFree of the ~1 GB list of 2^20 particles with shifts cost ~0.5 ms per call, a quarter of
+  // the list itself (docs/python.md, "Where the time goes").
+  pooled,
+};
+// nullptr when the device cannot hold `bytes` even after the pool gave its cached blocks back.
+void* pooled_allocate(std::size_t bytes);
+// After every stream's work (the block may still be read, as cudaFree waits too).
+void pooled_free(void* p) noexcept;
+
+template <class T, Allocation A = Allocation::dedicated>
 class DeviceBuffer {
  public:
   DeviceBuffer() = default;
@@ -43,8 +58,7 @@ class DeviceBuffer {
       return;
     }
     release();
-    if (cudaMalloc(&data_, count * sizeof(T)) != cudaSuccess) {
-      (void)cudaGetLastError();  // clear the sticky allocation error
+    if (!allocate(count * sizeof(T))) {
       data_ = nullptr;
       require_device_memory(count * sizeof(T), "a device buffer");
       throw_cuda(cudaErrorMemoryAllocation, "cudaMalloc", __FILE__, __LINE__);
@@ -58,13 +72,31 @@ class DeviceBuffer {
   std::size_t bytes() const { return size_ * sizeof(T); }
 
  private:
+  bool allocate(std::size_t bytes) {
+    if constexpr (A == Allocation::pooled) {
+      data_ = static_cast<T*>(pooled_allocate(bytes));
+      return data_ != nullptr;
+    } else {
+      if (cudaMalloc(&data_, bytes) == cudaSuccess) return true;
+      (void)cudaGetLastError();  // clear the sticky allocation error
+      return false;
+    }
+  }
   void release() noexcept {
-    if (data_) cudaFree(data_);
+    if (data_) {
+      if constexpr (A == Allocation::pooled)
+        pooled_free(data_);
+      else
+        cudaFree(data_);
+    }
     data_ = nullptr;
     size_ = capacity_ = 0;
   }
   T* data_ = nullptr;
   std::size_t size_ = 0, capacity_ = 0;
 };
+
+template <class T>
+using PooledBuffer = DeviceBuffer<T, Allocation::pooled>;
 
 }  // namespace raycut::detail::cuda

@@ -7,12 +7,13 @@
 
 #include "core/validation.hpp"
 #include "cuda/device_results.cuh"
+#include "cuda/runtime.hpp"
 
 namespace raycut::detail::cuda {
 namespace {
 
-template <class T>
-T* sized(DeviceBuffer<T>& buffer, std::size_t count, bool wanted) {
+template <class T, Allocation A>
+T* sized(DeviceBuffer<T, A>& buffer, std::size_t count, bool wanted) {
   if (!wanted) return nullptr;
   buffer.resize(count);
   return buffer.data();
@@ -143,10 +144,9 @@ std::uint64_t DeviceListStorage::scan_counts(cudaStream_t stream) {
   scan_temp_.resize(std::max<std::size_t>(temp_bytes, 1));
   RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scan_temp_.data(), temp_bytes, input,
                                                   offsets_.data(), n + 1, stream));
-  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(total_.device(), offsets_.data() + n, sizeof(std::uint64_t),
-                                    cudaMemcpyDeviceToDevice, stream));
-  RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
-  return total_.host();
+  std::uint64_t total = 0;
+  read_back(&total, offsets_.data() + n, sizeof total, stream);
+  return total;
 }
 
 ListFill DeviceListStorage::prepare_fill(std::uint64_t entries) {
@@ -227,10 +227,9 @@ PaddedFill DevicePaddedStorage::prepare(std::size_t targets, std::uint32_t width
 }
 
 void DevicePaddedStorage::read_report(cudaStream_t stream) {
-  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(report_.device(), overflow_.data(), sizeof(PaddedOverflow),
-                                    cudaMemcpyDeviceToDevice, stream));
-  RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
-  report = {report_.host().rows, report_.host().largest};
+  PaddedOverflow overflow;
+  read_back(&overflow, overflow_.data(), sizeof overflow, stream);
+  report = {overflow.rows, overflow.largest};
 }
 
 }  // namespace raycut::detail::cuda

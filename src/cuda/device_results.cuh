@@ -88,13 +88,13 @@ class DeviceListStorage final : public ListStorage {
 
  private:
   void publish();
-  DeviceBuffer<std::uint32_t> counts_;
-  DeviceBuffer<std::uint64_t> offsets_;
-  DeviceBuffer<std::uint32_t> indices_;
-  DeviceBuffer<float> distances_, vectors_;
-  DeviceBuffer<std::int32_t> shifts_;
-  DeviceBuffer<unsigned char> scan_temp_;
-  MappedValue<std::uint64_t> total_;
+  // Pooled: a list is often made afresh per call (each Python call returns a new one).
+  PooledBuffer<std::uint32_t> counts_;
+  PooledBuffer<std::uint64_t> offsets_;
+  PooledBuffer<std::uint32_t> indices_;
+  PooledBuffer<float> distances_, vectors_;
+  PooledBuffer<std::int32_t> shifts_;
+  PooledBuffer<unsigned char> scan_temp_;
 };
 
 class DevicePaddedStorage final : public PaddedStorage {
@@ -108,12 +108,11 @@ class DevicePaddedStorage final : public PaddedStorage {
   void read_report(cudaStream_t stream);
 
  private:
-  DeviceBuffer<std::uint32_t> indices_, counts_;
-  DeviceBuffer<std::int32_t> shifts_;
+  PooledBuffer<std::uint32_t> indices_, counts_;
+  PooledBuffer<std::int32_t> shifts_;
   // The kernel's atomics go to device memory (to mapped host memory they cost microseconds
   // each: 2.3x the whole padded pass at 1M particles); the report is copied back after.
-  DeviceBuffer<PaddedOverflow> overflow_;
-  MappedValue<PaddedOverflow> report_;
+  PooledBuffer<PaddedOverflow> overflow_;
 };
 
 // What every GPU method shares: positions and results on the device, the results kept until the

@@ -2,8 +2,13 @@
 
 #include <cuda_runtime.h>
 
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <mutex>
 #include <string>
+#include <vector>
 
 #include "core/validation.hpp"
 #include "cuda/device_buffer.cuh"
@@ -44,17 +49,106 @@ __global__ void first_non_finite_kernel(const float* xyz, std::size_t n,
 
 }  // namespace
 
-std::size_t first_non_finite(const float* device_xyz, std::size_t n) {
+// One device word per host thread and device, made once: the check runs at every build, and a
+// cudaMalloc, a cudaFree and two pageable copies per call cost ~30 us, more than a whole build at
+// 1,000 particles.
+class DeviceWords {
+ public:
+  ~DeviceWords() {
+    for (void* w : words_)  // at exit the runtime may be gone already: errors are ignored
+      if (w) cudaFree(w);
+  }
+  unsigned long long* current() {
+    int device = 0;
+    RAYCUT_CUDA_CHECK(cudaGetDevice(&device));
+    if (words_.size() <= static_cast<std::size_t>(device)) words_.resize(device + 1, nullptr);
+    if (!words_[device]) RAYCUT_CUDA_CHECK(cudaMalloc(&words_[device], sizeof(unsigned long long)));
+    return static_cast<unsigned long long*>(words_[device]);
+  }
+
+ private:
+  std::vector<void*> words_;
+};
+
+std::size_t first_non_finite(const float* device_xyz, std::size_t n, void* stream) {
   if (n == 0) return 0;
-  DeviceBuffer<unsigned long long> first(1);
-  const unsigned long long none = n;
-  RAYCUT_CUDA_CHECK(cudaMemcpy(first.data(), &none, sizeof none, cudaMemcpyHostToDevice));
+  thread_local DeviceWords words;
+  unsigned long long* first = words.current();
+  const auto s = static_cast<cudaStream_t>(stream);
+  RAYCUT_CUDA_CHECK(cudaMemsetAsync(first, 0xFF, sizeof *first, s));  // none found yet
   const unsigned blocks = static_cast<unsigned>(std::min<std::size_t>((n + 255) / 256, 65536));
-  first_non_finite_kernel<<<blocks, 256>>>(device_xyz, n, first.data());
+  first_non_finite_kernel<<<blocks, 256, 0, s>>>(device_xyz, n, first);
   RAYCUT_CUDA_CHECK_LAUNCH();
-  unsigned long long result = 0;
-  RAYCUT_CUDA_CHECK(cudaMemcpy(&result, first.data(), sizeof result, cudaMemcpyDeviceToHost));
-  return static_cast<std::size_t>(result);
+  unsigned long long found = 0;
+  read_back(&found, first, sizeof found, stream);
+  return static_cast<std::size_t>(std::min<unsigned long long>(found, n));
+}
+
+namespace {
+struct PinnedBlock {
+  static constexpr std::size_t bytes = 64;
+  void* host = nullptr;
+  PinnedBlock() {
+    RAYCUT_CUDA_CHECK(cudaHostAlloc(&host, bytes, cudaHostAllocPortable));  // any device
+  }
+  ~PinnedBlock() { cudaFreeHost(host); }
+};
+}  // namespace
+
+void read_back(void* host, const void* device, std::size_t bytes, void* stream) {
+  thread_local PinnedBlock block;
+  if (bytes > PinnedBlock::bytes)
+    throw Error(ErrorCode::internal, "read_back of more than 64 bytes");
+  const auto s = static_cast<cudaStream_t>(stream);
+  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(block.host, device, bytes, cudaMemcpyDeviceToHost, s));
+  RAYCUT_CUDA_CHECK(cudaStreamSynchronize(s));
+  std::memcpy(host, block.host, bytes);
+}
+
+namespace {
+// raycut's pool of each device, made on first use and kept for the process (the driver frees it
+// with the context). Freed blocks stay with the pool (no release threshold) until an allocation
+// does not fit.
+cudaMemPool_t device_pool() {
+  static std::mutex mutex;
+  static std::vector<cudaMemPool_t> pools;
+  int device = 0;
+  RAYCUT_CUDA_CHECK(cudaGetDevice(&device));
+  std::lock_guard<std::mutex> lock(mutex);
+  if (pools.size() <= static_cast<std::size_t>(device)) pools.resize(device + 1, nullptr);
+  if (!pools[device]) {
+    cudaMemPoolProps props{};
+    props.allocType = cudaMemAllocationTypePinned;
+    props.location.type = cudaMemLocationTypeDevice;
+    props.location.id = device;
+    RAYCUT_CUDA_CHECK(cudaMemPoolCreate(&pools[device], &props));
+    std::uint64_t keep = ~std::uint64_t{0};
+    RAYCUT_CUDA_CHECK(
+        cudaMemPoolSetAttribute(pools[device], cudaMemPoolAttrReleaseThreshold, &keep));
+  }
+  return pools[device];
+}
+}  // namespace
+
+// On the legacy default stream, which orders with the library's and the caller's blocking
+// streams; a block comes back to the pool only after a device-wide synchronisation
+// (pooled_free), so whatever stream uses it next finds it idle.
+void* pooled_allocate(std::size_t bytes) {
+  cudaMemPool_t pool = device_pool();
+  void* p = nullptr;
+  if (cudaMallocFromPoolAsync(&p, bytes, pool, cudaStreamLegacy) == cudaSuccess) return p;
+  (void)cudaGetLastError();
+  // The cached blocks back to the device, then once more.
+  if (cudaDeviceSynchronize() == cudaSuccess && cudaMemPoolTrimTo(pool, 0) == cudaSuccess &&
+      cudaMallocFromPoolAsync(&p, bytes, pool, cudaStreamLegacy) == cudaSuccess)
+    return p;
+  (void)cudaGetLastError();
+  return nullptr;
+}
+
+void pooled_free(void* p) noexcept {
+  cudaDeviceSynchronize();
+  cudaFreeAsync(p, cudaStreamLegacy);
 }
 
 void DeviceFree::operator()(void* p) const noexcept {

@@ -11,8 +11,14 @@ namespace raycut::detail::cuda {
 // True when at least one CUDA device is usable by this process.
 bool device_available();
 
-// Index of the first particle with a non-finite coordinate in device memory, or n if none.
-std::size_t first_non_finite(const float* device_xyz, std::size_t n);
+// Index of the first particle with a non-finite coordinate in device memory, or n if none; on
+// `stream` (a cudaStream_t), which it synchronises.
+std::size_t first_non_finite(const float* device_xyz, std::size_t n, void* stream);
+
+// Copies `bytes` (at most 64) of device memory to `host` through a pinned block of this host
+// thread (no pinned allocation per call), after the work queued on `stream` (a cudaStream_t),
+// which it synchronises.
+void read_back(void* host, const void* device, std::size_t bytes, void* stream);
 
 struct DeviceFree {
   void operator()(void* p) const noexcept;
