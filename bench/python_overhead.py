@@ -15,9 +15,12 @@ a CUDA input is synchronised after each call, and the library synchronises each 
   pairs), against the extension's ``Engine`` + ``build`` + ``pairs`` (the C++ phases time only
   the build: the pair extraction is not in ``timings``).
 
-``wrapper_us`` = API - extension calls: what the Python layer adds (the issue's overhead);
+``wrapper_us`` = API - extension calls: what the Python layer adds;
 ``over_cpp_us`` = API - C++ phases: that plus nanobind, argument checks and output wrapping (for
-``neighbor_list``: plus the untimed pair extraction). Writes a CSV (``--out``, default
+``neighbor_list``: plus the untimed pair extraction); ``over_cpp_loop_us`` = API - the same
+engine calls in a C++ loop (``Engine._cpp_loop_us``: [build +] run + results_view, wall per call,
+no Python): the issue's overhead "of a Python call over the same C++ call", what
+``meets_target`` checks (for ``neighbor_list``, which has no C++ loop: ``wrapper_us``). Writes a CSV (``--out``, default
 bench/results/local/python_overhead-<gpu or cpu>.csv, the GPU named in it) and prints a table.
 
     python bench/python_overhead.py [--n 1000] [--calls 2000] [--method auto] [--out FILE]
@@ -155,6 +158,11 @@ def bench_input(label, x, sync, method: str, cutoff: float, calls: int, warmup: 
             cpp_t = cpp_t[warmup:]
             api_med, ext_med = statistics.median(api_t), statistics.median(ext_t)
             cpp_med = statistics.median(cpp_t)
+            loop_med = float("nan")
+            if name != "neighbor_list":  # the same calls in a C++ loop: no Python at all
+                loop = raw._cpp_loop_us(x_ext, cutoff, "count", name == "build+count",
+                                        warmup + calls)
+                loop_med = statistics.median(loop[warmup:])
             rows.append({
                 "input": label, "method": engine.method, "space": space, "api": name,
                 "n": len(x_ext), "cutoff": cutoff, "pairs": pairs, "calls": calls,
@@ -163,7 +171,13 @@ def bench_input(label, x, sync, method: str, cutoff: float, calls: int, warmup: 
                 "cpp_us_median": round(cpp_med, 2), "cpp_phases": "+".join(phases),
                 "wrapper_us": round(api_med - ext_med, 2),
                 "over_cpp_us": round(api_med - cpp_med, 2),
-                "target_us": TARGET_US, "meets_target": api_med - ext_med <= TARGET_US,
+                "cpp_loop_us_median": round(loop_med, 2),
+                "over_cpp_loop_us": round(api_med - loop_med, 2),
+                "target_us": TARGET_US,
+                # Against the C++ loop where there is one (the "same C++ call"), else
+                # against the extension's calls.
+                "meets_target": (api_med - (loop_med if loop_med == loop_med else ext_med)
+                                 <= TARGET_US),
             })
     return rows
 
@@ -211,15 +225,17 @@ def main(argv=None) -> list:
     print(f"raycut Python overhead, N = {args.n}, cutoff {cutoff:.4g}, {args.calls} calls each, "
           f"{gpu or 'no GPU'} (target: wrapper <= {TARGET_US:g} us)")
     header = (f"{'input':<11} {'method':<11} {'api':<14} {'api us':>9} {'ext us':>9} "
-              f"{'C++ us':>9} {'wrapper':>8} {'over C++':>9}  ok")
+              f"{'C++ us':>9} {'C++ loop':>9} {'wrapper':>8} {'over loop':>9}  ok")
     print(header)
     print("-" * len(header))
     for r in rows:
         print(f"{r['input']:<11} {r['method']:<11} {r['api']:<14} {r['api_us_median']:>9.1f} "
-              f"{r['ext_us_median']:>9.1f} {r['cpp_us_median']:>9.1f} {r['wrapper_us']:>8.1f} "
-              f"{r['over_cpp_us']:>9.1f}  {'yes' if r['meets_target'] else 'NO'}")
+              f"{r['ext_us_median']:>9.1f} {r['cpp_us_median']:>9.1f} "
+              f"{r['cpp_loop_us_median']:>9.1f} {r['wrapper_us']:>8.1f} "
+              f"{r['over_cpp_loop_us']:>9.1f}  {'yes' if r['meets_target'] else 'NO'}")
     print("api: the Python call; ext: the same extension calls without the wrapper; C++: the "
-          "engine's phase times (neighbor_list: the build only). Medians.")
+          "engine's phase times (neighbor_list: the build only); C++ loop: build + run + "
+          "results_view in a C++ loop, wall per call (the target's reference). Medians.")
     print(f"wrote {out}")
     return rows
 

@@ -97,6 +97,16 @@ TEST_P(Conformance, MatchesBruteForce) {
     // refusing it with a clear out-of-memory error is its correct behaviour.
     if (method == "grid-paper" && e.code() == raycut::ErrorCode::out_of_memory)
       GTEST_SKIP() << e.what();
+    // The ray-tracing methods refuse a scene too wide for their float geometry before any launch
+    // (docs/methods.md, "Valid domain of each ray-tracing method"): on the families built to be
+    // that wide, that refusal, pointing at the grid, is their correct answer; anywhere else a
+    // refusal fails the test.
+    const bool beyond_ray_domain =
+        c.family == "offset-1e15" || c.family == "groups-far" || c.family == "rod-1e6";
+    if (method.rfind("optix", 0) == 0 && beyond_ray_domain &&
+        e.code() == raycut::ErrorCode::unsupported &&
+        std::string(e.what()).find("Use the grid method") != std::string::npos)
+      GTEST_SKIP() << e.what();
     throw;
   }
 

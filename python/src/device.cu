@@ -33,9 +33,40 @@ __global__ void widen(const std::uint32_t* indices, std::uint64_t pairs, std::in
   if (e < pairs) j[e] = indices[e];
 }
 
+template <class Index>
+__global__ void summarise(const Index* index, std::size_t n, unsigned long long* unsorted,
+                          std::int64_t* ends) {
+  const std::size_t k = blockIdx.x * std::size_t{blockDim.x} + threadIdx.x;
+  if (k == 0) {
+    ends[0] = index[0];
+    ends[1] = index[n - 1];
+  }
+  if (k + 1 < n && index[k] > index[k + 1]) atomicMin(unsorted, static_cast<unsigned long long>(k));
+}
+
+// Entry i (0 .. n) starts every system in (index[i - 1], index[i]] (index[-1] = -1, index[n] =
+// systems): with a sorted index, each offset is written once.
+template <class Index>
+__global__ void boundaries(const Index* index, std::size_t n, std::size_t systems,
+                           std::uint64_t* offsets) {
+  const std::size_t i = blockIdx.x * std::size_t{blockDim.x} + threadIdx.x;
+  if (i > n) return;
+  const std::int64_t lo = i == 0 ? -1 : static_cast<std::int64_t>(index[i - 1]);
+  const std::int64_t hi =
+      i == n ? static_cast<std::int64_t>(systems) : static_cast<std::int64_t>(index[i]);
+  for (std::int64_t s = lo + 1; s <= hi; ++s) offsets[s] = i;
+}
+
 unsigned blocks(std::uint64_t work, unsigned threads) {
   return static_cast<unsigned>((work + threads - 1) / threads);
 }
+
+// A small device scratch from the pool, freed on scope exit (after the stream's work).
+struct Scratch {
+  void* p;
+  explicit Scratch(std::size_t bytes) : p(device_alloc(bytes)) {}
+  ~Scratch() { device_free(p); }
+};
 
 }  // namespace
 
@@ -86,7 +117,10 @@ void device_copy(void* dst, const void* src, std::size_t bytes, void* stream) {
   if (bytes == 0) return;
   const auto s = static_cast<cudaStream_t>(stream);
   check(cudaMemcpyAsync(dst, src, bytes, cudaMemcpyDeviceToDevice, s), "cudaMemcpyAsync");
-  check(cudaStreamSynchronize(s), "device_copy");
+}
+
+void synchronize(void* stream) {
+  check(cudaStreamSynchronize(static_cast<cudaStream_t>(stream)), "cudaStreamSynchronize");
 }
 
 void csr_to_coo(const std::uint64_t* offsets, const std::uint32_t* indices, std::size_t n,
@@ -99,6 +133,65 @@ void csr_to_coo(const std::uint64_t* offsets, const std::uint32_t* indices, std:
   widen<<<blocks(pairs, threads), threads, 0, s>>>(indices, pairs, j);
   check(cudaGetLastError(), "widen launch");
   check(cudaStreamSynchronize(s), "csr_to_coo");
+}
+
+IndexSummary summarise_index(const void* index, bool wide, std::size_t n, void* stream) {
+  const auto s = static_cast<cudaStream_t>(stream);
+  struct Words {
+    unsigned long long unsorted;
+    std::int64_t ends[2];
+  };
+  Scratch scratch(sizeof(Words));
+  auto* words = static_cast<Words*>(scratch.p);
+  const unsigned long long sorted = n - 1;
+  check(cudaMemcpyAsync(&words->unsorted, &sorted, sizeof sorted, cudaMemcpyHostToDevice, s),
+        "cudaMemcpyAsync");
+  constexpr unsigned threads = 256;
+  if (wide)
+    summarise<<<blocks(n, threads), threads, 0, s>>>(static_cast<const std::int64_t*>(index), n,
+                                                      &words->unsorted, words->ends);
+  else
+    summarise<<<blocks(n, threads), threads, 0, s>>>(static_cast<const std::int32_t*>(index), n,
+                                                      &words->unsorted, words->ends);
+  check(cudaGetLastError(), "summarise launch");
+  Words host{};
+  check(cudaMemcpyAsync(&host, words, sizeof host, cudaMemcpyDeviceToHost, s), "cudaMemcpyAsync");
+  check(cudaStreamSynchronize(s), "summarise_index");
+  IndexSummary out{host.ends[0], host.ends[1], host.unsorted, 0, 0};
+  if (out.unsorted + 1 < n) {  // the two values the error message names
+    const std::size_t size = wide ? 8 : 4;
+    const auto* at = static_cast<const unsigned char*>(index) + out.unsorted * size;
+    std::int64_t pair[2] = {0, 0};
+    if (wide) {
+      check(cudaMemcpy(pair, at, 2 * size, cudaMemcpyDeviceToHost), "cudaMemcpy");
+    } else {
+      std::int32_t narrow[2];
+      check(cudaMemcpy(narrow, at, 2 * size, cudaMemcpyDeviceToHost), "cudaMemcpy");
+      pair[0] = narrow[0];
+      pair[1] = narrow[1];
+    }
+    out.here = pair[0];
+    out.after = pair[1];
+  }
+  return out;
+}
+
+void index_offsets(const void* index, bool wide, std::size_t n, std::size_t systems,
+                   std::uint64_t* host_offsets, void* stream) {
+  const auto s = static_cast<cudaStream_t>(stream);
+  const std::size_t bytes = (systems + 1) * sizeof(std::uint64_t);
+  Scratch offsets(bytes);
+  auto* out = static_cast<std::uint64_t*>(offsets.p);
+  constexpr unsigned threads = 256;
+  if (wide)
+    boundaries<<<blocks(n + 1, threads), threads, 0, s>>>(static_cast<const std::int64_t*>(index),
+                                                          n, systems, out);
+  else
+    boundaries<<<blocks(n + 1, threads), threads, 0, s>>>(static_cast<const std::int32_t*>(index),
+                                                          n, systems, out);
+  check(cudaGetLastError(), "boundaries launch");
+  check(cudaMemcpyAsync(host_offsets, out, bytes, cudaMemcpyDeviceToHost, s), "cudaMemcpyAsync");
+  check(cudaStreamSynchronize(s), "index_offsets");
 }
 
 }  // namespace raycut_py

@@ -13,12 +13,28 @@ void* device_alloc(std::size_t bytes);  // throws raycut::Error(out_of_memory)
 void device_free(void* p) noexcept;
 int current_device();  // the CUDA device of this thread (cudaGetDevice); throws on failure
 int current_device_or_none() noexcept;  // the same, or -1 where no device is usable
-// dst <- src, both device memory, on `stream`, synchronised before returning.
+// dst <- src, both device memory, queued on `stream` (synchronize() before reading dst).
 void device_copy(void* dst, const void* src, std::size_t bytes, void* stream);
+void synchronize(void* stream);
 
 // COO pairs of a device CSR list: i[e] = the row of entry e, j[e] = indices[e], both int64, on
 // `stream` (a cudaStream_t; null: the legacy default stream), synchronised before returning.
 void csr_to_coo(const std::uint64_t* offsets, const std::uint32_t* indices, std::size_t n,
                 std::uint64_t pairs, std::int64_t* i, std::int64_t* j, void* stream);
+
+// A per-particle system index (int32 when !wide, else int64) in device memory, n >= 1, as
+// batch= gives it: its first and last values, and the first k with index[k] > index[k + 1]
+// (n - 1 when it is sorted), then index[k] and index[k + 1] (0 when sorted). One kernel, one
+// read-back, on `stream`.
+struct IndexSummary {
+  std::int64_t first = 0, last = 0;
+  std::uint64_t unsorted = 0;
+  std::int64_t here = 0, after = 0;
+};
+IndexSummary summarise_index(const void* index, bool wide, std::size_t n, void* stream);
+// Systems::offsets of a sorted index with values in [0, systems): offsets[s] = the number of
+// entries below s, s = 0 .. systems, into host memory (systems + 1 values); on `stream`.
+void index_offsets(const void* index, bool wide, std::size_t n, std::size_t systems,
+                   std::uint64_t* host_offsets, void* stream);
 
 }  // namespace raycut_py

@@ -10,6 +10,7 @@
 #include <nanobind/stl/string_view.h>
 #include <nanobind/stl/vector.h>
 
+#include <chrono>
 #include <cstdint>
 #include <cstring>
 #include <limits>
@@ -143,6 +144,30 @@ FloatInput float_input(nb::handle obj, const char* name) {
   in.keep = std::move(array);
   return in;
 }
+
+#if defined(RAYCUT_PY_CUDA)
+// A 1-D int32 or int64 C-contiguous CUDA array, N >= 1 (a batch index).
+struct DeviceIndex {
+  const void* data = nullptr;
+  std::size_t n = 0;
+  bool wide = false;
+  nb::ndarray<nb::ro> keep;
+};
+
+DeviceIndex device_index(nb::handle obj) {
+  DeviceIndex in;
+  if (!nb::try_cast(obj, in.keep, /*convert=*/false) ||
+      in.keep.device_type() != nb::device::cuda::value || in.keep.ndim() != 1 ||
+      in.keep.shape(0) == 0 || (in.keep.shape(0) > 1 && in.keep.stride(0) != 1) ||
+      (in.keep.dtype() != nb::dtype<std::int32_t>() && in.keep.dtype() != nb::dtype<std::int64_t>()))
+    value_error("a system index on the device must be a non-empty 1-D contiguous int32 or int64 "
+                "CUDA array");
+  in.data = in.keep.data();
+  in.n = in.keep.shape(0);
+  in.wide = in.keep.dtype() == nb::dtype<std::int64_t>();
+  return in;
+}
+#endif
 
 raycut::PositionsView positions_view(const FloatInput& in) {
   if (in.shape.size() != 2 || in.shape[1] != 3)
@@ -434,6 +459,10 @@ nb::dict results(raycut::Engine& engine, std::string_view kernel_name, bool to_h
   if (produces.force) out["force"] = copy(view.force, {n, 3}, dtype_of<float>());
   if (produces.virial) out["virial"] = copy(view.virial, {n, 6}, dtype_of<float>());
   if (produces.density) out["density"] = copy(view.density, {n}, dtype_of<float>());
+  {
+    nb::gil_scoped_release release;
+    raycut_py::synchronize(engine.stream());  // the copies complete: the arrays are final
+  }
   return out;
 #else
   throw raycut::Error(raycut::ErrorCode::internal, "device results without CUDA");
@@ -565,6 +594,10 @@ Verlet::Snapshot take_snapshot(Verlet& v, bool to_host) {
   if (v.options.shifts)
     s.shifts =
         static_cast<const std::int32_t*>(copy(list.shifts(), 3 * s.pairs * sizeof(std::int32_t)));
+  {
+    nb::gil_scoped_release release;
+    raycut_py::synchronize(v.list.engine().stream());
+  }
   s.space = MemorySpace::device;
   s.owner = copies;
   return s;
@@ -675,6 +708,40 @@ NB_MODULE(_raycut, m) {
       false;
 #endif
 
+#if defined(RAYCUT_PY_CUDA)
+  // batch= as a CUDA tensor: checked and turned into offsets on the device (python/raycut/
+  // _systems.py), only a summary and the offsets read back.
+  m.def(
+      "device_index_summary",
+      [](nb::handle index, std::uintptr_t stream) {
+        const DeviceIndex in = device_index(index);
+        raycut_py::IndexSummary s;
+        {
+          nb::gil_scoped_release release;
+          s = raycut_py::summarise_index(in.data, in.wide, in.n, reinterpret_cast<void*>(stream));
+        }
+        return nb::make_tuple(s.first, s.last, s.unsorted, s.here, s.after);
+      },
+      nb::arg("index"), nb::arg("stream"),
+      "(first, last, k, index[k], index[k + 1]) of a 1-D int32/int64 CUDA array of N >= 1 "
+      "entries: k the first place it decreases (N - 1 when sorted).");
+  m.def(
+      "device_index_offsets",
+      [](nb::handle index, std::size_t systems, std::uintptr_t stream) {
+        const DeviceIndex in = device_index(index);
+        std::vector<std::uint64_t> offsets(systems + 1);
+        {
+          nb::gil_scoped_release release;
+          raycut_py::index_offsets(in.data, in.wide, in.n, systems, offsets.data(),
+                                   reinterpret_cast<void*>(stream));
+        }
+        return host_array(std::move(offsets), {systems + 1});
+      },
+      nb::arg("index"), nb::arg("systems"), nb::arg("stream"),
+      "Systems offsets (S + 1, uint64) of a sorted 1-D int32/int64 CUDA index with values in "
+      "[0, S).");
+#endif
+
   nb::class_<raycut::Engine>(m, "Engine")
       .def(nb::init<std::string_view>(), nb::arg("method") = "auto")
       .def_prop_ro("method", &raycut::Engine::method)
@@ -742,7 +809,32 @@ NB_MODULE(_raycut, m) {
         d["device_compute_ms"] = t.device_compute_ms;
         d["refit"] = t.refit;
         return d;
-      });
+      })
+      .def(
+          "_cpp_loop_us",
+          [](raycut::Engine& e, nb::handle positions, double cutoff, std::string_view kernel,
+             bool build, std::size_t calls) {
+            // The C++ caller's loop (benchmarks: bench/python_overhead.py): `calls` times
+            // [build] + run + results_view, each call timed on the host clock, no
+            // Python in between. What a Python call's overhead is measured against.
+            const FloatInput in = float_input(positions, "positions");
+            const raycut::PositionsView view = positions_view(in);
+            const raycut::Kernel k = raycut::parse_kernel(kernel);
+            std::vector<double> us(calls);
+            nb::gil_scoped_release release;
+            for (double& t : us) {
+              const auto start = std::chrono::steady_clock::now();
+              if (build) e.build(view, static_cast<float>(cutoff));
+              e.run(k);
+              (void)e.results_view();  // run() returns synchronised
+              t = std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() -
+                                                            start)
+                      .count();
+            }
+            return us;
+          },
+          nb::arg("positions"), nb::arg("cutoff"), nb::arg("kernel"), nb::arg("build"),
+          nb::arg("calls"));
 
   nb::class_<Verlet>(m, "VerletList")
       .def(

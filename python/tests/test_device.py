@@ -258,6 +258,35 @@ def test_torch_periodic_batch_equals_host(method):
                                       half=True, method=method))
 
 
+@pytest.mark.parametrize("dtype", ["int32", "int64", "int16"])
+def test_torch_cuda_batch_index(dtype):
+    """A CUDA batch index is checked and turned into offsets on the device: the same offsets and
+    errors as the host path, empty systems (leading, inner, trailing) included."""
+    torch = torch_cuda()
+    from raycut import _systems
+
+    host = np.array([1, 1, 3, 3, 3, 4, 6], np.int64)
+    b = torch.from_numpy(host.astype(dtype)).cuda()
+    got = _systems.batch(None, len(host), b)
+    want = _systems.batch(None, len(host), host)
+    assert got.systems == want.systems == 7
+    np.testing.assert_array_equal(got.offsets, want.offsets)
+    np.testing.assert_array_equal(got.offsets, [0, 0, 2, 2, 5, 6, 6, 7])
+    per_system = _systems.boxes(np.stack([np.eye(3)] * 9), True)  # 9 systems, the last 2 empty
+    np.testing.assert_array_equal(_systems.batch(per_system, len(host), b).offsets,
+                                  [0, 0, 2, 2, 5, 6, 6, 7, 7, 7])
+    one = _systems.batch(None, 1, torch.zeros(1, dtype=b.dtype, device="cuda"))
+    np.testing.assert_array_equal(one.offsets, [0, 1])
+    bad = host.copy()
+    bad[4] = 2  # 3 > 2 at k = 3
+    with pytest.raises(ValueError, match=r"batch\[3\] = 3 > batch\[4\] = 2"):
+        _systems.batch(None, len(bad), torch.from_numpy(bad.astype(dtype)).cuda())
+    with pytest.raises(ValueError, match="negative"):
+        _systems.batch(None, 3, torch.tensor([-1, 0, 0], device="cuda"))
+    with pytest.raises(ValueError, match="cell/pbc give 2 systems"):
+        _systems.batch(_systems.boxes(np.stack([np.eye(3)] * 2), True), len(host), b)
+
+
 @pytest.mark.parametrize("method", SYSTEM_DEVICE)
 def test_torch_padded_shifts_equal_host(method):
     """The padded matrix with S from CUDA positions: CUDA tensors (the library's buffers, wrapped,
