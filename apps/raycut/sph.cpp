@@ -10,6 +10,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <memory>
 #include <optional>
@@ -190,8 +191,11 @@ int rank_of(const sph::Solver&) {
 void agree(const sph::Solver&, const std::string& error, ErrorCode code) {
   if (!error.empty()) throw Error(code, error);
 }
-RunReport report(const sph::Solver&, bool) {
+RunReport report(const sph::Solver&, bool, double) {
   return {};
+}
+double summed_over_ranks(const sph::Solver&, double local) {
+  return local;
 }
 
 #if defined(RAYCUT_CLI_MPI)
@@ -205,21 +209,29 @@ void agree(const mpi::SphSolver&, const std::string& error, ErrorCode code) {
     throw Error(static_cast<ErrorCode>(failed[1]),
                 error.empty() ? "rank 0 failed to write its outputs" : error);
 }
-// Collective. `done`: after the steps (the summary), else before them (the first line).
-RunReport report(const mpi::SphSolver& solver, bool done) {
+double summed_over_ranks(const mpi::SphSolver&, double local) {
+  double sum = 0;
+  MPI_Allreduce(&local, &sum, 1, MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
+  return sum;
+}
+// Collective. `done`: after the steps (the summary, with the steps' CPU ms summed over the
+// ranks), else before them (the first line).
+RunReport report(const mpi::SphSolver& solver, bool done, double step_cpu_ms) {
   const mpi::SphRunStats s = solver.statistics();
   const std::string dims =
       std::to_string(s.dims[0]) + "x" + std::to_string(s.dims[1]) + "x" + std::to_string(s.dims[2]);
   RunReport r;
   r.where = ", " + std::to_string(s.ranks) + " ranks, domains " + dims;
   if (!done) return r;
-  r.header = ",ranks,dims,halos_mean,owned_min,owned_max,exchanges,refreshes,migrated,timer";
+  r.header =
+      ",ranks,dims,halos_mean,owned_min,owned_max,exchanges,refreshes,migrated,step_cpu_ms,timer";
   char line[512];
-  std::snprintf(
-      line, sizeof line, ",%d,%s,%.0f,%llu,%llu,%llu,%llu,%llu,max_over_ranks", s.ranks,
-      dims.c_str(), s.halos_mean, static_cast<unsigned long long>(s.owned_min),
-      static_cast<unsigned long long>(s.owned_max), static_cast<unsigned long long>(s.exchanges),
-      static_cast<unsigned long long>(s.refreshes), static_cast<unsigned long long>(s.migrated));
+  std::snprintf(line, sizeof line, ",%d,%s,%.0f,%llu,%llu,%llu,%llu,%llu,%.4f,max_over_ranks",
+                s.ranks, dims.c_str(), s.halos_mean, static_cast<unsigned long long>(s.owned_min),
+                static_cast<unsigned long long>(s.owned_max),
+                static_cast<unsigned long long>(s.exchanges),
+                static_cast<unsigned long long>(s.refreshes),
+                static_cast<unsigned long long>(s.migrated), step_cpu_ms);
   r.values = line;
   std::snprintf(
       line, sizeof line,
@@ -281,7 +293,7 @@ int run_steps(const SphOptions& o, const sph::WcsphConfig& config, const sph::Sp
     if (!o.result_csv.empty()) result_out.emplace(o.result_csv);
     if (!o.out.empty()) series.emplace(o.out, "frames");
   });
-  const RunReport where = report(solver, false);
+  const RunReport where = report(solver, false, 0);
   if (root)
     std::fprintf(stderr,
                  "sph %s: %zu particles, method %s (%s, skin %g m%s), %d frames of dt = %g s\n",
@@ -363,15 +375,17 @@ int run_steps(const SphOptions& o, const sph::WcsphConfig& config, const sph::Sp
 
   // Steps are timed alone; output (copies, files, renders) is not.
   sph::StepTimes sum;
-  double step_seconds = 0;
+  double step_seconds = 0, step_cpu_seconds = 0;
   const auto wall_start = Clock::now();
   auto last_report = wall_start;
   save(0);
   sample(true);
   for (int frame = 1; frame <= frames; ++frame) {
     const auto start = Clock::now();
+    const double cpu_start = cpu_seconds();
     solver.step();
     step_seconds += seconds_since(start);
+    step_cpu_seconds += cpu_seconds() - cpu_start;
     sample(frame == frames);
     if (wcsph && config.scenario == "hydrostatic" && solver.time() >= profile_from &&
         (frame % 20 == 0 || frame == frames)) {
@@ -405,7 +419,9 @@ int run_steps(const SphOptions& o, const sph::WcsphConfig& config, const sph::Sp
     mean.force_ms = sum.force_ms / frames;
     mean.integrate_ms = sum.integrate_ms / frames;
   }
-  const RunReport extra = report(solver, true);
+  const double step_cpu_ms =
+      frames > 0 ? 1e3 * summed_over_ranks(solver, step_cpu_seconds) / frames : 0.0;
+  const RunReport extra = report(solver, true, step_cpu_ms);
   if (root) {
     std::printf("scenario %s, N = %zu, method %s, %d steps in %.3f s (%.3f s with output)\n",
                 scenario.name.c_str(), n, solver.method().c_str(), frames, step_seconds, total_s);
@@ -415,6 +431,8 @@ int run_steps(const SphOptions& o, const sph::WcsphConfig& config, const sph::Sp
     std::printf("%-12s %10.4f\n", "force", mean.force_ms);
     std::printf("%-12s %10.4f\n", "integrate", mean.integrate_ms);
     std::printf("%-12s %10.4f\n", "step", frames > 0 ? 1e3 * step_seconds / frames : 0.0);
+    std::printf("%-12s %10.4f   (CPU time of the steps, all threads%s)\n", "step CPU", step_cpu_ms,
+                extra.summary.empty() ? "" : ", summed over the ranks");
     std::printf("steps/s      %10.1f\n", steps_per_s);
     std::printf("%s", extra.summary.c_str());
     if (series)
@@ -502,6 +520,12 @@ int run_sph(const SphOptions& o) {
 }
 
 }  // namespace
+
+double cpu_seconds() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
 
 Command add_sph(CLI::App& app) {
   auto* cmd = app.add_subcommand(
