@@ -13,6 +13,7 @@
 #include <string>
 #include <vector>
 
+#include "mpi/ranks.hpp"
 #include "raycut/mpi/sph.hpp"
 #include "raycut/sph/scenario.hpp"
 #include "raycut/sph/solver.hpp"
@@ -21,17 +22,6 @@ namespace {
 
 using raycut::mpi::SphSolver;
 using raycut::sph::SphScenario;
-
-int world_rank() {
-  int r = 0;
-  MPI_Comm_rank(MPI_COMM_WORLD, &r);
-  return r;
-}
-int world_size() {
-  int s = 1;
-  MPI_Comm_size(MPI_COMM_WORLD, &s);
-  return s;
-}
 
 struct State {
   std::vector<float> x, v, rho, p;
