@@ -222,7 +222,8 @@ void SphSolver::copy_state(std::vector<float>& x, std::vector<float>& v, std::ve
     mine[8 * i + 6] = s.rho[i];
     mine[8 * i + 7] = s.p[i];
   }
-  const int count = checked_int(8 * n, "8 floats per owned particle");
+  checked_int(8 * e.global_size(), "8 floats per particle, over all ranks,");
+  const int count = static_cast<int>(8 * n);
   const bool at_root = e.rank() == root;
   std::vector<int> counts(at_root ? e.size() : 0), offsets(counts.size());
   check(MPI_Gather(&count, 1, MPI_INT, counts.data(), 1, MPI_INT, root, s.comm), "MPI_Gather");
