@@ -61,6 +61,10 @@ Box resolve_box(const BoxOptions& o, const Box& base = Box::open());
 // "4x4x4 (pbc T T F)" or "[[ax ay az] [bx by bz] [cx cy cz]] (pbc T T T)", for messages and rows.
 std::string describe_box(const Box& box);
 
+// CPU seconds of this process, all its threads (CLOCK_PROCESS_CPUTIME_ID): the work, whatever the
+// cores are shared with.
+double cpu_seconds();
+
 // The median of samples (mean of the middle two for an even count).
 double median(std::vector<double> samples);
 

@@ -11,13 +11,13 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
-#include <ctime>
 #include <memory>
 #include <numeric>
 #include <string>
 #include <vector>
 
 #include "commands.hpp"
+#include "mpi_session.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/files.hpp"
 #include "raycut/mpi/distributed.hpp"
@@ -27,25 +27,6 @@ namespace {
 
 constexpr double lj_density = 0.8442;
 constexpr float lj_cutoff = 2.5f;
-
-// MPI_Init when the process has not (the raycut tool does not otherwise use MPI), and
-// MPI_Finalize on the way out, also when an error unwinds every rank.
-struct MpiSession {
-  bool owner = false;
-  MpiSession() {
-    int initialized = 0;
-    MPI_Initialized(&initialized);
-    if (!initialized) {
-      MPI_Init(nullptr, nullptr);
-      owner = true;
-    }
-  }
-  ~MpiSession() {
-    int finalized = 0;
-    MPI_Finalized(&finalized);
-    if (owner && !finalized) MPI_Finalize();
-  }
-};
 
 // splitmix64: coordinate k of the liquid from (seed, k) alone, so that N particles are the same
 // system whatever the number of ranks (strong scaling compares like with like).
@@ -94,12 +75,6 @@ enum Phase {
   step_cpu,
   phases
 };
-
-double cpu_seconds() {
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 struct Run {
   std::vector<double> samples[phases];

@@ -3,11 +3,14 @@
 // validation scenarios hydrostatic and dam-break, docs/sph-validation.md), writes every k-th frame
 // as VTK XML PolyData plus a .pvd series (and PNG renders with --png), prints progress on stderr
 // and a summary (steps/s, mean milliseconds per pass); --csv appends one row per run;
-// --result-csv writes the validation result (pressure profile or surge front).
+// --result-csv writes the validation result (pressure profile or surge front). Under mpirun,
+// --distributed runs raycut::mpi::SphSolver over the ranks with the same loop (run_steps).
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <memory>
 #include <optional>
@@ -22,6 +25,12 @@
 #include "raycut/sph/scenario.hpp"
 #include "raycut/sph/solver.hpp"
 #include "raycut/sph/vtk.hpp"
+#if defined(RAYCUT_CLI_MPI)
+#include <mpi.h>
+
+#include "mpi_session.hpp"
+#include "raycut/mpi/sph.hpp"
+#endif
 
 namespace raycut::cli {
 namespace {
@@ -43,6 +52,9 @@ struct SphOptions {
   std::string config;                                     // key = value scenario file
   std::vector<std::pair<std::string, std::string>> keys;  // CLI overrides, after the file
   std::string result_csv;
+  // Under mpirun: raycut::mpi::SphSolver over the ranks.
+  bool distributed = false;
+  std::vector<int> dims;  // empty: MPI_Dims_create
 };
 
 bool is_validation(const std::string& scenario) {
@@ -164,21 +176,307 @@ double seconds_since(Clock::time_point start) {
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
-// `csv` was opened in append mode before the run (its old rows are already copied).
-void append_csv(io::OutputFile& csv, const std::string& scenario, const sph::Solver& solver,
-                int frames, double steps_per_s, const sph::StepTimes& mean) {
-  if (csv.was_empty())
-    csv.write(
-        "scenario,method,N,frames,steps_per_s,update_ms,density_ms,force_ms,integrate_ms,gpu,"
-        "driver,cuda,optix\n");
-  const SystemInfo sys = system_info();
+// What a run needs beyond the solvers' common calls (size, parameters, method, space, skin, time,
+// step, last_times, copy_state): sph::Solver in this process; mpi::SphSolver under --distributed,
+// whose step and copy_state are collective, with rank 0 printing and writing. An error rank 0
+// meets while writing is thrown on every rank (agree), so none is left in a collective.
+struct RunReport {
+  std::string where;           // after the method in the first line
+  std::string header, values;  // extra CSV columns, each with a leading comma
+  std::string summary;         // extra summary lines
+};
+int rank_of(const sph::Solver&) {
+  return 0;
+}
+void agree(const sph::Solver&, const std::string& error, ErrorCode code) {
+  if (!error.empty()) throw Error(code, error);
+}
+RunReport report(const sph::Solver&, bool, double) {
+  return {};
+}
+double summed_over_ranks(const sph::Solver&, double local) {
+  return local;
+}
+
+#if defined(RAYCUT_CLI_MPI)
+int rank_of(const mpi::SphSolver& solver) {
+  return solver.engine().rank();
+}
+void agree(const mpi::SphSolver&, const std::string& error, ErrorCode code) {
+  int failed[2] = {!error.empty(), static_cast<int>(code)};
+  MPI_Bcast(failed, 2, MPI_INT, 0, MPI_COMM_WORLD);
+  if (failed[0])
+    throw Error(static_cast<ErrorCode>(failed[1]),
+                error.empty() ? "rank 0 failed to write its outputs" : error);
+}
+double summed_over_ranks(const mpi::SphSolver&, double local) {
+  double sum = 0;
+  MPI_Allreduce(&local, &sum, 1, MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
+  return sum;
+}
+// Collective. `done`: after the steps (the summary, with the steps' CPU ms summed over the
+// ranks), else before them (the first line).
+RunReport report(const mpi::SphSolver& solver, bool done, double step_cpu_ms) {
+  const mpi::SphRunStats s = solver.statistics();
+  const std::string dims =
+      std::to_string(s.dims[0]) + "x" + std::to_string(s.dims[1]) + "x" + std::to_string(s.dims[2]);
+  RunReport r;
+  r.where = ", " + std::to_string(s.ranks) + " ranks, domains " + dims;
+  if (!done) return r;
+  r.header =
+      ",ranks,dims,halos_mean,owned_min,owned_max,exchanges,refreshes,migrated,step_cpu_ms,timer";
   char line[512];
-  std::snprintf(line, sizeof line, "%s,%s,%zu,%d,%.1f,%.4f,%.4f,%.4f,%.4f,%s,%s,%s,%s\n",
-                scenario.c_str(), solver.method().c_str(), solver.size(), frames, steps_per_s,
-                mean.update_ms, mean.density_ms, mean.force_ms, mean.integrate_ms, sys.gpu.c_str(),
-                sys.driver.c_str(), sys.cuda.c_str(), sys.optix.c_str());
+  std::snprintf(line, sizeof line, ",%d,%s,%.0f,%llu,%llu,%llu,%llu,%llu,%.4f,max_over_ranks",
+                s.ranks, dims.c_str(), s.halos_mean, static_cast<unsigned long long>(s.owned_min),
+                static_cast<unsigned long long>(s.owned_max),
+                static_cast<unsigned long long>(s.exchanges),
+                static_cast<unsigned long long>(s.refreshes),
+                static_cast<unsigned long long>(s.migrated), step_cpu_ms);
+  r.values = line;
+  std::snprintf(
+      line, sizeof line,
+      "distributed: %d ranks (domains %s), pass times the largest over the ranks; "
+      "halos %.0f per step (summed over ranks), owned %llu to %llu per rank; %llu "
+      "exchanges, %llu refreshes in place; %llu particles migrated\n",
+      s.ranks, dims.c_str(), s.halos_mean, static_cast<unsigned long long>(s.owned_min),
+      static_cast<unsigned long long>(s.owned_max), static_cast<unsigned long long>(s.exchanges),
+      static_cast<unsigned long long>(s.refreshes), static_cast<unsigned long long>(s.migrated));
+  r.summary = line;
+  return r;
+}
+#endif
+
+// Runs `write` on rank 0, then agrees on its outcome: an Error it throws is thrown on every rank.
+template <class S, class F>
+void on_root(const S& solver, F&& write) {
+  std::string error;
+  ErrorCode code = ErrorCode::io;
+  if (rank_of(solver) == 0) try {
+      write();
+    } catch (const Error& e) {
+      error = e.what();
+      code = e.code();
+    }
+  agree(solver, error, code);
+}
+
+// `csv` was opened in append mode before the run (its old rows are already copied).
+void append_csv(io::OutputFile& csv, const std::string& scenario, const std::string& method,
+                std::size_t n, int frames, double steps_per_s, const sph::StepTimes& mean,
+                const RunReport& extra) {
+  if (csv.was_empty())
+    csv.write("scenario,method,N,frames,steps_per_s,update_ms,density_ms,force_ms,integrate_ms" +
+              extra.header + ",gpu,driver,cuda,optix\n");
+  const SystemInfo sys = system_info();
+  char line[1024];
+  std::snprintf(line, sizeof line, "%s,%s,%zu,%d,%.1f,%.4f,%.4f,%.4f,%.4f%s,%s,%s,%s,%s\n",
+                scenario.c_str(), method.c_str(), n, frames, steps_per_s, mean.update_ms,
+                mean.density_ms, mean.force_ms, mean.integrate_ms, extra.values.c_str(),
+                sys.gpu.c_str(), sys.driver.c_str(), sys.cuda.c_str(), sys.optix.c_str());
   csv.write(line);
   csv.commit();
+}
+
+template <class S>
+int run_steps(const SphOptions& o, const sph::WcsphConfig& config, const sph::SphScenario& scenario,
+              int frames, S& solver) {
+  const bool wcsph = is_validation(o.scenario);
+  const bool root = rank_of(solver) == 0;
+  const std::size_t n = solver.size();
+  const float rho0 = solver.parameters().rest_density;
+  // Output files are opened (temporary files created) before the steps, so that an unwritable
+  // path fails now rather than after the run; each appears whole, or not at all, at the end.
+  std::optional<io::OutputFile> csv_out, result_out;
+  std::optional<sph::VtkSeries> series;
+  on_root(solver, [&] {
+    if (!o.csv.empty()) csv_out.emplace(o.csv, io::OutputFile::Mode::append);
+    if (!o.result_csv.empty()) result_out.emplace(o.result_csv);
+    if (!o.out.empty()) series.emplace(o.out, "frames");
+  });
+  const RunReport where = report(solver, false, 0);
+  if (root)
+    std::fprintf(stderr,
+                 "sph %s: %zu particles, method %s (%s, skin %g m%s), %d frames of dt = %g s\n",
+                 scenario.name.c_str(), n, solver.method().c_str(),
+                 solver.space() == MemorySpace::device ? "device" : "host", solver.skin(),
+                 where.where.c_str(), frames, solver.parameters().dt);
+  std::size_t fluid = n;
+  if (wcsph && root) {
+    const sph::SphParameters& prm = solver.parameters();
+    fluid =
+        static_cast<std::size_t>(std::count(scenario.fixed.begin(), scenario.fixed.end(), 0.0f));
+    const sph::TimeStepLimits lim =
+        sph::wcsph_time_step(prm.smoothing_length, prm.sound_speed, 0.1f * prm.sound_speed,
+                             100.0f * config.gravity, prm.rest_density, prm.viscosity, config.cfl);
+    std::fprintf(stderr,
+                 "  wcsph: a = %g m, H = %g m, dx = %g m (%d across a), h = %g m (%g dx), "
+                 "%zu fluid + %zu boundary particles (%d layers), m = %g kg\n"
+                 "  c0 = %g m/s, B = %g Pa, alpha = %g -> mu = %g Pa s, negative pressure %s; "
+                 "dt limits: CFL %g, force %g, viscous %g s; t_end = %g s; damping %g 1/s "
+                 "until %g s; gradient correction %g\n",
+                 config.column_width, config.height(), config.dx(), config.resolution,
+                 prm.smoothing_length, config.h_over_dx, fluid, n - fluid, config.boundary_layers,
+                 prm.particle_mass, prm.sound_speed,
+                 prm.sound_speed * prm.sound_speed * prm.rest_density / 7.0, config.viscosity_alpha,
+                 prm.viscosity, prm.clamp_negative_pressure ? "clamped at 0" : "kept", lim.cfl,
+                 lim.force, lim.viscous, config.run_time(), prm.damping, prm.damping_time,
+                 prm.gradient_correction);
+  }
+  // The dam break's front, sampled every 0.05 in T (and at the first and last frames). The
+  // samples, the profile and the files are rank 0's; copy_state is every rank's.
+  std::vector<FrontSample> fronts;
+  std::vector<float> fx, fv, frho, fp;
+  const double T_per_t = std::sqrt(2.0 * config.gravity / config.column_width);
+  int last_sample = -1;
+  double max_mach = 0;
+  // The hydrostatic profile: averaged over every 20th step of the last 0.1 s (after the
+  // settling damping).
+  Profile profile(config, scenario.fixed, scenario.position);
+  const double profile_from =
+      std::max<double>(solver.parameters().damping_time, config.run_time() - 0.1);
+  double profile_first = -1;
+  auto sample = [&](bool force) {
+    if (!wcsph) return;
+    const int bucket = static_cast<int>(std::floor(solver.time() * T_per_t / 0.05 + 1e-9));
+    if (!force && bucket == last_sample) return;
+    last_sample = bucket;
+    solver.copy_state(fx, fv, frho, fp);
+    if (!root) return;
+    const FrontSample f =
+        front_of(solver.time(), config, solver.parameters().particle_mass, scenario.fixed, fx, fv);
+    max_mach = std::max(max_mach, f.max_speed / solver.parameters().sound_speed);
+    fronts.push_back(f);
+  };
+
+  std::vector<float> x, v, rho, p, colour;
+  int saved = 0;
+  auto save = [&](int frame) {
+    if (o.out.empty()) return;
+    solver.copy_state(x, v, rho, p);
+    on_root(solver, [&] {
+      series->write_frame(solver.time(), x.data(), v.data(), rho.data(), p.data(), n);
+      if (!o.png) return;
+      float lo = 0.0f, hi = 2.0f * rho0;  // fixed ranges: one colour scale per sequence
+      if (o.colour == "speed") {
+        colour.resize(n);
+        for (std::size_t i = 0; i < n; ++i)
+          colour[i] = std::sqrt(v[3 * i] * v[3 * i] + v[3 * i + 1] * v[3 * i + 1] +
+                                v[3 * i + 2] * v[3 * i + 2]);
+        lo = 0.0f;
+        hi = 4.0f;
+      }
+      char name[64];
+      std::snprintf(name, sizeof name, "frame_%06d.png", frame);
+      sph::render_png((std::filesystem::path(o.out) / name).string(), x.data(),
+                      o.colour == "speed" ? colour.data() : rho.data(), n, lo, hi);
+    });
+    ++saved;
+  };
+
+  // Steps are timed alone; output (copies, files, renders) is not.
+  sph::StepTimes sum;
+  double step_seconds = 0, step_cpu_seconds = 0;
+  const auto wall_start = Clock::now();
+  auto last_report = wall_start;
+  save(0);
+  sample(true);
+  for (int frame = 1; frame <= frames; ++frame) {
+    const auto start = Clock::now();
+    const double cpu_start = cpu_seconds();
+    solver.step();
+    step_seconds += seconds_since(start);
+    step_cpu_seconds += cpu_seconds() - cpu_start;
+    sample(frame == frames);
+    if (wcsph && config.scenario == "hydrostatic" && solver.time() >= profile_from &&
+        (frame % 20 == 0 || frame == frames)) {
+      solver.copy_state(fx, fv, frho, fp);
+      if (root) profile.add(fx, frho, fp);
+      if (profile_first < 0) profile_first = solver.time();
+    }
+    const sph::StepTimes t = solver.last_times();
+    sum.update_ms += t.update_ms;
+    sum.density_ms += t.density_ms;
+    sum.force_ms += t.force_ms;
+    sum.integrate_ms += t.integrate_ms;
+    if (frame % o.every == 0 || frame == frames) save(frame);
+    if (root && !o.quiet && (seconds_since(last_report) > 1.0 || frame == frames)) {
+      last_report = Clock::now();
+      if (wcsph)
+        std::fprintf(stderr, "  frame %d/%d  %.1f steps/s  t = %.4f s  Z = %.3f  KE = %.4g J\n",
+                     frame, frames, frame / step_seconds, solver.time(), fronts.back().Z,
+                     fronts.back().kinetic_energy);
+      else
+        std::fprintf(stderr, "  frame %d/%d  %.1f steps/s\n", frame, frames, frame / step_seconds);
+    }
+  }
+  const double total_s = seconds_since(wall_start);
+
+  const double steps_per_s = frames > 0 ? frames / step_seconds : 0.0;
+  sph::StepTimes mean;
+  if (frames > 0) {
+    mean.update_ms = sum.update_ms / frames;
+    mean.density_ms = sum.density_ms / frames;
+    mean.force_ms = sum.force_ms / frames;
+    mean.integrate_ms = sum.integrate_ms / frames;
+  }
+  const double step_cpu_ms =
+      frames > 0 ? 1e3 * summed_over_ranks(solver, step_cpu_seconds) / frames : 0.0;
+  const RunReport extra = report(solver, true, step_cpu_ms);
+  if (root) {
+    std::printf("scenario %s, N = %zu, method %s, %d steps in %.3f s (%.3f s with output)\n",
+                scenario.name.c_str(), n, solver.method().c_str(), frames, step_seconds, total_s);
+    std::printf("%-12s %10s\n", "", "mean ms");
+    std::printf("%-12s %10.4f\n", "update", mean.update_ms);
+    std::printf("%-12s %10.4f\n", "density", mean.density_ms);
+    std::printf("%-12s %10.4f\n", "force", mean.force_ms);
+    std::printf("%-12s %10.4f\n", "integrate", mean.integrate_ms);
+    std::printf("%-12s %10.4f\n", "step", frames > 0 ? 1e3 * step_seconds / frames : 0.0);
+    std::printf("%-12s %10.4f   (CPU time of the steps, all threads%s)\n", "step CPU", step_cpu_ms,
+                extra.summary.empty() ? "" : ", summed over the ranks");
+    std::printf("steps/s      %10.1f\n", steps_per_s);
+    std::printf("%s", extra.summary.c_str());
+    if (series)
+      std::printf("wrote %d frames to %s%s\n", saved, series->pvd_path().c_str(),
+                  o.png ? " (+ PNG)" : "");
+  }
+  on_root(solver, [&] {
+    if (!csv_out) return;
+    append_csv(*csv_out, scenario.name, solver.method(), n, frames, steps_per_s, mean, extra);
+    std::printf("wrote %s\n", o.csv.c_str());
+  });
+  if (!wcsph) return 0;
+  solver.copy_state(fx, fv, frho, fp);
+  on_root(solver, [&] {
+    double ke = 0;
+    for (std::size_t i = 0; i < n; ++i)
+      if (scenario.fixed[i] == 0.0f)
+        ke += 0.5 * solver.parameters().particle_mass *
+              (double{fv[3 * i]} * fv[3 * i] + double{fv[3 * i + 1]} * fv[3 * i + 1] +
+               double{fv[3 * i + 2]} * fv[3 * i + 2]);
+    std::printf("t = %.4f s, fluid kinetic energy %.4g J, max Mach |v|max / c0 = %.3f\n",
+                solver.time(), ke, max_mach);
+    if (config.scenario == "hydrostatic") {
+      if (profile.samples == 0) profile.add(fx, frho, fp);
+      if (result_out)
+        profile.write(*result_out, profile_first < 0 ? solver.time() : profile_first,
+                      solver.time());
+      return;
+    }
+    const FrontSample& f = fronts.back();
+    std::printf("dam-break: T = %.3f, Z = %.3f (x_front = %.4f m)\n", f.T, f.Z, f.x_front);
+    if (!result_out) return;
+    io::OutputFile& out = *result_out;
+    out.write("t,T,x_front,Z,max_speed,kinetic_energy\n");
+    char line[200];
+    for (const FrontSample& s : fronts) {
+      std::snprintf(line, sizeof line, "%.6f,%.5f,%.6f,%.5f,%.4f,%.6g\n", s.t, s.T, s.x_front, s.Z,
+                    s.max_speed, s.kinetic_energy);
+      out.write(line);
+    }
+    out.commit();
+    std::printf("wrote %s (%zu samples)\n", o.result_csv.c_str(), fronts.size());
+  });
+  return 0;
 }
 
 int run_sph(const SphOptions& o) {
@@ -205,187 +503,29 @@ int run_sph(const SphOptions& o) {
                               : o.scenario == "hiprt-drop" ? sph::hiprt_drop()
                                                            : sph::small_drop(o.n);
   const int frames = o.frames >= 0 ? o.frames : scenario.frames;
-  // Output files are opened (temporary files created) before the run, so that an unwritable path
-  // fails now rather than after it; each appears whole, or not at all, at the end.
-  std::optional<io::OutputFile> csv_out, result_out;
-  if (!o.csv.empty()) csv_out.emplace(o.csv, io::OutputFile::Mode::append);
-  if (!o.result_csv.empty()) result_out.emplace(o.result_csv);
+  if (o.distributed) {
+#if defined(RAYCUT_CLI_MPI)
+    const MpiSession session;
+    std::array<int, 3> dims = {0, 0, 0};
+    std::copy(o.dims.begin(), o.dims.end(), dims.begin());
+    mpi::SphSolver solver(MPI_COMM_WORLD, scenario, o.method, o.skin, dims);
+    return run_steps(o, config, scenario, frames, solver);
+#else
+    throw Error(ErrorCode::unsupported,
+                "sph --distributed: this raycut was built without MPI (RAYCUT_MPI)");
+#endif
+  }
   sph::Solver solver(scenario, o.method, o.skin);
-  const std::size_t n = solver.size();
-  const float rho0 = solver.parameters().rest_density;
-  std::fprintf(stderr, "sph %s: %zu particles, method %s (%s, skin %g m), %d frames of dt = %g s\n",
-               scenario.name.c_str(), n, solver.method().c_str(),
-               solver.space() == MemorySpace::device ? "device" : "host", solver.skin(), frames,
-               solver.parameters().dt);
-  std::size_t fluid = n;
-  if (wcsph) {
-    const sph::SphParameters& prm = solver.parameters();
-    fluid =
-        static_cast<std::size_t>(std::count(scenario.fixed.begin(), scenario.fixed.end(), 0.0f));
-    const sph::TimeStepLimits lim =
-        sph::wcsph_time_step(prm.smoothing_length, prm.sound_speed, 0.1f * prm.sound_speed,
-                             100.0f * config.gravity, prm.rest_density, prm.viscosity, config.cfl);
-    std::fprintf(stderr,
-                 "  wcsph: a = %g m, H = %g m, dx = %g m (%d across a), h = %g m (%g dx), "
-                 "%zu fluid + %zu boundary particles (%d layers), m = %g kg\n"
-                 "  c0 = %g m/s, B = %g Pa, alpha = %g -> mu = %g Pa s, negative pressure %s; "
-                 "dt limits: CFL %g, force %g, viscous %g s; t_end = %g s; damping %g 1/s "
-                 "until %g s; gradient correction %g\n",
-                 config.column_width, config.height(), config.dx(), config.resolution,
-                 prm.smoothing_length, config.h_over_dx, fluid, n - fluid, config.boundary_layers,
-                 prm.particle_mass, prm.sound_speed,
-                 prm.sound_speed * prm.sound_speed * prm.rest_density / 7.0, config.viscosity_alpha,
-                 prm.viscosity, prm.clamp_negative_pressure ? "clamped at 0" : "kept", lim.cfl,
-                 lim.force, lim.viscous, config.run_time(), prm.damping, prm.damping_time,
-                 prm.gradient_correction);
-  }
-  // The dam break's front, sampled every 0.05 in T (and at the first and last frames).
-  std::vector<FrontSample> fronts;
-  std::vector<float> fx, fv, frho, fp;
-  const double T_per_t = std::sqrt(2.0 * config.gravity / config.column_width);
-  int last_sample = -1;
-  double max_mach = 0;
-  // The hydrostatic profile: averaged over every 20th step of the last 0.1 s (after the
-  // settling damping).
-  Profile profile(config, scenario.fixed, scenario.position);
-  const double profile_from =
-      std::max<double>(solver.parameters().damping_time, config.run_time() - 0.1);
-  double profile_first = -1;
-  auto sample = [&](int frame, bool force) {
-    if (!wcsph) return;
-    const int bucket = static_cast<int>(std::floor(solver.time() * T_per_t / 0.05 + 1e-9));
-    if (!force && bucket == last_sample) return;
-    last_sample = bucket;
-    solver.copy_state(fx, fv, frho, fp);
-    const FrontSample f =
-        front_of(solver.time(), config, solver.parameters().particle_mass, scenario.fixed, fx, fv);
-    max_mach = std::max(max_mach, f.max_speed / solver.parameters().sound_speed);
-    fronts.push_back(f);
-    (void)frame;
-  };
-
-  std::optional<sph::VtkSeries> series;
-  if (!o.out.empty()) series.emplace(o.out, "frames");
-  std::vector<float> x, v, rho, p, colour;
-  int saved = 0;
-  auto save = [&](int frame) {
-    if (o.out.empty()) return;
-    solver.copy_state(x, v, rho, p);
-    series->write_frame(solver.time(), x.data(), v.data(), rho.data(), p.data(), n);
-    if (o.png) {
-      float lo = 0.0f, hi = 2.0f * rho0;  // fixed ranges: one colour scale per sequence
-      if (o.colour == "speed") {
-        colour.resize(n);
-        for (std::size_t i = 0; i < n; ++i)
-          colour[i] = std::sqrt(v[3 * i] * v[3 * i] + v[3 * i + 1] * v[3 * i + 1] +
-                                v[3 * i + 2] * v[3 * i + 2]);
-        lo = 0.0f;
-        hi = 4.0f;
-      }
-      char name[64];
-      std::snprintf(name, sizeof name, "frame_%06d.png", frame);
-      sph::render_png((std::filesystem::path(o.out) / name).string(), x.data(),
-                      o.colour == "speed" ? colour.data() : rho.data(), n, lo, hi);
-    }
-    ++saved;
-  };
-
-  // Steps are timed alone; output (copies, files, renders) is not.
-  sph::StepTimes sum;
-  double step_seconds = 0;
-  const auto wall_start = Clock::now();
-  auto last_report = wall_start;
-  save(0);
-  sample(0, true);
-  for (int frame = 1; frame <= frames; ++frame) {
-    const auto start = Clock::now();
-    solver.step();
-    step_seconds += seconds_since(start);
-    sample(frame, frame == frames);
-    if (wcsph && config.scenario == "hydrostatic" && solver.time() >= profile_from &&
-        (frame % 20 == 0 || frame == frames)) {
-      solver.copy_state(fx, fv, frho, fp);
-      profile.add(fx, frho, fp);
-      if (profile_first < 0) profile_first = solver.time();
-    }
-    const sph::StepTimes t = solver.last_times();
-    sum.update_ms += t.update_ms;
-    sum.density_ms += t.density_ms;
-    sum.force_ms += t.force_ms;
-    sum.integrate_ms += t.integrate_ms;
-    if (frame % o.every == 0 || frame == frames) save(frame);
-    if (!o.quiet && (seconds_since(last_report) > 1.0 || frame == frames)) {
-      last_report = Clock::now();
-      if (wcsph)
-        std::fprintf(stderr, "  frame %d/%d  %.1f steps/s  t = %.4f s  Z = %.3f  KE = %.4g J\n",
-                     frame, frames, frame / step_seconds, solver.time(), fronts.back().Z,
-                     fronts.back().kinetic_energy);
-      else
-        std::fprintf(stderr, "  frame %d/%d  %.1f steps/s\n", frame, frames, frame / step_seconds);
-    }
-  }
-  const double total_s = seconds_since(wall_start);
-
-  const double steps_per_s = frames > 0 ? frames / step_seconds : 0.0;
-  sph::StepTimes mean;
-  if (frames > 0) {
-    mean.update_ms = sum.update_ms / frames;
-    mean.density_ms = sum.density_ms / frames;
-    mean.force_ms = sum.force_ms / frames;
-    mean.integrate_ms = sum.integrate_ms / frames;
-  }
-  std::printf("scenario %s, N = %zu, method %s, %d steps in %.3f s (%.3f s with output)\n",
-              scenario.name.c_str(), n, solver.method().c_str(), frames, step_seconds, total_s);
-  std::printf("%-12s %10s\n", "", "mean ms");
-  std::printf("%-12s %10.4f\n", "update", mean.update_ms);
-  std::printf("%-12s %10.4f\n", "density", mean.density_ms);
-  std::printf("%-12s %10.4f\n", "force", mean.force_ms);
-  std::printf("%-12s %10.4f\n", "integrate", mean.integrate_ms);
-  std::printf("%-12s %10.4f\n", "step", frames > 0 ? 1e3 * step_seconds / frames : 0.0);
-  std::printf("steps/s      %10.1f\n", steps_per_s);
-  if (series)
-    std::printf("wrote %d frames to %s%s\n", saved, series->pvd_path().c_str(),
-                o.png ? " (+ PNG)" : "");
-  if (csv_out) {
-    append_csv(*csv_out, scenario.name, solver, frames, steps_per_s, mean);
-    std::printf("wrote %s\n", o.csv.c_str());
-  }
-  if (wcsph) {
-    solver.copy_state(fx, fv, frho, fp);
-    double ke = 0;
-    for (std::size_t i = 0; i < n; ++i)
-      if (scenario.fixed[i] == 0.0f)
-        ke += 0.5 * solver.parameters().particle_mass *
-              (double{fv[3 * i]} * fv[3 * i] + double{fv[3 * i + 1]} * fv[3 * i + 1] +
-               double{fv[3 * i + 2]} * fv[3 * i + 2]);
-    std::printf("t = %.4f s, fluid kinetic energy %.4g J, max Mach |v|max / c0 = %.3f\n",
-                solver.time(), ke, max_mach);
-    if (config.scenario == "hydrostatic") {
-      if (profile.samples == 0) profile.add(fx, frho, fp);
-      if (result_out)
-        profile.write(*result_out, profile_first < 0 ? solver.time() : profile_first,
-                      solver.time());
-    } else {
-      const FrontSample& f = fronts.back();
-      std::printf("dam-break: T = %.3f, Z = %.3f (x_front = %.4f m)\n", f.T, f.Z, f.x_front);
-      if (result_out) {
-        io::OutputFile& out = *result_out;
-        out.write("t,T,x_front,Z,max_speed,kinetic_energy\n");
-        char line[200];
-        for (const FrontSample& s : fronts) {
-          std::snprintf(line, sizeof line, "%.6f,%.5f,%.6f,%.5f,%.4f,%.6g\n", s.t, s.T, s.x_front,
-                        s.Z, s.max_speed, s.kinetic_energy);
-          out.write(line);
-        }
-        out.commit();
-        std::printf("wrote %s (%zu samples)\n", o.result_csv.c_str(), fronts.size());
-      }
-    }
-  }
-  return 0;
+  return run_steps(o, config, scenario, frames, solver);
 }
 
 }  // namespace
+
+double cpu_seconds() {
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
 
 Command add_sph(CLI::App& app) {
   auto* cmd = app.add_subcommand(
@@ -438,8 +578,17 @@ Command add_sph(CLI::App& app) {
   cmd->add_option("--colour", o->colour, "PNG colouring: density or speed")
       ->check(CLI::IsMember({"density", "speed"}));
   cmd->add_option("--skin", o->skin,
-                  "Refit skin in m for the OptiX methods (default h; 0 rebuilds every step)")
+                  "Refit skin in m for the OptiX methods (default h; 0 rebuilds every step); with "
+                  "--distributed the halo skin (default h / 2; 0 exchanges every step)")
       ->check(non_negative_finite());
+  auto* distributed = cmd->add_flag(
+      "--distributed", o->distributed,
+      "Under mpirun: the solver over the ranks (raycut::mpi::SphSolver, host methods), domains "
+      "over the particles' extent; rank 0 writes the outputs, pass times the largest over ranks");
+  cmd->add_option("--dims", o->dims, "--distributed: domains per axis, 0 = MPI chooses")
+      ->delimiter(',')
+      ->expected(3)
+      ->needs(distributed);
   cmd->add_option("--csv", o->csv, "Append a result row to this CSV file");
   cmd->add_flag("-q,--quiet", o->quiet, "No progress lines");
   return [o, scenario_option] {

@@ -6,7 +6,7 @@
 #include <utility>
 
 #include "raycut/error.hpp"
-#include "sph/physics.hpp"
+#include "sph/host_steps.hpp"
 #if defined(RAYCUT_HAVE_CUDA)
 #include "sph/device_steps.hpp"
 #endif
@@ -18,29 +18,6 @@ using Clock = std::chrono::steady_clock;
 
 double elapsed_ms(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
-
-StepConstants constants_of(const SphParameters& p) {
-  StepConstants c{};
-  const double pi = 3.14159265358979323846;
-  const double h = p.smoothing_length;
-  // m W_poly6(0, h) = m 315 / (64 pi h^9) h^6, in double then rounded once.
-  c.self_density = static_cast<float>(p.particle_mass * 315.0 / (64.0 * pi * h * h * h));
-  c.rest_density = p.rest_density;
-  c.stiffness = p.stiffness;
-  c.wall_stiffness = p.wall_stiffness;
-  for (int k = 0; k < 3; ++k) c.gravity[k] = p.gravity[k];
-  c.dt = p.dt;
-  for (int w = 0; w < 6; ++w) {
-    for (int k = 0; k < 3; ++k) c.wall_normal[w][k] = p.walls[w].normal[k];
-    c.wall_d[w] = p.walls[w].d;
-  }
-  c.equation_of_state = p.weakly_compressible ? eos_tait : eos_article;
-  // B = c0^2 rho0 / gamma, gamma = 7 (in double, rounded once).
-  c.tait_b = static_cast<float>(double{p.sound_speed} * p.sound_speed * p.rest_density / 7.0);
-  c.clamp_negative = p.clamp_negative_pressure ? 1 : 0;
-  c.velocity_keep = 1.0f;  // Solver::step sets the settling damping's
-  return c;
 }
 
 }  // namespace
@@ -60,6 +37,13 @@ KernelOptions force_pass_options(const SphParameters& params) {
     o.sph_mass = scale * params.particle_mass;
     o.sph_viscosity = params.viscosity / scale;
   }
+  return o;
+}
+
+KernelOptions density_pass_options(const SphParameters& params) {
+  KernelOptions o;
+  o.sph_mass = params.particle_mass;
+  o.sph_viscosity = params.viscosity;
   return o;
 }
 
@@ -97,20 +81,11 @@ struct Solver::Impl {
     return force ? view.force : view.density;
   }
 
-  KernelOptions options() const {
-    KernelOptions o;
-    o.sph_mass = params.particle_mass;
-    o.sph_viscosity = params.viscosity;
-    return o;
-  }
-
-  KernelOptions force_options() const { return force_pass_options(params); }
-
   // Density (neighbours j != i, then the self term) and pressure at the built positions.
   void density_pass() {
     const float* neighbour_density = nullptr;
     if (n > 0) {
-      engine.run(Kernel::sph_density, options());
+      engine.run(Kernel::sph_density, density_pass_options(params));
       neighbour_density = result(false);
     }
     density_and_pressure(neighbour_density);
@@ -130,13 +105,7 @@ struct Solver::Impl {
 #endif
       return;
     }
-    const StepConstants c = constants;
-    const long long count = static_cast<long long>(n);
-#pragma omp parallel for schedule(static)
-    for (long long i = 0; i < count; ++i) {
-      rho[i] = density_with_self(neighbour_density ? neighbour_density[i] : 0.0f, c);
-      p[i] = pressure_of(rho[i], c);
-    }
+    host::density_and_pressure(neighbour_density, rho.data(), p.data(), n, constants);
   }
 
   void integrate(const float* force) {
@@ -146,18 +115,7 @@ struct Solver::Impl {
 #endif
       return;
     }
-    const StepConstants c = constants;
-    const long long count = static_cast<long long>(n);
-    const float zero[3] = {0.0f, 0.0f, 0.0f};
-    if (!fixed.empty()) {
-#pragma omp parallel for schedule(static)
-      for (long long i = 0; i < count; ++i)
-        integrate_or_hold(&x[3 * i], &v[3 * i], force ? &force[3 * i] : zero, rho[i], fixed[i], c);
-      return;
-    }
-#pragma omp parallel for schedule(static)
-    for (long long i = 0; i < count; ++i)
-      integrate_particle(&x[3 * i], &v[3 * i], force ? &force[3 * i] : zero, rho[i], c);
+    host::integrate(x.data(), v.data(), force, rho.data(), fixed_ptr(), n, constants);
   }
 };
 
@@ -223,7 +181,7 @@ void Solver::step() {
   start = Clock::now();
   const float* force = nullptr;
   if (s.n > 0) {
-    KernelOptions options = s.force_options();
+    KernelOptions options = force_pass_options(s.params);
     options.sph = {s.v_ptr(), s.rho_ptr(), s.p_ptr()};
     s.engine.run(Kernel::sph_force, options);
     force = s.result(true);
@@ -232,8 +190,7 @@ void Solver::step() {
 
   // 4. Walls, gravity, semi-implicit Euler (the settling damping while t < damping_time).
   start = Clock::now();
-  const bool damped = s.params.damping > 0.0f && time() < s.params.damping_time;
-  s.constants.velocity_keep = damped ? 1.0f / (1.0f + s.params.dt * s.params.damping) : 1.0f;
+  s.constants.velocity_keep = velocity_keep_at(s.params, time());
   s.integrate(force);
   s.sync();
   t.integrate_ms = elapsed_ms(start);

@@ -25,6 +25,7 @@
 #include <vector>
 
 #include "error_helpers.hpp"
+#include "mpi/ranks.hpp"
 #include "periodic_oracle.hpp"
 #include "raycut/mpi/distributed.hpp"
 
@@ -36,17 +37,6 @@ using raycut::Kernel;
 using raycut::MemorySpace;
 using raycut::mpi::DistributedEngine;
 using raycut::mpi::DistributedOptions;
-
-int world_rank() {
-  int r = 0;
-  MPI_Comm_rank(MPI_COMM_WORLD, &r);
-  return r;
-}
-int world_size() {
-  int s = 1;
-  MPI_Comm_size(MPI_COMM_WORLD, &s);
-  return s;
-}
 
 // Uniform coordinates in [lo, hi) per axis, kept below hi in float.
 std::vector<float> uniform(std::size_t n, std::array<double, 3> lo, std::array<double, 3> hi,

@@ -37,6 +37,8 @@ struct StepTimes {
 // model; 2 m gradient_correction and mu / (2 gradient_correction) in the weakly compressible mode
 // (solver.cpp says why). The inputs (KernelOptions::sph) are left empty.
 KernelOptions force_pass_options(const SphParameters& params);
+// The KernelOptions of the density pass (the particle mass).
+KernelOptions density_pass_options(const SphParameters& params);
 
 class Solver {
  public:
