@@ -1,5 +1,6 @@
-// The distributed engine: domain decomposition, migration, halos with periodic images, and
-// plain open Engines per rank over owned and halo particles (docs/distributed.md).
+// The distributed engine: domain decomposition, migration, halos with periodic images across
+// split axes, and Engines per rank over owned and halo particles, periodic along the axes with
+// one domain (docs/distributed.md).
 #include "raycut/mpi/distributed.hpp"
 
 #include <algorithm>
@@ -208,21 +209,21 @@ DistributedEngine::DistributedEngine(MPI_Comm comm, DistributedOptions options)
                                                  " ranks");
   decomposition_.dims = dims;
   engine_ = std::make_unique<Engine>(options_.method);  // an unknown method throws here
-  if (options_.owned_rows_only) {
-    // Does the method take query points? One point asked of itself: grid-paper and the OptiX
-    // methods refuse with unsupported (every rank alike: the method is the same).
-    halo_engine_ = std::make_unique<Engine>(engine_->method());
-    const float origin[3] = {0, 0, 0};
-    Systems probe;
-    probe.queries = {origin, 1, MemorySpace::host};
-    try {
-      halo_engine_->build({origin, 1, MemorySpace::host}, 1.0f, probe);
-      split_ = true;
-    } catch (const Error& e) {
-      if (e.code() != ErrorCode::unsupported) throw;
-      halo_engine_.reset();
-    }
+  // Does the method take periodic boxes and query points (one refusal covers both)? One point
+  // asked of itself: grid-paper and the OptiX methods refuse with unsupported (every rank alike:
+  // the method is the same).
+  auto probe_engine = std::make_unique<Engine>(engine_->method());
+  const float origin[3] = {0, 0, 0};
+  Systems probe;
+  probe.queries = {origin, 1, MemorySpace::host};
+  try {
+    probe_engine->build({origin, 1, MemorySpace::host}, 1.0f, probe);
+    takes_boxes_ = true;
+  } catch (const Error& e) {
+    if (e.code() != ErrorCode::unsupported) throw;
   }
+  split_ = options_.owned_rows_only && takes_boxes_;
+  if (split_) halo_engine_ = std::move(probe_engine);
   transport_ = options_.transport ? options_.transport : make_host_transport(comm_);
   if (transport_->space() != MemorySpace::host)
     throw Error(ErrorCode::unsupported,
@@ -285,6 +286,12 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
       throw Error(ErrorCode::invalid_argument,
                   "cutoff must be finite and > 0, got " + std::to_string(cutoff));
     set_geometry(decomposition_, box);  // validates the box
+    local_box_ = box;
+    for (int a = 0; a < 3; ++a) {
+      decomposition_.local[a] =
+          box.pbc[a] && decomposition_.dims[a] == 1 && options_.local_images && takes_boxes_;
+      local_box_.pbc[a] = decomposition_.local[a];
+    }
     for (std::size_t i = 0; i < positions.size; ++i) {
       for (int c = 0; c < 3; ++c)
         if (!std::isfinite(positions.xyz[3 * i + c]))
@@ -338,7 +345,7 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
       dec.length[a] = any ? -global[3 + a] - global[a] : 0;
     }
     dec.width[a] = dec.length[a] / dec.dims[a];
-    if ((dec.dims[a] > 1 || dec.periodic[a]) && !(dec.width[a] >= halo_width_)) {
+    if (dec.halo_axis(a) && !(dec.width[a] >= halo_width_)) {
       // Orthorhombic axes by coordinate, triclinic ones by cell row and face width.
       const std::string axis = dec.aligned ? axis_name(a)
                                            : std::string("cell row ") + "abc"[a] + " (normal " +
@@ -498,17 +505,23 @@ void DistributedEngine::migrate() {
   stats_.bytes_sent += sent * record;
 }
 
-// Every image of every owned particle within cutoff + skin of some domain (its own too, for an
-// image shifted by a period) goes there: [id][image xyz][shift] records.
+// Every image of every owned particle, shifted along the axes with images (Decomposition::images),
+// within cutoff + skin of some domain (its own too, for an image shifted by a period) goes there:
+// [id][image xyz][shift] records. Local axes get no shift and no test: the local engines image
+// every point they hold along them.
 //
 // Why this is complete, in any cell: normal[k] is a unit vector, so for a target t and an image
 // p' of a source, |u_k(p') - u_k(t)| <= |p' - t|. A pair within h = cutoff + skin therefore
 // has, along every axis, the image within h of the slab of t's domain: h / w_k in fractional
 // units on a periodic axis. Positions are wrapped (u_k in [0, w_k)) and domains are at least h
-// wide, so w_k >= h and |S_k| <= 1 reaches every such image (as image_range() gives for w >= C).
-// With orthogonal normals the domain is a box and the Euclidean distance to it is exact; with
-// skewed ones the per-axis test alone is kept (a parallelepiped's corner and edge regions are
-// larger than the rounded shell: extra halos, sources only, harmless).
+// wide along the axes with images, so w_k >= h and |S_k| <= 1 reaches every such image (as
+// image_range() gives for w >= C). With orthogonal normals the domain is a box and the Euclidean
+// distance to it is exact; with skewed ones the per-axis test alone is kept (a parallelepiped's
+// corner and edge regions are larger than the rounded shell: extra halos, sources only,
+// harmless). Local axes: write p' = q + L . cell, L the part of S along local axes. No local row
+// moves u_a of another axis (g_a . row_k = 0; an open normal is orthogonal to the periodic rows),
+// so q has the gaps of p' along the other axes and none along the local ones (wrapped there): q
+// passes the test, is held here (owned or a halo), and the local engine finds (t, q, L).
 void DistributedEngine::build_halos() {
   const Decomposition& dec = decomposition_;
   const std::size_t n = ids_.size();
@@ -533,14 +546,15 @@ void DistributedEngine::build_halos() {
       axis[a].clear();
       const int d = dec.dims[a];
       const double u = dec.coordinate(a, &xyz_[3 * i]);
-      for (std::int32_t s = dec.periodic[a] ? -1 : 0; s <= (dec.periodic[a] ? 1 : 0); ++s) {
+      const bool images = dec.images(a);
+      for (std::int32_t s = images ? -1 : 0; s <= (images ? 1 : 0); ++s) {
         // A shift by cell row a moves u_a by one face width; the other rows leave it.
         const double y = u + s * dec.length[a];
         const int first = dec.slab(a, y - reach), last = dec.slab(a, y + reach);
         for (int k = first; k <= last; ++k) {
-          // An open axis's end slabs extend to infinity.
-          const bool open_low = !dec.periodic[a] && k == 0;
-          const bool open_high = !dec.periodic[a] && k == d - 1;
+          // An open axis's end slabs extend to infinity; a local axis's one slab is all of it.
+          const bool open_low = !images && k == 0;
+          const bool open_high = !images && k == d - 1;
           const double lo = dec.lo[a] + k * dec.width[a], hi = lo + dec.width[a];
           double gap = 0;
           if (!open_low && y < lo) gap = lo - y;
@@ -625,17 +639,20 @@ void DistributedEngine::refresh_halos() {
 
 // Owned rows only, exactly: the self pair (i, i, 0) must never reach a kernel (Lennard-Jones is
 // infinite at r = 0), and a query point does not exclude itself. So the owned particles are
-// never sources of the query engine: pairs among owned particles come from a plain engine over
-// them (which excludes (i, i, 0) by index, as a single rank does), pairs with halos from the
-// owned particles near a face as queries over the halos only. Every pair of an owned target is
-// in exactly one of the two; the halo copies of a particle's own periodic images are halos, so
-// (i, i, S != 0) is kept. Counts and lists are then exact; kernel sums are two partial sums added.
+// never sources of the query engine: pairs among owned particles (and their images along local
+// axes) come from an engine over them (which excludes (i, i, 0) by index, as a single rank
+// does), pairs with halos (and their local images) from the owned particles near a face as
+// queries over the halos only. Every pair of an owned target is in exactly one of the two; a
+// particle's own images are halos or local images, so (i, i, S != 0) is kept. Counts and lists
+// are then exact; kernel sums are two partial sums added.
 //
-// Only owned particles within cutoff + skin of a face of the domain that has something across it
-// are queries (the others meet no halo): every halo was outside the domain at the exchange and
-// has moved at most skin / 2 since, so an owned particle within the cutoff of one is within
-// cutoff + skin / 2 of such a face. The query engine's structure holds its queries too (they are
-// candidates it rejects), so fewer queries is most of what makes this cheaper than all rows.
+// Only owned particles within cutoff + skin of a face that halos cross (Decomposition::halo_axis:
+// not a local axis's, nor the outer face of an open end slab) are queries (the others meet no
+// halo): every halo was outside the domain along such an axis at the exchange (local images do
+// not move it along the others) and has moved at most skin / 2 since, so an owned particle within
+// the cutoff of one is within cutoff + skin / 2 of such a face. The query engine's structure holds
+// its queries too (they are candidates it rejects), so fewer queries is most of what makes this
+// cheaper than all rows.
 void DistributedEngine::select_boundary() {
   const Decomposition& dec = decomposition_;
   const auto c = dec.coords(rank_);
@@ -644,10 +661,10 @@ void DistributedEngine::select_boundary() {
   const double reach = halo_width_ + 1e-5 * scale;  // as build_halos(): a hair wide is harmless
   double low[3], high[3];  // the faces with something across, else -inf / +inf
   for (int a = 0; a < 3; ++a) {
-    const bool split = dec.dims[a] > 1 || dec.periodic[a];
-    low[a] = split && (dec.periodic[a] || c[a] > 0) ? dec.lo[a] + c[a] * dec.width[a]
-                                                    : -std::numeric_limits<double>::infinity();
-    high[a] = split && (dec.periodic[a] || c[a] < dec.dims[a] - 1)
+    const bool split = dec.halo_axis(a);
+    low[a] = split && (dec.images(a) || c[a] > 0) ? dec.lo[a] + c[a] * dec.width[a]
+                                                  : -std::numeric_limits<double>::infinity();
+    high[a] = split && (dec.images(a) || c[a] < dec.dims[a] - 1)
                   ? dec.lo[a] + (c[a] + 1) * dec.width[a]
                   : std::numeric_limits<double>::infinity();
   }
@@ -675,11 +692,11 @@ void DistributedEngine::build_local_engine(bool same_sources) {
     if (same_sources)
       engine_->update(local);
     else
-      engine_->build(local, cutoff_);
+      engine_->build(local, cutoff_, local_box_);
     if (split_) select_boundary();
     halo_engine_built_ = split_ && !boundary_.empty() && h > 0;
     if (halo_engine_built_) {  // with query points update() refuses: build again
-      Systems systems;
+      Systems systems = Systems::periodic(local_box_);
       systems.queries = {boundary_xyz_.data(), boundary_.size(), MemorySpace::host};
       halo_engine_->build({local_xyz_.data() + 3 * n, h, MemorySpace::host}, cutoff_, systems);
     }
@@ -818,20 +835,23 @@ Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options,
 DistributedList DistributedEngine::neighbours(const ListOptions& options) {
   check_built("neighbours");
   ListOptions local = options;
-  local.half = false;  // oriented here by global index
-  local.shifts = false;
+  local.half = false;   // oriented here by global index
+  local.shifts = true;  // along the local axes: added to the halo's
   const NeighbourList list = engine_->neighbours(local);
   NeighbourList halo_list;
   if (halo_engine_built_) halo_list = halo_engine_->neighbours(local);
   const std::size_t n = ids_.size();
-  // Local slot j of the engine over owned (+ halos): owned below n, else halo j - n.
-  static constexpr std::int32_t zero[3] = {0, 0, 0};
+  // Local slot j of the engine over owned (+ halos): owned below n, else halo j - n. A pair's S
+  // is the halo's (axes with images) plus the engine's (local axes, relative to the positions it
+  // was given): r = (x_j + S_halo . cell) + S_local . cell - x_i.
   DistributedList out;
   out.targets = ids_;
   out.offsets.assign(n + 1, 0);
   auto emit = [&](std::size_t i, const NeighbourList& from, std::uint64_t e, std::size_t j) {
     const std::uint64_t id = j < n ? ids_[j] : halo_ids_[j - n];
-    const std::int32_t* s = j < n ? zero : &halo_shifts_[3 * (j - n)];
+    std::int32_t s[3];
+    for (int c = 0; c < 3; ++c)
+      s[c] = from.shifts[3 * e + c] + (j < n ? 0 : halo_shifts_[3 * (j - n) + c]);
     if (options.half) {
       const Shift shift{s[0], s[1], s[2]};
       if (id < ids_[i] || (id == ids_[i] && !shift.positive())) return;

@@ -1,8 +1,9 @@
 // The distributed engine (docs/distributed.md): particles spread over the ranks of an MPI
 // communicator by a Cartesian grid of spatial domains, each rank computing the targets it owns
 // with any single-rank raycut method over its owned particles plus halo copies of the particles
-// within cutoff + skin of its domain (periodic images included), owned rows only where the
-// method takes query points. Indices are global throughout.
+// within cutoff + skin of its domain (periodic images across split axes included; a periodic
+// axis with one domain is the local engine's own), owned rows only where the method takes query
+// points. Indices are global throughout.
 //
 //   raycut::mpi::DistributedEngine engine(MPI_COMM_WORLD, {.method = "cell-list", .skin = 0.3f});
 //   engine.build({xyz.data(), n, raycut::MemorySpace::host}, ids.data(), cutoff, box);
@@ -67,11 +68,16 @@ std::unique_ptr<Transport> make_host_transport(MPI_Comm comm);
 // dims[k] equal slabs; on an open axis the first and last slabs extend to -inf and +inf, so a
 // particle outside the region still has an owner. Domain (i, j, k) is rank (i dims[1] + j)
 // dims[2] + k.
+//
+// A periodic axis with one domain is local (DistributedOptions::local_images, and a method that
+// takes periodic boxes): the local engines are periodic along it themselves, so no halo crosses
+// it; halos cross the other periodic axes (as images) and the split open ones.
 struct Decomposition {
   std::array<int, 3> dims = {1, 1, 1};
   std::array<double, 3> lo = {0, 0, 0}, width = {0, 0, 0};  // slab k of axis a: lo + k width
   std::array<bool, 3> periodic = {false, false, false};
-  std::array<double, 3> length = {0, 0, 0};  // the period (face width) on periodic axes
+  std::array<bool, 3> local = {false, false, false};  // periodic, one domain, the engines' own
+  std::array<double, 3> length = {0, 0, 0};           // the period (face width) on periodic axes
   std::array<std::array<double, 3>, 3> normal = {{{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}};
   std::array<std::array<double, 3>, 3> cell = {};  // the box's rows: images are x + S . cell
   // The normals are orthogonal (the domains are boxes): the halo test is Euclidean, else per
@@ -80,6 +86,10 @@ struct Decomposition {
   // The periodic rows lie along x, y, z with their normals: wrapped coordinate by coordinate.
   bool aligned = true;
   int domains() const { return dims[0] * dims[1] * dims[2]; }
+  // Halos carry image shifts along `axis` (periodic, not local).
+  bool images(int axis) const { return periodic[axis] && !local[axis]; }
+  // Halos cross the faces across `axis` (split, or imaged by halos).
+  bool halo_axis(int axis) const { return dims[axis] > 1 || images(axis); }
   // u_axis of a position.
   double coordinate(int axis, const float* xyz) const;
   // Slab index along `axis` of a domain coordinate (clamped to the grid).
@@ -105,6 +115,11 @@ struct DistributedOptions {
   // false, or a method without query points (grid-paper, OptiX): one engine over owned + halos,
   // halo rows discarded. docs/distributed.md measures both.
   bool owned_rows_only = true;
+  // A periodic axis with one domain: true, the local engines are periodic along it (no halo
+  // crosses it, and it may be thinner than cutoff + skin); false, its images are sent as halos
+  // (the all-axes scheme, which a method without periodic boxes, grid-paper or OptiX, gets
+  // anyway). docs/distributed.md measures both.
+  bool local_images = true;
 };
 
 // A neighbour list of the owned targets with global indices: the in-range sources of row t
@@ -157,8 +172,8 @@ class DistributedEngine {
   // back). Then migrates every particle to its domain and builds the halos and the local engine.
   // `box`: any box validate() accepts (open, orthorhombic or triclinic, periodic on any axes;
   // Decomposition says how domains follow it). Every domain must be at least cutoff + skin wide
-  // (face width / dims) along each axis split in more than one domain (and along a periodic
-  // one), else Error(invalid_argument) saying which.
+  // (face width / dims) along each axis that halos cross (Decomposition::halo_axis: split in
+  // more than one domain, or periodic and not local), else Error(invalid_argument) saying which.
   // An error found on one rank (a non-finite coordinate) is thrown on every rank.
   void build(PositionsView positions, const std::uint64_t* ids, float cutoff, const Box& box = {},
              const float* carried = nullptr, std::size_t width = 0);
@@ -203,7 +218,7 @@ class DistributedEngine {
   const std::vector<float>& positions() const { return xyz_; }
   const std::vector<float>& carried() const { return carried_; }
   std::size_t width() const { return width_; }
-  // The halo copies: global indices and image shifts (3 per halo).
+  // The halo copies: global indices and image shifts (3 per halo; 0 along local axes).
   const std::vector<std::uint64_t>& halo_ids() const { return halo_ids_; }
   const std::vector<std::int32_t>& halo_shifts() const { return halo_shifts_; }
   std::uint64_t global_size() const { return global_size_; }
@@ -246,6 +261,9 @@ class DistributedEngine {
   // near a face (boundary_, owned indices ascending; their positions boundary_xyz_) as queries
   // over the halos, built when both exist. Otherwise engine_ over owned + halos.
   std::unique_ptr<Engine> engine_, halo_engine_;
+  // Both engines' box: the cell, periodic on the local axes only (the others cross by halos).
+  Box local_box_;
+  bool takes_boxes_ = false;  // the method takes periodic boxes and query points
   bool split_ = false;
   bool halo_engine_built_ = false;
   std::vector<std::uint32_t> boundary_;
