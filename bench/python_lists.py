@@ -21,6 +21,8 @@ For each, these variants take turns call by call (so that a busy machine slows t
 - ``cpp_pairs``: the same engine's ``build`` + ``pairs``: the CSR expanded to the COO
   ``i, j (, S)`` that ``neighbor_list`` returns, still without the Python layer;
 - ``python``: ``raycut.neighbor_list`` as a user calls it (engine cache on, the default);
+- ``python_csr``: ``raycut.Engine.build`` + ``Engine.neighbours`` (CSR, with shifts where the
+  workload has them): the C++ call's own output through the Python API, against ``cpp_list``;
 - ``python_nocache``: the same with ``raycut.set_engine_cache(False)``: a fresh engine per call,
   its structure buffers allocated and freed every call.
 
@@ -129,9 +131,16 @@ def make_variants(inp: Input, method: str) -> tuple:
                                     pbc=inp.pbc, batch=inp.batch, half=inp.half,
                                     method=method), 0
 
+    py_engine = raycut.Engine(method)
+
+    def python_csr():  # the C++ call's own format (CSR) through the Python API
+        py_engine.build(inp.x, inp.cutoff, cell=inp.cell, pbc=inp.pbc, batch=inp.batch)
+        return py_engine.neighbours(half=inp.half, shifts=shifts), 1
+
     # python_nocache is timed in a loop of its own (time_variants' `cache`): turning the cache
     # off drops the cached engine, which would make every `python` call a cold one.
-    return ({"cpp_list": cpp_list, "cpp_pairs": cpp_pairs, "python": python}, {
+    return ({"cpp_list": cpp_list, "cpp_pairs": cpp_pairs, "python": python,
+             "python_csr": python_csr}, {
         "python_nocache": python}, engine, like)
 
 
@@ -229,19 +238,23 @@ def table(rows: list, native: bool) -> str:
     for r in rows:
         by.setdefault(r["workload"], {})[r["variant"]] = r
     head = ["workload", "input", "method", "N", "pairs", "C++ list ms", "C++ pairs ms",
-            "Python ms", "Python no cache ms", "Python / C++ list", "Python / C++ pairs"]
+            "Python ms", "Python CSR ms", "Python no cache ms", "Python / C++ list",
+            "Python / C++ pairs", "Python CSR / C++ list"]
     if native:
-        head += ["native cold ms", "native prepared ms", "Python / native prepared"]
+        head += ["native cold ms", "native prepared ms", "Python / native prepared",
+                 "Python CSR / native prepared"]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, v in by.items():
-        py, cl, cp = v["python"], v["cpp_list"], v["cpp_pairs"]
+        py, cl, cp, csr = v["python"], v["cpp_list"], v["cpp_pairs"], v["python_csr"]
         cells = [name, py["input"], py["method"], str(py["n"]), str(py["pairs"]), fmt(cl["ms"]),
-                 fmt(cp["ms"]), fmt(py["ms"]), fmt(v["python_nocache"]["ms"]),
-                 fmt(py["ms"] / cl["ms"], 2), fmt(py["ms"] / cp["ms"], 2)]
+                 fmt(cp["ms"]), fmt(py["ms"]), fmt(csr["ms"]), fmt(v["python_nocache"]["ms"]),
+                 fmt(py["ms"] / cl["ms"], 2), fmt(py["ms"] / cp["ms"], 2),
+                 fmt(csr["ms"] / cl["ms"], 2)]
         if native:
             prepared = py["native_prepared_ms"]
-            cells += [fmt(py["native_cold_ms"]), fmt(prepared),
-                      fmt(py["ms"] / prepared if prepared == prepared else float("nan"), 2)]
+            ratio = (lambda a: fmt(a / prepared if prepared == prepared else float("nan"), 2))
+            cells += [fmt(py["native_cold_ms"]), fmt(prepared), ratio(py["ms"]),
+                      ratio(csr["ms"])]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

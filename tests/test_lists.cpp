@@ -11,6 +11,10 @@
 #include "raycut/engine.hpp"
 #include "raycut/generators.hpp"
 
+#if defined(RAYCUT_TESTS_CUDA)
+#include "cuda/runtime.hpp"  // download(): taken device results read back
+#endif
+
 namespace {
 
 using raycut::Engine;
@@ -109,6 +113,39 @@ TEST_P(Lists, FailedRunLeavesNoResults) {
   EXPECT_THROW(engine.run(Kernel::sph_force), raycut::Error);  // no SPH inputs
   EXPECT_THROW(engine.results(), raycut::Error);
   EXPECT_THROW(engine.results_view(), raycut::Error);
+}
+
+// Taken results keep their values whatever the engine runs next, and leave the engine without
+// results until its next run.
+TEST_P(Lists, TakenResultsOutliveLaterRuns) {
+  const raycut::PointCloud cloud = raycut::make_family("uniform", 500, 1.0f, 6);
+  const std::size_t n = cloud.size();
+  Engine engine(GetParam());
+  engine.build({cloud.xyz.data(), n, MemorySpace::host}, 1.0f);
+  engine.run(Kernel::count);
+  const raycut::Results want = engine.results();
+  raycut::OwnedResults taken = engine.take_results();
+  ASSERT_NE(taken.owner, nullptr);
+  EXPECT_EQ(taken.view.space, engine.space());
+  EXPECT_THROW(engine.results(), raycut::Error);
+  EXPECT_THROW(engine.take_results(), raycut::Error);
+  raycut::KernelOptions lj;
+  lj.lj_sigma = 0.2f;
+  engine.run(Kernel::lj_forces, lj);  // new arrays: the taken counts stay as they were
+  engine.build({cloud.xyz.data(), n, MemorySpace::host}, 0.5f);
+  engine.run(Kernel::count);
+  std::vector<std::uint32_t> count(n);
+  if (taken.view.space == MemorySpace::host) {
+    std::copy(taken.view.count, taken.view.count + n, count.begin());
+  } else {
+#if defined(RAYCUT_TESTS_CUDA)
+    raycut::detail::cuda::download(count.data(), taken.view.count, n * sizeof(std::uint32_t));
+#else
+    FAIL() << "a device method without CUDA";
+#endif
+  }
+  EXPECT_EQ(count, want.count);
+  EXPECT_NE(engine.results().count, want.count);  // the later run did change the engine's
 }
 
 INSTANTIATE_TEST_SUITE_P(Methods, Lists, ::testing::ValuesIn(available_methods()),

@@ -84,6 +84,12 @@ struct ResultsView {
   MemorySpace space = MemorySpace::host;
 };
 
+// Results that own their arrays (Engine::take_results): `view` is valid while `owner` lives.
+struct OwnedResults {
+  ResultsView view;
+  std::shared_ptr<const void> owner;
+};
+
 // Host neighbour list in CSR form: the in-range sources of target i are
 // indices[offsets[i] .. offsets[i+1]); their order within a row is unspecified. A copy of the
 // list a method builds where it works (NeighbourListBuffer).
@@ -284,6 +290,11 @@ class Engine {
   Results results() const;
   // The results of the last run() in place (no copy): what an integrator on the device reads.
   ResultsView results_view() const;
+  // The results of the last run() moved out of the engine (no copy): arrays in the method's
+  // memory, valid for as long as the returned owner is held, whatever the engine does next.
+  // The engine keeps no results after it (results() throws until the next run(), which sizes
+  // new arrays: from a stream-ordered pool on the device, so a run per call stays cheap).
+  OwnedResults take_results();
   // run() then results().
   Results compute(Kernel kernel, const KernelOptions& options = {});
 

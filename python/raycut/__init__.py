@@ -105,7 +105,8 @@ class Engine:
 
     The outputs of every call are new arrays of the framework and device of the positions given
     to the last ``build``/``update``: later calls never change them (neighbour lists are fresh
-    buffers the arrays own; kernel results are copies, on the device for device positions).
+    buffers the arrays own; kernel results are the engine's result arrays, handed over without a
+    copy: the next ``compute`` makes new ones).
     """
 
     def __init__(self, method: str = "auto") -> None:
@@ -224,7 +225,8 @@ class Engine:
         - ``density`` (N,) float32 (``sph_density``).
 
         ``sph_force`` reads per-particle ``velocity`` (N, 3), ``density`` and ``pressure`` (N,)
-        float32 arrays. Results are copies (on the device for device positions): valid forever.
+        float32 arrays. The results are the engine's own arrays handed over without a copy (on
+        the device for device positions and GPU methods), never changed by a later call.
         """
         velocity = self._kernel_input(velocity, "velocity")
         density = self._kernel_input(density, "density")

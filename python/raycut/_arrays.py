@@ -112,15 +112,24 @@ def stream_of(like: Like) -> int:
     return 0
 
 
+_TORCH_DLPACK = []  # torch.utils.dlpack once imported: the import statement costs ~1 us a call
+
+
+def _torch_dlpack() -> Any:
+    if not _TORCH_DLPACK:
+        from torch.utils import dlpack
+
+        _TORCH_DLPACK.append(dlpack)
+    return _TORCH_DLPACK[0]
+
+
 def readable(x: Any) -> Any:
     """What the extension reads in place: a PyTorch tensor as its DLPack capsule (torch's C
     ``to_dlpack``, where ``Tensor.__dlpack__``, which nanobind would call, is Python code with
     stream checks the library does not need: it synchronises its own work), anything else as
     it is."""
     if framework_of(x) == "torch":
-        from torch.utils import dlpack
-
-        return dlpack.to_dlpack(x)
+        return _torch_dlpack().to_dlpack(x)
     return x
 
 
@@ -198,9 +207,7 @@ def output(array: Any, like: Like) -> Any:
             return tensor if like.host else tensor.to(like.device)
         # The capsule itself: torch.from_dlpack on the array would ask for the current stream
         # to synchronise with, and the library's work is already complete.
-        from torch.utils import dlpack
-
-        return dlpack.from_dlpack(array.__dlpack__())
+        return _torch_dlpack().from_dlpack(array.__dlpack__())
     if like.framework == "cupy":
         import cupy
 

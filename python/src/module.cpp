@@ -427,7 +427,7 @@ nb::dict results(raycut::Engine& engine, std::string_view kernel_name, bool to_h
   const raycut::KernelProduces produces = raycut::produces(raycut::parse_kernel(kernel_name));
   const std::size_t n = engine.size();
   nb::dict out;
-  if (engine.space() == MemorySpace::host || to_host) {
+  if (engine.space() == MemorySpace::device && to_host) {  // host copies of device results
     raycut::Results r;
     {
       nb::gil_scoped_release release;
@@ -440,33 +440,25 @@ nb::dict results(raycut::Engine& engine, std::string_view kernel_name, bool to_h
     if (produces.density) out["density"] = host_array(std::move(r.density), {n});
     return out;
   }
-#if defined(RAYCUT_PY_CUDA)
-  const raycut::ResultsView view = engine.results_view();
-  auto copy = [&](const void* src, std::vector<std::size_t> shape, nb::dlpack::dtype dtype) {
-    std::size_t bytes = dtype.bits / 8;
-    for (std::size_t s : shape) bytes *= s;
-    void* dst = raycut_py::device_alloc(bytes);
-    std::shared_ptr<const void> owner(
-        dst, [](const void* p) { raycut_py::device_free(const_cast<void*>(p)); });
-    if (src != nullptr) {
-      nb::gil_scoped_release release;
-      raycut_py::device_copy(dst, src, bytes, engine.stream());
-    }
-    return wrap(dst, std::move(shape), dtype, owner, MemorySpace::device);
-  };
-  if (produces.count) out["count"] = copy(view.count, {n}, index_dtype(n));
-  if (produces.energy) out["energy"] = copy(view.energy, {n}, dtype_of<float>());
-  if (produces.force) out["force"] = copy(view.force, {n, 3}, dtype_of<float>());
-  if (produces.virial) out["virial"] = copy(view.virial, {n, 6}, dtype_of<float>());
-  if (produces.density) out["density"] = copy(view.density, {n}, dtype_of<float>());
+  // Where the method works, the engine's own arrays moved out to the Python arrays (no copy):
+  // a later run() sizes new ones, so these stay as they are.
+  raycut::OwnedResults owned;
   {
     nb::gil_scoped_release release;
-    raycut_py::synchronize(engine.stream());  // the copies complete: the arrays are final
+    owned = engine.take_results();
   }
+  const raycut::ResultsView& v = owned.view;
+  const MemorySpace space = engine.space();
+  auto put = [&](const char* name, const void* data, std::vector<std::size_t> shape,
+                 nb::dlpack::dtype dtype) {
+    out[name] = wrap(data, std::move(shape), dtype, owned.owner, space);
+  };
+  if (produces.count) put("count", v.count, {n}, index_dtype(n));
+  if (produces.energy) put("energy", v.energy, {n}, dtype_of<float>());
+  if (produces.force) put("force", v.force, {n, 3}, dtype_of<float>());
+  if (produces.virial) put("virial", v.virial, {n, 6}, dtype_of<float>());
+  if (produces.density) put("density", v.density, {n}, dtype_of<float>());
   return out;
-#else
-  throw raycut::Error(raycut::ErrorCode::internal, "device results without CUDA");
-#endif
 }
 
 // A per-particle float input of a kernel (sph_force's velocity, density, pressure) where the

@@ -65,7 +65,7 @@ def test_python_lists_bench_runs_tiny(tmp_path):
     # NumPy input with a CPU method: the bench's bound-engine variants read host arrays.
     rows = bench.main(["--tiny", "--numpy", "--method", "cell-list", "--reps", "2", "--warmup", "1",
                        "--out", str(out)])
-    variants = {"cpp_list", "cpp_pairs", "python", "python_nocache"}
+    variants = {"cpp_list", "cpp_pairs", "python", "python_csr", "python_nocache"}
     by = {}
     for r in rows:
         by.setdefault(r["workload"], {})[r["variant"]] = r

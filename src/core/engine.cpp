@@ -317,6 +317,16 @@ ResultsView Engine::results_view() const {
   return m.results_view();
 }
 
+OwnedResults Engine::take_results() {
+  detail::Method& m = impl("take_results");
+  if (!has_run_)
+    throw Error(ErrorCode::invalid_argument,
+                "Engine::take_results() called before a successful run()");
+  has_run_ = false;  // the results leave the engine
+  if (size_ == 0) return {ResultsView{nullptr, nullptr, nullptr, nullptr, nullptr, m.space()}, {}};
+  return m.take_results();
+}
+
 Results Engine::compute(Kernel kernel, const KernelOptions& options) {
   run(kernel, options);
   return results();

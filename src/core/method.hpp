@@ -66,6 +66,8 @@ class Method {
   virtual void compute(Kernel kernel, const KernelOptions& options) = 0;
   virtual Results results() const = 0;
   virtual ResultsView results_view() const = 0;
+  // The results moved out (Engine::take_results); the method then holds none.
+  virtual OwnedResults take_results() = 0;
 
   // Lists, into storage of the method's memory space (made by the method).
   virtual std::unique_ptr<ListStorage> make_list_storage() const = 0;

@@ -39,6 +39,11 @@ class HostMethod : public Method {
   }
   Results results() const override { return results_; }
   ResultsView results_view() const override { return view_of(results_); }
+  OwnedResults take_results() override {
+    auto owned = std::make_shared<Results>(std::move(results_));
+    results_ = {};
+    return {view_of(*owned), owned};
+  }
 
   std::unique_ptr<ListStorage> make_list_storage() const override {
     return std::make_unique<HostListStorage>();

@@ -31,8 +31,9 @@ class DeviceResults {
   Kernel kernel_ = Kernel::count;
   std::size_t n_ = 0;
   bool valid_ = false;
-  DeviceBuffer<std::uint32_t> count_;
-  DeviceBuffer<float> energy_, force_, virial_, density_;
+  // Pooled: take_results() hands them out, and the next run sizes new ones.
+  PooledBuffer<std::uint32_t> count_;
+  PooledBuffer<float> energy_, force_, virial_, density_;
 };
 
 // A pair of CUDA events around work queued on a stream.
@@ -123,6 +124,11 @@ class GpuMethod : public Method {
   void set_stream(void* stream) override { stream_ = static_cast<cudaStream_t>(stream); }
   Results results() const override { return results_.to_host(); }
   ResultsView results_view() const override { return results_.view(); }
+  OwnedResults take_results() override {
+    auto owned = std::make_shared<DeviceResults>(std::move(results_));
+    results_ = DeviceResults{};
+    return {owned->view(), owned};
+  }
   void synchronize() override { RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream_)); }
   double device_build_ms() const override { return build_timer_.elapsed_ms(); }
   double device_compute_ms() const override { return compute_timer_.elapsed_ms(); }
