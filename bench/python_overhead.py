@@ -223,7 +223,7 @@ def main(argv=None) -> list:
             writer.writerows(rows)
 
     print(f"raycut Python overhead, N = {args.n}, cutoff {cutoff:.4g}, {args.calls} calls each, "
-          f"{gpu or 'no GPU'} (target: wrapper <= {TARGET_US:g} us)")
+          f"{gpu or 'no GPU'} (target: API - C++ loop <= {TARGET_US:g} us)")
     header = (f"{'input':<11} {'method':<11} {'api':<14} {'api us':>9} {'ext us':>9} "
               f"{'C++ us':>9} {'C++ loop':>9} {'wrapper':>8} {'over loop':>9}  ok")
     print(header)

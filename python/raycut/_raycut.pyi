@@ -13,6 +13,11 @@ class CapacityError(RuntimeError):
 def methods() -> list[dict[str, Any]]: ...
 def auto_method() -> str: ...
 def cuda_device_available() -> bool: ...
+def device_index_summary(index: Any, stream: int) -> tuple[int, int, int, int, int]:
+    """(first, last, k, index[k], index[k + 1]) of a 1-D int32/int64 CUDA index, k the first
+    place it decreases (N - 1 when sorted)."""
+def device_index_offsets(index: Any, systems: int, stream: int) -> Any:
+    """Systems offsets (S + 1, uint64 NumPy) of a sorted 1-D int32/int64 CUDA index."""
 def current_device() -> int:
     """The CUDA device current in this thread (where a GPU method allocates), -1 without one."""
 
@@ -39,7 +44,9 @@ class Engine:
     def run(self, kernel: str, lj_epsilon: float = 1.0, lj_sigma: float = 1.0,
             sph_mass: float = 0.0, sph_viscosity: float = 0.0, velocity: Optional[Any] = None,
             density: Optional[Any] = None, pressure: Optional[Any] = None) -> None: ...
-    def results(self, kernel: str, to_host: bool) -> dict[str, Any]: ...
+    def results(self, kernel: str, to_host: bool) -> dict[str, Any]:
+        """The last run's arrays, handed over (Engine::take_results; host copies of device
+        results with to_host): the engine holds no results after it."""
     def neighbours(self, half: bool, distances: bool, vectors: bool, to_host: bool,
                    shifts: bool = False
                    ) -> tuple[Any, Any, Optional[Any], Optional[Any], Optional[Any]]: ...
@@ -49,6 +56,9 @@ class Engine:
     def padded(self, k: int, raise_on_overflow: bool, to_host: bool,
                shifts: bool = ...) -> tuple[Any, Any, dict[str, Any], Any]: ...
     def timings(self) -> dict[str, Any]: ...
+    def _cpp_loop_us(self, positions: Any, cutoff: float, kernel: str, build: bool,
+                     calls: int) -> list[float]:
+        """Benchmarks: [build +] run + results_view `calls` times in C++, us per call."""
 
 class VerletList:
     def __init__(self, cutoff: float, skin: float, method: str = "auto", half: bool = False,
