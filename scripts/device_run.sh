@@ -3,7 +3,8 @@
 # every result in one tarball (for machines that hand back few files). What this project's device
 # sessions ran, in one place.
 #
-#   scripts/device_run.sh [tests REGEX] [bench] [lists] [periodic] [sph]   results: ${OUT:-/tmp/raycut-out}/results.tgz
+#   scripts/device_run.sh [tests REGEX] [bench] [lists] [periodic] [sph] [python] [python-bench]
+#                         [mpi] [memcheck] [grid-suites]   results: ${OUT:-/tmp/raycut-out}/results.tgz
 #
 #   tests REGEX  ctest -R REGEX (e.g. "GridVariants|grid_|Sph"; "." for everything, ~6 min)
 #   bench        both suites, every GPU method, plus the paper's grid when its source is in
@@ -18,8 +19,13 @@
 #   grid-suites  both suites with grid and grid-paper beside the paper's grid (no regression)
 #   memcheck     compute-sanitizer on the functor, list, grid-variant and periodic GPU tests
 #   python       the Python package built with the device's Python, and its tests
+#   python-bench bench/python_lists.py (beside neighbour_bench's periodic list rows, run first)
+#                and bench/python_overhead.py: python-lists.csv/.md, python-overhead.csv
+#                (docs/python.md)
+#   mpi          the MPI tests (ctest -R mpi) and `mpirun -np 1 raycut bench --distributed`
+#                at 2^20 and 2^22 (distributed-np1.csv; docs/distributed.md)
 set -uo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/.." || exit 1
 out="${OUT:-/tmp/raycut-out}"
 res="$(mktemp -d)"
 mkdir -p "$out"
@@ -110,6 +116,31 @@ while [ $# -gt 0 ]; do
         > "$res/pytest.log" 2>&1
       echo "pytest exit $?"
       tail -15 "$res/pytest.log"
+      ;;
+    python-bench)
+      py="${RAYCUT_PYTHON:-/opt/torch/.venv/bin/python}"
+      [ -d build/python/raycut ] || scripts/configure.sh -DRAYCUT_BUILD_PYTHON=ON \
+        -DPython_EXECUTABLE="$py" > "$res/python-build.log" 2>&1
+      build/bench/neighbour_bench --methods grid --periodic --betas 32 --ps 32 \
+        --ops list_full,list_full_s,list_half_s --reps 10 --out "$res/nb-lists.csv" \
+        > "$res/nb-lists.log" 2>&1
+      PYTHONPATH="$PWD/build/python" "$py" bench/python_lists.py --native "$res/nb-lists.csv" \
+        --out "$res/python-lists.csv" --md "$res/python-lists.md" > "$res/python-lists.log" 2>&1
+      echo "python_lists exit $?"
+      tail -5 "$res/python-lists.md"
+      PYTHONPATH="$PWD/build/python" "$py" bench/python_overhead.py \
+        --out "$res/python-overhead.csv" > "$res/python-overhead.log" 2>&1
+      echo "python_overhead exit $?"
+      tail -13 "$res/python-overhead.log" | head -11
+      ;;
+    mpi)
+      export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+      (cd build && ctest -R mpi --output-on-failure > "$res/ctest-mpi.log" 2>&1)
+      grep -E "tests passed|tests failed" "$res/ctest-mpi.log"
+      mpirun --allow-run-as-root -np 1 "$raycut" bench --distributed --n 1048576 4194304 \
+        -m grid -o "$res/distributed-np1.csv" > "$res/distributed-np1.log" 2>&1
+      echo "distributed np1 exit $?"
+      tail -4 "$res/distributed-np1.log"
       ;;
     grid-suites)
       # Both suites, the grids beside the paper's own grid: the no-regression check.
