@@ -104,7 +104,7 @@ int main(int argc, char** argv) {
 
   raycut::Engine periodic(method), plain(method);
   const std::unique_ptr<raycut::detail::Method> direct = raycut::detail::make_cell_list_cpu();
-  const raycut::detail::Points open_n{open.data(), open.size() / 3, n};
+  const raycut::detail::Points open_n{open.data(), open.size() / 3, n, {}};
   const char* names[3] = {"periodic", "open", "open-n"};
   const std::size_t targets[3] = {n, open.size() / 3, n};
   using Clock = std::chrono::steady_clock;
