@@ -21,8 +21,9 @@
 //                                    // position itself, so that the lanes sharing a target
 //                                    // write its entries together (coalesced lists)
 //     static constexpr bool uses_source = false;  // operator() reads neither j nor the shift:
-//                                    // with periodic images the traversal may skip looking
-//                                    // the source up (a load per pair)
+//                                    // with periodic images (and no accepts) the traversal runs
+//                                    // as on an open cloud, no lookup per pair (j is then a
+//                                    // point's index, not a particle's)
 //     static constexpr bool takes_shift = true;  // operator() and accepts() take the pair's
 //                                    // image shift S as a last argument (const Shift&)
 //     RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b);  // a += b: lets

@@ -60,7 +60,7 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk&
 // run_host over a HostPass, with its images.
 template <class Walk, class F>
 void run_host_pass(const PairPass& pass, const Walk& walk, const F& f) {
-  with_images(pass, [&](const auto& images) {
+  with_images<F>(pass, [&](const auto& images) {
     run_host(pass.n, pass.host.xyz, pass.cutoff_squared, walk, f, images);
   });
 }

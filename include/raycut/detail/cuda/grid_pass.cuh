@@ -426,7 +426,7 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
         break;
     }
   };
-  with_images(pass, [&](const auto& images) {
+  with_images<F>(pass, [&](const auto& images) {
     if (g.dense)
       launch(DenseTable{g.dense_table.start}, images);
     else
