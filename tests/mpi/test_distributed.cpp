@@ -1094,8 +1094,8 @@ void expect_cuts_apart(const DistributedEngine& engine, double h, const std::str
 // Imbalanced inputs, periodic and open, with the cuts at the particle-count quantiles: results
 // per target as the single process's, the halos complete, and the owned counts within 15% of
 // N / ranks where the input allows it (the marginal counts are exact to a particle; a domain's is
-// a product's, here within 6%). With equal slabs the same inputs put 60-100% on one rank, which
-// the same bound rejects.
+// not the marginals' product, here within 4% at 2 x 2). With equal slabs the same inputs put 90 to
+// 100% on one rank, which the same bound rejects.
 TEST(Distributed, BalancedCutsMatchSingleProcess) {
   const int size = world_size();
   // Every particle in a corner of the region: equal slabs give rank 0 all of them.
