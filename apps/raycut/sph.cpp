@@ -56,7 +56,7 @@ struct SphOptions {
   bool distributed = false;
   std::vector<int> dims;  // empty: MPI_Dims_create
   bool balance = false;   // cuts at the particle-count quantiles
-  int rebalance_every = 10;
+  int rebalance_every = 1;
 };
 
 bool is_validation(const std::string& scenario) {
@@ -602,7 +602,7 @@ Command add_sph(CLI::App& app) {
                     "exchanges, instead of equal slabs of the extent at build")
           ->needs(distributed);
   cmd->add_option("--rebalance-every", o->rebalance_every,
-                  "--balance: move the cuts again every N exchanges (default 10; 0: at build only)")
+                  "--balance: move the cuts again every N exchanges (default 1; 0: at build only)")
       ->check(CLI::NonNegativeNumber)
       ->needs(balance);
   cmd->add_option("--csv", o->csv, "Append a result row to this CSV file");
