@@ -78,6 +78,7 @@ struct DistributedBenchOptions {
   float skin = 0.3f;
   std::vector<int> dims;  // empty: MPI_Dims_create
   bool all_rows = false;  // DistributedOptions::owned_rows_only = false
+  bool balance = false;   // DistributedOptions::balance = particles
 };
 void add_distributed_bench_options(CLI::App& bench, DistributedBenchOptions& o);
 int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<std::string>& methods,

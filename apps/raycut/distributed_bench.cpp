@@ -93,6 +93,7 @@ Run run_method(MPI_Comm comm, const DistributedBenchOptions& o, const std::strin
   options.method = method;
   options.skin = o.skin;
   options.owned_rows_only = !o.all_rows;
+  if (o.balance) options.balance = mpi::Balance::particles;
   for (std::size_t a = 0; a < o.dims.size(); ++a) options.dims[a] = o.dims[a];
   mpi::DistributedEngine engine(comm, options);
   const Share share = liquid_share(n, side, rank, size, seed);
@@ -182,6 +183,11 @@ void add_distributed_bench_options(CLI::App& bench, DistributedBenchOptions& o) 
                 "--distributed: one local engine over owned + halos, halo rows discarded (the "
                 "scheme of methods without query points), instead of owned rows only")
       ->needs(flag);
+  bench
+      .add_flag("--balance", o.balance,
+                "--distributed: cuts at the particle-count quantiles of each split axis at build "
+                "(DistributedOptions::balance), instead of equal slabs")
+      ->needs(flag);
 }
 
 int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<std::string>& names,
@@ -215,7 +221,8 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
   const std::string environment = environment_columns(sys, true);
   if (rank == 0) {
     csv->write(
-        "suite,method,rows,ranks,dims,scaling,N,N_per_rank,cutoff,skin,pairs,halos,owned_min,"
+        "suite,method,rows,ranks,dims,balance,scaling,N,N_per_rank,cutoff,skin,pairs,halos,owned_"
+        "min,"
         "owned_max,build_ms,exchange_ms,refresh_ms,compute_ms,step_ms,step_ms_min,step_ms_max,"
         "compute_cpu_ms,step_cpu_ms,reps,timer,gpu,driver,cuda,optix\n");
     std::fprintf(stderr, "raycut bench --distributed: %d ranks, %s scaling, %d reps, on %s -> %s\n",
@@ -243,12 +250,13 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
       char row[1024];
       std::snprintf(
           row, sizeof row,
-          "lj-liquid-pbc,%s,%s,%d,%dx%dx%d,%s,%llu,%llu,%g,%g,%llu,%llu,%llu,%llu,%.4f,%.4f,"
+          "lj-liquid-pbc,%s,%s,%d,%dx%dx%d,%s,%s,%llu,%llu,%g,%g,%llu,%llu,%llu,%llu,%.4f,%.4f,"
           "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%d,mpi_wtime_max,%s\n",
           method.c_str(), run.owned_rows_only ? "owned" : "all", size, run.dims[0], run.dims[1],
-          run.dims[2], weak ? "weak" : "strong", static_cast<unsigned long long>(n),
-          static_cast<unsigned long long>(n / size), lj_cutoff, o.skin,
-          static_cast<unsigned long long>(run.pairs), static_cast<unsigned long long>(run.halos),
+          run.dims[2], o.balance ? "particles" : "none", weak ? "weak" : "strong",
+          static_cast<unsigned long long>(n), static_cast<unsigned long long>(n / size), lj_cutoff,
+          o.skin, static_cast<unsigned long long>(run.pairs),
+          static_cast<unsigned long long>(run.halos),
           static_cast<unsigned long long>(run.owned_min),
           static_cast<unsigned long long>(run.owned_max), run.build_ms, median(s[exchange_phase]),
           median(s[refresh_phase]), median(s[compute_phase]), median(s[step_phase]),

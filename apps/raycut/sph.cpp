@@ -55,6 +55,8 @@ struct SphOptions {
   // Under mpirun: raycut::mpi::SphSolver over the ranks.
   bool distributed = false;
   std::vector<int> dims;  // empty: MPI_Dims_create
+  bool balance = false;   // cuts at the particle-count quantiles
+  int rebalance_every = 1;
 };
 
 bool is_validation(const std::string& scenario) {
@@ -224,23 +226,25 @@ RunReport report(const mpi::SphSolver& solver, bool done, double step_cpu_ms) {
   r.where = ", " + std::to_string(s.ranks) + " ranks, domains " + dims;
   if (!done) return r;
   r.header =
-      ",ranks,dims,halos_mean,owned_min,owned_max,exchanges,refreshes,migrated,step_cpu_ms,timer";
+      ",ranks,dims,halos_mean,owned_min,owned_max,exchanges,refreshes,migrated,balances,"
+      "step_cpu_ms,timer";
   char line[512];
-  std::snprintf(line, sizeof line, ",%d,%s,%.0f,%llu,%llu,%llu,%llu,%llu,%.4f,max_over_ranks",
-                s.ranks, dims.c_str(), s.halos_mean, static_cast<unsigned long long>(s.owned_min),
-                static_cast<unsigned long long>(s.owned_max),
-                static_cast<unsigned long long>(s.exchanges),
-                static_cast<unsigned long long>(s.refreshes),
-                static_cast<unsigned long long>(s.migrated), step_cpu_ms);
+  std::snprintf(
+      line, sizeof line, ",%d,%s,%.0f,%llu,%llu,%llu,%llu,%llu,%llu,%.4f,max_over_ranks", s.ranks,
+      dims.c_str(), s.halos_mean, static_cast<unsigned long long>(s.owned_min),
+      static_cast<unsigned long long>(s.owned_max), static_cast<unsigned long long>(s.exchanges),
+      static_cast<unsigned long long>(s.refreshes), static_cast<unsigned long long>(s.migrated),
+      static_cast<unsigned long long>(s.balances), step_cpu_ms);
   r.values = line;
   std::snprintf(
       line, sizeof line,
       "distributed: %d ranks (domains %s), pass times the largest over the ranks; "
       "halos %.0f per step (summed over ranks), owned %llu to %llu per rank; %llu "
-      "exchanges, %llu refreshes in place; %llu particles migrated\n",
+      "exchanges, %llu refreshes in place; %llu particles migrated; cuts balanced %llu times\n",
       s.ranks, dims.c_str(), s.halos_mean, static_cast<unsigned long long>(s.owned_min),
       static_cast<unsigned long long>(s.owned_max), static_cast<unsigned long long>(s.exchanges),
-      static_cast<unsigned long long>(s.refreshes), static_cast<unsigned long long>(s.migrated));
+      static_cast<unsigned long long>(s.refreshes), static_cast<unsigned long long>(s.migrated),
+      static_cast<unsigned long long>(s.balances));
   r.summary = line;
   return r;
 }
@@ -508,7 +512,9 @@ int run_sph(const SphOptions& o) {
     const MpiSession session;
     std::array<int, 3> dims = {0, 0, 0};
     std::copy(o.dims.begin(), o.dims.end(), dims.begin());
-    mpi::SphSolver solver(MPI_COMM_WORLD, scenario, o.method, o.skin, dims);
+    mpi::SphSolver solver(MPI_COMM_WORLD, scenario, o.method, o.skin, dims,
+                          o.balance ? mpi::Balance::particles : mpi::Balance::none,
+                          o.rebalance_every);
     return run_steps(o, config, scenario, frames, solver);
 #else
     throw Error(ErrorCode::unsupported,
@@ -589,6 +595,16 @@ Command add_sph(CLI::App& app) {
       ->delimiter(',')
       ->expected(3)
       ->needs(distributed);
+  auto* balance =
+      cmd->add_flag("--balance", o->balance,
+                    "--distributed: cuts at the particle-count quantiles of each split axis "
+                    "(DistributedOptions::balance) at build and every --rebalance-every "
+                    "exchanges, instead of equal slabs of the extent at build")
+          ->needs(distributed);
+  cmd->add_option("--rebalance-every", o->rebalance_every,
+                  "--balance: move the cuts again every N exchanges (default 1; 0: at build only)")
+      ->check(CLI::NonNegativeNumber)
+      ->needs(balance);
   cmd->add_option("--csv", o->csv, "Append a result row to this CSV file");
   cmd->add_flag("-q,--quiet", o->quiet, "No progress lines");
   return [o, scenario_option] {

@@ -130,6 +130,16 @@ float wrap_coordinate(float v, double length) {
   return static_cast<float>(w);
 }
 
+// Halo candidates a little beyond the halo width: extra halos are harmless (they are sources
+// only), missing ones are not, and the slab and distance tests round in double at the scale of
+// the coordinates.
+double reach_of(const Decomposition& dec, double halo_width) {
+  double scale = halo_width;
+  for (const auto& cuts : dec.cuts)
+    for (double c : cuts) scale = std::max(scale, std::abs(c));
+  return halo_width + 1e-5 * scale;
+}
+
 // sph_force over the query engine (owned particles near a face over the halos): query b is
 // owned particle boundary[b] and source j is halo j, local index owned + j, of the fields in the
 // local order (halo_fields()). The single-rank kernel indexes targets and sources in one array,
@@ -156,11 +166,9 @@ double Decomposition::coordinate(int axis, const float* xyz) const {
 }
 
 int Decomposition::slab(int axis, double u) const {
-  const int d = dims[axis];
-  if (d == 1) return 0;
-  const double k = std::floor((u - lo[axis]) / width[axis]);
-  if (!(k >= 0)) return 0;  // also NaN
-  return k >= d - 1 ? d - 1 : static_cast<int>(k);
+  const auto& c = cuts[axis];
+  if (dims[axis] == 1 || std::isnan(u)) return 0;
+  return static_cast<int>(std::upper_bound(c.begin() + 1, c.end() - 1, u) - (c.begin() + 1));
 }
 
 int Decomposition::owner(const float* xyz) const {
@@ -189,6 +197,9 @@ DistributedEngine::DistributedEngine(MPI_Comm comm, DistributedOptions options)
   if (!std::isfinite(options_.skin) || options_.skin < 0)
     throw Error(ErrorCode::invalid_argument,
                 "distributed skin must be finite and >= 0, got " + std::to_string(options_.skin));
+  if (options_.rebalance_every < 0)
+    throw Error(ErrorCode::invalid_argument, "distributed rebalance_every must be >= 0, got " +
+                                                 std::to_string(options_.rebalance_every));
   std::array<int, 3> dims = options_.dims;
   int fixed = 1;
   for (int d : dims) {
@@ -335,17 +346,22 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
   halo_width_ = static_cast<double>(cutoff) + static_cast<double>(options_.skin);
   Decomposition& dec = decomposition_;
   for (int a = 0; a < 3; ++a) {
+    double lo = 0;
     const double along = dot(dec.cell[a], dec.normal[a]);  // the open row's extent along u_a
     if (dec.periodic[a] || along > 0) {
-      dec.lo[a] = 0;
       if (!dec.periodic[a]) dec.length[a] = along;
     } else {  // an open axis with no length: the particles' extent now
       const bool any = global_size_ > 0;
-      dec.lo[a] = any ? global[a] : 0;
+      lo = any ? global[a] : 0;
       dec.length[a] = any ? -global[3 + a] - global[a] : 0;
     }
-    dec.width[a] = dec.length[a] / dec.dims[a];
-    if (dec.halo_axis(a) && !(dec.width[a] >= halo_width_)) {
+    // Equal slabs; Balance::particles moves the inner cuts at the first exchange. Either way the
+    // region must hold dims equal slabs of cutoff + skin.
+    const double width = dec.length[a] / dec.dims[a];
+    dec.cuts[a].resize(static_cast<std::size_t>(dec.dims[a]) + 1);
+    for (int i = 0; i <= dec.dims[a]; ++i) dec.cuts[a][i] = lo + i * width;
+    dec.cuts[a].back() = lo + dec.length[a];
+    if (dec.halo_axis(a) && !(width >= halo_width_)) {
       // Orthorhombic axes by coordinate, triclinic ones by cell row and face width.
       const std::string axis = dec.aligned ? axis_name(a)
                                            : std::string("cell row ") + "abc"[a] + " (normal " +
@@ -353,10 +369,9 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
                                                  std::to_string(dec.normal[a][1]) + ", " +
                                                  std::to_string(dec.normal[a][2]) + ")";
       throw Error(ErrorCode::invalid_argument,
-                  "distributed engine: domains along " + axis + " are " +
-                      std::to_string(dec.width[a]) + " wide (" + std::to_string(dec.dims[a]) +
-                      " over " + (dec.periodic[a] ? "face width " : "") +
-                      std::to_string(dec.length[a]) +
+                  "distributed engine: domains along " + axis + " are " + std::to_string(width) +
+                      " wide (" + std::to_string(dec.dims[a]) + " over " +
+                      (dec.periodic[a] ? "face width " : "") + std::to_string(dec.length[a]) +
                       "), less than cutoff + skin = " + std::to_string(halo_width_) +
                       "; use fewer domains along that axis (DistributedOptions::dims) or a "
                       "larger box");
@@ -435,12 +450,77 @@ void DistributedEngine::exchange() {
     for (int c = 0; c < 3; ++c) x[c] = static_cast<float>(w[c]);
   }
   stats_.bytes_sent = 0;
+  // Every rank counts the same exchanges, so all move the cuts together, before the migration
+  // that takes the particles to their new owners.
+  if (options_.balance == Balance::particles &&
+      (stats_.exchanges == 0 ||
+       (options_.rebalance_every > 0 && stats_.exchanges % options_.rebalance_every == 0)))
+    balance();
   migrate();
   build_halos();
   xyz_at_exchange_ = xyz_;
   ++stats_.exchanges;
   stats_.exchange_ms = elapsed_ms(start);
   build_local_engine(false);
+}
+
+// Balance::particles: the inner cuts of each split axis at the quantiles i / dims[a] of the
+// particle count along u_a over all particles, each axis by its own marginal distribution (the
+// grid stays Cartesian, so every domain keeps its neighbours; docs/distributed.md says what this
+// does not balance). Found by bisection, every cut at once, over MPI_Allreduce of the counts
+// below the probes: integer sums and the same arithmetic, so every rank gets the same cuts. Then
+// each slab is kept at least h = cutoff + skin wide, which the halo test needs (one image per side,
+// neighbours' slabs only): cut i at least h above cut i - 1 and, on a periodic axis, h above 0 and
+// at most L - (dims - i) h (room that build()'s check of dims equal slabs leaves).
+void DistributedEngine::balance() {
+  Decomposition& dec = decomposition_;
+  if (global_size_ == 0 || dec.domains() == 1) return;
+  const double inf = std::numeric_limits<double>::infinity();
+  std::vector<double> u[3];
+  std::array<double, 6> bounds = {inf, inf, inf, inf, inf, inf}, global;  // min, -max
+  for (int a = 0; a < 3; ++a) {
+    if (dec.dims[a] == 1) continue;
+    u[a].resize(ids_.size());
+    for (std::size_t i = 0; i < ids_.size(); ++i) {
+      u[a][i] = dec.coordinate(a, &xyz_[3 * i]);
+      bounds[a] = std::min(bounds[a], u[a][i]);
+      bounds[3 + a] = std::min(bounds[3 + a], -u[a][i]);
+    }
+    std::sort(u[a].begin(), u[a].end());
+  }
+  check(MPI_Allreduce(bounds.data(), global.data(), 6, MPI_DOUBLE, MPI_MIN, comm_),
+        "MPI_Allreduce");
+  struct Cut {
+    int axis, index;
+    std::uint64_t target;  // particles below the cut
+    double low, high;      // count(u < low) < target <= count(u < high)
+  };
+  std::vector<Cut> cuts;
+  for (int a = 0; a < 3; ++a)
+    for (int i = 1; i < dec.dims[a]; ++i)
+      cuts.push_back({a, i, global_size_ * i / dec.dims[a], dec.periodic[a] ? 0.0 : global[a],
+                      dec.periodic[a] ? dec.length[a] : -global[3 + a]});
+  std::vector<std::uint64_t> below(cuts.size()), total(cuts.size());
+  for (int round = 0; round < 48; ++round) {  // 2^-48 of the range: below float resolution
+    for (std::size_t k = 0; k < cuts.size(); ++k) {
+      const auto& v = u[cuts[k].axis];
+      const double mid = 0.5 * (cuts[k].low + cuts[k].high);
+      below[k] = static_cast<std::uint64_t>(std::lower_bound(v.begin(), v.end(), mid) - v.begin());
+    }
+    check(MPI_Allreduce(below.data(), total.data(), static_cast<int>(cuts.size()), MPI_UINT64_T,
+                        MPI_SUM, comm_),
+          "MPI_Allreduce");
+    for (std::size_t k = 0; k < cuts.size(); ++k)
+      (total[k] < cuts[k].target ? cuts[k].low : cuts[k].high) = 0.5 * (cuts[k].low + cuts[k].high);
+  }
+  for (const Cut& cut : cuts) {  // by axis, then index: cut i - 1 is placed before cut i
+    const int a = cut.axis, i = cut.index, d = dec.dims[a];
+    double c = cut.high;
+    if (i > 1 || dec.periodic[a]) c = std::max(c, dec.cuts[a][i - 1] + halo_width_);
+    if (dec.periodic[a]) c = std::min(c, dec.length[a] - (d - i) * halo_width_);
+    dec.cuts[a][i] = c;
+  }
+  ++stats_.balances;
 }
 
 // Every particle outside this rank's domain goes to its owner: [id][xyz][carried] records.
@@ -525,11 +605,7 @@ void DistributedEngine::migrate() {
 void DistributedEngine::build_halos() {
   const Decomposition& dec = decomposition_;
   const std::size_t n = ids_.size();
-  // Candidates a little beyond the halo width: extra halos are harmless (they are sources only),
-  // missing ones are not, and the slab and distance tests round in double.
-  double scale = halo_width_;
-  for (int a = 0; a < 3; ++a) scale = std::max(scale, std::abs(dec.lo[a]) + dec.length[a]);
-  const double reach = halo_width_ + 1e-5 * scale;
+  const double reach = reach_of(dec, halo_width_);
   const double reach2 = reach * reach;
 
   struct Candidate {
@@ -555,7 +631,7 @@ void DistributedEngine::build_halos() {
           // An open axis's end slabs extend to infinity; a local axis's one slab is all of it.
           const bool open_low = !images && k == 0;
           const bool open_high = !images && k == d - 1;
-          const double lo = dec.lo[a] + k * dec.width[a], hi = lo + dec.width[a];
+          const double lo = dec.cuts[a][k], hi = dec.cuts[a][k + 1];
           double gap = 0;
           if (!open_low && y < lo) gap = lo - y;
           if (!open_high && y > hi) gap = y - hi;
@@ -656,16 +732,14 @@ void DistributedEngine::refresh_halos() {
 void DistributedEngine::select_boundary() {
   const Decomposition& dec = decomposition_;
   const auto c = dec.coords(rank_);
-  double scale = halo_width_;
-  for (int a = 0; a < 3; ++a) scale = std::max(scale, std::abs(dec.lo[a]) + dec.length[a]);
-  const double reach = halo_width_ + 1e-5 * scale;  // as build_halos(): a hair wide is harmless
+  const double reach = reach_of(dec, halo_width_);  // as build_halos(): a hair wide is harmless
   double low[3], high[3];  // the faces with something across, else -inf / +inf
   for (int a = 0; a < 3; ++a) {
     const bool split = dec.halo_axis(a);
-    low[a] = split && (dec.images(a) || c[a] > 0) ? dec.lo[a] + c[a] * dec.width[a]
+    low[a] = split && (dec.images(a) || c[a] > 0) ? dec.cuts[a][c[a]]
                                                   : -std::numeric_limits<double>::infinity();
     high[a] = split && (dec.images(a) || c[a] < dec.dims[a] - 1)
-                  ? dec.lo[a] + (c[a] + 1) * dec.width[a]
+                  ? dec.cuts[a][c[a] + 1]
                   : std::numeric_limits<double>::infinity();
   }
   boundary_.clear();

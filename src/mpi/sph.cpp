@@ -91,7 +91,7 @@ namespace {
 
 // The sph::Solver's checks first (the same scenario on every rank, so every rank throws alike).
 DistributedOptions options_of(const sph::SphScenario& scenario, std::string_view method, float skin,
-                              std::array<int, 3> dims) {
+                              std::array<int, 3> dims, Balance balance, int rebalance_every) {
   sph::validate(scenario);
   if (!(skin < 0) && !std::isfinite(skin))
     throw Error(ErrorCode::invalid_argument, "skin must be finite");
@@ -100,14 +100,17 @@ DistributedOptions options_of(const sph::SphScenario& scenario, std::string_view
   o.method = method == "auto" ? "cell-list" : std::string(method);
   o.skin = skin < 0 ? 0.5f * scenario.params.smoothing_length : skin;
   o.dims = dims;
+  o.balance = balance;
+  o.rebalance_every = rebalance_every;
   return o;
 }
 
 }  // namespace
 
 SphSolver::SphSolver(MPI_Comm comm, const sph::SphScenario& scenario, std::string_view method,
-                     float skin, std::array<int, 3> dims)
-    : impl_(std::make_unique<Impl>(comm, options_of(scenario, method, skin, dims))) {
+                     float skin, std::array<int, 3> dims, Balance balance, int rebalance_every)
+    : impl_(std::make_unique<Impl>(
+          comm, options_of(scenario, method, skin, dims, balance, rebalance_every))) {
   Impl& s = *impl_;
   s.params = scenario.params;
   s.constants = sph::constants_of(s.params);
@@ -284,6 +287,7 @@ SphRunStats SphSolver::statistics() const {
   r.dims = e.decomposition().dims;
   r.exchanges = s.exchanges;  // the same on every rank (update() agrees)
   r.refreshes = s.refreshes;
+  r.balances = e.stats().balances;  // the same on every rank
   const std::uint64_t owned = e.owned();
   std::uint64_t sums[2] = {e.halos(), s.migrated}, totals[2];
   double halo_sum = 0;

@@ -50,8 +50,11 @@ struct Comparison {
 };
 
 // `frames` steps of both solvers, compared after every step. Collective.
-Comparison compare_runs(const SphScenario& scenario, const std::string& method, int frames) {
-  SphSolver distributed(MPI_COMM_WORLD, scenario, method, -1, {1, world_size(), 1});
+Comparison compare_runs(const SphScenario& scenario, const std::string& method, int frames,
+                        raycut::mpi::Balance balance = raycut::mpi::Balance::none,
+                        int rebalance_every = 0) {
+  SphSolver distributed(MPI_COMM_WORLD, scenario, method, -1, {1, world_size(), 1}, balance,
+                        rebalance_every);
   raycut::sph::Solver single(scenario, method);
   const bool root = world_rank() == 0;
   Comparison r;
@@ -143,6 +146,22 @@ TEST(DistributedSph, ArticleDropMatchesTheSingleProcessSolver) {
       EXPECT_GT(r.max_speed, 0.5) << method;  // g t = 0.61 m/s
     }
   }
+}
+
+// The cuts moved at every exchange (DistributedOptions::balance): the falling block's particles
+// migrate to new owners as the cuts follow them, and the run still matches the single solver.
+TEST(DistributedSph, ArticleDropWithRebalancingMatchesTheSingleProcessSolver) {
+  const Comparison r =
+      compare_runs(jittered_drop(), "cell-list", 20, raycut::mpi::Balance::particles, 1);
+  expect_within_round_off(r, "small drop, balanced");
+  expect_migration(r, "balanced");
+  if (world_size() > 1) {
+    EXPECT_EQ(r.stats.balances, r.stats.exchanges + 1);  // build's, then every exchange's
+  }
+  if (world_rank() == 0)
+    std::printf("[ balanced, %d ranks ] owned %llu to %llu\n", world_size(),
+                static_cast<unsigned long long>(r.stats.owned_min),
+                static_cast<unsigned long long>(r.stats.owned_max));
 }
 
 TEST(DistributedSph, DamBreakKeepsItsFixedParticles) {

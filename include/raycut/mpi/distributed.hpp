@@ -64,17 +64,21 @@ std::unique_ptr<Transport> make_host_transport(MPI_Comm comm);
 // periodic row (orthorhombic boxes, slabs whose periodic rows lie in a coordinate plane), else
 // the effective cell's unit completion row (box.hpp), orthogonal to the periodic rows; either
 // way no periodic shift moves u_k. Its region is [0, L_k) with L_k = cell[k] . normal[k] when
-// that is > 0, else the particles' extent along u_k at build(). Domains split each axis into
-// dims[k] equal slabs; on an open axis the first and last slabs extend to -inf and +inf, so a
-// particle outside the region still has an owner. Domain (i, j, k) is rank (i dims[1] + j)
-// dims[2] + k.
+// that is > 0, else the particles' extent along u_k at build(). Each axis is cut into dims[k]
+// slabs at cuts[k] (dims[k] + 1 positions along u_k: equal slabs of the region, or moved to the
+// particle-count quantiles by DistributedOptions::balance); on an open axis the first and last
+// slabs extend to -inf and +inf, so a particle outside the region still has an owner. Domain
+// (i, j, k) is rank (i dims[1] + j) dims[2] + k.
 //
 // A periodic axis with one domain is local (DistributedOptions::local_images, and a method that
 // takes periodic boxes): the local engines are periodic along it themselves, so no halo crosses
 // it; halos cross the other periodic axes (as images) and the split open ones.
 struct Decomposition {
   std::array<int, 3> dims = {1, 1, 1};
-  std::array<double, 3> lo = {0, 0, 0}, width = {0, 0, 0};  // slab k of axis a: lo + k width
+  // Slab i of axis a is [cuts[a][i], cuts[a][i + 1]) in u_a. The inner cuts ascend, at least
+  // cutoff + skin apart on an axis that halos cross; cuts[a].front() and .back() are the region's
+  // ends (on a periodic axis 0 and the period), which bound no slab on an open axis.
+  std::array<std::vector<double>, 3> cuts = {{{0, 0}, {0, 0}, {0, 0}}};
   std::array<bool, 3> periodic = {false, false, false};
   std::array<bool, 3> local = {false, false, false};  // periodic, one domain, the engines' own
   std::array<double, 3> length = {0, 0, 0};           // the period (face width) on periodic axes
@@ -92,12 +96,17 @@ struct Decomposition {
   bool halo_axis(int axis) const { return dims[axis] > 1 || images(axis); }
   // u_axis of a position.
   double coordinate(int axis, const float* xyz) const;
-  // Slab index along `axis` of a domain coordinate (clamped to the grid).
+  // Slab index along `axis` of a domain coordinate (clamped to the grid): the inner cuts <= u.
   int slab(int axis, double u) const;
   // The owning domain (= rank) of a position.
   int owner(const float* xyz) const;
   std::array<int, 3> coords(int domain) const;
 };
+
+// Where the cuts go (docs/distributed.md): equal slabs of the region, or, per split axis, at the
+// quantiles of the particle count along it (the processor grid stays Cartesian, as LAMMPS's
+// `balance ... shift`), moved apart where a slab would be thinner than cutoff + skin.
+enum class Balance { none, particles };
 
 struct DistributedOptions {
   std::string method = "cell-list";  // any single-rank method of list_methods(), or "auto"
@@ -120,6 +129,10 @@ struct DistributedOptions {
   // (the all-axes scheme, which a method without periodic boxes, grid-paper or OptiX, gets
   // anyway). docs/distributed.md measures both.
   bool local_images = true;
+  // Balance::particles: the cuts at build() and, when rebalance_every > 0, again at every
+  // rebalance_every-th exchange after it (before its migration), from the particles then.
+  Balance balance = Balance::none;
+  int rebalance_every = 0;
 };
 
 // A neighbour list of the owned targets with global indices: the in-range sources of row t
@@ -151,6 +164,7 @@ struct DistributedStats {
   std::uint64_t exchanges = 0;         // full exchanges: migration + new halo sets
   std::uint64_t refreshes = 0;         // halo refreshes in place (skin)
   std::uint64_t migrated_out = 0;      // particles sent to other ranks by the last exchange
+  std::uint64_t balances = 0;          // exchanges that moved the cuts (Balance::particles)
   std::uint64_t bytes_sent = 0;        // payload bytes sent to other ranks, last exchange/refresh
   double exchange_ms = 0;              // wall time of the last exchange or refresh
   double build_ms = 0;                 // the local engine's build/update, last pass
@@ -173,7 +187,9 @@ class DistributedEngine {
   // `box`: any box validate() accepts (open, orthorhombic or triclinic, periodic on any axes;
   // Decomposition says how domains follow it). Every domain must be at least cutoff + skin wide
   // (face width / dims) along each axis that halos cross (Decomposition::halo_axis: split in
-  // more than one domain, or periodic and not local), else Error(invalid_argument) saying which.
+  // more than one domain, or periodic and not local), else Error(invalid_argument) saying which;
+  // with Balance::particles too (the region must hold dims equal slabs; the balanced cuts are
+  // then kept that far apart).
   // An error found on one rank (a non-finite coordinate) is thrown on every rank.
   void build(PositionsView positions, const std::uint64_t* ids, float cutoff, const Box& box = {},
              const float* carried = nullptr, std::size_t width = 0);
@@ -232,6 +248,7 @@ class DistributedEngine {
   struct HaloPlan;
   void check_built(const char* call) const;
   void agree(const std::string& local_error, ErrorCode code);
+  void balance();
   void migrate();
   void build_halos();
   void refresh_halos();

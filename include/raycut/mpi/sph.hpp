@@ -36,6 +36,7 @@ struct SphRunStats {
   std::uint64_t exchanges = 0;  // steps whose update() exchanged (migration, new halos)
   std::uint64_t refreshes = 0;  // steps whose update() refreshed the halos in place
   std::uint64_t migrated = 0;   // particles sent to another rank by those exchanges, summed
+  std::uint64_t balances = 0;   // exchanges that moved the cuts (build's included; Balance)
 };
 
 class SphSolver {
@@ -46,10 +47,13 @@ class SphSolver {
   // build along each axis (dims; 0 entries: MPI_Dims_create), the end slabs reach to infinity.
   // `method`: a host method, or "auto" (cell-list). `skin`: halos reach h + skin and are
   // refreshed in place while no particle has moved more than skin / 2 since the last exchange;
-  // < 0: h / 2. Then one density pass (copy_state has rho and p of frame 0), as sph::Solver.
+  // < 0: h / 2. `balance`, `rebalance_every`: DistributedOptions' (the cuts at the particle-count
+  // quantiles at build and every rebalance_every-th exchange; the water moves). Then one density
+  // pass (copy_state has rho and p of frame 0), as sph::Solver.
   // Errors as sph::Solver's and DistributedEngine::build's, thrown on every rank.
   SphSolver(MPI_Comm comm, const sph::SphScenario& scenario, std::string_view method = "auto",
-            float skin = -1, std::array<int, 3> dims = {0, 0, 0});
+            float skin = -1, std::array<int, 3> dims = {0, 0, 0}, Balance balance = Balance::none,
+            int rebalance_every = 0);
   ~SphSolver();
   SphSolver(const SphSolver&) = delete;
   SphSolver& operator=(const SphSolver&) = delete;
