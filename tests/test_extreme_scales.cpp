@@ -197,19 +197,25 @@ TEST(DoubleOracle, SeesWhatTheFloatPredicateLost) {
   // A list with an extra out pair, a duplicate or a missing pair is caught.
   const std::vector<float> three = {0, 0, 0, 0.5f, 0, 0, 3, 0, 0};
   const auto o3 = raycut_test::make_oracle(three, 1.0f);
-  raycut::NeighbourList good{{0, 1, 2, 2}, {1, 0}, {}, {}};
+  const auto csr = [](std::vector<std::uint64_t> offsets, std::vector<std::uint32_t> indices) {
+    raycut::NeighbourList list;
+    list.offsets = std::move(offsets);
+    list.indices = std::move(indices);
+    return list;
+  };
+  raycut::NeighbourList good = csr({0, 1, 2, 2}, {1, 0});
   EXPECT_TRUE(raycut_test::check_list(good, o3).ok);
-  raycut::NeighbourList extra{{0, 2, 3, 3}, {1, 2, 0}, {}, {}};
+  raycut::NeighbourList extra = csr({0, 2, 3, 3}, {1, 2, 0});
   EXPECT_FALSE(raycut_test::check_list(extra, o3).ok);
-  raycut::NeighbourList twice{{0, 2, 3, 3}, {1, 1, 0}, {}, {}};
+  raycut::NeighbourList twice = csr({0, 2, 3, 3}, {1, 1, 0});
   EXPECT_FALSE(raycut_test::check_list(twice, o3).ok);
-  raycut::NeighbourList missing{{0, 1, 1, 1}, {1}, {}, {}};
+  raycut::NeighbourList missing = csr({0, 1, 1, 1}, {1});
   EXPECT_FALSE(raycut_test::check_list(missing, o3).ok);
   // A pair within the band may be listed or not.
   const std::vector<float> tie = {0, 0, 0, 1, 0, 0};
   const auto ot = raycut_test::make_oracle(tie, 1.0f);
-  EXPECT_TRUE(raycut_test::check_list({{0, 0, 0}, {}, {}, {}}, ot).ok);
-  EXPECT_TRUE(raycut_test::check_list({{0, 1, 2}, {1, 0}, {}, {}}, ot).ok);
+  EXPECT_TRUE(raycut_test::check_list(csr({0, 0, 0}, {}), ot).ok);
+  EXPECT_TRUE(raycut_test::check_list(csr({0, 1, 2}, {1, 0}), ot).ok);
   EXPECT_TRUE(raycut_test::check_counts({1, 0}, ot).ok);
   EXPECT_FALSE(raycut_test::check_counts({2, 0}, ot).ok);
 }

@@ -41,7 +41,7 @@ std::vector<std::uint64_t> checked_offsets(const std::vector<std::uint64_t>& off
 // A system's frame; errors name the system in a batch.
 ImageFrame frame_of(const Box& box, double cutoff, std::size_t system, bool batch) {
   ImageFrame frame;
-  std::memset(&frame, 0, sizeof frame);  // padding too: frames are compared bytewise
+  std::memset(static_cast<void*>(&frame), 0, sizeof frame);  // padding too: compared bytewise
   try {
     const auto g = reciprocal_rows(box);  // validates the box
     image_range(box, cutoff);             // refuses cells far too thin for the cutoff

@@ -26,6 +26,13 @@ struct Points {
   ImageTables images;
   const std::uint32_t* system = nullptr;  // per point; null: one system
   std::uint32_t systems = 1;
+  // n plain particles: every point a target and its own source, one system.
+  static Points plain(const float* xyz, std::size_t n) {
+    Points p;
+    p.xyz = xyz;
+    p.size = p.targets = n;
+    return p;
+  }
 };
 
 class Method {

@@ -40,6 +40,7 @@ DeviceArray& DeviceArray::operator=(DeviceArray&& o) noexcept {
 
 namespace {
 
+#if defined(RAYCUT_HAVE_CUDA)
 // "580.159.04": the first dotted number on the kernel module's version line ("NVRM version:
 // NVIDIA UNIX Open Kernel Module for x86_64  580.159.04  Release Build ..."), or "unknown".
 std::string nvidia_driver_version() {
@@ -52,6 +53,7 @@ std::string nvidia_driver_version() {
   }
   return "unknown";
 }
+#endif
 
 std::string cpu_model() {
   std::ifstream in("/proc/cpuinfo");

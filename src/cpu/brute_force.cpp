@@ -19,7 +19,7 @@ class BruteForceCpu final : public HostMethod<BruteForceCpu> {
   }
 
   void build(const float* xyz, std::size_t n, float cutoff) override {
-    build_points(Points{xyz, n, n}, cutoff);
+    build_points(Points::plain(xyz, n), cutoff);
   }
   std::string points_unsupported() const override { return {}; }
   void build_points(const Points& points, float cutoff) override {

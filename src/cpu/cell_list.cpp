@@ -65,7 +65,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   }
 
   void build(const float* xyz, std::size_t n, float cutoff) override {
-    build_points(Points{xyz, n, n}, cutoff);
+    build_points(Points::plain(xyz, n), cutoff);
   }
 
   std::string points_unsupported() const override { return {}; }

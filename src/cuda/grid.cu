@@ -20,7 +20,7 @@ class Grid final : public CudaPairMethod<Grid> {
   explicit Grid(const GridPolicy& policy) : policy_(policy) {}
 
   void build(const float* xyz, std::size_t n, float cutoff) override {
-    build_points(Points{xyz, n, n}, cutoff);
+    build_points(Points::plain(xyz, n), cutoff);
   }
 
   std::string points_unsupported() const override { return {}; }

@@ -262,8 +262,12 @@ TEST(Distributed, PeriodicBoxMatchesSingleProcess) {
         // Owned rows only: the particles deeper than cutoff + skin inside the domain are no
         // queries of the halo engine (at 1 rank [2, 10)^3 of the box holds ~30% of them).
         const std::uint64_t boundary = engine.stats().boundary;
-        if (owned_rows_only && world_size() == 1) EXPECT_LT(boundary, engine.owned());
-        if (!owned_rows_only) EXPECT_EQ(boundary, engine.owned());
+        if (owned_rows_only && world_size() == 1) {
+          EXPECT_LT(boundary, engine.owned());
+        }
+        if (!owned_rows_only) {
+          EXPECT_EQ(boundary, engine.owned());
+        }
       }
 }
 
@@ -758,7 +762,9 @@ TEST(Distributed, TriclinicCellsMatchTheEngine) {
         for (int m = 0; m < 3; ++m) {
           const double along =
               nk[0] * c.box.cell[m][0] + nk[1] * c.box.cell[m][1] + nk[2] * c.box.cell[m][2];
-          if (c.box.pbc[m]) EXPECT_NEAR(along, m == k ? dec.length[k] : 0.0, 1e-9) << c.name;
+          if (c.box.pbc[m]) {
+            EXPECT_NEAR(along, m == k ? dec.length[k] : 0.0, 1e-9) << c.name;
+          }
         }
       }
     }
@@ -878,7 +884,9 @@ void triclinic_step_loop(const TriclinicCase& c, int steps) {
   }
   std::uint64_t total_migrated = 0;
   MPI_Allreduce(&migrated, &total_migrated, 1, MPI_UINT64_T, MPI_SUM, MPI_COMM_WORLD);
-  if (world_size() > 1) EXPECT_GT(total_migrated, 0u) << c.name << ": no particle crossed a face";
+  if (world_size() > 1) {
+    EXPECT_GT(total_migrated, 0u) << c.name << ": no particle crossed a face";
+  }
   EXPECT_GT(engine.stats().refreshes, 0u) << c.name;
   EXPECT_GT(exchanges, 0u) << c.name;
   std::size_t outside = 0;  // particles that left the cell through a periodic face
