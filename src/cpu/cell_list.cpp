@@ -8,9 +8,10 @@
 // widen the cells of all the others (which made the list O(N^2): counting 100k uniform points
 // plus one at 1e9 took 10-17 s instead of 0.01 s).
 //
-// Query points (targets that are no source) sit after the sources of their cell and are never
+// Query points (targets that are no source) are sorted after every source and are never
 // candidates: a query set over sources costs the pairs with sources only, not the query-query
-// candidates rejected one by one (issue 16's owned rows only, raycut.radius).
+// candidates rejected one by one (issue 16's owned rows only, raycut.radius), and a cell's
+// sources stay next to the next cell's.
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -62,7 +63,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
       const std::uint32_t c = cell_of_particle_[i];
       for (std::size_t e = neighbour_offsets_[c]; e < neighbour_offsets_[c + 1]; ++e) {
         const std::uint32_t nc = neighbour_cells_[e];
-        for (std::uint32_t s = cell_start_[nc]; s < cell_sources_end_[nc]; ++s)
+        for (std::uint32_t s = cell_start_[nc]; s < cell_start_[nc + 1]; ++s)
           f(order_[s], &sorted_xyz_[3 * std::size_t{s}]);
       }
     };
@@ -83,10 +84,11 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     set_positions(xyz_.data(), n, cutoff, points.targets, points.images);
     inverse_width_ = 1.0 / (static_cast<double>(cutoff) * (1.0 + width_margin));
 
-    // Sort particles by (cell key, query, index): the entries themselves, not indices into them.
+    // Sort particles by (query, cell key, index): the sources by cell, then the query points by
+    // cell; the entries themselves, not indices into them.
     struct Entry {
+      std::uint32_t query;  // 1: a query point
       CellKey key;
-      std::uint32_t query;  // 1: a query point, after the cell's sources
       std::uint32_t index;
       auto operator<=>(const Entry&) const = default;
     };
@@ -95,9 +97,9 @@ class CellListCpu final : public HostMethod<CellListCpu> {
 #pragma omp parallel for schedule(static)
     for (std::size_t i = 0; i < n; ++i)
       entries[i] = {
+          image && image[i].source == not_a_source ? 1u : 0u,
           {system ? system[i] : 0u, axis_label(xyz[3 * i + 2], inverse_width_),
            axis_label(xyz[3 * i + 1], inverse_width_), axis_label(xyz[3 * i], inverse_width_)},
-          image && image[i].source == not_a_source ? 1u : 0u,
           static_cast<std::uint32_t>(i)};
     std::sort(entries.begin(), entries.end());
     order_.resize(n);
@@ -106,25 +108,26 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     for (std::size_t s = 0; s < n; ++s)
       std::copy_n(&xyz[3 * std::size_t{order_[s]}], 3, &sorted_xyz_[3 * s]);
 
-    // Compact the non-empty cells.
+    // Compact the non-empty cells: the union of the sources' and the queries' keys, merged; a
+    // cell's start indexes the sources (a cell of queries only holds none).
+    const std::size_t sources = static_cast<std::size_t>(
+        std::partition_point(entries.begin(), entries.end(),
+                             [](const Entry& e) { return e.query == 0; }) -
+        entries.begin());
     cell_keys_.clear();
     cell_start_.clear();
     cell_of_particle_.resize(n);
-    for (std::size_t s = 0; s < n; ++s) {
-      const CellKey k = entries[s].key;
-      if (cell_keys_.empty() || cell_keys_.back() != k) {
-        cell_keys_.push_back(k);
-        cell_start_.push_back(static_cast<std::uint32_t>(s));
-      }
-      cell_of_particle_[order_[s]] = static_cast<std::uint32_t>(cell_keys_.size() - 1);
+    for (std::size_t a = 0, b = sources; a < sources || b < n;) {
+      const CellKey k = b == n || (a < sources && entries[a].key < entries[b].key)
+                            ? entries[a].key
+                            : entries[b].key;
+      const auto c = static_cast<std::uint32_t>(cell_keys_.size());
+      cell_keys_.push_back(k);
+      cell_start_.push_back(static_cast<std::uint32_t>(a));
+      for (; a < sources && entries[a].key == k; ++a) cell_of_particle_[order_[a]] = c;
+      for (; b < n && entries[b].key == k; ++b) cell_of_particle_[order_[b]] = c;
     }
-    cell_start_.push_back(static_cast<std::uint32_t>(n));
-    cell_sources_end_.resize(cell_keys_.size());
-    for (std::size_t c = 0; c < cell_keys_.size(); ++c) {
-      std::uint32_t s = cell_start_[c];
-      while (s < cell_start_[c + 1] && !entries[s].query) ++s;
-      cell_sources_end_[c] = s;
-    }
+    cell_start_.push_back(static_cast<std::uint32_t>(sources));
     find_neighbour_cells();
   }
 
@@ -167,8 +170,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   std::vector<std::uint32_t> order_;             // sorted slot -> particle index
   std::vector<float> sorted_xyz_;                // positions in sorted order
   std::vector<CellKey> cell_keys_;               // non-empty cells, ascending
-  std::vector<std::uint32_t> cell_start_;        // cell c holds slots [start[c], start[c+1])
-  std::vector<std::uint32_t> cell_sources_end_;  // its sources: [start[c], sources_end[c])
+  std::vector<std::uint32_t> cell_start_;        // cell c's sources: slots [start[c], start[c+1])
   std::vector<std::uint32_t> cell_of_particle_;  // particle index -> cell
   std::vector<std::uint64_t> neighbour_offsets_;
   std::vector<std::uint32_t> neighbour_cells_;
