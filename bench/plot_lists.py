@@ -53,6 +53,13 @@ def fnum(s):
         return math.nan
 
 
+def row_values(ops):
+    """N, pairs and the median ms by operation (NaN when absent) of one configuration's rows."""
+    any_row = next(iter(ops.values()))
+    return (int(any_row["N"]), fnum(any_row["pairs"]),
+            lambda op: fnum(ops[op]["ms"]) if op in ops else math.nan)
+
+
 def fmt(v, digits=3):
     return "" if v is None or math.isnan(v) else f"{v:.{digits}f}"
 
@@ -121,10 +128,7 @@ def main():
         for key in sorted(k for k in table if k[4] == mode and not periodic(k[0])):
             suite, beta, p, method, _ = key
             ops = table[key]
-            any_row = next(iter(ops.values()))
-            n = int(any_row["N"])
-            pairs = fnum(any_row["pairs"])
-            get = lambda op: fnum(ops[op]["ms"]) if op in ops else math.nan  # noqa: E731
+            n, pairs, get = row_values(ops)
             padded = ""
             if "padded" in ops:
                 pr = ops["padded"]
@@ -155,10 +159,7 @@ def main():
         for key in keys:
             suite, systems, per_system, method, _ = key
             ops = table[key]
-            any_row = next(iter(ops.values()))
-            n = int(any_row["N"])
-            pairs = fnum(any_row["pairs"])
-            get = lambda op: fnum(ops[op]["ms"]) if op in ops else math.nan  # noqa: E731
+            n, pairs, get = row_values(ops)
             mb = fnum(ops["list_full_s"]["bytes"]) / 2**20 if "list_full_s" in ops else math.nan
             cells = [suite, str(systems), f"{per_system:,}", f"{n:,}", method,
                      "" if math.isnan(pairs) else f"{int(pairs):,}",

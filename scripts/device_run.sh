@@ -32,6 +32,15 @@ mkdir -p "$out"
 export PATH="/usr/local/cuda/bin:$PATH"
 start=$(date +%s)
 step() { echo "[$(($(date +%s) - start)) s] $*"; }
+# The Python package in the same build tree, with the device's Python (torch, cupy, jax there);
+# once per run.
+py="${RAYCUT_PYTHON:-/opt/torch/.venv/bin/python}"
+build_python() {
+  [ -n "${python_built:-}" ] && return
+  python_built=1
+  BUILD_DIR=build scripts/configure.sh -DRAYCUT_BUILD_PYTHON=ON -DPython_EXECUTABLE="$py" \
+    > "$res/python-build.log" 2>&1 || tail -20 "$res/python-build.log"
+}
 
 BUILD_DIR=build scripts/configure.sh -DCMAKE_CUDA_ARCHITECTURES=90 > "$res/build.log" 2>&1 ||
   { tail -40 "$res/build.log"; exit 1; }
@@ -108,19 +117,14 @@ while [ $# -gt 0 ]; do
       done
       ;;
     python)
-      # The package in the same build tree, with the device's Python (torch, cupy, jax there).
-      py="${RAYCUT_PYTHON:-/opt/torch/.venv/bin/python}"
-      scripts/configure.sh -DRAYCUT_BUILD_PYTHON=ON -DPython_EXECUTABLE="$py" \
-        > "$res/python-build.log" 2>&1 || tail -20 "$res/python-build.log"
+      build_python
       PYTHONPATH="$PWD/build/python" "$py" -m pytest -q -rs -p no:cacheprovider python/tests \
         > "$res/pytest.log" 2>&1
       echo "pytest exit $?"
       tail -15 "$res/pytest.log"
       ;;
     python-bench)
-      py="${RAYCUT_PYTHON:-/opt/torch/.venv/bin/python}"
-      [ -d build/python/raycut ] || scripts/configure.sh -DRAYCUT_BUILD_PYTHON=ON \
-        -DPython_EXECUTABLE="$py" > "$res/python-build.log" 2>&1
+      build_python
       build/bench/neighbour_bench --methods grid --periodic --betas 32 --ps 32 \
         --ops list_full,list_full_s,list_half_s --reps 10 --out "$res/nb-lists.csv" \
         > "$res/nb-lists.log" 2>&1

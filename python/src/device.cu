@@ -149,10 +149,10 @@ IndexSummary summarise_index(const void* index, bool wide, std::size_t n, void* 
   constexpr unsigned threads = 256;
   if (wide)
     summarise<<<blocks(n, threads), threads, 0, s>>>(static_cast<const std::int64_t*>(index), n,
-                                                      &words->unsorted, words->ends);
+                                                     &words->unsorted, words->ends);
   else
     summarise<<<blocks(n, threads), threads, 0, s>>>(static_cast<const std::int32_t*>(index), n,
-                                                      &words->unsorted, words->ends);
+                                                     &words->unsorted, words->ends);
   check(cudaGetLastError(), "summarise launch");
   Words host{};
   check(cudaMemcpyAsync(&host, words, sizeof host, cudaMemcpyDeviceToHost, s), "cudaMemcpyAsync");

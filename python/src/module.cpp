@@ -159,9 +159,11 @@ DeviceIndex device_index(nb::handle obj) {
   if (!nb::try_cast(obj, in.keep, /*convert=*/false) ||
       in.keep.device_type() != nb::device::cuda::value || in.keep.ndim() != 1 ||
       in.keep.shape(0) == 0 || (in.keep.shape(0) > 1 && in.keep.stride(0) != 1) ||
-      (in.keep.dtype() != nb::dtype<std::int32_t>() && in.keep.dtype() != nb::dtype<std::int64_t>()))
-    value_error("a system index on the device must be a non-empty 1-D contiguous int32 or int64 "
-                "CUDA array");
+      (in.keep.dtype() != nb::dtype<std::int32_t>() &&
+       in.keep.dtype() != nb::dtype<std::int64_t>()))
+    value_error(
+        "a system index on the device must be a non-empty 1-D contiguous int32 or int64 "
+        "CUDA array");
   in.data = in.keep.data();
   in.n = in.keep.shape(0);
   in.wide = in.keep.dtype() == nb::dtype<std::int64_t>();
@@ -792,16 +794,17 @@ NB_MODULE(_raycut, m) {
            nb::arg("to_host"), nb::arg("shifts") = false)
       .def("padded", &padded, nb::arg("k"), nb::arg("raise_on_overflow"), nb::arg("to_host"),
            nb::arg("shifts") = false)
-      .def("timings", [](const raycut::Engine& e) {
-        const raycut::Timings& t = e.last_timings();
-        nb::dict d;
-        d["build_ms"] = t.build_ms;
-        d["compute_ms"] = t.compute_ms;
-        d["device_build_ms"] = t.device_build_ms;
-        d["device_compute_ms"] = t.device_compute_ms;
-        d["refit"] = t.refit;
-        return d;
-      })
+      .def("timings",
+           [](const raycut::Engine& e) {
+             const raycut::Timings& t = e.last_timings();
+             nb::dict d;
+             d["build_ms"] = t.build_ms;
+             d["compute_ms"] = t.compute_ms;
+             d["device_build_ms"] = t.device_build_ms;
+             d["device_compute_ms"] = t.device_compute_ms;
+             d["refit"] = t.refit;
+             return d;
+           })
       .def(
           "_cpp_loop_us",
           [](raycut::Engine& e, nb::handle positions, double cutoff, std::string_view kernel,

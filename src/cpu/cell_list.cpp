@@ -110,17 +110,16 @@ class CellListCpu final : public HostMethod<CellListCpu> {
 
     // Compact the non-empty cells: the union of the sources' and the queries' keys, merged; a
     // cell's start indexes the sources (a cell of queries only holds none).
-    const std::size_t sources = static_cast<std::size_t>(
-        std::partition_point(entries.begin(), entries.end(),
-                             [](const Entry& e) { return e.query == 0; }) -
-        entries.begin());
+    const std::size_t sources =
+        static_cast<std::size_t>(std::partition_point(entries.begin(), entries.end(),
+                                                      [](const Entry& e) { return e.query == 0; }) -
+                                 entries.begin());
     cell_keys_.clear();
     cell_start_.clear();
     cell_of_particle_.resize(n);
     for (std::size_t a = 0, b = sources; a < sources || b < n;) {
-      const CellKey k = b == n || (a < sources && entries[a].key < entries[b].key)
-                            ? entries[a].key
-                            : entries[b].key;
+      const CellKey k = b == n || (a < sources && entries[a].key < entries[b].key) ? entries[a].key
+                                                                                   : entries[b].key;
       const auto c = static_cast<std::uint32_t>(cell_keys_.size());
       cell_keys_.push_back(k);
       cell_start_.push_back(static_cast<std::uint32_t>(a));
