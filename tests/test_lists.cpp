@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "raycut/compare.hpp"
@@ -113,6 +114,69 @@ TEST_P(Lists, FailedRunLeavesNoResults) {
   EXPECT_THROW(engine.run(Kernel::sph_force), raycut::Error);  // no SPH inputs
   EXPECT_THROW(engine.results(), raycut::Error);
   EXPECT_THROW(engine.results_view(), raycut::Error);
+}
+
+// ListOptions::coo: the same entries as the CSR list, row by row in the same order, as int64
+// (i, j), with the same distances, vectors and shifts; no uint32 indices.
+TEST_P(Lists, CooListIsTheCsrListExpanded) {
+  const raycut::PointCloud cloud = raycut::make_family("uniform", 700, 1.0f, 8);
+  const std::size_t n = cloud.size();
+  Engine engine(GetParam());
+  const raycut::PositionsView x{cloud.xyz.data(), n, MemorySpace::host};
+  raycut::Box box;  // periodic along a and b of a 4 x 4 cell, the cloud inside it
+  box.cell[0][0] = 4;
+  box.cell[1][0] = 0.5;
+  box.cell[1][1] = 4;
+  box.pbc[0] = box.pbc[1] = true;
+  for (const bool periodic : {false, true}) {
+    try {
+      if (periodic)
+        engine.build(x, 1.0f, box);
+      else
+        engine.build(x, 1.0f);
+    } catch (const raycut::Error& e) {
+      if (periodic && e.code() == raycut::ErrorCode::unsupported) continue;  // OptiX, grid-paper
+      throw;
+    }
+    for (const bool half : {false, true}) {
+      const raycut::ListOptions csr{half, true, true, periodic};
+      raycut::ListOptions coo = csr;
+      coo.coo = true;
+      const raycut::NeighbourList a = engine.neighbours(csr), b = engine.neighbours(coo);
+      ASSERT_EQ(b.offsets, a.offsets);
+      EXPECT_TRUE(b.indices.empty());
+      ASSERT_EQ(b.rows.size(), a.indices.size());
+      ASSERT_EQ(b.columns.size(), a.indices.size());
+      ASSERT_EQ(b.shifts.size(), a.shifts.size());
+      // Row by row as sets of (j, S, |r|, r): the order within a row is not part of the contract.
+      using Entry = std::tuple<std::int64_t, std::int32_t, std::int32_t, std::int32_t, float, float,
+                               float, float>;
+      const auto entry = [&](const raycut::NeighbourList& l, std::uint64_t e, std::int64_t j) {
+        const auto s = [&](int a) { return periodic ? l.shifts[3 * e + a] : 0; };
+        return Entry{j,
+                     s(0),
+                     s(1),
+                     s(2),
+                     l.distances[e],
+                     l.vectors[3 * e],
+                     l.vectors[3 * e + 1],
+                     l.vectors[3 * e + 2]};
+      };
+      for (std::size_t i = 0; i < n; ++i) {
+        std::vector<Entry> want, got;
+        for (std::uint64_t e = a.offsets[i]; e < a.offsets[i + 1]; ++e) {
+          ASSERT_EQ(b.rows[e], static_cast<std::int64_t>(i)) << "entry " << e;
+          want.push_back(entry(a, e, a.indices[e]));
+          got.push_back(entry(b, e, b.columns[e]));
+        }
+        std::sort(want.begin(), want.end());
+        std::sort(got.begin(), got.end());
+        ASSERT_EQ(got, want) << "row " << i << (half ? ", half" : "")
+                             << (periodic ? ", periodic" : "");
+      }
+      EXPECT_GT(a.indices.size(), n);  // the test sees pairs
+    }
+  }
 }
 
 // Taken results keep their values whatever the engine runs next, and leave the engine without

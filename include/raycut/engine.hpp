@@ -99,6 +99,8 @@ struct NeighbourList {
   std::vector<float> distances;      // |r_ij| per entry, when asked
   std::vector<float> vectors;        // r_ij = x_j - x_i + S . cell per entry (3 floats), when asked
   std::vector<std::int32_t> shifts;  // S per entry (3 ints), when asked
+  // With ListOptions::coo: the (i, j) of every entry, int64; `indices` is then empty.
+  std::vector<std::int64_t> rows, columns;
 };
 
 // What a neighbour list holds (spec/NEIGHBOURS.md section 5).
@@ -109,6 +111,10 @@ struct ListOptions {
   bool distances = false;  // |r_ij| per entry
   bool vectors = false;    // r_ij = x_j - x_i + S . cell per entry
   bool shifts = false;     // the image shift S per entry (3 int32; zeros without a box)
+  // Entries as COO pairs: rows() and columns(), the (i, j) of every entry as int64 (ASE's
+  // neighbor_list and PyTorch Geometric's edge_index), written by the list pass itself, in place
+  // of the uint32 indices() (null then). The offsets are there all the same.
+  bool coo = false;
 };
 
 namespace detail {
@@ -130,7 +136,9 @@ class NeighbourListBuffer {
   std::size_t size() const;              // N, the number of targets
   std::uint64_t pairs() const;           // entries (offsets()[N])
   const std::uint64_t* offsets() const;  // N + 1
-  const std::uint32_t* indices() const;  // pairs()
+  const std::uint32_t* indices() const;  // pairs(), or null with ListOptions::coo
+  const std::int64_t* rows() const;      // pairs() with ListOptions::coo, else null
+  const std::int64_t* columns() const;   // pairs() with ListOptions::coo, else null
   const float* distances() const;        // pairs(), or null when not asked
   const float* vectors() const;          // 3 pairs(), or null when not asked
   const std::int32_t* shifts() const;    // 3 pairs(), or null when not asked

@@ -18,21 +18,6 @@ void check(cudaError_t status, const char* what) {
                       std::string("raycut (python): ") + what + ": " + cudaGetErrorString(status));
 }
 
-// A warp per row: the lanes write the row's entries side by side (coalesced), where a thread
-// per row wrote 32 scattered runs per store.
-__global__ void expand_rows(const std::uint64_t* offsets, std::size_t n, std::int64_t* i) {
-  const std::size_t row = (blockIdx.x * std::size_t{blockDim.x} + threadIdx.x) / 32;
-  if (row >= n) return;
-  const std::uint64_t end = offsets[row + 1];
-  for (std::uint64_t e = offsets[row] + threadIdx.x % 32; e < end; e += 32)
-    i[e] = static_cast<std::int64_t>(row);
-}
-
-__global__ void widen(const std::uint32_t* indices, std::uint64_t pairs, std::int64_t* j) {
-  const std::uint64_t e = blockIdx.x * std::uint64_t{blockDim.x} + threadIdx.x;
-  if (e < pairs) j[e] = indices[e];
-}
-
 template <class Index>
 __global__ void summarise(const Index* index, std::size_t n, unsigned long long* unsorted,
                           std::int64_t* ends) {
@@ -121,18 +106,6 @@ void device_copy(void* dst, const void* src, std::size_t bytes, void* stream) {
 
 void synchronize(void* stream) {
   check(cudaStreamSynchronize(static_cast<cudaStream_t>(stream)), "cudaStreamSynchronize");
-}
-
-void csr_to_coo(const std::uint64_t* offsets, const std::uint32_t* indices, std::size_t n,
-                std::uint64_t pairs, std::int64_t* i, std::int64_t* j, void* stream) {
-  if (n == 0 || pairs == 0) return;
-  const auto s = static_cast<cudaStream_t>(stream);
-  constexpr unsigned threads = 256;
-  expand_rows<<<blocks(std::uint64_t{n} * 32, threads), threads, 0, s>>>(offsets, n, i);
-  check(cudaGetLastError(), "expand_rows launch");
-  widen<<<blocks(pairs, threads), threads, 0, s>>>(indices, pairs, j);
-  check(cudaGetLastError(), "widen launch");
-  check(cudaStreamSynchronize(s), "csr_to_coo");
 }
 
 IndexSummary summarise_index(const void* index, bool wide, std::size_t n, void* stream) {

@@ -17,11 +17,6 @@ int current_device_or_none() noexcept;  // the same, or -1 where no device is us
 void device_copy(void* dst, const void* src, std::size_t bytes, void* stream);
 void synchronize(void* stream);
 
-// COO pairs of a device CSR list: i[e] = the row of entry e, j[e] = indices[e], both int64, on
-// `stream` (a cudaStream_t; null: the legacy default stream), synchronised before returning.
-void csr_to_coo(const std::uint64_t* offsets, const std::uint32_t* indices, std::size_t n,
-                std::uint64_t pairs, std::int64_t* i, std::int64_t* j, void* stream);
-
 // A per-particle system index (int32 when !wide, else int64) in device memory, n >= 1, as
 // batch= gives it: its first and last values, and the first k with index[k] > index[k + 1]
 // (n - 1 when it is sorted), then index[k] and index[k + 1] (0 when sorted). One kernel, one

@@ -289,10 +289,11 @@ nb::dlpack::dtype index_dtype(std::size_t n) {
 // The list of `engine`'s positions where the method works (a new buffer: earlier results stay
 // valid).
 std::shared_ptr<raycut::NeighbourListBuffer> fill_list(raycut::Engine& engine, bool half,
-                                                       bool distances, bool vectors, bool shifts) {
+                                                       bool distances, bool vectors, bool shifts,
+                                                       bool coo = false) {
   auto list = std::make_shared<raycut::NeighbourListBuffer>();
   nb::gil_scoped_release release;
-  engine.neighbours(*list, raycut::ListOptions{half, distances, vectors, shifts});
+  engine.neighbours(*list, raycut::ListOptions{half, distances, vectors, shifts, coo});
   return list;
 }
 
@@ -331,69 +332,34 @@ nb::tuple neighbours(raycut::Engine& engine, bool half, bool distances, bool vec
 }
 
 // COO pairs (i int64 [P], j int64 [P], d [P] or None, D [P, 3] or None, S int32 [P, 3] or
-// None): ASE's "ijdDS".
+// None): ASE's "ijdDS", written as COO by the list pass itself (ListOptions::coo).
 nb::tuple pairs(raycut::Engine& engine, bool half, bool distances, bool vectors, bool to_host,
                 bool shifts) {
-  auto list = fill_list(engine, half, distances, vectors, shifts);
-  const std::size_t n = list->size();
+  auto list = fill_list(engine, half, distances, vectors, shifts, /*coo=*/true);
   const std::size_t count = list->pairs();
-  if (list->space() == MemorySpace::device && !to_host) {
-#if defined(RAYCUT_PY_CUDA)
-    // Two allocations (not one split in two): each array aligned as its own allocation, as
-    // some consumers (JAX) want.
-    auto device_int64 = [](std::size_t size) {
-      return std::shared_ptr<std::int64_t>(
-          static_cast<std::int64_t*>(raycut_py::device_alloc(size * sizeof(std::int64_t))),
-          [](std::int64_t* p) { raycut_py::device_free(p); });
-    };
-    auto i = device_int64(count), j = device_int64(count);
-    {
-      nb::gil_scoped_release release;
-      raycut_py::csr_to_coo(list->offsets(), list->indices(), n, count, i.get(), j.get(),
-                            engine.stream());
-    }
-    const MemorySpace space = MemorySpace::device;
-    return nb::make_tuple(
-        wrap(i.get(), {count}, dtype_of<std::int64_t>(), i, space),
-        wrap(j.get(), {count}, dtype_of<std::int64_t>(), j, space),
-        distances ? wrap(list->distances(), {count}, dtype_of<float>(), list, space) : nb::none(),
-        vectors ? wrap(list->vectors(), {count, 3}, dtype_of<float>(), list, space) : nb::none(),
-        shifts ? wrap(list->shifts(), {count, 3}, dtype_of<std::int32_t>(), list, space)
-               : nb::none());
-#else
-    throw raycut::Error(raycut::ErrorCode::internal, "device list without CUDA");
-#endif
-  }
-  // On the host: the library's host list in place, or a copy of the device list.
-  std::shared_ptr<const void> owner = list;
-  const std::uint64_t* offsets = list->offsets();
-  const std::uint32_t* indices = list->indices();
-  const float* d = list->distances();
-  const float* v = list->vectors();
-  const std::int32_t* sh = list->shifts();
-  if (list->space() == MemorySpace::device) {
+  if (to_host && list->space() == MemorySpace::device) {
     auto host = std::make_shared<raycut::NeighbourList>(list->to_host());
-    offsets = host->offsets.data();
-    indices = host->indices.data();
-    d = host->distances.empty() ? nullptr : host->distances.data();
-    v = host->vectors.empty() ? nullptr : host->vectors.data();
-    sh = host->shifts.empty() ? nullptr : host->shifts.data();
-    owner = host;
+    list.reset();
+    auto opt = [&](bool asked, const auto& v, std::vector<std::size_t> shape) -> nb::object {
+      using T = typename std::decay_t<decltype(v)>::value_type;
+      if (!asked) return nb::none();
+      return wrap(v.data(), std::move(shape), dtype_of<T>(), host, MemorySpace::host);
+    };
+    return nb::make_tuple(opt(true, host->rows, {count}), opt(true, host->columns, {count}),
+                          opt(distances, host->distances, {count}),
+                          opt(vectors, host->vectors, {count, 3}),
+                          opt(shifts, host->shifts, {count, 3}));
   }
-  std::vector<std::int64_t> i(count), j(count);
-  {
-    nb::gil_scoped_release release;
-    for (std::size_t row = 0; row < n; ++row)
-      for (std::uint64_t e = offsets[row]; e < offsets[row + 1]; ++e)
-        i[e] = static_cast<std::int64_t>(row);
-    for (std::size_t e = 0; e < count; ++e) j[e] = indices[e];
-  }
-  const MemorySpace space = MemorySpace::host;
-  return nb::make_tuple(
-      host_array(std::move(i), {count}), host_array(std::move(j), {count}),
-      distances ? wrap(d, {count}, dtype_of<float>(), owner, space) : nb::none(),
-      vectors ? wrap(v, {count, 3}, dtype_of<float>(), owner, space) : nb::none(),
-      shifts ? wrap(sh, {count, 3}, dtype_of<std::int32_t>(), owner, space) : nb::none());
+  const MemorySpace space = list->space();
+  auto opt = [&](bool asked, const auto* data, std::vector<std::size_t> shape) -> nb::object {
+    using T = std::remove_cv_t<std::remove_pointer_t<decltype(data)>>;
+    if (!asked) return nb::none();
+    return wrap(data, std::move(shape), dtype_of<T>(), list, space);
+  };
+  return nb::make_tuple(opt(true, list->rows(), {count}), opt(true, list->columns(), {count}),
+                        opt(distances, list->distances(), {count}),
+                        opt(vectors, list->vectors(), {count, 3}),
+                        opt(shifts, list->shifts(), {count, 3}));
 }
 
 // Padded [N, K] (int32; N marks an empty slot), counts [N] (int32), report, and with `shifts`

@@ -421,6 +421,12 @@ const std::uint64_t* NeighbourListBuffer::offsets() const {
 const std::uint32_t* NeighbourListBuffer::indices() const {
   return filled(storage_).indices;
 }
+const std::int64_t* NeighbourListBuffer::rows() const {
+  return filled(storage_).rows;
+}
+const std::int64_t* NeighbourListBuffer::columns() const {
+  return filled(storage_).columns;
+}
 const float* NeighbourListBuffer::distances() const {
   return filled(storage_).distances;
 }

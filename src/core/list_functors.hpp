@@ -53,10 +53,17 @@ struct ListFill : HalfFilter {
   float* distances;
   float* vectors;
   std::int32_t* shifts;
+  std::int64_t* rows;     // COO (ListOptions::coo): i and j as int64, in place of `indices`
+  std::int64_t* columns;
   RAYCUT_HD Accumulator init(std::uint32_t i) const { return offsets[i]; }
-  RAYCUT_HD void operator()(Accumulator& slot, std::uint32_t, std::uint32_t j, Vec3 r, float r2,
+  RAYCUT_HD void operator()(Accumulator& slot, std::uint32_t i, std::uint32_t j, Vec3 r, float r2,
                             const Shift& s) const {
-    indices[slot] = j;
+    if (columns) {
+      rows[slot] = i;
+      columns[slot] = j;
+    } else {
+      indices[slot] = j;
+    }
     if (shifts) {
       shifts[3 * slot] = s.a;
       shifts[3 * slot + 1] = s.b;

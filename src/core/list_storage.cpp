@@ -9,13 +9,19 @@ namespace raycut::detail {
 std::size_t HostListStorage::bytes() const {
   return offsets_.capacity() * sizeof(std::uint64_t) + indices_.capacity() * sizeof(std::uint32_t) +
          (distances_.capacity() + vectors_.capacity()) * sizeof(float) +
-         shifts_.capacity() * sizeof(std::int32_t);
+         shifts_.capacity() * sizeof(std::int32_t) +
+         (rows_.capacity() + columns_.capacity()) * sizeof(std::int64_t);
 }
 
 NeighbourList HostListStorage::to_host() const {
   NeighbourList list;
   list.offsets.assign(offsets, offsets + n + 1);
-  list.indices.assign(indices_.begin(), indices_.begin() + pairs);
+  if (options.coo) {
+    list.rows.assign(rows_.begin(), rows_.begin() + pairs);
+    list.columns.assign(columns_.begin(), columns_.begin() + pairs);
+  } else {
+    list.indices.assign(indices_.begin(), indices_.begin() + pairs);
+  }
   if (options.distances) list.distances.assign(distances_.begin(), distances_.begin() + pairs);
   if (options.vectors) list.vectors.assign(vectors_.begin(), vectors_.begin() + 3 * pairs);
   if (options.shifts) list.shifts.assign(shifts_.begin(), shifts_.begin() + 3 * pairs);
@@ -41,7 +47,9 @@ ListFill HostListStorage::prepare_fill(std::uint64_t entries, bool half) {
   pairs = entries;
   // Sized on demand (no shrinking: the buffers are reused by the next fill).
   try {
-    if (indices_.size() < entries) indices_.resize(entries);
+    if (!options.coo && indices_.size() < entries) indices_.resize(entries);
+    if (options.coo && rows_.size() < entries) rows_.resize(entries);
+    if (options.coo && columns_.size() < entries) columns_.resize(entries);
     if (options.distances && distances_.size() < entries) distances_.resize(entries);
     if (options.vectors && vectors_.size() < 3 * entries) vectors_.resize(3 * entries);
     if (options.shifts && shifts_.size() < 3 * entries) shifts_.resize(3 * entries);
@@ -54,23 +62,27 @@ ListFill HostListStorage::prepare_fill(std::uint64_t entries, bool half) {
   publish();
   return {{half},
           offsets_.data(),
-          indices_.data(),
+          options.coo ? nullptr : indices_.data(),
           options.distances ? distances_.data() : nullptr,
           options.vectors ? vectors_.data() : nullptr,
-          options.shifts ? shifts_.data() : nullptr};
+          options.shifts ? shifts_.data() : nullptr,
+          options.coo ? rows_.data() : nullptr,
+          options.coo ? columns_.data() : nullptr};
 }
 
 void HostListStorage::publish() {
   offsets = offsets_.data();
-  indices = data_or_null(indices_);
+  indices = options.coo ? nullptr : data_or_null(indices_);
   distances = options.distances ? data_or_null(distances_) : nullptr;
   vectors = options.vectors ? data_or_null(vectors_) : nullptr;
   shifts = options.shifts ? data_or_null(shifts_) : nullptr;
+  rows = options.coo ? data_or_null(rows_) : nullptr;
+  columns = options.coo ? data_or_null(columns_) : nullptr;
 }
 
 double bytes_per_entry(const ListOptions& options) {
-  return 4.0 + (options.distances ? 4.0 : 0.0) + (options.vectors ? 12.0 : 0.0) +
-         (options.shifts ? 12.0 : 0.0);
+  return (options.coo ? 16.0 : 4.0) + (options.distances ? 4.0 : 0.0) +
+         (options.vectors ? 12.0 : 0.0) + (options.shifts ? 12.0 : 0.0);
 }
 
 PaddedFill HostPaddedStorage::prepare(std::size_t targets, std::uint32_t width, bool half,

@@ -34,6 +34,8 @@ class ListStorage {
   const float* distances = nullptr;
   const float* vectors = nullptr;
   const std::int32_t* shifts = nullptr;
+  const std::int64_t* rows = nullptr;     // ListOptions::coo
+  const std::int64_t* columns = nullptr;  // ListOptions::coo
 };
 
 // The bytes one list entry takes with these options.
@@ -74,6 +76,7 @@ class HostListStorage final : public ListStorage {
   std::vector<std::uint32_t> indices_;
   std::vector<float> distances_, vectors_;
   std::vector<std::int32_t> shifts_;
+  std::vector<std::int64_t> rows_, columns_;
 };
 
 class HostPaddedStorage final : public PaddedStorage {

@@ -88,16 +88,22 @@ double EventTimer::elapsed_ms() const {
 
 std::size_t DeviceListStorage::bytes() const {
   return counts_.bytes() + offsets_.bytes() + indices_.bytes() + distances_.bytes() +
-         vectors_.bytes() + shifts_.bytes() + scan_temp_.bytes();
+         vectors_.bytes() + shifts_.bytes() + rows_.bytes() + columns_.bytes() +
+         scan_temp_.bytes();
 }
 
 NeighbourList DeviceListStorage::to_host() const {
   NeighbourList list;
   copy_to_host(list.offsets, offsets, n + 1);
-  allocate_indices(list, pairs);
-  if (pairs > 0)
-    RAYCUT_CUDA_CHECK(cudaMemcpy(list.indices.data(), indices, pairs * sizeof(std::uint32_t),
-                                 cudaMemcpyDeviceToHost));
+  if (options.coo) {
+    copy_to_host(list.rows, rows, pairs);
+    copy_to_host(list.columns, columns, pairs);
+  } else {
+    allocate_indices(list, pairs);
+    if (pairs > 0)
+      RAYCUT_CUDA_CHECK(cudaMemcpy(list.indices.data(), indices, pairs * sizeof(std::uint32_t),
+                                   cudaMemcpyDeviceToHost));
+  }
   if (options.distances) copy_to_host(list.distances, distances, pairs);
   if (options.vectors) copy_to_host(list.vectors, vectors, 3 * pairs);
   if (options.shifts) copy_to_host(list.shifts, shifts, 3 * pairs);
@@ -153,7 +159,7 @@ ListFill DeviceListStorage::prepare_fill(std::uint64_t entries) {
   pairs = entries;
   const double per_pair = bytes_per_entry(options);
   const double held = static_cast<double>(indices_.bytes() + distances_.bytes() + vectors_.bytes() +
-                                          shifts_.bytes());
+                                          shifts_.bytes() + rows_.bytes() + columns_.bytes());
   const double need = per_pair * static_cast<double>(entries);
   if (need > held) {
     const std::string what = "a neighbour list of " + std::to_string(entries) + " pairs";
@@ -161,25 +167,34 @@ ListFill DeviceListStorage::prepare_fill(std::uint64_t entries) {
       throw Error(ErrorCode::out_of_memory, "not enough device memory for " + what);
     require_device_memory(static_cast<std::size_t>(need - held), what.c_str());
   }
-  indices_.resize(std::max<std::uint64_t>(entries, 1));
+  if (options.coo) {
+    rows_.resize(std::max<std::uint64_t>(entries, 1));
+    columns_.resize(std::max<std::uint64_t>(entries, 1));
+  } else {
+    indices_.resize(std::max<std::uint64_t>(entries, 1));
+  }
   if (options.distances) distances_.resize(std::max<std::uint64_t>(entries, 1));
   if (options.vectors) vectors_.resize(std::max<std::uint64_t>(3 * entries, 1));
   if (options.shifts) shifts_.resize(std::max<std::uint64_t>(3 * entries, 1));
   publish();
   return {{options.half},
           offsets_.data(),
-          indices_.data(),
+          options.coo ? nullptr : indices_.data(),
           options.distances ? distances_.data() : nullptr,
           options.vectors ? vectors_.data() : nullptr,
-          options.shifts ? shifts_.data() : nullptr};
+          options.shifts ? shifts_.data() : nullptr,
+          options.coo ? rows_.data() : nullptr,
+          options.coo ? columns_.data() : nullptr};
 }
 
 void DeviceListStorage::publish() {
   offsets = offsets_.data();
-  indices = indices_.data();
+  indices = options.coo ? nullptr : indices_.data();
   distances = options.distances ? distances_.data() : nullptr;
   vectors = options.vectors ? vectors_.data() : nullptr;
   shifts = options.shifts ? shifts_.data() : nullptr;
+  rows = options.coo ? rows_.data() : nullptr;
+  columns = options.coo ? columns_.data() : nullptr;
 }
 
 std::vector<std::uint32_t> DevicePaddedStorage::indices_to_host() const {

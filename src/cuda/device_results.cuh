@@ -95,6 +95,7 @@ class DeviceListStorage final : public ListStorage {
   PooledBuffer<std::uint32_t> indices_;
   PooledBuffer<float> distances_, vectors_;
   PooledBuffer<std::int32_t> shifts_;
+  PooledBuffer<std::int64_t> rows_, columns_;  // ListOptions::coo
   PooledBuffer<unsigned char> scan_temp_;
 };
 

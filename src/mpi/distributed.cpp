@@ -911,6 +911,7 @@ DistributedList DistributedEngine::neighbours(const ListOptions& options) {
   ListOptions local = options;
   local.half = false;   // oriented here by global index
   local.shifts = true;  // along the local axes: added to the halo's
+  local.coo = false;    // the local rows are read as CSR; DistributedList has global indices
   const NeighbourList list = engine_->neighbours(local);
   NeighbourList halo_list;
   if (halo_engine_built_) halo_list = halo_engine_->neighbours(local);
