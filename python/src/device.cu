@@ -3,6 +3,7 @@
 #include <cstdint>
 #include <string>
 
+#include "cuda/device_buffer.cuh"  // raycut's pool
 #include "device.hpp"
 #include "raycut/error.hpp"
 
@@ -55,33 +56,22 @@ struct Scratch {
 
 }  // namespace
 
-// Outputs come from the device's stream-ordered pool, kept between calls (release threshold at
-// its maximum): a list of 58M pairs needs about 1 GB per call, and mapping and unmapping that
-// much with cudaMalloc / cudaFree costs more than the list itself.
+// Outputs come from raycut's stream-ordered pool (src/cuda/device_buffer.cuh), kept between
+// calls: a list of 58M pairs needs about 1 GB per call, and mapping and unmapping that much with
+// cudaMalloc / cudaFree costs more than the list itself. Not the device's default pool: its
+// release threshold is every other library's setting too (CuPy's async allocator uses it).
 void* device_alloc(std::size_t bytes) {
-  static const bool pooled = [] {
-    int device = 0;
-    cudaMemPool_t pool;
-    if (cudaGetDevice(&device) != cudaSuccess ||
-        cudaDeviceGetDefaultMemPool(&pool, device) != cudaSuccess) {
-      (void)cudaGetLastError();
-      return false;
-    }
-    std::uint64_t keep = ~std::uint64_t{0};
-    return cudaMemPoolSetAttribute(pool, cudaMemPoolAttrReleaseThreshold, &keep) == cudaSuccess;
-  }();
-  (void)pooled;
-  void* p = nullptr;
-  check(cudaMallocAsync(&p, bytes == 0 ? 1 : bytes, nullptr), "cudaMallocAsync");
+  void* p = raycut::detail::cuda::pooled_allocate(bytes == 0 ? 1 : bytes);
+  if (p == nullptr)
+    throw raycut::Error(raycut::ErrorCode::out_of_memory,
+                        "raycut (python): not enough device memory for an output of " +
+                            std::to_string(bytes) + " bytes");
   return p;
 }
 
-// The caller's framework may still read the array on a stream of its own: wait for the whole
-// device first, as cudaFree does, then return the block to the pool (no unmapping).
-void device_free(void* p) noexcept {
-  cudaDeviceSynchronize();
-  cudaFreeAsync(p, nullptr);
-}
+// The caller's framework may still read the array on a stream of its own: the pool takes the
+// block back after the whole device is idle, as cudaFree would wait.
+void device_free(void* p) noexcept { raycut::detail::cuda::pooled_free(p); }
 
 int current_device() {
   int device = 0;

@@ -146,9 +146,18 @@ void* pooled_allocate(std::size_t bytes) {
   return nullptr;
 }
 
+// On the block's own device, which need not be the current one when the buffer dies.
 void pooled_free(void* p) noexcept {
+  int current = -1;
+  cudaPointerAttributes where{};
+  const bool elsewhere = cudaGetDevice(&current) == cudaSuccess &&
+                         cudaPointerGetAttributes(&where, p) == cudaSuccess &&
+                         where.device >= 0 && where.device != current;
+  (void)cudaGetLastError();  // a failed query is not the caller's error
+  if (elsewhere) cudaSetDevice(where.device);
   cudaDeviceSynchronize();
   cudaFreeAsync(p, cudaStreamLegacy);
+  if (elsewhere) cudaSetDevice(current);
 }
 
 void DeviceFree::operator()(void* p) const noexcept {
