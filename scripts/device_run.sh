@@ -22,8 +22,10 @@
 #   python-bench bench/python_lists.py (beside neighbour_bench's periodic list rows, run first)
 #                and bench/python_overhead.py: python-lists.csv/.md, python-overhead.csv
 #                (docs/python.md)
-#   mpi          the MPI tests (ctest -R mpi) and `mpirun -np 1 raycut bench --distributed`
-#                at 2^20 and 2^22 (distributed-np1.csv; docs/distributed.md)
+#   mpi          the MPI tests (ctest -R mpi, the device-resident ones among them) and
+#                `mpirun -np 1 raycut bench --distributed` at 2^20 and 2^22 with host positions
+#                (distributed-np1.csv), then --device at 2^20, 2^22, 2^24 (MPI_DEVICE_SIZES)
+#                beside the plain engine (distributed-device-np1.csv; docs/distributed.md)
 set -uo pipefail
 cd "$(dirname "$0")/.." || exit 1
 out="${OUT:-/tmp/raycut-out}"
@@ -141,10 +143,17 @@ while [ $# -gt 0 ]; do
       export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
       (cd build && ctest -R mpi --output-on-failure > "$res/ctest-mpi.log" 2>&1)
       grep -E "tests passed|tests failed" "$res/ctest-mpi.log"
+      grep -E "DistributedDevice|SKIPPED|FAILED" "$res/ctest-mpi.log" | sort | uniq -c | head -20
       mpirun --allow-run-as-root -np 1 "$raycut" bench --distributed --n 1048576 4194304 \
         -m grid -o "$res/distributed-np1.csv" > "$res/distributed-np1.log" 2>&1
       echo "distributed np1 exit $?"
       tail -4 "$res/distributed-np1.log"
+      # The device-resident path against the plain engine in the same run (plain_step_ms).
+      mpirun --allow-run-as-root -np 1 "$raycut" bench --distributed --device \
+        --n "${MPI_DEVICE_SIZES:-1048576,4194304,16777216}" -m grid -r 10 \
+        -o "$res/distributed-device-np1.csv" > "$res/distributed-device-np1.log" 2>&1
+      echo "distributed --device np1 exit $?"
+      grep -E "step|plain" "$res/distributed-device-np1.log"
       ;;
     grid-suites)
       # Both suites, the grids beside the paper's own grid: the no-regression check.

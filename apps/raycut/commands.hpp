@@ -79,6 +79,8 @@ struct DistributedBenchOptions {
   std::vector<int> dims;  // empty: MPI_Dims_create
   bool all_rows = false;  // DistributedOptions::owned_rows_only = false
   bool balance = false;   // DistributedOptions::balance = particles
+  bool device = false;    // positions (and the step) in device memory: the device-resident path
+  bool nccl = false;      // halo refreshes by make_nccl_transport (with device)
 };
 void add_distributed_bench_options(CLI::App& bench, DistributedBenchOptions& o);
 int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<std::string>& methods,

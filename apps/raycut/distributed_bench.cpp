@@ -4,7 +4,10 @@
 // medians over the repetitions, one CSV row per (method, size) written by rank 0. A step is a
 // halo refresh (the skin keeps the halo set) plus the fused lj_forces pass; a full exchange
 // (migration, new halos, local builds) is timed apart. Weak scaling: --n-per-rank particles on
-// every rank; strong: --n in total.
+// every rank; strong: --n in total. --device: positions in device memory (the device-resident
+// path: the step's positions come from the device, lj_forces stays there), and at one rank the
+// plain Engine's build + lj_forces over the same positions, timed in the same run, the
+// reference the distributed step is set against.
 #include <mpi.h>
 
 #include <algorithm>
@@ -13,6 +16,7 @@
 #include <cstdio>
 #include <memory>
 #include <numeric>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -78,6 +82,7 @@ enum Phase {
 
 struct Run {
   std::vector<double> samples[phases];
+  std::vector<double> plain;  // one rank, --device: the plain Engine's build + lj_forces
   double build_ms = 0;
   std::uint64_t pairs = 0, halos = 0, owned_min = 0, owned_max = 0;
   bool owned_rows_only = false;
@@ -94,16 +99,22 @@ Run run_method(MPI_Comm comm, const DistributedBenchOptions& o, const std::strin
   options.skin = o.skin;
   options.owned_rows_only = !o.all_rows;
   if (o.balance) options.balance = mpi::Balance::particles;
+  if (o.nccl) options.transport = mpi::make_nccl_transport(comm);
   for (std::size_t a = 0; a < o.dims.size(); ++a) options.dims[a] = o.dims[a];
   mpi::DistributedEngine engine(comm, options);
   const Share share = liquid_share(n, side, rank, size, seed);
   const Box box = Box::orthorhombic(side, side, side);
+  std::optional<DeviceArray> on_device;
+  PositionsView given{share.xyz.data(), share.ids.size(), MemorySpace::host};
+  if (o.device) {
+    on_device.emplace(share.xyz);
+    given = {on_device->data(), share.ids.size(), MemorySpace::device};
+  }
 
   Run run;
   MPI_Barrier(comm);
   double start = MPI_Wtime();
-  engine.build({share.xyz.data(), share.ids.size(), MemorySpace::host}, share.ids.data(), lj_cutoff,
-               box);
+  engine.build(given, share.ids.data(), lj_cutoff, box);
   double local = 1e3 * (MPI_Wtime() - start);
   MPI_Allreduce(&local, &run.build_ms, 1, MPI_DOUBLE, MPI_MAX, comm);
 
@@ -129,14 +140,19 @@ Run run_method(MPI_Comm comm, const DistributedBenchOptions& o, const std::strin
     start = MPI_Wtime();
     engine.exchange();
     t[exchange_phase] = MPI_Wtime() - start;
-    const std::vector<float> xyz = engine.positions();  // untimed: the integrator's output
+    // Untimed: the integrator's output, where the positions live.
+    const std::vector<float> xyz = engine.positions();
+    if (o.device) on_device.emplace(xyz);
     MPI_Barrier(comm);
     start = MPI_Wtime();
     const double cpu_start = cpu_seconds();
-    if (engine.update(xyz.data()))  // nothing moved: within the skin
+    if (engine.update(o.device ? on_device->data() : xyz.data()))  // nothing moved: in the skin
       throw Error(ErrorCode::internal, "bench --distributed: update() exchanged, not refreshed");
     const double refreshed = MPI_Wtime(), cpu_refreshed = cpu_seconds();
-    engine.compute(Kernel::lj_forces);
+    if (o.device)
+      engine.run(Kernel::lj_forces);  // results stay on the device
+    else
+      engine.compute(Kernel::lj_forces);
     const double computed = MPI_Wtime(), cpu_computed = cpu_seconds();
     t[refresh_phase] = refreshed - start;
     t[compute_phase] = computed - refreshed;
@@ -148,6 +164,16 @@ Run run_method(MPI_Comm comm, const DistributedBenchOptions& o, const std::strin
     MPI_Allreduce(t + wall_phases, reduced + wall_phases, phases - wall_phases, MPI_DOUBLE, MPI_SUM,
                   comm);
     for (int p = 0; p < phases; ++p) run.samples[p].push_back(1e3 * reduced[p]);
+  }
+  if (o.device && size == 1) {  // the reference: the plain engine, same positions, same GPU
+    const DeviceArray xyz(engine.positions());
+    Engine plain(method);
+    for (int r = 0; r <= reps; ++r) {  // the first is the warm-up
+      start = MPI_Wtime();
+      plain.build(xyz.view(), lj_cutoff, box);
+      plain.run(Kernel::lj_forces);
+      if (r > 0) run.plain.push_back(1e3 * (MPI_Wtime() - start));
+    }
   }
   return run;
 }
@@ -188,6 +214,17 @@ void add_distributed_bench_options(CLI::App& bench, DistributedBenchOptions& o) 
                 "--distributed: cuts at the particle-count quantiles of each split axis at build "
                 "(DistributedOptions::balance), instead of equal slabs")
       ->needs(flag);
+  auto* device =
+      bench
+          .add_flag("--device", o.device,
+                    "--distributed: positions in device memory, the step on the GPU (the "
+                    "device-resident path; GPU methods); at one rank also the plain engine's "
+                    "build + lj_forces (plain_step_ms)")
+          ->needs(flag);
+  bench
+      .add_flag("--nccl", o.nccl,
+                "--distributed --device: halo refreshes GPU to GPU by NCCL (one rank per GPU)")
+      ->needs(device);
 }
 
 int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<std::string>& names,
@@ -200,6 +237,8 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
   int rank = 0, size = 1;
   MPI_Comm_rank(comm, &rank);
   MPI_Comm_size(comm, &size);
+  if (o.device && mpi::select_local_device(comm) < 0)
+    throw Error(ErrorCode::unsupported, "bench --distributed --device: no CUDA device");
   const auto methods = resolve_methods(names);
   const bool weak = !o.n_per_rank.empty();
   std::vector<std::uint64_t> sizes;
@@ -224,7 +263,8 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
         "suite,method,rows,ranks,dims,balance,scaling,N,N_per_rank,cutoff,skin,pairs,halos,owned_"
         "min,"
         "owned_max,build_ms,exchange_ms,refresh_ms,compute_ms,step_ms,step_ms_min,step_ms_max,"
-        "compute_cpu_ms,step_cpu_ms,reps,timer,gpu,driver,cuda,optix\n");
+        "compute_cpu_ms,step_cpu_ms,positions,transport,plain_step_ms,reps,timer,gpu,driver,cuda,"
+        "optix\n");
     std::fprintf(stderr, "raycut bench --distributed: %d ranks, %s scaling, %d reps, on %s -> %s\n",
                  size, weak ? "weak" : "strong", reps,
                  environment.substr(0, environment.find(',')).c_str(), out.c_str());
@@ -247,11 +287,14 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
         status = pairs_ok ? status : 1;
         continue;
       }
+      char plain_text[32] = "";  // empty: not measured (more than one rank, or host positions)
+      if (!run.plain.empty()) std::snprintf(plain_text, sizeof plain_text, "%.4f", median(run.plain));
+      const std::string plain = plain_text;
       char row[1024];
       std::snprintf(
           row, sizeof row,
           "lj-liquid-pbc,%s,%s,%d,%dx%dx%d,%s,%s,%llu,%llu,%g,%g,%llu,%llu,%llu,%llu,%.4f,%.4f,"
-          "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%d,mpi_wtime_max,%s\n",
+          "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%s,%s,%s,%d,mpi_wtime_max,%s\n",
           method.c_str(), run.owned_rows_only ? "owned" : "all", size, run.dims[0], run.dims[1],
           run.dims[2], o.balance ? "particles" : "none", weak ? "weak" : "strong",
           static_cast<unsigned long long>(n), static_cast<unsigned long long>(n / size), lj_cutoff,
@@ -262,7 +305,8 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
           median(s[refresh_phase]), median(s[compute_phase]), median(s[step_phase]),
           *std::min_element(s[step_phase].begin(), s[step_phase].end()),
           *std::max_element(s[step_phase].begin(), s[step_phase].end()), median(s[compute_cpu]),
-          median(s[step_cpu]), reps, environment.c_str());
+          median(s[step_cpu]), o.device ? "device" : "host", o.nccl ? "nccl" : "mpi-host",
+          plain.c_str(), reps, environment.c_str());
       csv->write(row);
       csv->flush();
       std::fprintf(
@@ -274,6 +318,9 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
           median(s[step_phase]), median(s[refresh_phase]), median(s[compute_phase]),
           median(s[exchange_phase]), median(s[step_cpu]), median(s[compute_cpu]),
           static_cast<unsigned long long>(run.pairs), static_cast<unsigned long long>(run.halos));
+      if (!run.plain.empty())
+        std::fprintf(stderr, "  plain engine build + lj_forces %.3f ms: distributed step / plain %.3f\n",
+                     median(run.plain), median(s[step_phase]) / median(run.plain));
       if (!pairs_ok) {
         std::fprintf(stderr, "  check failed: %llu pairs, expected %.0f +- 2%%\n",
                      static_cast<unsigned long long>(run.pairs), expected);

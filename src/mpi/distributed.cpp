@@ -13,6 +13,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "mpi/device_residence.hpp"
 #include "mpi/mpi_check.hpp"
 #include "raycut/pairs.hpp"
 
@@ -235,11 +236,9 @@ DistributedEngine::DistributedEngine(MPI_Comm comm, DistributedOptions options)
   }
   split_ = options_.owned_rows_only && takes_boxes_;
   if (split_) halo_engine_ = std::move(probe_engine);
-  transport_ = options_.transport ? options_.transport : make_host_transport(comm_);
-  if (transport_->space() != MemorySpace::host)
-    throw Error(ErrorCode::unsupported,
-                "distributed engine: transport '" + transport_->name() +
-                    "' works in device memory; this slice packs halos on the host only");
+  const bool host_given = options_.transport && options_.transport->space() == MemorySpace::host;
+  host_transport_ = host_given ? options_.transport : make_host_transport(comm_);
+  transport_ = options_.transport ? options_.transport : host_transport_;
   plan_ = std::make_unique<HaloPlan>();
 }
 
@@ -286,13 +285,28 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
                                   std::numeric_limits<double>::infinity(),
                                   std::numeric_limits<double>::infinity(),
                                   std::numeric_limits<double>::infinity()};  // min, -max
+  const bool on_device = positions.space == MemorySpace::device;
+  std::vector<float> staged_xyz, staged_carried;  // device positions: the host copies planned on
   try {
-    if (positions.space != MemorySpace::host)
-      throw Error(ErrorCode::unsupported, "distributed build takes host positions in this slice");
     if (positions.size > 0 && (positions.xyz == nullptr || ids == nullptr))
       throw Error(ErrorCode::invalid_argument, "distributed build: null positions or ids");
     if (positions.size > 0 && width > 0 && carried == nullptr)
       throw Error(ErrorCode::invalid_argument, "distributed build: null carried values");
+    if (on_device) {
+      if (engine_->space() != MemorySpace::device)
+        throw Error(ErrorCode::unsupported, "distributed build: positions in device memory, but "
+                                            "method '" + engine_->method() +
+                                                "' works on the host; give host positions");
+      // Planned on the host like any exchange (from host copies); device_ keeps them after it.
+#if defined(RAYCUT_HAVE_CUDA)
+      device_ = detail::make_device_residence();
+#endif
+      device_->adopt(positions.xyz, carried, positions.size, width, staged_xyz, staged_carried);
+      positions.xyz = staged_xyz.data();
+      carried = width > 0 ? staged_carried.data() : nullptr;
+    } else {
+      device_.reset();
+    }
     if (!(cutoff > 0) || !std::isfinite(cutoff))
       throw Error(ErrorCode::invalid_argument,
                   "cutoff must be finite and > 0, got " + std::to_string(cutoff));
@@ -321,18 +335,21 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
   }
   // Every rank must describe the same system: compare with rank 0's. Outside the try, so that a
   // rank that threw above still takes part (a skipped broadcast would be matched by a later one).
-  double mine[14];
+  double mine[15];
   for (int a = 0; a < 3; ++a) {
     for (int c = 0; c < 3; ++c) mine[3 * a + c] = box.cell[a][c];
     mine[9 + a] = box.pbc[a];
   }
   mine[12] = cutoff;
   mine[13] = static_cast<double>(width);
-  double root[14];
+  mine[14] = on_device;
+  double root[15];
   std::memcpy(root, mine, sizeof mine);
-  check(MPI_Bcast(root, 14, MPI_DOUBLE, 0, comm_), "MPI_Bcast");
+  check(MPI_Bcast(root, 15, MPI_DOUBLE, 0, comm_), "MPI_Bcast");
   if (error.empty() && std::memcmp(root, mine, sizeof mine) != 0)
-    error = "distributed build: box, cutoff or carried width differ from rank 0's";
+    error =
+        "distributed build: box, cutoff, carried width or positions' memory space differ from "
+        "rank 0's";
   agree(error, code);
 
   std::array<double, 6> global;
@@ -378,6 +395,7 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
     }
   }
 
+  split_ = halo_engine_ && !device_;
   ids_.assign(ids, ids + positions.size);
   xyz_.assign(positions.xyz, positions.xyz + 3 * positions.size);
   if (carried)
@@ -395,8 +413,30 @@ bool DistributedEngine::update(const float* positions, const float* carried) {
   check_built("update");
   const std::size_t n = ids_.size();
   std::string error;
-  double moved2 = 0;
   if (n > 0 && positions == nullptr) error = "distributed update: null positions";
+  const double half_skin = 0.5 * static_cast<double>(options_.skin);
+  if (device_) {  // the same steps, on the GPU: a copy, a finite check, the skin's reduction
+    int moved = 0;
+    if (error.empty()) {
+      const std::size_t bad = device_->take(positions, carried);
+      if (bad < n)
+        error = "distributed update: particle " + std::to_string(ids_[bad]) +
+                " has a non-finite coordinate";
+      else
+        moved = options_.skin == 0 || device_->moved_beyond(static_cast<float>(half_skin));
+    }
+    agree(error, ErrorCode::invalid_input);
+    int any = 0;
+    check(MPI_Allreduce(&moved, &any, 1, MPI_INT, MPI_MAX, comm_), "MPI_Allreduce");
+    if (any) {
+      exchange();
+      return true;
+    }
+    refresh_halos();
+    build_local_engine(true);
+    return false;
+  }
+  double moved2 = 0;
   for (std::size_t i = 0; error.empty() && i < n; ++i) {
     double d2 = 0;
     for (int c = 0; c < 3; ++c) {
@@ -417,7 +457,6 @@ bool DistributedEngine::update(const float* positions, const float* carried) {
 
   double largest2 = 0;
   check(MPI_Allreduce(&moved2, &largest2, 1, MPI_DOUBLE, MPI_MAX, comm_), "MPI_Allreduce");
-  const double half_skin = 0.5 * static_cast<double>(options_.skin);
   if (options_.skin == 0 || largest2 > half_skin * half_skin) {
     exchange();
     return true;
@@ -430,6 +469,7 @@ bool DistributedEngine::update(const float* positions, const float* carried) {
 void DistributedEngine::exchange() {
   check_built("exchange");
   const auto start = Clock::now();
+  if (device_) device_->download(xyz_, carried_);  // planned on the host
   const Decomposition& dec = decomposition_;
   for (std::size_t i = 0; i < ids_.size(); ++i) {
     float* x = &xyz_[3 * i];
@@ -458,7 +498,10 @@ void DistributedEngine::exchange() {
     balance();
   migrate();
   build_halos();
-  xyz_at_exchange_ = xyz_;
+  if (device_)
+    device_->upload(local_xyz_, ids_.size(), carried_, plan_->index, plan_->shift, dec.cell);
+  else
+    xyz_at_exchange_ = xyz_;
   ++stats_.exchanges;
   stats_.exchange_ms = elapsed_ms(start);
   build_local_engine(false);
@@ -564,7 +607,7 @@ void DistributedEngine::migrate() {
     put(at, &xyz_[3 * i], 3);
     put(at, carried_.data() + width_ * i, width_);
   }
-  transport_->exchange(send.data(), scaled(send_counts, record).data(), send_offsets.data(),
+  host_transport_->exchange(send.data(), scaled(send_counts, record).data(), send_offsets.data(),
                        recv.data(), scaled(recv_counts, record).data(), recv_offsets.data());
   const std::byte* at = recv.data();
   for (std::uint64_t k = 0; k < received; ++k) {
@@ -676,7 +719,7 @@ void DistributedEngine::build_halos() {
     put(at, p, 3);
     put(at, s, 3);
   }
-  transport_->exchange(send.data(), scaled(plan.send_counts, record).data(), send_offsets.data(),
+  host_transport_->exchange(send.data(), scaled(plan.send_counts, record).data(), send_offsets.data(),
                        recv.data(), scaled(plan.recv_counts, record).data(), recv_offsets.data());
 
   halo_ids_.resize(received);
@@ -699,15 +742,37 @@ void DistributedEngine::refresh_halos() {
   const HaloPlan& plan = *plan_;
   const std::size_t record = 3 * sizeof(float);
   const std::size_t n = ids_.size();
-  std::vector<float> send(3 * plan.index.size());
-  for (std::size_t k = 0; k < plan.index.size(); ++k)
-    image(&xyz_[3 * plan.index[k]], &plan.shift[3 * k], dec, &send[3 * k]);
-  std::copy(xyz_.begin(), xyz_.end(), local_xyz_.begin());
-  transport_->exchange(
-      reinterpret_cast<const std::byte*>(send.data()), scaled(plan.send_counts, record).data(),
-      offsets_of(plan.send_counts, record).data(),
-      reinterpret_cast<std::byte*>(local_xyz_.data() + 3 * n),
-      scaled(plan.recv_counts, record).data(), offsets_of(plan.recv_counts, record).data());
+  const auto send_counts = scaled(plan.send_counts, record);
+  const auto recv_counts = scaled(plan.recv_counts, record);
+  const auto send_offsets = offsets_of(plan.send_counts, record);
+  const auto recv_offsets = offsets_of(plan.recv_counts, record);
+  std::vector<float> send;
+  if (device_) {
+    // Gathered on the GPU; GPU to GPU by a device transport, else staged through the host.
+    const float* gathered = device_->gather();
+    if (transport_->space() == MemorySpace::device) {
+      transport_->exchange(reinterpret_cast<const std::byte*>(gathered), send_counts.data(),
+                           send_offsets.data(),
+                           reinterpret_cast<std::byte*>(device_->local() + 3 * n),
+                           recv_counts.data(), recv_offsets.data());
+    } else {
+      device_->download_gathered(send);
+      host_transport_->exchange(reinterpret_cast<const std::byte*>(send.data()),
+                                send_counts.data(), send_offsets.data(),
+                                reinterpret_cast<std::byte*>(local_xyz_.data() + 3 * n),
+                                recv_counts.data(), recv_offsets.data());
+      device_->upload_halos(local_xyz_.data() + 3 * n);
+    }
+  } else {
+    send.resize(3 * plan.index.size());
+    for (std::size_t k = 0; k < plan.index.size(); ++k)
+      image(&xyz_[3 * plan.index[k]], &plan.shift[3 * k], dec, &send[3 * k]);
+    std::copy(xyz_.begin(), xyz_.end(), local_xyz_.begin());
+    host_transport_->exchange(reinterpret_cast<const std::byte*>(send.data()), send_counts.data(),
+                              send_offsets.data(),
+                              reinterpret_cast<std::byte*>(local_xyz_.data() + 3 * n),
+                              recv_counts.data(), recv_offsets.data());
+  }
   ++stats_.refreshes;
   stats_.bytes_sent = (plan.index.size() - plan.send_counts[rank_]) * record;
   stats_.exchange_ms = elapsed_ms(start);
@@ -762,7 +827,7 @@ void DistributedEngine::build_local_engine(bool same_sources) {
   const auto start = Clock::now();
   try {
     const std::size_t n = ids_.size(), h = halo_ids_.size();
-    const PositionsView local{local_xyz_.data(), split_ ? n : n + h, MemorySpace::host};
+    const PositionsView local = local_positions(split_ ? n : n + h);
     if (same_sources)
       engine_->update(local);
     else
@@ -785,7 +850,34 @@ void DistributedEngine::build_local_engine(bool same_sources) {
   stats_.boundary = split_ ? boundary_.size() : ids_.size();
 }
 
+PositionsView DistributedEngine::local_positions(std::size_t count) {
+  if (device_) return {device_->local(), count, MemorySpace::device};
+  return {local_xyz_.data(), count, MemorySpace::host};
+}
+
+PositionsView DistributedEngine::owned_positions() const {
+  if (device_) return {device_->local(), ids_.size(), MemorySpace::device};
+  return {xyz_.data(), ids_.size(), MemorySpace::host};
+}
+
+const float* DistributedEngine::owned_carried() const {
+  return device_ ? device_->carried() : carried_.data();
+}
+
 // ---- results ------------------------------------------------------------------------------------
+
+ResultsView DistributedEngine::run(Kernel kernel, const KernelOptions& options) {
+  check_built("run");
+  if (split_ && halo_engine_built_) {  // two engines' rows added: on the host
+    summed_ = compute(kernel, options);
+    const auto data = [](const auto& v) { return v.empty() ? nullptr : v.data(); };
+    return {data(summed_.count),  data(summed_.energy),  data(summed_.force),
+            data(summed_.virial), data(summed_.density), MemorySpace::host};
+  }
+  if (kernel == Kernel::sph_force) compute(kernel, options);  // its refusal, with the reason
+  engine_->run(kernel, options);
+  return engine_->results_view();
+}
 
 Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options) {
   check_built("compute");
@@ -842,7 +934,7 @@ std::vector<float> DistributedEngine::halo_fields(const float* owned, std::size_
   for (std::size_t k = 0; k < plan.index.size(); ++k)
     std::copy_n(owned + width * plan.index[k], width, &send[width * k]);
   const std::size_t record = width * sizeof(float);
-  transport_->exchange(
+  host_transport_->exchange(
       reinterpret_cast<const std::byte*>(send.data()), scaled(plan.send_counts, record).data(),
       offsets_of(plan.send_counts, record).data(),
       reinterpret_cast<std::byte*>(local.data() + width * n),

@@ -7,6 +7,11 @@
 
 #include "mpi/mpi_check.hpp"
 #include "raycut/mpi/distributed.hpp"
+#if defined(RAYCUT_HAVE_CUDA)
+#include <cuda_runtime.h>
+
+#include "raycut/detail/cuda/check.cuh"
+#endif
 
 namespace raycut::mpi {
 namespace {
@@ -71,6 +76,35 @@ class HostTransport final : public Transport {
 
 std::unique_ptr<Transport> make_host_transport(MPI_Comm comm) {
   return std::make_unique<HostTransport>(comm);
+}
+
+#if !defined(RAYCUT_HAVE_NCCL)
+std::unique_ptr<Transport> make_nccl_transport(MPI_Comm) {
+  throw Error(ErrorCode::unsupported,
+              "make_nccl_transport: raycut was built without NCCL (CMake finds it with CUDA, "
+              "nccl.h and libnccl); use make_host_transport");
+}
+#endif
+
+int select_local_device(MPI_Comm comm) {
+  MPI_Comm node = MPI_COMM_NULL;
+  check(MPI_Comm_split_type(comm, MPI_COMM_TYPE_SHARED, 0, MPI_INFO_NULL, &node),
+        "MPI_Comm_split_type");
+  int local = 0;
+  MPI_Comm_rank(node, &local);
+  MPI_Comm_free(&node);
+#if defined(RAYCUT_HAVE_CUDA)
+  int devices = 0;
+  if (cudaGetDeviceCount(&devices) != cudaSuccess || devices == 0) {
+    (void)cudaGetLastError();  // no device: not an error here
+    return -1;
+  }
+  RAYCUT_CUDA_CHECK(cudaSetDevice(local % devices));
+  return local % devices;
+#else
+  (void)local;
+  return -1;
+#endif
 }
 
 }  // namespace raycut::mpi

@@ -1281,6 +1281,210 @@ TEST(Distributed, Errors) {
   }
 }
 
+
+// ---- the device-resident path
+// ------------------------------------------------------------------------------------
+//
+// Positions in device memory (DistributedEngine::space() device): the owned positions, halos and
+// the local engine stay on the GPU between exchanges, refreshes are gathered there. Checked
+// against a host-resident twin over the same particles and method (every local row: the scheme a
+// device-resident engine runs), step by step: the same exchanges, owned sets, halos and results,
+// and against the reference over the positions both hold. Skipped without a CUDA device (all
+// ranks alike: they share the machine).
+
+// The twins' particles and velocities, as step_loop's.
+struct Twins {
+  std::vector<float> start, velocity;
+  std::size_t n = 0;
+};
+Twins twins_input() {
+  Twins t;
+  t.start = lattice(10, 1.2, 0.15, 21);
+  t.n = t.start.size() / 3;
+  std::mt19937_64 rng(99);
+  std::uniform_real_distribution<double> u(-0.12, 0.12);
+  t.velocity.resize(3 * t.n);
+  for (float& v : t.velocity) v = static_cast<float>(u(rng));
+  return t;
+}
+
+// This rank's strided share of `xyz` (and `carried`, width 3), built on the device.
+void build_on_device(DistributedEngine& engine, const std::vector<float>& xyz,
+                     const std::vector<float>& carried, float cutoff, const Box& box) {
+  std::vector<float> mine, mine_carried;
+  std::vector<std::uint64_t> ids;
+  for (std::size_t i = 0; i < xyz.size() / 3; ++i) {
+    if (static_cast<int>(i % world_size()) != world_rank()) continue;
+    ids.push_back(i);
+    mine.insert(mine.end(), &xyz[3 * i], &xyz[3 * i] + 3);
+    mine_carried.insert(mine_carried.end(), &carried[3 * i], &carried[3 * i] + 3);
+  }
+  const raycut::DeviceArray d_xyz(mine), d_carried(mine_carried);
+  engine.build({d_xyz.data(), ids.size(), MemorySpace::device}, ids.data(), cutoff, box,
+               d_carried.data(), 3);
+}
+
+void expect_twins(const Box& box, float skin, int steps, DistributedOptions device_options) {
+  const float cutoff = 1.5f;
+  const Twins in = twins_input();
+  DistributedOptions host_options = device_options;
+  host_options.owned_rows_only = false;  // the device-resident engine's scheme
+  host_options.transport = nullptr;
+  host_options.method = device_options.method = "grid";
+  host_options.skin = device_options.skin = skin;
+  DistributedEngine host(MPI_COMM_WORLD, host_options), device(MPI_COMM_WORLD, device_options);
+  build(host, in.start, cutoff, box, Spread::strided, in.velocity, 3);
+  build_on_device(device, in.start, in.velocity, cutoff, box);
+  ASSERT_EQ(device.space(), MemorySpace::device);
+  ASSERT_EQ(host.space(), MemorySpace::host);
+  EXPECT_FALSE(device.owned_rows_only());
+
+  std::uint64_t exchanges = 0;
+  for (int step = 0; step < steps; ++step) {
+    // Both integrate the host twin's positions: the device twin's are the same floats when the
+    // two agree, which the checks below assert.
+    std::vector<float> next(host.positions());
+    for (std::size_t t = 0; t < host.owned(); ++t)
+      for (int a = 0; a < 3; ++a) next[3 * t + a] += host.carried()[3 * t + a];
+    const raycut::DeviceArray d_next(next);
+    const bool host_exchanged = host.update(next.data());
+    const bool device_exchanged = device.update(d_next.data());
+    exchanges += host_exchanged;
+    const std::string what = "step " + std::to_string(step);
+    ASSERT_EQ(device_exchanged, host_exchanged) << what;
+    ASSERT_EQ(device.ids(), host.ids()) << what;
+    ASSERT_EQ(device.halo_ids(), host.halo_ids()) << what;
+    ASSERT_EQ(device.halo_shifts(), host.halo_shifts()) << what;
+    if (host_exchanged) {  // the host copies are current at an exchange
+      EXPECT_EQ(device.positions(), host.positions()) << what;
+      EXPECT_EQ(device.carried(), host.carried()) << what;
+    }
+    EXPECT_EQ(device.owned_positions().space, MemorySpace::device);
+
+    const raycut::Results h = host.compute(Kernel::lj_forces), d = device.compute(Kernel::lj_forces);
+    EXPECT_EQ(device.compute(Kernel::count).count, host.compute(Kernel::count).count) << what;
+    EXPECT_EQ(d.energy, h.energy) << what;  // same floats, same method: the same sums
+    EXPECT_EQ(d.force, h.force) << what;
+    EXPECT_EQ(d.virial, h.virial) << what;
+    raycut::ListOptions options;
+    options.shifts = true;
+    options.half = true;
+    EXPECT_EQ(device.neighbours(options).indices, host.neighbours(options).indices) << what;
+    const raycut::ResultsView view = device.run(Kernel::count);
+    EXPECT_EQ(view.space, MemorySpace::device);
+
+    // And the reference over the positions both hold.
+    expect_matches(device, reference(gather_positions(host, in.n), box, cutoff), what,
+                   host_exchanged, {}, frame_relative);
+  }
+  if (skin > 0) {
+    EXPECT_GT(device.stats().refreshes, 0u);
+    EXPECT_LT(exchanges, static_cast<std::uint64_t>(steps));
+  }
+}
+
+// One GPU per rank where there are enough (select_local_device), collective: call it first.
+bool skip_without_device() {
+  raycut::mpi::select_local_device(MPI_COMM_WORLD);
+  return !raycut::cuda_device_available();
+}
+
+// Whether two ranks share a GPU (of one host: the tests run on one), which NCCL refuses.
+bool ranks_share_a_device() {
+  const int mine = raycut::mpi::select_local_device(MPI_COMM_WORLD);
+  std::vector<int> devices(static_cast<std::size_t>(world_size()));
+  MPI_Allgather(&mine, 1, MPI_INT, devices.data(), 1, MPI_INT, MPI_COMM_WORLD);
+  std::sort(devices.begin(), devices.end());
+  return std::adjacent_find(devices.begin(), devices.end()) != devices.end();
+}
+
+DistributedOptions method_and_skin(const std::string& method, float skin = 0) {
+  DistributedOptions options;
+  options.method = method;
+  options.skin = skin;
+  return options;
+}
+
+TEST(DistributedDevice, PeriodicStepLoopMatchesHostResidentTwin) {
+  if (skip_without_device()) GTEST_SKIP() << "no CUDA device";
+  expect_twins(Box::orthorhombic(12, 12, 12), 0.4f, 8, {});
+}
+
+TEST(DistributedDevice, OpenStepLoopMatchesHostResidentTwin) {
+  if (skip_without_device()) GTEST_SKIP() << "no CUDA device";
+  expect_twins(Box::orthorhombic(12, 12, 12, false, false, false), 0.0f, 4, {});
+}
+
+TEST(DistributedDevice, ImagedAxesRefreshOnTheDevice) {
+  // Every periodic axis imaged by halos (at one rank: halos to itself), so that refreshes gather
+  // images on the GPU whatever the rank count.
+  if (skip_without_device()) GTEST_SKIP() << "no CUDA device";
+  DistributedOptions options;
+  options.local_images = false;
+  expect_twins(Box::orthorhombic(12, 12, 12), 0.4f, 6, options);
+}
+
+TEST(DistributedDevice, NcclRefreshesMatchHostStaging) {
+  // NCCL needs one GPU per rank: at one rank (halos to itself across imaged periodic axes) on
+  // any GPU machine, at K ranks on K GPUs.
+  if (skip_without_device()) GTEST_SKIP() << "no CUDA device";
+  if (ranks_share_a_device()) GTEST_SKIP() << "fewer GPUs than ranks";
+  DistributedOptions options;
+  options.local_images = false;
+  try {
+    options.transport = raycut::mpi::make_nccl_transport(MPI_COMM_WORLD);
+  } catch (const raycut::Error& e) {
+    if (e.code() != ErrorCode::unsupported) throw;
+    GTEST_SKIP() << e.what();
+  }
+  EXPECT_EQ(options.transport->name(), "nccl");
+  EXPECT_EQ(options.transport->space(), MemorySpace::device);
+  expect_twins(Box::orthorhombic(12, 12, 12), 0.4f, 6, options);
+}
+
+TEST(DistributedDevice, Errors) {
+  using raycut_test::contains;
+  using raycut_test::error_message;
+  if (skip_without_device()) GTEST_SKIP() << "no CUDA device";
+  const std::vector<float> xyz = uniform(40, {0, 0, 0}, {4, 4, 4}, 3);
+  const std::vector<float> carried(xyz.size(), 0.0f);
+  {  // a host method with device positions
+    DistributedEngine engine(MPI_COMM_WORLD, method_and_skin("cell-list"));
+    const std::string m = error_message(ErrorCode::unsupported, [&] {
+      build_on_device(engine, xyz, carried, 1.0f, Box::orthorhombic(8, 8, 8));
+    });
+    EXPECT_TRUE(contains(m, "device memory") && contains(m, "cell-list")) << m;
+  }
+  {  // a non-finite coordinate given to update(): every rank throws, naming it
+    DistributedEngine engine(MPI_COMM_WORLD, method_and_skin("grid", 0.2f));
+    build_on_device(engine, xyz, carried, 1.0f, Box::orthorhombic(8, 8, 8));
+    std::vector<float> bad = engine.positions();
+    const bool last = world_rank() == world_size() - 1;
+    if (last && !bad.empty()) bad[1] = NAN;
+    const raycut::DeviceArray d_bad(bad);
+    std::uint64_t named = last && !bad.empty() ? engine.ids()[0] : 0;
+    MPI_Allreduce(MPI_IN_PLACE, &named, 1, MPI_UINT64_T, MPI_MAX, MPI_COMM_WORLD);
+    const std::string m =
+        error_message(ErrorCode::invalid_input, [&] { engine.update(d_bad.data()); });
+    EXPECT_TRUE(contains(m, "particle " + std::to_string(named)) && contains(m, "non-finite"))
+        << m;
+    // Refused before any copy: the engine still holds its positions and steps on.
+    const raycut::DeviceArray d_good(engine.positions());
+    EXPECT_FALSE(engine.update(d_good.data()));
+    EXPECT_EQ(engine.stats().refreshes, 1u);
+  }
+  if (world_size() > 1) {  // ranks that disagree on where positions live
+    DistributedEngine engine(MPI_COMM_WORLD, method_and_skin("grid"));
+    const std::string m = error_message(ErrorCode::invalid_argument, [&] {
+      if (world_rank() == 0)
+        build_on_device(engine, xyz, carried, 1.0f, Box::orthorhombic(8, 8, 8));
+      else
+        build(engine, xyz, 1.0f, Box::orthorhombic(8, 8, 8), Spread::strided, carried, 3);
+    });
+    EXPECT_TRUE(contains(m, "memory space")) << m;
+  }
+}
+
 // Only rank 0 prints the full report; the others print their failures, prefixed by their rank.
 class FailurePrinter : public ::testing::EmptyTestEventListener {
  public:
@@ -1312,3 +1516,4 @@ int main(int argc, char** argv) {
   MPI_Finalize();
   return any;
 }
+

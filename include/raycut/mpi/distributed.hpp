@@ -32,10 +32,16 @@
 
 namespace raycut::mpi {
 
+namespace detail {
+class DeviceResidence;
+}
+
 // Moves per-rank blocks of bytes between the ranks of a communicator: the payload of a
 // migration or a halo exchange. Sizes are agreed beforehand over MPI (the engine's control
-// plane), so a transport only moves data: the seam where an NCCL transport (device buffers,
-// ncclSend/ncclRecv in a group) plugs in. This slice packs on the host and needs space() host.
+// plane), so a transport only moves data. A host transport moves everything; a device one
+// (NCCL) moves the halo refreshes of a device-resident engine (positions given in device
+// memory), GPU to GPU, while exchanges (planned on the host, rare with a skin) and halo fields go
+// through host-staged MPI.
 class Transport {
  public:
   virtual ~Transport() = default;
@@ -54,6 +60,16 @@ class Transport {
 // with something to move (the neighbours of a domain), not a dense all-to-all. The
 // communicator is duplicated, so its messages never mix with the caller's.
 std::unique_ptr<Transport> make_host_transport(MPI_Comm comm);
+
+// NCCL between the ranks' current CUDA devices, one rank per GPU (select_local_device): device
+// buffers, ncclSend/ncclRecv pairs in one group on a stream of its own. Collective over `comm`.
+// Error(unsupported) when raycut was built without NCCL (CMake finds nccl.h and libnccl with
+// CUDA), Error(backend) when NCCL fails (two ranks on one GPU, say).
+std::unique_ptr<Transport> make_nccl_transport(MPI_Comm comm);
+
+// Makes the rank's node-local index (MPI_COMM_TYPE_SHARED) modulo the visible CUDA devices its
+// current device and returns it; -1, changing nothing, without a CUDA device. Collective.
+int select_local_device(MPI_Comm comm);
 
 // The Cartesian grid of domains over the global region, in domain coordinates
 // u_k = x . normal[k] (unit vectors, so u is in lengths and a halo of width h is h along every
@@ -117,12 +133,15 @@ struct DistributedOptions {
   // Domains per axis; 0 entries are chosen by MPI_Dims_create. The product must be the
   // communicator's size.
   std::array<int, 3> dims = {0, 0, 0};
-  // Payload transport; null: make_host_transport(comm).
+  // Payload transport of halo refreshes; null: make_host_transport(comm). A device transport
+  // (make_nccl_transport) serves a device-resident engine; host-resident ones stage through
+  // host-staged MPI whatever is given here.
   std::shared_ptr<Transport> transport;
   // Owned rows only: one engine over the owned particles (pairs among them) and one with the
   // owned particles near a face as query points over the halos (pairs with halos), summed.
-  // false, or a method without query points (grid-paper, OptiX): one engine over owned + halos,
-  // halo rows discarded. docs/distributed.md measures both.
+  // false, or a method without query points (grid-paper, OptiX), or a device-resident engine:
+  // one engine over owned + halos, halo rows discarded (on a GPU the second build costs more
+  // than the rows it saves). docs/distributed.md measures both.
   bool owned_rows_only = true;
   // A periodic axis with one domain: true, the local engines are periodic along it (no halo
   // crosses it, and it may be thinner than cutoff + skin); false, its images are sent as halos
@@ -181,9 +200,13 @@ class DistributedEngine {
   DistributedEngine& operator=(const DistributedEngine&) = delete;
 
   // Collective. Each rank gives any subset of the particles (all on rank 0 and none elsewhere
-  // is fine): host positions, their global indices (distinct over all ranks), and `width`
+  // is fine): positions, their global indices (host, distinct over all ranks), and `width`
   // floats per particle that travel with it on migration (velocities, say; carried() reads them
   // back). Then migrates every particle to its domain and builds the halos and the local engine.
+  // Positions in device memory make the engine device-resident (the method must work on the
+  // device, Engine::space(), else Error(unsupported)): carried floats and update()'s arrays are
+  // then device memory too, the owned positions, halos and the local engine stay on the GPU
+  // between exchanges, and run() leaves results there. Every rank must give the same space.
   // `box`: any box validate() accepts (open, orthorhombic or triclinic, periodic on any axes;
   // Decomposition says how domains follow it). Every domain must be at least cutoff + skin wide
   // (face width / dims) along each axis that halos cross (Decomposition::halo_axis: split in
@@ -195,9 +218,10 @@ class DistributedEngine {
              const float* carried = nullptr, std::size_t width = 0);
 
   // Collective. New positions of the owned particles in owned order (3 floats each, ids()
-  // order), and optionally their carried floats. Refreshes the halos in place when the skin
-  // allows, else exchanges (migration, new halos). Returns true after an exchange: the owned set
-  // and order may have changed (ids(), positions(), carried() say how).
+  // order), and optionally their carried floats, in space() memory. Refreshes the halos in place
+  // when the skin allows, else exchanges (migration, new halos). Returns true after an
+  // exchange: the owned set and order may have changed (ids(), owned_positions(),
+  // owned_carried() say how).
   bool update(const float* positions, const float* carried = nullptr);
   // Collective: an exchange now, whatever the skin.
   void exchange();
@@ -205,6 +229,10 @@ class DistributedEngine {
   // The kernel for every owned target; rows in ids() order. sph_force reads its neighbours'
   // fields: Error(unsupported) here, use the overload below.
   Results compute(Kernel kernel, const KernelOptions& options = {});
+  // The same, results left where the method keeps them (a device-resident engine: on the GPU,
+  // what an integrator there reads) and valid until the next call on this engine: rows
+  // 0 .. owned() - 1 in ids() order (rows past them, if any, are not the owned targets').
+  ResultsView run(Kernel kernel, const KernelOptions& options = {});
   // Collective for sph_force: the owned particles' fields, their halo copies sent by
   // halo_fields() (one exchange for all three), then sph_force over owned + halos, rows in ids()
   // order. options.sph is replaced by the local arrays. Error(invalid_argument) on every rank
@@ -228,11 +256,17 @@ class DistributedEngine {
   float cutoff() const { return cutoff_; }
   std::size_t owned() const { return ids_.size(); }
   std::size_t halos() const { return halo_ids_.size(); }
+  // Where the owned positions and carried floats live: the space of build()'s positions.
+  MemorySpace space() const { return device_ ? MemorySpace::device : MemorySpace::host; }
   // The owned particles: global indices, positions (wrapped into the cell at the last exchange;
-  // as given since), carried floats (width() per particle).
+  // as given since), carried floats (width() per particle). positions() and carried() are host
+  // copies: of a device-resident engine's as of the last exchange (owned_positions() and
+  // owned_carried() are current, in space() memory).
   const std::vector<std::uint64_t>& ids() const { return ids_; }
   const std::vector<float>& positions() const { return xyz_; }
   const std::vector<float>& carried() const { return carried_; }
+  PositionsView owned_positions() const;
+  const float* owned_carried() const;
   std::size_t width() const { return width_; }
   // The halo copies: global indices and image shifts (3 per halo; 0 along local axes).
   const std::vector<std::uint64_t>& halo_ids() const { return halo_ids_; }
@@ -247,6 +281,7 @@ class DistributedEngine {
  private:
   struct HaloPlan;
   void check_built(const char* call) const;
+  PositionsView local_positions(std::size_t count);
   void agree(const std::string& local_error, ErrorCode code);
   void balance();
   void migrate();
@@ -259,7 +294,10 @@ class DistributedEngine {
   MPI_Comm comm_;
   int rank_ = 0, size_ = 1;
   DistributedOptions options_;
-  std::shared_ptr<Transport> transport_;
+  // Refreshes of a device-resident engine through transport_ (the option's, or host_transport_);
+  // everything else through host_transport_.
+  std::shared_ptr<Transport> transport_, host_transport_;
+  std::unique_ptr<detail::DeviceResidence> device_;  // device-resident engines only
   Decomposition decomposition_;
   float cutoff_ = 0;
   double halo_width_ = 0;
@@ -273,6 +311,7 @@ class DistributedEngine {
   std::vector<std::uint64_t> halo_ids_;
   std::vector<std::int32_t> halo_shifts_;
   std::vector<float> local_xyz_;  // owned then halos: what the local engine is built over
+  Results summed_;                // run()'s results when two engines' rows are added
   std::unique_ptr<HaloPlan> plan_;
   // Owned rows only: engine_ over the owned particles, halo_engine_ with the owned particles
   // near a face (boundary_, owned indices ascending; their positions boundary_xyz_) as queries
