@@ -2,6 +2,7 @@
 #include <cuda_runtime.h>
 
 #include <algorithm>
+#include <utility>
 
 #include "cuda/device_buffer.cuh"
 #include "cuda/runtime.hpp"
@@ -34,6 +35,28 @@ __global__ void gather_images(const float* xyz, const std::uint32_t* index,
           v = __dadd_rn(v, __dmul_rn(static_cast<double>(s[row]), cell.rows[3 * row + c]));
       out[3 * k + c] = zero ? x[c] : __double2float_rn(v);
     }
+  }
+}
+
+// update()'s pass over the owned particles: the new positions into `out` (the other half of a
+// double buffer), the first non-finite coordinate (atomicMin over report[0], which starts at
+// all ones) and whether one moved more than the skin's half (report[1] set to 0, from all ones),
+// with the float arithmetic of the engine's own moved_beyond (runtime.cu).
+__global__ void take_positions(const float* xyz, const float* reference, std::size_t n,
+                               float limit_squared, float* out, unsigned long long* report) {
+  for (std::size_t i = blockIdx.x * std::size_t{blockDim.x} + threadIdx.x; i < n;
+       i += std::size_t{gridDim.x} * blockDim.x) {
+    float d2 = 0;
+    bool finite = true;
+    for (int a = 0; a < 3; ++a) {
+      const float x = xyz[3 * i + a];
+      finite = finite && isfinite(x);
+      const float d = x - reference[3 * i + a];
+      d2 += d * d;
+      out[3 * i + a] = x;
+    }
+    if (!finite) atomicMin(&report[0], static_cast<unsigned long long>(i));
+    if (!(d2 <= limit_squared)) report[1] = 0;  // racing writes of the same value
   }
 }
 
@@ -73,6 +96,7 @@ class CudaResidence final : public DeviceResidence {
     for (int row = 0; row < 3; ++row)
       for (int c = 0; c < 3; ++c) cell_.rows[3 * row + c] = cell[row][c];
     copy_in(local_, local_xyz.data(), local_xyz.size());
+    staged_.resize(local_xyz.size());
     reference_.resize(3 * owned);
     copy_on_device(reference_.data(), local_.data(), 3 * owned);
     copy_in(carried_, carried.data(), carried.size());
@@ -89,17 +113,21 @@ class CudaResidence final : public DeviceResidence {
       cuda::download(carried.data(), carried_.data(), carried.size() * sizeof(float));
   }
 
-  std::size_t take(const float* xyz, const float* carried) override {
-    // Checked where they are, so that a refused update leaves the engine's positions as they were.
-    const std::size_t bad = cuda::first_non_finite(xyz, owned_, nullptr);
-    if (bad < owned_) return bad;
-    copy_on_device(local_.data(), xyz, 3 * owned_);
+  Taken take(const float* xyz, const float* carried, float distance) override {
+    if (owned_ == 0) return {0, false};
+    RAYCUT_CUDA_CHECK(cudaMemsetAsync(report_.data(), 0xFF, 2 * sizeof(unsigned long long)));
+    take_positions<<<blocks_for(owned_), 256>>>(xyz, reference_.data(), owned_,
+                                                distance * distance, staged_.data(),
+                                                report_.data());
+    RAYCUT_CUDA_CHECK_LAUNCH();
+    unsigned long long report[2];
+    cuda::read_back(report, report_.data(), sizeof report, nullptr);
+    if (report[0] < owned_) return {static_cast<std::size_t>(report[0]), true};
+    // The halos behind the owned positions are all rewritten by the refresh or the exchange
+    // that follows, so the staged half becomes the local array as it is.
+    std::swap(local_, staged_);
     if (carried) copy_on_device(carried_.data(), carried, width_ * owned_);
-    return owned_;
-  }
-
-  bool moved_beyond(float distance) const override {
-    return cuda::moved_beyond(local_.data(), reference_.data(), owned_, distance, nullptr);
+    return {owned_, report[1] == 0};
   }
 
   const float* gather() override {
@@ -134,7 +162,9 @@ class CudaResidence final : public DeviceResidence {
           cudaMemcpy(to, from, count * sizeof(float), cudaMemcpyDeviceToDevice));
   }
 
-  cuda::DeviceBuffer<float> local_, reference_, carried_, send_;
+  // local_ is what the local engine was built over; update() writes staged_ and swaps them.
+  cuda::DeviceBuffer<float> local_, staged_, reference_, carried_, send_;
+  cuda::DeviceBuffer<unsigned long long> report_{2};
   cuda::DeviceBuffer<std::uint32_t> index_;
   cuda::DeviceBuffer<std::int32_t> shift_;
   std::size_t owned_ = 0, halos_ = 0, records_ = 0, width_ = 0;

@@ -34,11 +34,15 @@ class DeviceResidence {
   // Before an exchange: the owned positions and carried floats to the host.
   virtual void download(std::vector<float>& xyz, std::vector<float>& carried) const = 0;
   // update(): the new owned positions (device, 3 per owned particle) and carried floats
-  // (device, or null: kept) copied in. Returns the index of the first owned particle with a
-  // non-finite coordinate (and copies nothing), or owned() when none.
-  virtual std::size_t take(const float* xyz, const float* carried) = 0;
-  // Whether an owned particle is more than `distance` from its place at the last upload().
-  virtual bool moved_beyond(float distance) const = 0;
+  // (device, or null: kept), in one pass that also finds the first non-finite coordinate and
+  // whether a particle is more than `distance` from its place at the last upload(). With a
+  // non-finite coordinate nothing is taken (the engine keeps its positions).
+  struct Taken {
+    std::size_t first_bad;  // index of the first owned particle with a non-finite coordinate,
+                            // or owned() when none
+    bool moved;             // some particle moved more than `distance`
+  };
+  virtual Taken take(const float* xyz, const float* carried, float distance) = 0;
   // The plan's halo records at the owned particles' current positions (3 floats each, x + S .
   // cell in double rounded to float, as the host makes its halo copies), in a device buffer.
   virtual const float* gather() = 0;

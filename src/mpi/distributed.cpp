@@ -415,15 +415,14 @@ bool DistributedEngine::update(const float* positions, const float* carried) {
   std::string error;
   if (n > 0 && positions == nullptr) error = "distributed update: null positions";
   const double half_skin = 0.5 * static_cast<double>(options_.skin);
-  if (device_) {  // the same steps, on the GPU: a copy, a finite check, the skin's reduction
+  if (device_) {  // the same steps on the GPU, in one pass: copy, finite check, skin test
     int moved = 0;
     if (error.empty()) {
-      const std::size_t bad = device_->take(positions, carried);
-      if (bad < n)
-        error = "distributed update: particle " + std::to_string(ids_[bad]) +
+      const auto taken = device_->take(positions, carried, static_cast<float>(half_skin));
+      if (taken.first_bad < n)
+        error = "distributed update: particle " + std::to_string(ids_[taken.first_bad]) +
                 " has a non-finite coordinate";
-      else
-        moved = options_.skin == 0 || device_->moved_beyond(static_cast<float>(half_skin));
+      moved = options_.skin == 0 || taken.moved;
     }
     agree(error, ErrorCode::invalid_input);
     int any = 0;
