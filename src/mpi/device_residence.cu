@@ -68,8 +68,7 @@ template <class T>
 void copy_in(cuda::DeviceBuffer<T>& buffer, const T* host, std::size_t count) {
   buffer.resize(count);
   if (count > 0)
-    RAYCUT_CUDA_CHECK(
-        cudaMemcpy(buffer.data(), host, count * sizeof(T), cudaMemcpyHostToDevice));
+    RAYCUT_CUDA_CHECK(cudaMemcpy(buffer.data(), host, count * sizeof(T), cudaMemcpyHostToDevice));
 }
 
 class CudaResidence final : public DeviceResidence {
@@ -116,9 +115,8 @@ class CudaResidence final : public DeviceResidence {
   Taken take(const float* xyz, const float* carried, float distance) override {
     if (owned_ == 0) return {0, false};
     RAYCUT_CUDA_CHECK(cudaMemsetAsync(report_.data(), 0xFF, 2 * sizeof(unsigned long long)));
-    take_positions<<<blocks_for(owned_), 256>>>(xyz, reference_.data(), owned_,
-                                                distance * distance, staged_.data(),
-                                                report_.data());
+    take_positions<<<blocks_for(owned_), 256>>>(xyz, reference_.data(), owned_, distance * distance,
+                                                staged_.data(), report_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
     unsigned long long report[2];
     cuda::read_back(report, report_.data(), sizeof report, nullptr);
@@ -158,8 +156,7 @@ class CudaResidence final : public DeviceResidence {
   // Reallocates when growing (DeviceBuffer); the legacy stream orders every copy.
   static void copy_on_device(float* to, const float* from, std::size_t count) {
     if (count > 0)
-      RAYCUT_CUDA_CHECK(
-          cudaMemcpy(to, from, count * sizeof(float), cudaMemcpyDeviceToDevice));
+      RAYCUT_CUDA_CHECK(cudaMemcpy(to, from, count * sizeof(float), cudaMemcpyDeviceToDevice));
   }
 
   // local_ is what the local engine was built over; update() writes staged_ and swaps them.

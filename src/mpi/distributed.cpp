@@ -173,8 +173,10 @@ int Decomposition::slab(int axis, double u) const {
 }
 
 int Decomposition::owner(const float* xyz) const {
-  return (slab(0, coordinate(0, xyz)) * dims[1] + slab(1, coordinate(1, xyz))) * dims[2] +
-         slab(2, coordinate(2, xyz));
+  int domain = 0;
+  for (int a = 0; a < 3; ++a)  // an axis of one domain needs no coordinate
+    domain = domain * dims[a] + (dims[a] > 1 ? slab(a, coordinate(a, xyz)) : 0);
+  return domain;
 }
 
 std::array<int, 3> Decomposition::coords(int domain) const {
@@ -294,10 +296,11 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
       throw Error(ErrorCode::invalid_argument, "distributed build: null carried values");
     if (on_device) {
       if (engine_->space() != MemorySpace::device)
-        throw Error(ErrorCode::unsupported, "distributed build: positions in device memory, but "
-                                            "method '" + engine_->method() +
-                                                "' works on the host; give host positions");
-      // Planned on the host like any exchange (from host copies); device_ keeps them after it.
+        throw Error(ErrorCode::unsupported,
+                    "distributed build: positions in device memory, but "
+                    "method '" +
+                        engine_->method() + "' works on the host; give host positions");
+        // Planned on the host like any exchange (from host copies); device_ keeps them after it.
 #if defined(RAYCUT_HAVE_CUDA)
       device_ = detail::make_device_residence();
 #endif
@@ -588,17 +591,16 @@ void DistributedEngine::migrate() {
   std::vector<std::byte*> cursor(static_cast<std::size_t>(size_));
   for (int r = 0; r < size_; ++r) cursor[r] = send.data() + send_offsets[r];
 
-  std::vector<std::uint64_t> ids;
-  std::vector<float> xyz, carried;
-  ids.reserve(staying + received);
-  xyz.reserve(3 * (staying + received));
-  carried.reserve(width_ * (staying + received));
+  // The staying particles compacted in place, in their order; the arrivals after them.
+  std::size_t kept = 0;
   for (std::size_t i = 0; i < n; ++i) {
     if (dest[i] == rank_) {
-      ids.push_back(ids_[i]);
-      xyz.insert(xyz.end(), &xyz_[3 * i], &xyz_[3 * i] + 3);
-      carried.insert(carried.end(), carried_.begin() + width_ * i,
-                     carried_.begin() + width_ * (i + 1));
+      if (kept != i) {
+        ids_[kept] = ids_[i];
+        std::copy_n(&xyz_[3 * i], 3, &xyz_[3 * kept]);
+        std::copy_n(carried_.begin() + width_ * i, width_, carried_.begin() + width_ * kept);
+      }
+      ++kept;
       continue;
     }
     std::byte*& at = cursor[static_cast<std::size_t>(dest[i])];
@@ -607,22 +609,16 @@ void DistributedEngine::migrate() {
     put(at, carried_.data() + width_ * i, width_);
   }
   host_transport_->exchange(send.data(), scaled(send_counts, record).data(), send_offsets.data(),
-                       recv.data(), scaled(recv_counts, record).data(), recv_offsets.data());
+                            recv.data(), scaled(recv_counts, record).data(), recv_offsets.data());
+  ids_.resize(staying + received);
+  xyz_.resize(3 * (staying + received));
+  carried_.resize(width_ * (staying + received));
   const std::byte* at = recv.data();
-  for (std::uint64_t k = 0; k < received; ++k) {
-    std::uint64_t id;
-    float p[3];
-    take(at, &id, 1);
-    take(at, p, 3);
-    ids.push_back(id);
-    xyz.insert(xyz.end(), p, p + 3);
-    const std::size_t base = carried.size();
-    carried.resize(base + width_);
-    take(at, carried.data() + base, width_);
+  for (std::uint64_t k = staying; k < staying + received; ++k) {
+    take(at, &ids_[k], 1);
+    take(at, &xyz_[3 * k], 3);
+    take(at, carried_.data() + width_ * k, width_);
   }
-  ids_ = std::move(ids);
-  xyz_ = std::move(xyz);
-  carried_ = std::move(carried);
   stats_.migrated_out = sent;
   stats_.bytes_sent += sent * record;
 }
@@ -659,8 +655,17 @@ void DistributedEngine::build_halos() {
   std::vector<std::vector<std::uint32_t>> index(static_cast<std::size_t>(size_));
   std::vector<std::vector<std::int32_t>> shift(static_cast<std::size_t>(size_));
   std::vector<Candidate> axis[3];
-  for (std::size_t i = 0; i < n; ++i) {
+  // An axis that no halo crosses has one candidate, the particle's own slab unshifted: with no
+  // such axis at all (one rank, every periodic axis local) nothing is sent.
+  bool crossed[3], any_crossed = false;
+  for (int a = 0; a < 3; ++a) {
+    crossed[a] = dec.halo_axis(a);
+    any_crossed = any_crossed || crossed[a];
+    if (!crossed[a]) axis[a] = {{dec.coords(rank_)[a], 0, 0.0}};
+  }
+  for (std::size_t i = 0; any_crossed && i < n; ++i) {
     for (int a = 0; a < 3; ++a) {
+      if (!crossed[a]) continue;
       axis[a].clear();
       const int d = dec.dims[a];
       const double u = dec.coordinate(a, &xyz_[3 * i]);
@@ -718,8 +723,9 @@ void DistributedEngine::build_halos() {
     put(at, p, 3);
     put(at, s, 3);
   }
-  host_transport_->exchange(send.data(), scaled(plan.send_counts, record).data(), send_offsets.data(),
-                       recv.data(), scaled(plan.recv_counts, record).data(), recv_offsets.data());
+  host_transport_->exchange(send.data(), scaled(plan.send_counts, record).data(),
+                            send_offsets.data(), recv.data(),
+                            scaled(plan.recv_counts, record).data(), recv_offsets.data());
 
   halo_ids_.resize(received);
   halo_shifts_.resize(3 * received);
@@ -756,8 +762,8 @@ void DistributedEngine::refresh_halos() {
                            recv_counts.data(), recv_offsets.data());
     } else {
       device_->download_gathered(send);
-      host_transport_->exchange(reinterpret_cast<const std::byte*>(send.data()),
-                                send_counts.data(), send_offsets.data(),
+      host_transport_->exchange(reinterpret_cast<const std::byte*>(send.data()), send_counts.data(),
+                                send_offsets.data(),
                                 reinterpret_cast<std::byte*>(local_xyz_.data() + 3 * n),
                                 recv_counts.data(), recv_offsets.data());
       device_->upload_halos(local_xyz_.data() + 3 * n);

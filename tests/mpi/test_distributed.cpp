@@ -1281,7 +1281,6 @@ TEST(Distributed, Errors) {
   }
 }
 
-
 // ---- the device-resident path
 // ------------------------------------------------------------------------------------
 //
@@ -1361,7 +1360,8 @@ void expect_twins(const Box& box, float skin, int steps, DistributedOptions devi
     }
     EXPECT_EQ(device.owned_positions().space, MemorySpace::device);
 
-    const raycut::Results h = host.compute(Kernel::lj_forces), d = device.compute(Kernel::lj_forces);
+    const raycut::Results h = host.compute(Kernel::lj_forces),
+                          d = device.compute(Kernel::lj_forces);
     EXPECT_EQ(device.compute(Kernel::count).count, host.compute(Kernel::count).count) << what;
     EXPECT_EQ(d.energy, h.energy) << what;  // same floats, same method: the same sums
     EXPECT_EQ(d.force, h.force) << what;
@@ -1468,8 +1468,7 @@ TEST(DistributedDevice, Errors) {
     MPI_Allreduce(MPI_IN_PLACE, &named, 1, MPI_UINT64_T, MPI_MAX, MPI_COMM_WORLD);
     const std::string m =
         error_message(ErrorCode::invalid_input, [&] { engine.update(d_bad.data()); });
-    EXPECT_TRUE(contains(m, "particle " + std::to_string(named)) && contains(m, "non-finite"))
-        << m;
+    EXPECT_TRUE(contains(m, "particle " + std::to_string(named)) && contains(m, "non-finite")) << m;
     // Refused before any copy: the engine still holds its positions and steps on.
     const raycut::DeviceArray d_good(engine.positions());
     EXPECT_FALSE(engine.update(d_good.data()));
@@ -1518,4 +1517,3 @@ int main(int argc, char** argv) {
   MPI_Finalize();
   return any;
 }
-
