@@ -13,6 +13,8 @@
 #include <type_traits>
 #include <vector>
 
+#include <omp.h>
+
 #include "mpi/device_residence.hpp"
 #include "mpi/mpi_check.hpp"
 #include "raycut/pairs.hpp"
@@ -129,6 +131,25 @@ float wrap_coordinate(float v, double length) {
   if (w >= length) w -= length;
   if (w < 0) w += length;
   return static_cast<float>(w);
+}
+
+// A position wrapped into the cell along the periodic axes.
+void wrap_into_cell(float* x, const Decomposition& dec) {
+  if (dec.aligned) {
+    for (int a = 0; a < 3; ++a)
+      if (dec.periodic[a]) x[a] = wrap_coordinate(x[a], dec.length[a]);
+    return;
+  }
+  // Through the fractional coordinates f_k = u_k / w_k, as raycut::wrap: x - floor(f) . cell.
+  double w[3] = {x[0], x[1], x[2]};
+  for (int k = 0; k < 3; ++k) {
+    if (!dec.periodic[k]) continue;
+    const double f = dec.coordinate(k, x) / dec.length[k];
+    double s = std::floor(f);
+    if (f - s >= 1) s += 1;
+    for (int c = 0; c < 3; ++c) w[c] -= s * dec.cell[k][c];
+  }
+  for (int c = 0; c < 3; ++c) x[c] = static_cast<float>(w[c]);
 }
 
 // Halo candidates a little beyond the halo width: extra halos are harmless (they are sources
@@ -472,25 +493,9 @@ void DistributedEngine::exchange() {
   check_built("exchange");
   const auto start = Clock::now();
   if (device_) device_->download(xyz_, carried_);  // planned on the host
-  const Decomposition& dec = decomposition_;
-  for (std::size_t i = 0; i < ids_.size(); ++i) {
-    float* x = &xyz_[3 * i];
-    if (dec.aligned) {
-      for (int a = 0; a < 3; ++a)
-        if (dec.periodic[a]) x[a] = wrap_coordinate(x[a], dec.length[a]);
-      continue;
-    }
-    // Through the fractional coordinates f_k = u_k / w_k, as raycut::wrap: x - floor(f) . cell.
-    double w[3] = {x[0], x[1], x[2]};
-    for (int k = 0; k < 3; ++k) {
-      if (!dec.periodic[k]) continue;
-      const double f = dec.coordinate(k, x) / dec.length[k];
-      double s = std::floor(f);
-      if (f - s >= 1) s += 1;
-      for (int c = 0; c < 3; ++c) w[c] -= s * dec.cell[k][c];
-    }
-    for (int c = 0; c < 3; ++c) x[c] = static_cast<float>(w[c]);
-  }
+  const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(ids_.size());
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t i = 0; i < n; ++i) wrap_into_cell(&xyz_[3 * i], decomposition_);
   stats_.bytes_sent = 0;
   // Every rank counts the same exchanges, so all move the cuts together, before the migration
   // that takes the particles to their new owners.
@@ -501,7 +506,8 @@ void DistributedEngine::exchange() {
   migrate();
   build_halos();
   if (device_)
-    device_->upload(local_xyz_, ids_.size(), carried_, plan_->index, plan_->shift, dec.cell);
+    device_->upload(local_xyz_, ids_.size(), carried_, plan_->index, plan_->shift,
+                    decomposition_.cell);
   else
     xyz_at_exchange_ = xyz_;
   ++stats_.exchanges;
@@ -573,11 +579,11 @@ void DistributedEngine::migrate() {
   const std::size_t n = ids_.size();
   const std::size_t record = sizeof(std::uint64_t) + (3 + width_) * sizeof(float);
   std::vector<int> dest(n);
-  std::vector<std::uint64_t> send_counts(static_cast<std::size_t>(size_), 0);
-  for (std::size_t i = 0; i < n; ++i) {
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i)
     dest[i] = decomposition_.owner(&xyz_[3 * i]);
-    ++send_counts[static_cast<std::size_t>(dest[i])];
-  }
+  std::vector<std::uint64_t> send_counts(static_cast<std::size_t>(size_), 0);
+  for (int d : dest) ++send_counts[static_cast<std::size_t>(d)];
   const std::uint64_t staying = send_counts[static_cast<std::size_t>(rank_)];
   send_counts[static_cast<std::size_t>(rank_)] = 0;  // kept in place, not copied
   std::vector<std::uint64_t> recv_counts;
@@ -652,59 +658,75 @@ void DistributedEngine::build_halos() {
     double gap2;
   };
   HaloPlan& plan = *plan_;
-  std::vector<std::vector<std::uint32_t>> index(static_cast<std::size_t>(size_));
-  std::vector<std::vector<std::int32_t>> shift(static_cast<std::size_t>(size_));
-  std::vector<Candidate> axis[3];
   // An axis that no halo crosses has one candidate, the particle's own slab unshifted: with no
   // such axis at all (one rank, every periodic axis local) nothing is sent.
   bool crossed[3], any_crossed = false;
   for (int a = 0; a < 3; ++a) {
     crossed[a] = dec.halo_axis(a);
     any_crossed = any_crossed || crossed[a];
-    if (!crossed[a]) axis[a] = {{dec.coords(rank_)[a], 0, 0.0}};
   }
-  for (std::size_t i = 0; any_crossed && i < n; ++i) {
-    for (int a = 0; a < 3; ++a) {
-      if (!crossed[a]) continue;
-      axis[a].clear();
-      const int d = dec.dims[a];
-      const double u = dec.coordinate(a, &xyz_[3 * i]);
-      const bool images = dec.images(a);
-      for (std::int32_t s = images ? -1 : 0; s <= (images ? 1 : 0); ++s) {
-        // A shift by cell row a moves u_a by one face width; the other rows leave it.
-        const double y = u + s * dec.length[a];
-        const int first = dec.slab(a, y - reach), last = dec.slab(a, y + reach);
-        for (int k = first; k <= last; ++k) {
-          // An open axis's end slabs extend to infinity; a local axis's one slab is all of it.
-          const bool open_low = !images && k == 0;
-          const bool open_high = !images && k == d - 1;
-          const double lo = dec.cuts[a][k], hi = dec.cuts[a][k + 1];
-          double gap = 0;
-          if (!open_low && y < lo) gap = lo - y;
-          if (!open_high && y > hi) gap = y - hi;
-          if (gap < reach) axis[a].push_back({k, s, gap * gap});
+  // Per thread, per destination rank: owned indices and shifts. Threads take contiguous blocks
+  // of particles in order (a static schedule), so appending their lists in thread order gives
+  // the serial order: the same plan whatever the thread count.
+  struct Routes {
+    std::vector<std::vector<std::uint32_t>> index;
+    std::vector<std::vector<std::int32_t>> shift;
+  };
+  std::vector<Routes> routes(static_cast<std::size_t>(omp_get_max_threads()));
+#pragma omp parallel if (any_crossed)
+  {
+    Routes& mine = routes[static_cast<std::size_t>(omp_get_thread_num())];
+    mine.index.resize(static_cast<std::size_t>(size_));
+    mine.shift.resize(static_cast<std::size_t>(size_));
+    std::vector<Candidate> axis[3];
+    for (int a = 0; a < 3; ++a)
+      if (!crossed[a]) axis[a] = {{dec.coords(rank_)[a], 0, 0.0}};
+#pragma omp for schedule(static)
+    for (std::ptrdiff_t i = 0; i < (any_crossed ? static_cast<std::ptrdiff_t>(n) : 0); ++i) {
+      for (int a = 0; a < 3; ++a) {
+        if (!crossed[a]) continue;
+        axis[a].clear();
+        const int d = dec.dims[a];
+        const double u = dec.coordinate(a, &xyz_[3 * i]);
+        const bool images = dec.images(a);
+        for (std::int32_t s = images ? -1 : 0; s <= (images ? 1 : 0); ++s) {
+          // A shift by cell row a moves u_a by one face width; the other rows leave it.
+          const double y = u + s * dec.length[a];
+          const int first = dec.slab(a, y - reach), last = dec.slab(a, y + reach);
+          for (int k = first; k <= last; ++k) {
+            // An open axis's end slabs extend to infinity; a local axis's one slab is all of it.
+            const bool open_low = !images && k == 0;
+            const bool open_high = !images && k == d - 1;
+            const double lo = dec.cuts[a][k], hi = dec.cuts[a][k + 1];
+            double gap = 0;
+            if (!open_low && y < lo) gap = lo - y;
+            if (!open_high && y > hi) gap = y - hi;
+            if (gap < reach) axis[a].push_back({k, s, gap * gap});
+          }
         }
       }
+      for (const Candidate& cx : axis[0])
+        for (const Candidate& cy : axis[1])
+          for (const Candidate& cz : axis[2]) {
+            if (dec.orthogonal && cx.gap2 + cy.gap2 + cz.gap2 >= reach2) continue;
+            const int q = (cx.slab * dec.dims[1] + cy.slab) * dec.dims[2] + cz.slab;
+            if (q == rank_ && cx.shift == 0 && cy.shift == 0 && cz.shift == 0) continue;
+            mine.index[q].push_back(static_cast<std::uint32_t>(i));
+            mine.shift[q].insert(mine.shift[q].end(), {cx.shift, cy.shift, cz.shift});
+          }
     }
-    for (const Candidate& cx : axis[0])
-      for (const Candidate& cy : axis[1])
-        for (const Candidate& cz : axis[2]) {
-          if (dec.orthogonal && cx.gap2 + cy.gap2 + cz.gap2 >= reach2) continue;
-          const int q = (cx.slab * dec.dims[1] + cy.slab) * dec.dims[2] + cz.slab;
-          if (q == rank_ && cx.shift == 0 && cy.shift == 0 && cz.shift == 0) continue;
-          index[q].push_back(static_cast<std::uint32_t>(i));
-          shift[q].insert(shift[q].end(), {cx.shift, cy.shift, cz.shift});
-        }
   }
 
   plan.send_counts.assign(static_cast<std::size_t>(size_), 0);
   plan.index.clear();
   plan.shift.clear();
-  for (int r = 0; r < size_; ++r) {
-    plan.send_counts[r] = index[r].size();
-    plan.index.insert(plan.index.end(), index[r].begin(), index[r].end());
-    plan.shift.insert(plan.shift.end(), shift[r].begin(), shift[r].end());
-  }
+  for (int r = 0; r < size_; ++r)
+    for (Routes& mine : routes) {
+      if (mine.index.empty()) continue;  // a thread the team did not have
+      plan.send_counts[r] += mine.index[r].size();
+      plan.index.insert(plan.index.end(), mine.index[r].begin(), mine.index[r].end());
+      plan.shift.insert(plan.shift.end(), mine.shift[r].begin(), mine.shift[r].end());
+    }
   exchange_counts(plan.send_counts, plan.recv_counts);
 
   const std::size_t record = sizeof(std::uint64_t) + 3 * sizeof(float) + 3 * sizeof(std::int32_t);
