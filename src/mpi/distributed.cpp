@@ -162,6 +162,34 @@ double reach_of(const Decomposition& dec, double halo_width) {
   return halo_width + 1e-5 * scale;
 }
 
+// The faces of a domain that halos cross (Decomposition::halo_axis: not a local axis's, nor the
+// outer face of an open end slab), else -inf / +inf: a particle of the domain farther than the
+// halo reach from all of them sends no halo and meets none.
+struct Faces {
+  double low[3], high[3];
+  Faces(const Decomposition& dec, int domain) {
+    const auto c = dec.coords(domain);
+    for (int a = 0; a < 3; ++a) {
+      const bool crossed = dec.halo_axis(a);
+      low[a] = crossed && (dec.images(a) || c[a] > 0) ? dec.cuts[a][c[a]]
+                                                      : -std::numeric_limits<double>::infinity();
+      high[a] = crossed && (dec.images(a) || c[a] < dec.dims[a] - 1)
+                    ? dec.cuts[a][c[a] + 1]
+                    : std::numeric_limits<double>::infinity();
+    }
+  }
+  bool near(const Decomposition& dec, const float* xyz, double reach) const {
+    for (int a = 0; a < 3; ++a) {
+      if (low[a] == -std::numeric_limits<double>::infinity() &&
+          high[a] == std::numeric_limits<double>::infinity())
+        continue;  // no coordinate needed
+      const double u = dec.coordinate(a, xyz);
+      if (u - low[a] < reach || high[a] - u < reach) return true;
+    }
+    return false;
+  }
+};
+
 // sph_force over the query engine (owned particles near a face over the halos): query b is
 // owned particle boundary[b] and source j is halo j, local index owned + j, of the fields in the
 // local order (halo_fields()). The single-rank kernel indexes targets and sources in one array,
@@ -673,6 +701,7 @@ void DistributedEngine::build_halos() {
     std::vector<std::vector<std::int32_t>> shift;
   };
   std::vector<Routes> routes(static_cast<std::size_t>(omp_get_max_threads()));
+  const Faces faces(dec, rank_);
 #pragma omp parallel if (any_crossed)
   {
     Routes& mine = routes[static_cast<std::size_t>(omp_get_thread_num())];
@@ -683,6 +712,9 @@ void DistributedEngine::build_halos() {
       if (!crossed[a]) axis[a] = {{dec.coords(rank_)[a], 0, 0.0}};
 #pragma omp for schedule(static)
     for (std::ptrdiff_t i = 0; i < (any_crossed ? static_cast<std::ptrdiff_t>(n) : 0); ++i) {
+      // Farther than the reach from every crossed face of its domain (it is owned: inside it),
+      // a particle has no candidate along any axis but its own slab, unshifted.
+      if (!faces.near(dec, &xyz_[3 * i], reach)) continue;
       for (int a = 0; a < 3; ++a) {
         if (!crossed[a]) continue;
         axis[a].clear();
@@ -823,26 +855,12 @@ void DistributedEngine::refresh_halos() {
 // cheaper than all rows.
 void DistributedEngine::select_boundary() {
   const Decomposition& dec = decomposition_;
-  const auto c = dec.coords(rank_);
+  const Faces faces(dec, rank_);
   const double reach = reach_of(dec, halo_width_);  // as build_halos(): a hair wide is harmless
-  double low[3], high[3];  // the faces with something across, else -inf / +inf
-  for (int a = 0; a < 3; ++a) {
-    const bool split = dec.halo_axis(a);
-    low[a] = split && (dec.images(a) || c[a] > 0) ? dec.cuts[a][c[a]]
-                                                  : -std::numeric_limits<double>::infinity();
-    high[a] = split && (dec.images(a) || c[a] < dec.dims[a] - 1)
-                  ? dec.cuts[a][c[a] + 1]
-                  : std::numeric_limits<double>::infinity();
-  }
   boundary_.clear();
   boundary_xyz_.clear();
   for (std::size_t i = 0; i < ids_.size(); ++i) {
-    bool near = false;
-    for (int a = 0; a < 3; ++a) {
-      const double u = dec.coordinate(a, &xyz_[3 * i]);
-      near = near || u - low[a] < reach || high[a] - u < reach;
-    }
-    if (!near) continue;
+    if (!faces.near(dec, &xyz_[3 * i], reach)) continue;
     boundary_.push_back(static_cast<std::uint32_t>(i));
     boundary_xyz_.insert(boundary_xyz_.end(), &xyz_[3 * i], &xyz_[3 * i] + 3);
   }
