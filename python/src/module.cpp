@@ -297,69 +297,71 @@ std::shared_ptr<raycut::NeighbourListBuffer> fill_list(raycut::Engine& engine, b
   return list;
 }
 
+// A list's arrays where they are (the list buffer's memory, or a host copy of it with
+// `to_host`), with what keeps them alive; the CSR and COO calls below wrap them alike.
+struct ListArrays {
+  std::shared_ptr<const void> owner;
+  MemorySpace space;
+  std::size_t targets;
+  std::uint64_t pairs;
+  const std::uint64_t* offsets;
+  const std::uint32_t* indices;
+  const std::int64_t *rows, *columns;
+  const float *distances, *vectors;
+  const std::int32_t* shifts;
+  // None unless asked, else the array (shape given) owned by `owner`.
+  template <class T>
+  nb::object optional(bool asked, const T* data, std::vector<std::size_t> shape) const {
+    if (!asked) return nb::none();
+    return wrap(data, std::move(shape), dtype_of<T>(), owner, space);
+  }
+};
+
+ListArrays arrays_of(std::shared_ptr<raycut::NeighbourListBuffer> list, bool to_host) {
+  if (to_host && list->space() == MemorySpace::device) {
+    auto host = std::make_shared<raycut::NeighbourList>(list->to_host());
+    const auto data = [](const auto& v) { return v.empty() ? nullptr : v.data(); };
+    return {host,
+            MemorySpace::host,
+            host->offsets.size() - 1,
+            host->offsets.back(),
+            host->offsets.data(),
+            data(host->indices),
+            data(host->rows),
+            data(host->columns),
+            data(host->distances),
+            data(host->vectors),
+            data(host->shifts)};
+  }
+  const auto* l = list.get();
+  return {list,      l->space(),   l->size(),      l->pairs(),   l->offsets(), l->indices(),
+          l->rows(), l->columns(), l->distances(), l->vectors(), l->shifts()};
+}
+
 // CSR: (offsets int64 [N+1], indices int32 [P], distances [P] or None, vectors [P, 3] or None,
 // shifts int32 [P, 3] or None).
 nb::tuple neighbours(raycut::Engine& engine, bool half, bool distances, bool vectors, bool to_host,
                      bool shifts) {
-  auto list = fill_list(engine, half, distances, vectors, shifts);
-  const std::size_t n = list->size();
-  const std::size_t pairs = list->pairs();
-  if (to_host && list->space() == MemorySpace::device) {
-    auto host = std::make_shared<raycut::NeighbourList>(list->to_host());
-    list.reset();
-    auto opt = [&](bool asked, const auto& v, std::vector<std::size_t> shape) -> nb::object {
-      using T = typename std::decay_t<decltype(v)>::value_type;
-      if (!asked) return nb::none();
-      return wrap(v.data(), std::move(shape), dtype_of<T>(), host, MemorySpace::host);
-    };
-    return nb::make_tuple(
-        wrap(host->offsets.data(), {n + 1}, dtype_of<std::int64_t>(), host, MemorySpace::host),
-        wrap(host->indices.data(), {pairs}, index_dtype(n), host, MemorySpace::host),
-        opt(distances, host->distances, {pairs}), opt(vectors, host->vectors, {pairs, 3}),
-        opt(shifts, host->shifts, {pairs, 3}));
-  }
-  const MemorySpace space = list->space();
-  auto opt = [&](bool asked, const auto* data, std::vector<std::size_t> shape) -> nb::object {
-    using T = std::remove_cv_t<std::remove_pointer_t<decltype(data)>>;
-    if (!asked) return nb::none();
-    return wrap(data, std::move(shape), dtype_of<T>(), list, space);
-  };
-  return nb::make_tuple(wrap(list->offsets(), {n + 1}, dtype_of<std::int64_t>(), list, space),
-                        wrap(list->indices(), {pairs}, index_dtype(n), list, space),
-                        opt(distances, list->distances(), {pairs}),
-                        opt(vectors, list->vectors(), {pairs, 3}),
-                        opt(shifts, list->shifts(), {pairs, 3}));
+  const ListArrays a = arrays_of(fill_list(engine, half, distances, vectors, shifts), to_host);
+  const std::size_t n = a.targets, pairs = a.pairs;
+  return nb::make_tuple(wrap(a.offsets, {n + 1}, dtype_of<std::int64_t>(), a.owner, a.space),
+                        wrap(a.indices, {pairs}, index_dtype(n), a.owner, a.space),
+                        a.optional(distances, a.distances, {pairs}),
+                        a.optional(vectors, a.vectors, {pairs, 3}),
+                        a.optional(shifts, a.shifts, {pairs, 3}));
 }
 
 // COO pairs (i int64 [P], j int64 [P], d [P] or None, D [P, 3] or None, S int32 [P, 3] or
 // None): ASE's "ijdDS", written as COO by the list pass itself (ListOptions::coo).
 nb::tuple pairs(raycut::Engine& engine, bool half, bool distances, bool vectors, bool to_host,
                 bool shifts) {
-  auto list = fill_list(engine, half, distances, vectors, shifts, /*coo=*/true);
-  const std::size_t count = list->pairs();
-  if (to_host && list->space() == MemorySpace::device) {
-    auto host = std::make_shared<raycut::NeighbourList>(list->to_host());
-    list.reset();
-    auto opt = [&](bool asked, const auto& v, std::vector<std::size_t> shape) -> nb::object {
-      using T = typename std::decay_t<decltype(v)>::value_type;
-      if (!asked) return nb::none();
-      return wrap(v.data(), std::move(shape), dtype_of<T>(), host, MemorySpace::host);
-    };
-    return nb::make_tuple(opt(true, host->rows, {count}), opt(true, host->columns, {count}),
-                          opt(distances, host->distances, {count}),
-                          opt(vectors, host->vectors, {count, 3}),
-                          opt(shifts, host->shifts, {count, 3}));
-  }
-  const MemorySpace space = list->space();
-  auto opt = [&](bool asked, const auto* data, std::vector<std::size_t> shape) -> nb::object {
-    using T = std::remove_cv_t<std::remove_pointer_t<decltype(data)>>;
-    if (!asked) return nb::none();
-    return wrap(data, std::move(shape), dtype_of<T>(), list, space);
-  };
-  return nb::make_tuple(opt(true, list->rows(), {count}), opt(true, list->columns(), {count}),
-                        opt(distances, list->distances(), {count}),
-                        opt(vectors, list->vectors(), {count, 3}),
-                        opt(shifts, list->shifts(), {count, 3}));
+  const ListArrays a =
+      arrays_of(fill_list(engine, half, distances, vectors, shifts, /*coo=*/true), to_host);
+  const std::size_t count = a.pairs;
+  return nb::make_tuple(a.optional(true, a.rows, {count}), a.optional(true, a.columns, {count}),
+                        a.optional(distances, a.distances, {count}),
+                        a.optional(vectors, a.vectors, {count, 3}),
+                        a.optional(shifts, a.shifts, {count, 3}));
 }
 
 // Padded [N, K] (int32; N marks an empty slot), counts [N] (int32), report, and with `shifts`
