@@ -577,6 +577,33 @@ TEST(Distributed, StepLoopEveryLocalRow) {
   step_loop(Box::orthorhombic(12, 12, 12), 0.4f, 5, options);
 }
 
+TEST(Distributed, RunLeavesWhatComputeReturns) {
+  // run()'s view: the owned rows first, as compute() returns them, in both schemes (owned rows
+  // only adds two engines' rows on the host; all rows is the local engine's own view).
+  const float cutoff = 1.5f;
+  const std::vector<float> xyz = lattice(8, 1.2, 0.15, 5);
+  for (const bool owned_rows : {true, false}) {
+    DistributedOptions options;
+    options.owned_rows_only = owned_rows;
+    DistributedEngine engine(MPI_COMM_WORLD, options);
+    build(engine, xyz, cutoff, Box::orthorhombic(9.6, 9.6, 9.6), Spread::strided);
+    const raycut::Results want = engine.compute(Kernel::lj_forces);
+    const raycut::ResultsView got = engine.run(Kernel::lj_forces);
+    ASSERT_EQ(got.space, MemorySpace::host);
+    const std::size_t n = engine.owned();
+    ASSERT_EQ(want.energy.size(), n);
+    ASSERT_TRUE(n == 0 || (got.energy && got.force && got.virial));
+    std::size_t differ = 0;
+    for (std::size_t t = 0; t < n; ++t) {
+      differ += got.energy[t] != want.energy[t];
+      for (int c = 0; c < 3; ++c) differ += got.force[3 * t + c] != want.force[3 * t + c];
+      for (int c = 0; c < 6; ++c) differ += got.virial[6 * t + c] != want.virial[6 * t + c];
+    }
+    EXPECT_EQ(differ, 0u) << (owned_rows ? "owned rows" : "all rows");
+    EXPECT_THROW(engine.run(Kernel::sph_force), raycut::Error);  // needs the fields overload
+  }
+}
+
 // ---- triclinic cells
 // ------------------------------------------------------------------------------------
 //
