@@ -17,6 +17,7 @@
 
 #include "mpi/device_residence.hpp"
 #include "mpi/mpi_check.hpp"
+#include "raycut/mpi/pairs.hpp"
 #include "raycut/pairs.hpp"
 
 namespace raycut::mpi {
@@ -188,21 +189,6 @@ struct Faces {
     }
     return false;
   }
-};
-
-// sph_force over the query engine (owned particles near a face over the halos): query b is
-// owned particle boundary[b] and source j is halo j, local index owned + j, of the fields in the
-// local order (halo_fields()). The single-rank kernel indexes targets and sources in one array,
-// which query points do not share, hence the remapping; the pair terms are the kernel's own.
-struct BoundarySphForce {
-  using Accumulator = SphForceKernel::Accumulator;
-  SphForceKernel kernel;  // its force: one row per query
-  const std::uint32_t* boundary;
-  std::uint32_t owned;
-  void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3 r, float r2) const {
-    kernel(acc, boundary[i], owned + j, r, r2);
-  }
-  void finish(std::uint32_t i, Accumulator& acc) const { kernel.finish(i, acc); }
 };
 
 }  // namespace
@@ -1023,23 +1009,16 @@ Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options,
   KernelOptions with_fields = options;
   with_fields.sph = {velocity.data(), density.data(), pressure.data()};
 
-  // Owned rows only: engine_ is over the owned particles (local indices < n), the query engine
-  // adds the pairs with halos. Else engine_ is over owned + halos, halo rows discarded.
-  Results r = engine_->compute(Kernel::sph_force, with_fields);
-  if (!split_) {
-    if (!r.force.empty()) r.force.resize(3 * n);
-  } else if (halo_engine_built_) {
-    std::vector<float> halo_force(3 * boundary_.size());
-    KernelOutputs out;
-    out.force = halo_force.data();
-    with_kernel(Kernel::sph_force, with_fields, squared_cutoff(cutoff_), out, [&](const auto& f) {
-      if constexpr (std::is_same_v<std::decay_t<decltype(f)>, SphForceKernel>)
-        for_each_pair(*halo_engine_,
-                      BoundarySphForce{f, boundary_.data(), static_cast<std::uint32_t>(n)});
-    });
-    for (std::size_t b = 0; b < boundary_.size(); ++b)
-      for (int c = 0; c < 3; ++c) r.force[3 * boundary_[b] + c] += halo_force[3 * b + c];
-  }
+  // The single-rank kernel over the owned rows through raycut::mpi::for_each_pair (either
+  // scheme): its sources in the local order of the fields.
+  Results r;
+  r.force.assign(3 * n, 0.0f);
+  KernelOutputs out;
+  out.force = r.force.data();
+  with_kernel(Kernel::sph_force, with_fields, squared_cutoff(cutoff_), out, [&](const auto& f) {
+    if constexpr (std::is_same_v<std::decay_t<decltype(f)>, SphForceKernel>)
+      for_each_pair(*this, f);
+  });
   return r;
 }
 

@@ -28,6 +28,7 @@
 #include "mpi/ranks.hpp"
 #include "periodic_oracle.hpp"
 #include "raycut/mpi/distributed.hpp"
+#include "raycut/mpi/pairs.hpp"
 
 namespace {
 
@@ -575,6 +576,85 @@ TEST(Distributed, StepLoopEveryLocalRow) {
   DistributedOptions options;
   options.owned_rows_only = false;
   step_loop(Box::orthorhombic(12, 12, 12), 0.4f, 5, options);
+}
+
+// A user functor with every optional member that reads indices (init, accepts, the shift): a
+// charge-weighted sum, pair count and shift checksum per target, from a per-target base.
+struct Probe {
+  struct Accumulator {
+    double sum = 0;
+    std::uint32_t pairs = 0;
+    std::int64_t shifts = 0;
+  };
+  static constexpr bool takes_shift = true;
+  const float* q;            // per source
+  const std::int64_t* base;  // per target
+  Accumulator* out;          // per target
+  Accumulator init(std::uint32_t i) const { return {0, 0, base[i]}; }
+  bool accepts(std::uint32_t, std::uint32_t j, const raycut::Shift&) const { return q[j] > 0.2f; }
+  void operator()(Accumulator& a, std::uint32_t, std::uint32_t j, raycut::Vec3, float r2,
+                  const raycut::Shift& s) const {
+    a.sum += static_cast<double>(q[j]) * (2.25 - r2);
+    ++a.pairs;
+    a.shifts += s.a + 3 * s.b + 9 * s.c;
+  }
+  void finish(std::uint32_t i, Accumulator& a) const { out[i] = a; }
+};
+
+TEST(Distributed, UserFunctorsSeeOwnedRowsAndLocalSources) {
+  const float cutoff = 1.5f;
+  const Box box = Box::orthorhombic(12, 12, 12);
+  const std::vector<float> xyz = lattice(10, 1.2, 0.15, 8);
+  const std::size_t n = xyz.size() / 3;
+  std::vector<float> q(n);
+  std::vector<std::int64_t> base(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    q[i] = static_cast<float>((i * 37) % 100) / 100.0f;
+    base[i] = static_cast<std::int64_t>(i) * 1000;
+  }
+  for (const bool owned_rows : {true, false})
+    for (const bool local_images : {true, false}) {
+      DistributedOptions options;
+      options.owned_rows_only = owned_rows;
+      options.local_images = local_images;
+      DistributedEngine engine(MPI_COMM_WORLD, options);
+      build(engine, xyz, cutoff, box, Spread::strided);
+      const std::size_t owned = engine.owned();
+      std::vector<float> q_owned(owned);
+      std::vector<std::int64_t> base_owned(owned);
+      for (std::size_t t = 0; t < owned; ++t) {
+        q_owned[t] = q[engine.ids()[t]];
+        base_owned[t] = base[engine.ids()[t]];
+      }
+      const std::vector<float> q_local = engine.halo_fields(q_owned.data(), 1);
+      std::vector<Probe::Accumulator> got(owned);
+      raycut::mpi::for_each_pair(engine, Probe{q_local.data(), base_owned.data(), got.data()});
+
+      // The same functor on one engine over the positions the ranks hold, global indices.
+      const std::vector<float> held = gather_positions(engine, n);
+      raycut::Engine single("cell-list");
+      single.build({held.data(), n, MemorySpace::host}, cutoff, box);
+      std::vector<Probe::Accumulator> want(n);
+      raycut::for_each_pair(single, Probe{q.data(), base.data(), want.data()});
+
+      const std::string what = std::string(owned_rows ? "owned rows" : "all rows") +
+                               (local_images ? ", local images" : ", imaged axes");
+      std::size_t wrong = 0;
+      for (std::size_t t = 0; t < owned; ++t) {
+        const Probe::Accumulator& g = got[t];
+        const Probe::Accumulator& w = want[engine.ids()[t]];
+        wrong += g.pairs != w.pairs || g.shifts != w.shifts ||
+                 std::abs(g.sum - w.sum) > 1e-5 * (1 + std::abs(w.sum));
+      }
+      EXPECT_EQ(wrong, 0u) << what;
+      std::uint64_t pairs = 0, total = 0;
+      for (const auto& g : got) pairs += g.pairs;
+      MPI_Allreduce(&pairs, &total, 1, MPI_UINT64_T, MPI_SUM, MPI_COMM_WORLD);
+      EXPECT_GT(total, n) << what;  // something to test
+      if (engine.halos() > 0 && owned_rows) {
+        EXPECT_NE(engine.halo_engine(), nullptr) << what;
+      }
+    }
 }
 
 TEST(Distributed, RunLeavesWhatComputeReturns) {

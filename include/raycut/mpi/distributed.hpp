@@ -277,6 +277,12 @@ class DistributedEngine {
   // Whether the local passes compute the owned rows only (DistributedOptions::owned_rows_only
   // and a method that takes query points), or every row of owned + halos.
   bool owned_rows_only() const { return split_; }
+  // The local engines (raycut::mpi::for_each_pair runs a functor through them): over owned +
+  // halos, or with owned rows only over the owned particles, plus the boundary rows (owned
+  // indices, ascending) as queries over the halos (null when it has nothing to do).
+  const Engine& local_engine() const { return *engine_; }
+  const Engine* halo_engine() const { return halo_engine_built_ ? halo_engine_.get() : nullptr; }
+  const std::vector<std::uint32_t>& boundary() const { return boundary_; }
 
  private:
   struct HaloPlan;
