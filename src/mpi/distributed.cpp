@@ -153,6 +153,16 @@ void wrap_into_cell(float* x, const Decomposition& dec) {
   for (int c = 0; c < 3; ++c) x[c] = static_cast<float>(w[c]);
 }
 
+// The device side of a device-resident engine: asked for by methods that work on the device
+// only, which builds without CUDA do not have.
+std::unique_ptr<detail::DeviceResidence> device_residence() {
+#if defined(RAYCUT_HAVE_CUDA)
+  return detail::make_device_residence();
+#else
+  throw Error(ErrorCode::internal, "a device-resident engine in a build without CUDA");
+#endif
+}
+
 // Halo candidates a little beyond the halo width: extra halos are harmless (they are sources
 // only), missing ones are not, and the slab and distance tests round in double at the scale of
 // the coordinates.
@@ -332,13 +342,10 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
     if (on_device) {
       if (engine_->space() != MemorySpace::device)
         throw Error(ErrorCode::unsupported,
-                    "distributed build: positions in device memory, but "
-                    "method '" +
+                    "distributed build: positions in device memory, but method '" +
                         engine_->method() + "' works on the host; give host positions");
-        // Planned on the host like any exchange (from host copies); device_ keeps them after it.
-#if defined(RAYCUT_HAVE_CUDA)
-      device_ = detail::make_device_residence();
-#endif
+      // Planned on the host like any exchange (from host copies); device_ keeps them after it.
+      device_ = device_residence();
       device_->adopt(positions.xyz, carried, positions.size, width, staged_xyz, staged_carried);
       positions.xyz = staged_xyz.data();
       carried = width > 0 ? staged_carried.data() : nullptr;
