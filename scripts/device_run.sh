@@ -4,7 +4,7 @@
 # sessions ran, in one place.
 #
 #   scripts/device_run.sh [tests REGEX] [bench] [lists] [periodic] [sph] [python] [python-bench]
-#                         [mpi] [memcheck] [grid-suites]   results: ${OUT:-/tmp/raycut-out}/results.tgz
+#                         [mpi] [mpi-scaling] [memcheck] [grid-suites]   results: ${OUT:-/tmp/raycut-out}/results.tgz
 #
 #   tests REGEX  ctest -R REGEX (e.g. "GridVariants|grid_|Sph"; "." for everything, ~6 min)
 #   bench        both suites, every GPU method, plus the paper's grid when its source is in
@@ -26,6 +26,10 @@
 #                `mpirun -np 1 raycut bench --distributed` at 2^20 and 2^22 with host positions
 #                (distributed-np1.csv), then --device at 2^20, 2^22, 2^24 (MPI_DEVICE_SIZES)
 #                beside the plain engine (distributed-device-np1.csv; docs/distributed.md)
+#   mpi-scaling  the MPI tests, then weak (2^24 per GPU) and strong (2^25) scaling of the
+#                device-resident engine with NCCL at 1, 2, 4 and all visible GPUs (kinds
+#                nvidia-h200-x2/x4/x8): weak-npK.csv, strong-npK.csv, scaling.md/.png
+#                (bench/plot_distributed.py; issues 16 and 17)
 set -uo pipefail
 cd "$(dirname "$0")/.." || exit 1
 out="${OUT:-/tmp/raycut-out}"
@@ -154,6 +158,32 @@ while [ $# -gt 0 ]; do
         -o "$res/distributed-device-np1.csv" > "$res/distributed-device-np1.log" 2>&1
       echo "distributed --device np1 exit $?"
       grep -E "step|plain" "$res/distributed-device-np1.log"
+      ;;
+    mpi-scaling)
+      # Issue 16 (2 GPUs) and 17 (4, 8): weak (MPI_WEAK_N per GPU, default 2^24) and strong
+      # (MPI_STRONG_N in total, default 2^25) scaling of the device-resident engine, halo
+      # refreshes by NCCL, one rank per GPU, from 1 rank to every visible GPU; the MPI tests
+      # first (the NCCL twin runs at np > 1 only with a GPU per rank).
+      export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+      gpus=$(nvidia-smi -L | wc -l)
+      (cd build && ctest -R mpi --output-on-failure > "$res/ctest-mpi.log" 2>&1)
+      grep -E "tests passed|tests failed" "$res/ctest-mpi.log"
+      csvs=()
+      for np in $(seq 1 "$gpus"); do
+        [ "$np" -eq 1 ] || [ "$np" -eq 2 ] || [ "$np" -eq 4 ] || [ "$np" -eq "$gpus" ] || continue
+        for kind in weak strong; do
+          if [ "$kind" = weak ]; then size=(--n-per-rank "${MPI_WEAK_N:-16777216}"); else
+            size=(--n "${MPI_STRONG_N:-33554432}"); fi
+          mpirun --allow-run-as-root --bind-to none -np "$np" "$raycut" bench --distributed \
+            --device --nccl "${size[@]}" -m grid -r 10 -o "$res/$kind-np$np.csv" \
+            > "$res/$kind-np$np.log" 2>&1
+          echo "$kind np$np exit $?"
+          grep -E "step|plain" "$res/$kind-np$np.log"
+          [ -f "$res/$kind-np$np.csv" ] && csvs+=("$res/$kind-np$np.csv")
+        done
+      done
+      [ ${#csvs[@]} -gt 0 ] && "$py" bench/plot_distributed.py "${csvs[@]}" \
+        --md "$res/scaling.md" --png "$res/scaling.png" && cat "$res/scaling.md"
       ;;
     grid-suites)
       # Both suites, the grids beside the paper's own grid: the no-regression check.
