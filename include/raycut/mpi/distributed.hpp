@@ -13,6 +13,12 @@
 //     if (engine.update(new_xyz.data())) { ... the owned set changed: read ids() again ... }
 //   }
 //
+// On GPUs (one rank per GPU): select_local_device(comm), options.transport =
+// make_nccl_transport(comm), positions given in device memory; then each step is
+// engine.run(kernel) (results on the device, rows engine.ids()), the integrator's device kernel
+// over owned_positions(), and engine.update(device pointer). User pair functors:
+// include/raycut/mpi/pairs.hpp.
+//
 // Host-only header; the only MPI type in it is MPI_Comm.
 #pragma once
 
