@@ -5,13 +5,15 @@
 //   open      the same particles plus explicit copies of every image within the cutoff shell
 //             (the engine's own set, in its order) as an open cloud: every point a target;
 //   open-n    those points through the method directly (src/, not the public API), the first N
-//             (the particles) the only targets: the periodic pass's very work without images.
+//             (the particles) the only targets: the periodic pass's very work without images;
+//   queries   N query points (the particles moved by 0.37 along each axis, wrapped) over the
+//             particles in the same periodic box: the query pass's cost per pair.
 // Reports the minimum and the median over rounds (variants alternate, so a noisy machine hits
 // both alike) of the build and lj_forces ms, pairs (from count), ns per pair (compute / pairs)
 // and candidates per target (the points of the 27 cells around the target's own, counted here
 // with the cell list's cell width). Threads: OMP_NUM_THREADS.
 //
-//   periodic_cpu [particles=200000] [rounds=5] [method=cell-list]
+//   periodic_cpu [particles=200000] [rounds=5] [method=cell-list] [kernel=lj_forces|count]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -88,6 +90,9 @@ int main(int argc, char** argv) {
   const std::size_t n = argc > 1 ? std::strtoull(argv[1], nullptr, 10) : 200000;
   const int rounds = argc > 2 ? std::atoi(argv[2]) : 5;
   const std::string method = argc > 3 ? argv[3] : "cell-list";
+  const std::string kernel_name = argc > 4 ? argv[4] : "lj_forces";
+  const raycut::Kernel kernel =
+      kernel_name == "count" ? raycut::Kernel::count : raycut::Kernel::lj_forces;
   const float cutoff = 2.5f;
   const double side = std::cbrt(static_cast<double>(n) / 0.8442);
   std::mt19937_64 rng(1);
@@ -102,28 +107,37 @@ int main(int argc, char** argv) {
   const raycut::PositionsView periodic_view{x.data(), n, raycut::MemorySpace::host};
   const raycut::PositionsView open_view{open.data(), open.size() / 3, raycut::MemorySpace::host};
 
-  raycut::Engine periodic(method), plain(method);
+  std::vector<float> q(x);
+  for (float& v : q) v = static_cast<float>(std::fmod(v + 0.37, side));
+  raycut::Systems with_queries = raycut::Systems::periodic(box);
+  with_queries.queries = {q.data(), n, raycut::MemorySpace::host};
+  raycut::Engine periodic(method), plain(method), queries(method);
   const std::unique_ptr<raycut::detail::Method> direct = raycut::detail::make_cell_list_cpu();
   const raycut::detail::Points open_n{open.data(), open.size() / 3, n, {}};
-  const char* names[3] = {"periodic", "open", "open-n"};
-  const std::size_t targets[3] = {n, open.size() / 3, n};
+  constexpr int variants = 4;
+  const char* names[variants] = {"periodic", "open", "open-n", "queries"};
+  const std::size_t targets[variants] = {n, open.size() / 3, n, n};
   using Clock = std::chrono::steady_clock;
   const auto ms = [](Clock::time_point a, Clock::time_point b) {
     return std::chrono::duration<double, std::milli>(b - a).count();
+  };
+  const auto engine_of = [&](int v) -> raycut::Engine& {
+    return v == 0 ? periodic : v == 1 ? plain : queries;
   };
   // Variant v built; its build ms.
   const auto build = [&](int v) {
     if (v == 0) periodic.build(periodic_view, cutoff, box);
     if (v == 1) plain.build(open_view, cutoff);
-    if (v < 2) return (v == 0 ? periodic : plain).last_timings().build_ms;
+    if (v == 3) queries.build(periodic_view, cutoff, with_queries);
+    if (v != 2) return engine_of(v).last_timings().build_ms;
     const auto start = Clock::now();
     direct->build_points(open_n, cutoff);
     return ms(start, Clock::now());
   };
   // Runs `kernel` on variant v; its ms.
   const auto run = [&](int v, raycut::Kernel kernel) {
-    if (v < 2) {
-      raycut::Engine& e = v == 0 ? periodic : plain;
+    if (v != 2) {
+      raycut::Engine& e = engine_of(v);
       e.run(kernel);
       return e.last_timings().compute_ms;
     }
@@ -131,28 +145,27 @@ int main(int argc, char** argv) {
     direct->compute(kernel, {});
     return ms(start, Clock::now());
   };
-  std::uint64_t pairs[3] = {0, 0, 0};
-  for (int v = 0; v < 3; ++v) {
+  std::uint64_t pairs[variants] = {0, 0, 0, 0};
+  for (int v = 0; v < variants; ++v) {
     build(v);
     run(v, raycut::Kernel::count);
-    const raycut::ResultsView r = v == 0   ? periodic.results_view()
-                                  : v == 1 ? plain.results_view()
-                                           : direct->results_view();
+    const raycut::ResultsView r = v == 2 ? direct->results_view() : engine_of(v).results_view();
     for (std::size_t i = 0; i < targets[v]; ++i) pairs[v] += r.count[i];
   }
-  std::vector<Sample> samples[3];
+  std::vector<Sample> samples[variants];
   for (int round = 0; round < rounds; ++round)
-    for (int v = 0; v < 3; ++v) {
+    for (int v = 0; v < variants; ++v) {
       const double build_ms = build(v);
-      samples[v].push_back({build_ms, run(v, raycut::Kernel::lj_forces)});
+      samples[v].push_back({build_ms, run(v, kernel)});
     }
   const char* threads = std::getenv("OMP_NUM_THREADS");
-  std::printf("# %s, N = %zu, side %.3f, rc %.1f, OMP_NUM_THREADS=%s, %d rounds\n", method.c_str(),
-              n, side, cutoff, threads ? threads : "(unset)", rounds);
+  std::printf("# %s, %s, N = %zu, side %.3f, rc %.1f, OMP_NUM_THREADS=%s, %d rounds\n",
+              method.c_str(), kernel_name.c_str(), n, side, cutoff, threads ? threads : "(unset)",
+              rounds);
   std::printf(
       "variant,targets,points,pairs,candidates_per_target,build_ms_min,build_ms_median,"
-      "lj_forces_ms_min,lj_forces_ms_median,ns_per_pair_min,ns_per_pair_median\n");
-  for (int v = 0; v < 3; ++v) {
+      "kernel_ms_min,kernel_ms_median,ns_per_pair_min,ns_per_pair_median\n");
+  for (int v = 0; v < variants; ++v) {
     std::vector<double> b, c;
     for (const Sample& s : samples[v]) {
       b.push_back(s.build_ms);

@@ -81,7 +81,10 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     const std::uint32_t* system = points.systems > 1 ? points.system : nullptr;
     require_indexable(n, "cell-list");
     xyz_.assign(xyz, xyz + 3 * n);
-    set_positions(xyz_.data(), n, cutoff, points.targets, points.images);
+    // Query points are sorted after every source and never offered as candidates (below).
+    ImageTables images = points.images;
+    images.candidates_are_sources = true;
+    set_positions(xyz_.data(), n, cutoff, points.targets, images);
     inverse_width_ = 1.0 / (static_cast<double>(cutoff) * (1.0 + width_margin));
 
     // Sort particles by (query, cell key, index): the sources by cell, then the query points by

@@ -62,11 +62,11 @@ inline constexpr bool needs_images = uses_source<F>::value || has_accepts<F>::va
 
 // Runs launch(images) with the image policy of `pass` for functor F: one instantiation per
 // policy. A functor that needs no tables runs the open traversal (j = the point's index, which
-// it does not read) unless some point is a query, never a source: no per-pair lookup or branch,
-// the very loop of an open cloud (measured: 10 % of a periodic LJ pair on the CPU).
+// it does not read) unless a candidate may be a query point, never a source: no per-pair lookup
+// or branch, the very loop of an open cloud (measured: 10 % of a periodic LJ pair on the CPU).
 template <class F, class Launch>
 void with_images(const PairPass& pass, Launch&& launch) {
-  if (pass.images.active() && (needs_images<F> || !pass.images.all_sources))
+  if (pass.images.active() && (needs_images<F> || !pass.images.candidates_are_sources))
     launch(WithImages{pass.images.image});
   else
     launch(NoImages{});

@@ -106,6 +106,10 @@ struct alignas(16) PointImage {
 struct ImageTables {
   const PointImage* image = nullptr;
   bool all_sources = true;  // no query points
+  // Every point the traversal offers as a candidate is some particle's image: no query points,
+  // or a structure that never offers them (the CPU cell list). Then a functor that reads
+  // neither j nor S runs the open traversal (with_images).
+  bool candidates_are_sources = true;
   bool active() const { return image != nullptr; }
 };
 
