@@ -158,6 +158,13 @@ while [ $# -gt 0 ]; do
         -o "$res/distributed-device-np1.csv" > "$res/distributed-device-np1.log" 2>&1
       echo "distributed --device np1 exit $?"
       grep -E "step|plain" "$res/distributed-device-np1.log"
+      # The same with 5 steps per exchange: steps after steps, as between an MD run's exchanges
+      # (does the step right after an exchange carry the fixed excess over plain?).
+      mpirun --allow-run-as-root -np 1 "$raycut" bench --distributed --device --steps 5 \
+        --n 1048576,4194304 -m grid -r 10 -o "$res/distributed-device-np1-steps5.csv" \
+        > "$res/distributed-device-np1-steps5.log" 2>&1
+      echo "distributed --device --steps 5 np1 exit $?"
+      grep -E "step|plain" "$res/distributed-device-np1-steps5.log"
       ;;
     mpi-scaling)
       # Issue 16 (2 GPUs) and 17 (4, 8): weak (MPI_WEAK_N per GPU, default 2^24) and strong
@@ -175,7 +182,7 @@ while [ $# -gt 0 ]; do
           if [ "$kind" = weak ]; then size=(--n-per-rank "${MPI_WEAK_N:-16777216}"); else
             size=(--n "${MPI_STRONG_N:-33554432}"); fi
           mpirun --allow-run-as-root --bind-to none -np "$np" "$raycut" bench --distributed \
-            --device --nccl "${size[@]}" -m grid -r 10 -o "$res/$kind-np$np.csv" \
+            --device --nccl --steps 5 "${size[@]}" -m grid -r 10 -o "$res/$kind-np$np.csv" \
             > "$res/$kind-np$np.log" 2>&1
           echo "$kind np$np exit $?"
           grep -E "step|plain" "$res/$kind-np$np.log"

@@ -81,6 +81,7 @@ struct DistributedBenchOptions {
   bool balance = false;   // DistributedOptions::balance = particles
   bool device = false;    // positions (and the step) in device memory: the device-resident path
   bool nccl = false;      // halo refreshes by make_nccl_transport (with device)
+  int steps = 1;          // refresh steps timed after each exchange
 };
 void add_distributed_bench_options(CLI::App& bench, DistributedBenchOptions& o);
 int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<std::string>& methods,

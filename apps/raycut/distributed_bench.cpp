@@ -1,10 +1,10 @@
 // raycut bench --distributed, under mpirun: the LJ liquid (density 0.8442, rc 2.5, uniform random
 // in a periodic cube) through raycut::mpi::DistributedEngine. Per repetition and phase the time
 // is MPI_Wtime's, the largest over the ranks (the slowest rank sets the step); one warm-up, then
-// medians over the repetitions, one CSV row per (method, size) written by rank 0. A step is a
-// halo refresh (the skin keeps the halo set) plus the fused lj_forces pass; a full exchange
-// (migration, new halos, local builds) is timed apart. Weak scaling: --n-per-rank particles on
-// every rank; strong: --n in total. --device: positions in device memory (the device-resident
+// medians, one CSV row per (method, size) written by rank 0. A repetition is a full exchange
+// (migration, new halos, local builds; timed apart) and then --steps steps, each a halo refresh
+// (the skin keeps the halo set) plus the fused lj_forces pass. Weak scaling: --n-per-rank particles
+// on every rank; strong: --n in total. --device: positions in device memory (the device-resident
 // path: the step's positions come from the device, lj_forces stays there), and at one rank the
 // plain Engine's build + lj_forces over the same positions, timed in the same run, the
 // reference the distributed step is set against.
@@ -136,49 +136,60 @@ Run run_method(MPI_Comm comm, const DistributedBenchOptions& o, const std::strin
   run.dims = engine.decomposition().dims;
   engine.compute(Kernel::lj_forces);
 
+  // The largest over the ranks of the wall phases, the sum of the CPU ones, into the samples.
+  const auto record = [&](double* t, int first, int last) {
+    double reduced[phases];
+    MPI_Allreduce(t + first, reduced + first, std::min(last, int{wall_phases}) - first, MPI_DOUBLE,
+                  MPI_MAX, comm);
+    if (last > wall_phases)
+      MPI_Allreduce(t + wall_phases, reduced + wall_phases, last - wall_phases, MPI_DOUBLE, MPI_SUM,
+                    comm);
+    for (int p = first; p < last; ++p) run.samples[p].push_back(1e3 * reduced[p]);
+  };
   for (int r = 0; r < reps; ++r) {
     double t[phases];
     MPI_Barrier(comm);
     start = MPI_Wtime();
     engine.exchange();
     t[exchange_phase] = MPI_Wtime() - start;
+    record(t, exchange_phase, exchange_phase + 1);
     // Untimed: the integrator's output, where the positions live.
     const std::vector<float> xyz = engine.positions();
     if (o.device) on_device.emplace(xyz);
-    MPI_Barrier(comm);
-    start = MPI_Wtime();
-    const double cpu_start = cpu_seconds();
-    if (engine.update(o.device ? on_device->data() : xyz.data()))  // nothing moved: in the skin
-      throw Error(ErrorCode::internal, "bench --distributed: update() exchanged, not refreshed");
-    const double refreshed = MPI_Wtime(), cpu_refreshed = cpu_seconds();
-    run.local_build.push_back(engine.stats().build_ms);
-    if (o.device)
-      engine.run(Kernel::lj_forces);  // results stay on the device
-    else
-      engine.compute(Kernel::lj_forces);
-    const double computed = MPI_Wtime(), cpu_computed = cpu_seconds();
-    t[refresh_phase] = refreshed - start;
-    t[compute_phase] = computed - refreshed;
-    t[step_phase] = computed - start;
-    t[compute_cpu] = cpu_computed - cpu_refreshed;
-    t[step_cpu] = cpu_computed - cpu_start;
-    double reduced[phases];
-    MPI_Allreduce(t, reduced, wall_phases, MPI_DOUBLE, MPI_MAX, comm);
-    MPI_Allreduce(t + wall_phases, reduced + wall_phases, phases - wall_phases, MPI_DOUBLE, MPI_SUM,
-                  comm);
-    for (int p = 0; p < phases; ++p) run.samples[p].push_back(1e3 * reduced[p]);
+    for (int step = 0; step < o.steps; ++step) {  // refreshes, as between an MD run's exchanges
+      MPI_Barrier(comm);
+      start = MPI_Wtime();
+      const double cpu_start = cpu_seconds();
+      if (engine.update(o.device ? on_device->data() : xyz.data()))  // nothing moved: in the skin
+        throw Error(ErrorCode::internal, "bench --distributed: update() exchanged, not refreshed");
+      const double refreshed = MPI_Wtime(), cpu_refreshed = cpu_seconds();
+      run.local_build.push_back(engine.stats().build_ms);
+      if (o.device)
+        engine.run(Kernel::lj_forces);  // results stay on the device
+      else
+        engine.compute(Kernel::lj_forces);
+      const double computed = MPI_Wtime(), cpu_computed = cpu_seconds();
+      t[refresh_phase] = refreshed - start;
+      t[compute_phase] = computed - refreshed;
+      t[step_phase] = computed - start;
+      t[compute_cpu] = cpu_computed - cpu_refreshed;
+      t[step_cpu] = cpu_computed - cpu_start;
+      record(t, refresh_phase, phases);
+    }
   }
   if (o.device && size == 1) {  // the reference: the plain engine, same positions, same GPU
     Engine plain(method);
     for (int r = 0; r <= reps; ++r) {  // the first is the warm-up
-      // Untimed, as before the distributed step: the integrator's output on the device.
+      // Untimed, as before the distributed steps: the integrator's output on the device.
       const DeviceArray xyz(engine.positions());
-      start = MPI_Wtime();
-      plain.build(xyz.view(), lj_cutoff, box);
-      const double built = MPI_Wtime();
-      plain.run(Kernel::lj_forces);
-      if (r > 0) run.plain.push_back(1e3 * (MPI_Wtime() - start));
-      if (r > 0) run.plain_build.push_back(1e3 * (built - start));
+      for (int step = 0; step < o.steps; ++step) {
+        start = MPI_Wtime();
+        plain.build(xyz.view(), lj_cutoff, box);
+        const double built = MPI_Wtime();
+        plain.run(Kernel::lj_forces);
+        if (r > 0) run.plain.push_back(1e3 * (MPI_Wtime() - start));
+        if (r > 0) run.plain_build.push_back(1e3 * (built - start));
+      }
     }
   }
   return run;
@@ -231,6 +242,12 @@ void add_distributed_bench_options(CLI::App& bench, DistributedBenchOptions& o) 
       .add_flag("--nccl", o.nccl,
                 "--distributed --device: halo refreshes GPU to GPU by NCCL (one rank per GPU)")
       ->needs(device);
+  bench
+      .add_option("--steps", o.steps,
+                  "--distributed: refresh steps timed after each exchange (default 1: the step "
+                  "right after an exchange; more: the steps between exchanges of an MD run)")
+      ->check(CLI::Range(1, 1000))
+      ->needs(flag);
 }
 
 int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<std::string>& names,
@@ -269,8 +286,8 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
         "suite,method,rows,ranks,dims,balance,scaling,N,N_per_rank,cutoff,skin,pairs,halos,owned_"
         "min,"
         "owned_max,build_ms,exchange_ms,refresh_ms,compute_ms,step_ms,step_ms_min,step_ms_max,"
-        "compute_cpu_ms,step_cpu_ms,positions,transport,plain_step_ms,reps,timer,gpu,driver,cuda,"
-        "optix\n");
+        "compute_cpu_ms,step_cpu_ms,positions,transport,plain_step_ms,reps,steps,timer,gpu,driver,"
+        "cuda,optix\n");
     std::fprintf(stderr, "raycut bench --distributed: %d ranks, %s scaling, %d reps, on %s -> %s\n",
                  size, weak ? "weak" : "strong", reps,
                  environment.substr(0, environment.find(',')).c_str(), out.c_str());
@@ -301,7 +318,7 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
       std::snprintf(
           row, sizeof row,
           "lj-liquid-pbc,%s,%s,%d,%dx%dx%d,%s,%s,%llu,%llu,%g,%g,%llu,%llu,%llu,%llu,%.4f,%.4f,"
-          "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%s,%s,%s,%d,mpi_wtime_max,%s\n",
+          "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%s,%s,%s,%d,%d,mpi_wtime_max,%s\n",
           method.c_str(), run.owned_rows_only ? "owned" : "all", size, run.dims[0], run.dims[1],
           run.dims[2], o.balance ? "particles" : "none", weak ? "weak" : "strong",
           static_cast<unsigned long long>(n), static_cast<unsigned long long>(n / size), lj_cutoff,
@@ -313,7 +330,7 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
           *std::min_element(s[step_phase].begin(), s[step_phase].end()),
           *std::max_element(s[step_phase].begin(), s[step_phase].end()), median(s[compute_cpu]),
           median(s[step_cpu]), o.device ? "device" : "host", o.nccl ? "nccl" : "mpi-host",
-          plain.c_str(), reps, environment.c_str());
+          plain.c_str(), reps, o.steps, environment.c_str());
       csv->write(row);
       csv->flush();
       std::fprintf(
