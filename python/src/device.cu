@@ -71,7 +71,9 @@ void* device_alloc(std::size_t bytes) {
 
 // The caller's framework may still read the array on a stream of its own: the pool takes the
 // block back after the whole device is idle, as cudaFree would wait.
-void device_free(void* p) noexcept { raycut::detail::cuda::pooled_free(p); }
+void device_free(void* p) noexcept {
+  raycut::detail::cuda::pooled_free(p);
+}
 
 int current_device() {
   int device = 0;

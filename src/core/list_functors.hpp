@@ -53,7 +53,7 @@ struct ListFill : HalfFilter {
   float* distances;
   float* vectors;
   std::int32_t* shifts;
-  std::int64_t* rows;     // COO (ListOptions::coo): i and j as int64, in place of `indices`
+  std::int64_t* rows;  // COO (ListOptions::coo): i and j as int64, in place of `indices`
   std::int64_t* columns;
   RAYCUT_HD Accumulator init(std::uint32_t i) const { return offsets[i]; }
   RAYCUT_HD void operator()(Accumulator& slot, std::uint32_t i, std::uint32_t j, Vec3 r, float r2,

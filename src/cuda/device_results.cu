@@ -88,8 +88,7 @@ double EventTimer::elapsed_ms() const {
 
 std::size_t DeviceListStorage::bytes() const {
   return counts_.bytes() + offsets_.bytes() + indices_.bytes() + distances_.bytes() +
-         vectors_.bytes() + shifts_.bytes() + rows_.bytes() + columns_.bytes() +
-         scan_temp_.bytes();
+         vectors_.bytes() + shifts_.bytes() + rows_.bytes() + columns_.bytes() + scan_temp_.bytes();
 }
 
 NeighbourList DeviceListStorage::to_host() const {

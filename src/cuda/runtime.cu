@@ -151,8 +151,8 @@ void pooled_free(void* p) noexcept {
   int current = -1;
   cudaPointerAttributes where{};
   const bool elsewhere = cudaGetDevice(&current) == cudaSuccess &&
-                         cudaPointerGetAttributes(&where, p) == cudaSuccess &&
-                         where.device >= 0 && where.device != current;
+                         cudaPointerGetAttributes(&where, p) == cudaSuccess && where.device >= 0 &&
+                         where.device != current;
   (void)cudaGetLastError();  // a failed query is not the caller's error
   if (elsewhere) cudaSetDevice(where.device);
   cudaDeviceSynchronize();
