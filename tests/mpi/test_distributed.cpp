@@ -13,6 +13,7 @@
 // single-process Engine built with the same Box instead (see the triclinic section).
 #include <gtest/gtest.h>
 #include <mpi.h>
+#include <omp.h>
 
 #include <algorithm>
 #include <array>
@@ -655,6 +656,28 @@ TEST(Distributed, UserFunctorsSeeOwnedRowsAndLocalSources) {
         EXPECT_NE(engine.halo_engine(), nullptr) << what;
       }
     }
+}
+
+TEST(Distributed, ExchangePlanIsTheSameAtAnyThreadCount) {
+  // The exchange's planning runs in OpenMP threads (wrap, owners, halo routes); per-thread routes
+  // are appended in thread order, so owned order, halos and shifts must not depend on the count.
+  const std::vector<float> xyz = uniform(3000, {-1, -1, -1}, {13, 13, 13}, 17);  // some to wrap
+  const Box box = Box::orthorhombic(12, 12, 12);
+  const int threads = omp_get_max_threads();
+  DistributedOptions options;
+  options.local_images = false;  // halos along every axis, at one rank too
+  omp_set_num_threads(1);
+  DistributedEngine serial(MPI_COMM_WORLD, options);
+  build(serial, xyz, 1.5f, box, Spread::strided);
+  omp_set_num_threads(3);
+  DistributedEngine threaded(MPI_COMM_WORLD, options);
+  build(threaded, xyz, 1.5f, box, Spread::strided);
+  omp_set_num_threads(threads);
+  EXPECT_GT(serial.halos(), 0u);
+  EXPECT_EQ(threaded.ids(), serial.ids());
+  EXPECT_EQ(threaded.positions(), serial.positions());
+  EXPECT_EQ(threaded.halo_ids(), serial.halo_ids());
+  EXPECT_EQ(threaded.halo_shifts(), serial.halo_shifts());
 }
 
 TEST(Distributed, RunLeavesWhatComputeReturns) {
