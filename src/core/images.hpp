@@ -58,7 +58,7 @@ class ImagePoints {
     points_.xyz = xyz;
     points_.size = size;
     points_.targets = plan.target_count();
-    points_.images = {image, !plan.has_queries(), !plan.has_queries()};
+    points_.images = {image, !plan.has_queries()};
     points_.systems = plan.systems();
     points_.system = plan.systems() > 1 ? system : nullptr;
   }

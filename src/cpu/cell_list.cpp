@@ -95,7 +95,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
       std::uint32_t index;
       auto operator<=>(const Entry&) const = default;
     };
-    const PointImage* image = points.images.all_sources ? nullptr : points.images.image;
+    const PointImage* image = points.images.image;  // which points are queries
     std::vector<Entry> entries(n);
 #pragma omp parallel for schedule(static)
     for (std::size_t i = 0; i < n; ++i)

@@ -153,6 +153,14 @@ void wrap_into_cell(float* x, const Decomposition& dec) {
   for (int c = 0; c < 3; ++c) x[c] = static_cast<float>(w[c]);
 }
 
+void refuse_sph_force_without_fields(Kernel kernel) {
+  if (kernel == Kernel::sph_force)
+    throw Error(ErrorCode::unsupported,
+                "distributed engine: sph_force needs its neighbours' velocities, densities and "
+                "pressures: call compute(Kernel::sph_force, options, SphFields{...}) with the "
+                "owned particles' fields");
+}
+
 // The device side of a device-resident engine: asked for by methods that work on the device
 // only, which builds without CUDA do not have.
 std::unique_ptr<detail::DeviceResidence> device_residence() {
@@ -460,48 +468,41 @@ bool DistributedEngine::update(const float* positions, const float* carried) {
   std::string error;
   if (n > 0 && positions == nullptr) error = "distributed update: null positions";
   const double half_skin = 0.5 * static_cast<double>(options_.skin);
+  int moved = 0;  // some owned particle more than skin / 2 from its place at the last exchange
   if (device_) {  // the same steps on the GPU, in one pass: copy, finite check, skin test
-    int moved = 0;
     if (error.empty()) {
       const auto taken = device_->take(positions, carried, static_cast<float>(half_skin));
       if (taken.first_bad < n)
         error = "distributed update: particle " + std::to_string(ids_[taken.first_bad]) +
                 " has a non-finite coordinate";
-      moved = options_.skin == 0 || taken.moved;
+      moved = taken.moved;
     }
     agree(error, ErrorCode::invalid_input);
-    int any = 0;
-    check(MPI_Allreduce(&moved, &any, 1, MPI_INT, MPI_MAX, comm_), "MPI_Allreduce");
-    if (any) {
-      exchange();
-      return true;
-    }
-    refresh_halos();
-    build_local_engine(true);
-    return false;
-  }
-  double moved2 = 0;
-  for (std::size_t i = 0; error.empty() && i < n; ++i) {
-    double d2 = 0;
-    for (int c = 0; c < 3; ++c) {
-      const float v = positions[3 * i + c];
-      if (!std::isfinite(v)) {
-        error = "distributed update: particle " + std::to_string(ids_[i]) +
-                " has a non-finite coordinate";
-        break;
+  } else {
+    double moved2 = 0;
+    for (std::size_t i = 0; error.empty() && i < n; ++i) {
+      double d2 = 0;
+      for (int c = 0; c < 3; ++c) {
+        const float v = positions[3 * i + c];
+        if (!std::isfinite(v)) {
+          error = "distributed update: particle " + std::to_string(ids_[i]) +
+                  " has a non-finite coordinate";
+          break;
+        }
+        const double d = static_cast<double>(v) - xyz_at_exchange_[3 * i + c];
+        d2 += d * d;
       }
-      const double d = static_cast<double>(v) - xyz_at_exchange_[3 * i + c];
-      d2 += d * d;
+      moved2 = std::max(moved2, d2);
     }
-    moved2 = std::max(moved2, d2);
+    agree(error, ErrorCode::invalid_input);
+    std::copy(positions, positions + 3 * n, xyz_.begin());
+    if (carried) std::copy(carried, carried + width_ * n, carried_.begin());
+    moved = moved2 > half_skin * half_skin;
   }
-  agree(error, ErrorCode::invalid_input);
-  std::copy(positions, positions + 3 * n, xyz_.begin());
-  if (carried) std::copy(carried, carried + width_ * n, carried_.begin());
-
-  double largest2 = 0;
-  check(MPI_Allreduce(&moved2, &largest2, 1, MPI_DOUBLE, MPI_MAX, comm_), "MPI_Allreduce");
-  if (options_.skin == 0 || largest2 > half_skin * half_skin) {
+  moved = moved || options_.skin == 0;
+  int any = 0;
+  check(MPI_Allreduce(&moved, &any, 1, MPI_INT, MPI_MAX, comm_), "MPI_Allreduce");
+  if (any) {
     exchange();
     return true;
   }
@@ -906,24 +907,20 @@ const float* DistributedEngine::owned_carried() const {
 
 ResultsView DistributedEngine::run(Kernel kernel, const KernelOptions& options) {
   check_built("run");
+  refuse_sph_force_without_fields(kernel);
   if (split_ && halo_engine_built_) {  // two engines' rows added: on the host
     summed_ = compute(kernel, options);
     const auto data = [](const auto& v) { return v.empty() ? nullptr : v.data(); };
     return {data(summed_.count),  data(summed_.energy),  data(summed_.force),
             data(summed_.virial), data(summed_.density), MemorySpace::host};
   }
-  if (kernel == Kernel::sph_force) compute(kernel, options);  // its refusal, with the reason
   engine_->run(kernel, options);
   return engine_->results_view();
 }
 
 Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options) {
   check_built("compute");
-  if (kernel == Kernel::sph_force)
-    throw Error(ErrorCode::unsupported,
-                "distributed engine: sph_force needs its neighbours' velocities, densities and "
-                "pressures: call compute(Kernel::sph_force, options, SphFields{...}) with the "
-                "owned particles' fields");
+  refuse_sph_force_without_fields(kernel);
   Results r = engine_->compute(kernel, options);
   const std::size_t n = ids_.size();
   if (!split_) {  // rows past n are the halos'

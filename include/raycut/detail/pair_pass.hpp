@@ -105,7 +105,6 @@ struct alignas(16) PointImage {
 // Null: the points are the caller's particles. The grid hands its traversal a copy in slot order.
 struct ImageTables {
   const PointImage* image = nullptr;
-  bool all_sources = true;  // no query points
   // Every point the traversal offers as a candidate is some particle's image: no query points,
   // or a structure that never offers them (the CPU cell list). Then a functor that reads
   // neither j nor S runs the open traversal (with_images).
