@@ -121,6 +121,14 @@ while [ $# -gt 0 ]; do
           > "$res/memcheck-$name.log" 2>&1
         echo "memcheck $name: exit $? ($(grep -E "ERROR SUMMARY" "$res/memcheck-$name.log"))"
       done
+      # The distributed engine's device-resident path, one rank (MPI singleton). NCCL probes its
+      # kernels' attributes with calls that fail by design: API errors are not reported here.
+      if [ -x build/tests/raycut_mpi_tests ]; then
+        compute-sanitizer --tool memcheck --report-api-errors no --error-exitcode 9 \
+          build/tests/raycut_mpi_tests --gtest_filter='DistributedDevice*' \
+          > "$res/memcheck-mpi-device.log" 2>&1
+        echo "memcheck mpi-device: exit $? ($(grep -E "ERROR SUMMARY" "$res/memcheck-mpi-device.log"))"
+      fi
       ;;
     python)
       build_python

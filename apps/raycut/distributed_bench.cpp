@@ -84,7 +84,9 @@ struct Run {
   std::vector<double> samples[phases];
   std::vector<double> plain, plain_build;  // one rank, --device: the plain Engine's build +
                                            // lj_forces, and its build alone
-  std::vector<double> local_build;         // the local engine's build within the refresh
+  // Within the refresh (engine.stats(), this rank's): update()'s own pass, the halo refresh,
+  // the local engine's build.
+  std::vector<double> update, halo_refresh, local_build;
   double build_ms = 0;
   std::uint64_t pairs = 0, halos = 0, owned_min = 0, owned_max = 0;
   bool owned_rows_only = false;
@@ -163,6 +165,8 @@ Run run_method(MPI_Comm comm, const DistributedBenchOptions& o, const std::strin
       if (engine.update(o.device ? on_device->data() : xyz.data()))  // nothing moved: in the skin
         throw Error(ErrorCode::internal, "bench --distributed: update() exchanged, not refreshed");
       const double refreshed = MPI_Wtime(), cpu_refreshed = cpu_seconds();
+      run.update.push_back(engine.stats().update_ms);
+      run.halo_refresh.push_back(engine.stats().exchange_ms);
       run.local_build.push_back(engine.stats().build_ms);
       if (o.device)
         engine.run(Kernel::lj_forces);  // results stay on the device
@@ -286,8 +290,8 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
         "suite,method,rows,ranks,dims,balance,scaling,N,N_per_rank,cutoff,skin,pairs,halos,owned_"
         "min,"
         "owned_max,build_ms,exchange_ms,refresh_ms,compute_ms,step_ms,step_ms_min,step_ms_max,"
-        "compute_cpu_ms,step_cpu_ms,positions,transport,plain_step_ms,reps,steps,timer,gpu,driver,"
-        "cuda,optix\n");
+        "compute_cpu_ms,step_cpu_ms,update_ms,halo_refresh_ms,local_build_ms,positions,transport,"
+        "plain_step_ms,reps,steps,timer,gpu,driver,cuda,optix\n");
     std::fprintf(stderr, "raycut bench --distributed: %d ranks, %s scaling, %d reps, on %s -> %s\n",
                  size, weak ? "weak" : "strong", reps,
                  environment.substr(0, environment.find(',')).c_str(), out.c_str());
@@ -318,7 +322,7 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
       std::snprintf(
           row, sizeof row,
           "lj-liquid-pbc,%s,%s,%d,%dx%dx%d,%s,%s,%llu,%llu,%g,%g,%llu,%llu,%llu,%llu,%.4f,%.4f,"
-          "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%s,%s,%s,%d,%d,mpi_wtime_max,%s\n",
+          "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%s,%s,%s,%d,%d,mpi_wtime_max,%s\n",
           method.c_str(), run.owned_rows_only ? "owned" : "all", size, run.dims[0], run.dims[1],
           run.dims[2], o.balance ? "particles" : "none", weak ? "weak" : "strong",
           static_cast<unsigned long long>(n), static_cast<unsigned long long>(n / size), lj_cutoff,
@@ -329,7 +333,8 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
           median(s[refresh_phase]), median(s[compute_phase]), median(s[step_phase]),
           *std::min_element(s[step_phase].begin(), s[step_phase].end()),
           *std::max_element(s[step_phase].begin(), s[step_phase].end()), median(s[compute_cpu]),
-          median(s[step_cpu]), o.device ? "device" : "host", o.nccl ? "nccl" : "mpi-host",
+          median(s[step_cpu]), median(run.update), median(run.halo_refresh),
+          median(run.local_build), o.device ? "device" : "host", o.nccl ? "nccl" : "mpi-host",
           plain.c_str(), reps, o.steps, environment.c_str());
       csv->write(row);
       csv->flush();
@@ -345,9 +350,10 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
       if (!run.plain.empty())
         std::fprintf(stderr,
                      "  plain engine build + lj_forces %.3f ms (build %.3f): distributed step / "
-                     "plain %.3f (its local build %.3f)\n",
+                     "plain %.3f (rank 0's refresh: update %.3f + halos %.3f + local build %.3f)\n",
                      median(run.plain), median(run.plain_build),
-                     median(s[step_phase]) / median(run.plain), median(run.local_build));
+                     median(s[step_phase]) / median(run.plain), median(run.update),
+                     median(run.halo_refresh), median(run.local_build));
       if (!pairs_ok) {
         std::fprintf(stderr, "  check failed: %llu pairs, expected %.0f +- 2%%\n",
                      static_cast<unsigned long long>(run.pairs), expected);

@@ -1,9 +1,14 @@
-// The device side of a device-resident DistributedEngine (device_residence.hpp).
+// The device side of a device-resident DistributedEngine (device_residence.hpp). Compiled with
+// --fmad=false (CMakeLists.txt), so that domains.hpp's arithmetic rounds here as on the host.
 #include <cuda_runtime.h>
 
 #include <algorithm>
+#include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_scan.cuh>
+#include <string>
 #include <utility>
 
+#include "core/validation.hpp"
 #include "cuda/device_buffer.cuh"
 #include "cuda/runtime.hpp"
 #include "mpi/device_residence.hpp"
@@ -13,39 +18,25 @@ namespace {
 
 namespace cuda = raycut::detail::cuda;
 
-struct Cell {
-  double rows[9];  // row-major: rows[3 r + c] = cell[r][c]
-};
+__device__ std::size_t first_index() {
+  return blockIdx.x * std::size_t{blockDim.x} + threadIdx.x;
+}
+__device__ std::size_t stride() {
+  return std::size_t{gridDim.x} * blockDim.x;
+}
 
-// x + S . cell in double, rounded to float; the same operations in the same order as the host's
-// image() (distributed.cpp), without contraction into FMAs, so halos are bit-identical whichever
-// side makes them.
-__global__ void gather_images(const float* xyz, const std::uint32_t* index,
-                              const std::int32_t* shift, std::size_t records, Cell cell,
-                              float* out) {
-  for (std::size_t k = blockIdx.x * std::size_t{blockDim.x} + threadIdx.x; k < records;
-       k += std::size_t{gridDim.x} * blockDim.x) {
-    const float* x = xyz + 3 * std::size_t{index[k]};
-    const std::int32_t* s = shift + 3 * k;
-    const bool zero = s[0] == 0 && s[1] == 0 && s[2] == 0;
-    for (int c = 0; c < 3; ++c) {
-      double v = x[c];
-      if (!zero)
-        for (int row = 0; row < 3; ++row)
-          v = __dadd_rn(v, __dmul_rn(static_cast<double>(s[row]), cell.rows[3 * row + c]));
-      out[3 * k + c] = zero ? x[c] : __double2float_rn(v);
-    }
-  }
+__global__ void gather_images(Domains d, const float* xyz, const std::uint32_t* index,
+                              const std::int32_t* shift, std::size_t records, float* out) {
+  for (std::size_t k = first_index(); k < records; k += stride())
+    d.image(xyz + 3 * std::size_t{index[k]}, shift + 3 * k, out + 3 * k);
 }
 
 // update()'s pass over the owned particles: the new positions into `out` (the other half of a
 // double buffer), the first non-finite coordinate (atomicMin over report[0], which starts at
-// all ones) and whether one moved more than the skin's half (report[1] set to 0, from all ones),
-// with the float arithmetic of the engine's own moved_beyond (runtime.cu).
+// all ones) and whether one moved more than the skin's half (report[1] set to 0, from all ones).
 __global__ void take_positions(const float* xyz, const float* reference, std::size_t n,
                                float limit_squared, float* out, unsigned long long* report) {
-  for (std::size_t i = blockIdx.x * std::size_t{blockDim.x} + threadIdx.x; i < n;
-       i += std::size_t{gridDim.x} * blockDim.x) {
+  for (std::size_t i = first_index(); i < n; i += stride()) {
     float d2 = 0;
     bool finite = true;
     for (int a = 0; a < 3; ++a) {
@@ -60,15 +51,105 @@ __global__ void take_positions(const float* xyz, const float* reference, std::si
   }
 }
 
+__global__ void wrap_positions(Domains d, float* xyz, std::size_t n) {
+  for (std::size_t i = first_index(); i < n; i += stride()) d.wrap(xyz + 3 * i);
+}
+
+__global__ void find_owner(Domains d, const float* xyz, std::size_t n, std::uint32_t* owner,
+                           std::uint32_t* index) {
+  for (std::size_t i = first_index(); i < n; i += stride()) {
+    owner[i] = static_cast<std::uint32_t>(d.owner(xyz + 3 * i));
+    index[i] = static_cast<std::uint32_t>(i);
+  }
+}
+
+// starts[r] = the first k with sorted[k] >= r, for r in [0, keys]: where each key's run begins.
+__global__ void key_starts(const std::uint32_t* sorted, std::size_t n, int keys,
+                           unsigned long long* starts) {
+  for (std::size_t r = first_index(); r <= static_cast<std::size_t>(keys); r += stride()) {
+    std::size_t low = 0, high = n;
+    while (low < high) {
+      const std::size_t mid = (low + high) / 2;
+      if (sorted[mid] < r)
+        low = mid + 1;
+      else
+        high = mid;
+    }
+    starts[r] = low;
+  }
+}
+
+// to[k] = from[rows[k]], `width` floats a row.
+__global__ void gather_rows(const float* from, const std::uint32_t* rows, std::size_t count,
+                            std::size_t width, float* to) {
+  for (std::size_t e = first_index(); e < count * width; e += stride())
+    to[e] = from[width * rows[e / width] + e % width];
+}
+
+__global__ void count_halos(Domains d, int rank, double reach, const float* xyz, std::size_t n,
+                            unsigned long long* counts) {
+  const Faces faces(d, rank);
+  for (std::size_t i = first_index(); i < n; i += stride()) {
+    unsigned long long c = 0;
+    for_each_halo(d, faces, rank, reach, xyz + 3 * i, [&](int, const std::int32_t*) { ++c; });
+    counts[i] = c;
+  }
+}
+
+// Particle i's records at offsets[i] on, in for_each_halo's order.
+__global__ void write_halos(Domains d, int rank, double reach, const float* xyz, std::size_t n,
+                            const unsigned long long* offsets, std::uint32_t* dest,
+                            std::uint32_t* index, std::int32_t* shift) {
+  const Faces faces(d, rank);
+  for (std::size_t i = first_index(); i < n; i += stride()) {
+    std::size_t k = offsets[i];
+    for_each_halo(d, faces, rank, reach, xyz + 3 * i, [&](int q, const std::int32_t* s) {
+      dest[k] = static_cast<std::uint32_t>(q);
+      index[k] = static_cast<std::uint32_t>(i);
+      for (int c = 0; c < 3; ++c) shift[3 * k + c] = s[c];
+      ++k;
+    });
+  }
+}
+
+__global__ void iota(std::uint32_t* out, std::size_t n) {
+  for (std::size_t i = first_index(); i < n; i += stride()) out[i] = static_cast<std::uint32_t>(i);
+}
+
+// Record k of the sorted plan is record order[k] of the unsorted one.
+__global__ void gather_records(const std::uint32_t* order, std::size_t n,
+                               const std::uint32_t* index, const std::int32_t* shift,
+                               std::uint32_t* index_out, std::int32_t* shift_out) {
+  for (std::size_t k = first_index(); k < n; k += stride()) {
+    const std::uint32_t from = order[k];
+    index_out[k] = index[from];
+    for (int c = 0; c < 3; ++c) shift_out[3 * k + c] = shift[3 * std::size_t{from} + c];
+  }
+}
+
 unsigned blocks_for(std::size_t n) {
   return static_cast<unsigned>(std::clamp<std::size_t>((n + 255) / 256, 1, 4096));
 }
 
+int bits_for(int keys) {
+  int bits = 1;
+  while ((1 << bits) < keys) ++bits;
+  return bits;
+}
+
 template <class T>
-void copy_in(cuda::DeviceBuffer<T>& buffer, const T* host, std::size_t count) {
-  buffer.resize(count);
+void copy_on_device(T* to, const T* from, std::size_t count) {
   if (count > 0)
-    RAYCUT_CUDA_CHECK(cudaMemcpy(buffer.data(), host, count * sizeof(T), cudaMemcpyHostToDevice));
+    RAYCUT_CUDA_CHECK(cudaMemcpy(to, from, count * sizeof(T), cudaMemcpyDeviceToDevice));
+}
+template <class T>
+void upload_to(T* to, const T* from, std::size_t count) {
+  if (count > 0) RAYCUT_CUDA_CHECK(cudaMemcpy(to, from, count * sizeof(T), cudaMemcpyHostToDevice));
+}
+template <class T>
+void download_to(std::vector<T>& to, const T* from, std::size_t count) {
+  to.resize(count);
+  if (count > 0) cuda::download(to.data(), from, count * sizeof(T));
 }
 
 class CudaResidence final : public DeviceResidence {
@@ -76,6 +157,7 @@ class CudaResidence final : public DeviceResidence {
   void adopt(const float* xyz, const float* carried, std::size_t owned, std::size_t width,
              std::vector<float>& host_xyz, std::vector<float>& host_carried) override {
     owned_ = owned;
+    halos_ = records_ = 0;
     width_ = width;
     local_.resize(3 * owned);
     carried_.resize(width * owned);
@@ -84,32 +166,161 @@ class CudaResidence final : public DeviceResidence {
     download(host_xyz, host_carried);
   }
 
-  void upload(const std::vector<float>& local_xyz, std::size_t owned,
-              const std::vector<float>& carried, const std::vector<std::uint32_t>& index,
-              const std::vector<std::int32_t>& shift,
-              const std::array<std::array<double, 3>, 3>& cell) override {
-    owned_ = owned;
-    halos_ = local_xyz.size() / 3 - owned;
-    width_ = owned > 0 ? carried.size() / owned : 0;
-    records_ = index.size();
-    for (int row = 0; row < 3; ++row)
-      for (int c = 0; c < 3; ++c) cell_.rows[3 * row + c] = cell[row][c];
-    copy_in(local_, local_xyz.data(), local_xyz.size());
-    staged_.resize(local_xyz.size());
-    reference_.resize(3 * owned);
-    copy_on_device(reference_.data(), local_.data(), 3 * owned);
-    copy_in(carried_, carried.data(), carried.size());
-    copy_in(index_, index.data(), index.size());
-    copy_in(shift_, shift.data(), shift.size());
-    send_.resize(3 * records_);
+  void download(std::vector<float>& xyz, std::vector<float>& carried) const override {
+    download_to(xyz, local_.data(), 3 * owned_);
+    download_to(carried, carried_.data(), width_ * owned_);
   }
 
-  void download(std::vector<float>& xyz, std::vector<float>& carried) const override {
-    xyz.resize(3 * owned_);
-    carried.resize(width_ * owned_);
-    if (!xyz.empty()) cuda::download(xyz.data(), local_.data(), xyz.size() * sizeof(float));
-    if (!carried.empty())
-      cuda::download(carried.data(), carried_.data(), carried.size() * sizeof(float));
+  void download_reference(std::vector<float>& xyz) const override {
+    download_to(xyz, reference_.data(), 3 * owned_);
+  }
+
+  void set_domains(const Domains& domains) override {
+    domains_ = domains;
+    std::vector<double> cuts;
+    for (int a = 0; a < 3; ++a)
+      cuts.insert(cuts.end(), domains.cuts[a], domains.cuts[a] + domains.dims[a] + 1);
+    cuts_.resize(cuts.size());
+    upload_to(cuts_.data(), cuts.data(), cuts.size());
+    for (int a = 0, at = 0; a < 3; at += domains.dims[a] + 1, ++a)
+      domains_.cuts[a] = cuts_.data() + at;
+  }
+
+  void wrap() override {
+    if (owned_ == 0) return;
+    wrap_positions<<<blocks_for(owned_), 256>>>(domains_, local_.data(), owned_);
+    RAYCUT_CUDA_CHECK_LAUNCH();
+  }
+
+  void find_owners(int rank, int ranks, Leaving& leaving) override {
+    const std::size_t n = owned_;
+    leaving.counts.assign(static_cast<std::size_t>(ranks), 0);
+    leaving.counts[static_cast<std::size_t>(rank)] = n;
+    leaving.index.clear();
+    leaving.xyz.clear();
+    leaving.carried.clear();
+    sorted_ = false;
+    if (ranks == 1 || n == 0) return;  // everything stays, in order
+    owner_.resize(n);
+    owner_sorted_.resize(n);
+    order_in_.resize(n);
+    order_.resize(n);
+    find_owner<<<blocks_for(n), 256>>>(domains_, local_.data(), n, owner_.data(), order_in_.data());
+    RAYCUT_CUDA_CHECK_LAUNCH();
+    sort_by_key(owner_, owner_sorted_, order_in_, order_, n, ranks);  // stable: index order
+    runs(owner_sorted_.data(), n, ranks, leaving.counts);
+    sorted_ = true;
+    // The staying particles are the run of `rank`, the leaving ones the runs around it.
+    staying_first_ = 0;
+    for (int r = 0; r < rank; ++r) staying_first_ += leaving.counts[static_cast<std::size_t>(r)];
+    const std::size_t staying = leaving.counts[static_cast<std::size_t>(rank)];
+    staying_ = staying;
+    const std::size_t gone = n - staying;
+    if (gone == 0) {  // the order is the identity
+      sorted_ = false;
+      return;
+    }
+    leaving_.resize(gone);
+    copy_on_device(leaving_.data(), order_.data(), staying_first_);
+    copy_on_device(leaving_.data() + staying_first_, order_.data() + staying_first_ + staying,
+                   gone - staying_first_);
+    download_to(leaving.index, leaving_.data(), gone);
+    rows_.resize(std::max<std::size_t>(3, width_) * gone);
+    gather(local_.data(), leaving_.data(), gone, 3, leaving.xyz);
+    gather(carried_.data(), leaving_.data(), gone, width_, leaving.carried);
+  }
+
+  void keep_staying(int rank, const std::vector<float>& xyz,
+                    const std::vector<float>& carried) override {
+    (void)rank;
+    if (!sorted_ && xyz.empty()) return;  // nothing left, nothing came
+    const std::size_t staying = sorted_ ? staying_ : owned_;
+    const std::size_t arrived = xyz.size() / 3, n = staying + arrived;
+    staged_.resize(3 * n);
+    carried_staged_.resize(width_ * n);
+    const std::uint32_t* kept = order_.data() + staying_first_;
+    if (sorted_) {
+      gather_rows_into(local_.data(), kept, staying, 3, staged_.data());
+      gather_rows_into(carried_.data(), kept, staying, width_, carried_staged_.data());
+    } else {
+      copy_on_device(staged_.data(), local_.data(), 3 * staying);
+      copy_on_device(carried_staged_.data(), carried_.data(), width_ * staying);
+    }
+    upload_to(staged_.data() + 3 * staying, xyz.data(), xyz.size());
+    upload_to(carried_staged_.data() + width_ * staying, carried.data(), carried.size());
+    std::swap(local_, staged_);
+    std::swap(carried_, carried_staged_);
+    owned_ = n;
+    sorted_ = false;
+  }
+
+  void plan_halos(int rank, int ranks, double reach, std::vector<std::uint64_t>& counts,
+                  std::vector<std::uint32_t>& index, std::vector<std::int32_t>& shift) override {
+    const std::size_t n = owned_;
+    counts.assign(static_cast<std::size_t>(ranks), 0);
+    halo_counts_.resize(n + 1);
+    halo_offsets_.resize(n + 1);
+    RAYCUT_CUDA_CHECK(cudaMemsetAsync(halo_counts_.data() + n, 0, sizeof(unsigned long long)));
+    if (n > 0) {
+      count_halos<<<blocks_for(n), 256>>>(domains_, rank, reach, local_.data(), n,
+                                          halo_counts_.data());
+      RAYCUT_CUDA_CHECK_LAUNCH();
+    }
+    std::size_t temp_bytes = 0;
+    RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, halo_counts_.data(),
+                                                    halo_offsets_.data(), n + 1));
+    temp_.resize(temp_bytes);
+    RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(temp_.data(), temp_bytes, halo_counts_.data(),
+                                                    halo_offsets_.data(), n + 1));
+    unsigned long long total = 0;
+    cuda::read_back(&total, halo_offsets_.data() + n, sizeof total, nullptr);
+    if (total > 0xFFFFFFFFull)  // the plan's record orders are 32-bit
+      throw Error(ErrorCode::out_of_memory,
+                  "distributed exchange: " + std::to_string(total) +
+                      " halo records on one rank, more than 2^32 - 1; use more ranks");
+    records_ = total;
+    record_dest_.resize(total);
+    record_index_.resize(total);
+    record_shift_.resize(3 * std::size_t{total});
+    index_.resize(total);
+    shift_.resize(3 * std::size_t{total});
+    send_.resize(3 * std::size_t{total});
+    if (total > 0) {
+      write_halos<<<blocks_for(n), 256>>>(domains_, rank, reach, local_.data(), n,
+                                          halo_offsets_.data(), record_dest_.data(),
+                                          record_index_.data(), record_shift_.data());
+      RAYCUT_CUDA_CHECK_LAUNCH();
+    }
+    if (ranks == 1) {  // every record to rank 0, already in order
+      counts[0] = total;
+      std::swap(index_, record_index_);
+      std::swap(shift_, record_shift_);
+    } else if (total > 0) {
+      order_in_.resize(total);
+      order_.resize(total);
+      owner_sorted_.resize(total);
+      iota<<<blocks_for(total), 256>>>(order_in_.data(), total);
+      RAYCUT_CUDA_CHECK_LAUNCH();
+      sort_by_key(record_dest_, owner_sorted_, order_in_, order_, total, ranks);
+      runs(owner_sorted_.data(), total, ranks, counts);
+      gather_records<<<blocks_for(total), 256>>>(order_.data(), total, record_index_.data(),
+                                                 record_shift_.data(), index_.data(),
+                                                 shift_.data());
+      RAYCUT_CUDA_CHECK_LAUNCH();
+    }
+    download_to(index, index_.data(), total);
+    download_to(shift, shift_.data(), 3 * std::size_t{total});
+  }
+
+  void set_halos(const std::vector<float>& xyz) override {
+    halos_ = xyz.size() / 3;
+    staged_.resize(3 * (owned_ + halos_));
+    copy_on_device(staged_.data(), local_.data(), 3 * owned_);
+    upload_to(staged_.data() + 3 * owned_, xyz.data(), xyz.size());
+    std::swap(local_, staged_);
+    staged_.resize(3 * (owned_ + halos_));  // take()'s other half
+    reference_.resize(3 * owned_);
+    copy_on_device(reference_.data(), local_.data(), 3 * owned_);
   }
 
   Taken take(const float* xyz, const float* carried, float distance) override {
@@ -130,22 +341,19 @@ class CudaResidence final : public DeviceResidence {
 
   const float* gather() override {
     if (records_ > 0) {
-      gather_images<<<blocks_for(records_), 256>>>(local_.data(), index_.data(), shift_.data(),
-                                                   records_, cell_, send_.data());
+      gather_images<<<blocks_for(records_), 256>>>(domains_, local_.data(), index_.data(),
+                                                   shift_.data(), records_, send_.data());
       RAYCUT_CUDA_CHECK_LAUNCH();
     }
     return send_.data();
   }
 
   void upload_halos(const float* xyz) override {
-    if (halos_ > 0)
-      RAYCUT_CUDA_CHECK(cudaMemcpy(local_.data() + 3 * owned_, xyz, 3 * halos_ * sizeof(float),
-                                   cudaMemcpyHostToDevice));
+    upload_to(local_.data() + 3 * owned_, xyz, 3 * halos_);
   }
 
   void download_gathered(std::vector<float>& xyz) const override {
-    xyz.resize(3 * records_);
-    if (!xyz.empty()) cuda::download(xyz.data(), send_.data(), xyz.size() * sizeof(float));
+    download_to(xyz, send_.data(), 3 * records_);
   }
 
   std::size_t owned() const override { return owned_; }
@@ -153,19 +361,64 @@ class CudaResidence final : public DeviceResidence {
   const float* carried() const override { return carried_.data(); }
 
  private:
-  // Reallocates when growing (DeviceBuffer); the legacy stream orders every copy.
-  static void copy_on_device(float* to, const float* from, std::size_t count) {
-    if (count > 0)
-      RAYCUT_CUDA_CHECK(cudaMemcpy(to, from, count * sizeof(float), cudaMemcpyDeviceToDevice));
+  // A stable sort of (keys, values) by keys below `keys` (radix: equal keys keep their order).
+  void sort_by_key(cuda::DeviceBuffer<std::uint32_t>& keys_in,
+                   cuda::DeviceBuffer<std::uint32_t>& keys_out,
+                   cuda::DeviceBuffer<std::uint32_t>& values_in,
+                   cuda::DeviceBuffer<std::uint32_t>& values_out, std::size_t n, int keys) {
+    std::size_t temp_bytes = 0;
+    const int bits = bits_for(keys);
+    RAYCUT_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, keys_in.data(),
+                                                      keys_out.data(), values_in.data(),
+                                                      values_out.data(), n, 0, bits));
+    temp_.resize(temp_bytes);
+    RAYCUT_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(temp_.data(), temp_bytes, keys_in.data(),
+                                                      keys_out.data(), values_in.data(),
+                                                      values_out.data(), n, 0, bits));
   }
 
-  // local_ is what the local engine was built over; update() writes staged_ and swaps them.
-  cuda::DeviceBuffer<float> local_, staged_, reference_, carried_, send_;
-  cuda::DeviceBuffer<unsigned long long> report_{2};
+  // counts[r] = the length of key r's run in sorted keys; the staying run is remembered.
+  void runs(const std::uint32_t* sorted, std::size_t n, int keys,
+            std::vector<std::uint64_t>& counts) {
+    starts_.resize(static_cast<std::size_t>(keys) + 1);
+    key_starts<<<blocks_for(static_cast<std::size_t>(keys) + 1), 256>>>(sorted, n, keys,
+                                                                        starts_.data());
+    RAYCUT_CUDA_CHECK_LAUNCH();
+    std::vector<unsigned long long> starts;
+    download_to(starts, starts_.data(), static_cast<std::size_t>(keys) + 1);
+    for (int r = 0; r < keys; ++r) counts[static_cast<std::size_t>(r)] = starts[r + 1] - starts[r];
+  }
+
+  void gather_rows_into(const float* from, const std::uint32_t* rows, std::size_t count,
+                        std::size_t width, float* to) {
+    if (count * width == 0) return;
+    gather_rows<<<blocks_for(count * width), 256>>>(from, rows, count, width, to);
+    RAYCUT_CUDA_CHECK_LAUNCH();
+  }
+  void gather(const float* from, const std::uint32_t* rows, std::size_t count, std::size_t width,
+              std::vector<float>& to) {
+    gather_rows_into(from, rows, count, width, rows_.data());
+    download_to(to, rows_.data(), count * width);
+  }
+
+  // local_ is what the local engine was built over (owned, then halos); update() writes staged_
+  // and swaps them. reference_: the owned positions at the last exchange.
+  cuda::DeviceBuffer<float> local_, staged_, reference_, carried_, carried_staged_, send_, rows_;
+  cuda::DeviceBuffer<unsigned long long> report_{2}, starts_;
+  cuda::DeviceBuffer<double> cuts_;
+  Domains domains_{};
+  // The exchange's scratch: owners (or halo destinations) and the orders that sort them.
+  cuda::DeviceBuffer<std::uint32_t> owner_, owner_sorted_, order_in_, order_, leaving_;
+  cuda::DeviceBuffer<unsigned long long> halo_counts_, halo_offsets_;
+  cuda::DeviceBuffer<std::uint32_t> record_dest_, record_index_;
+  cuda::DeviceBuffer<std::int32_t> record_shift_;
+  cuda::DeviceBuffer<unsigned char> temp_;
+  bool sorted_ = false;  // find_owners sorted: the staying run is order_[staying_first_ ...)
+  std::size_t staying_first_ = 0, staying_ = 0;
+  // The halo plan: per record the owned index and the shift (3 int32), in send order.
   cuda::DeviceBuffer<std::uint32_t> index_;
   cuda::DeviceBuffer<std::int32_t> shift_;
   std::size_t owned_ = 0, halos_ = 0, records_ = 0, width_ = 0;
-  Cell cell_{};
 };
 
 }  // namespace

@@ -1,17 +1,20 @@
 // The device side of a device-resident DistributedEngine (positions given in device memory):
 // what the local engine is built over and what a step touches, kept on the GPU so that a step
 // with a skin is the plain engine's build + pass plus a displacement test and the halo refresh.
-// Exchanges (migration, new halo sets: rare with a skin) stay planned on the host, from a copy of
-// the owned positions (docs/distributed.md, "The device-resident path"). Defined in
-// device_residence.cu, only in builds with CUDA; host-only interface. Every call queues on the
-// legacy default stream, the local engines' (DistributedEngine never sets a stream).
+// Exchanges are planned on the GPU too, with the host's arithmetic (domains.hpp): the owners,
+// the migration's order, the halo plan. Only what crosses ranks (migrants, halo records) and the
+// plan's indices come to the host, where DistributedEngine sends them as a host-resident engine
+// does (docs/distributed.md, "The device-resident path"). Defined in device_residence.cu, only in
+// builds with CUDA; host-only interface. Every call queues on the legacy default stream, the
+// local engines' (DistributedEngine never sets a stream).
 #pragma once
 
-#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <vector>
+
+#include "mpi/domains.hpp"
 
 namespace raycut::mpi::detail {
 
@@ -20,22 +23,45 @@ class DeviceResidence {
   virtual ~DeviceResidence() = default;
 
   // build(): copies of the owned positions and carried floats given in device memory (width
-  // floats per particle), and the same to the host (planned on there, then upload()ed).
+  // floats per particle), and the same to the host (build() checks them there).
   virtual void adopt(const float* xyz, const float* carried, std::size_t owned, std::size_t width,
                      std::vector<float>& host_xyz, std::vector<float>& host_carried) = 0;
-  // After an exchange: the local positions (owned, then halos; 3 floats each), the owned
-  // particles' carried floats, and the halo plan (per record the owned index and the image shift
-  // S, 3 int32, in send order; images are x + S . cell, cell rows as in Decomposition::cell).
-  // The owned positions become the skin's reference.
-  virtual void upload(const std::vector<float>& local_xyz, std::size_t owned,
-                      const std::vector<float>& carried, const std::vector<std::uint32_t>& index,
-                      const std::vector<std::int32_t>& shift,
-                      const std::array<std::array<double, 3>, 3>& cell) = 0;
-  // Before an exchange: the owned positions and carried floats to the host.
+  // The owned positions (now) and carried floats to the host.
   virtual void download(std::vector<float>& xyz, std::vector<float>& carried) const = 0;
+  // The owned positions at the last exchange (the skin's reference) to the host.
+  virtual void download_reference(std::vector<float>& xyz) const = 0;
+
+  // ---- an exchange, in this order ----
+  // The decomposition the calls below use (its cuts copied to the device).
+  virtual void set_domains(const Domains& domains) = 0;
+  // The owned positions wrapped into the cell (Domains::wrap), in place.
+  virtual void wrap() = 0;
+  // The owners of the owned particles (Domains::owner). Per rank the particles it owns
+  // (counts[rank]: those that stay), and those that leave, grouped by owner in index order
+  // (the host's migration order): their indices, positions and carried floats, on the host.
+  struct Leaving {
+    std::vector<std::uint64_t> counts;
+    std::vector<std::uint32_t> index;
+    std::vector<float> xyz, carried;
+  };
+  virtual void find_owners(int rank, int ranks, Leaving& leaving) = 0;
+  // After find_owners: the staying particles compacted in their order, then the arrivals (host
+  // arrays, 3 and width floats each) after them.
+  virtual void keep_staying(int rank, const std::vector<float>& xyz,
+                            const std::vector<float>& carried) = 0;
+  // The halo plan of the owned particles (for_each_halo): per rank the records it gets, and per
+  // record the owned index and image shift (3 int32), grouped by rank in the host's order, on
+  // the host. gather() makes the records' positions.
+  virtual void plan_halos(int rank, int ranks, double reach, std::vector<std::uint64_t>& counts,
+                          std::vector<std::uint32_t>& index, std::vector<std::int32_t>& shift) = 0;
+  // The received halos (3 floats each, host) after the owned positions; the owned positions
+  // become the skin's reference.
+  virtual void set_halos(const std::vector<float>& xyz) = 0;
+
+  // ---- a step ----
   // update(): the new owned positions (device, 3 per owned particle) and carried floats
   // (device, or null: kept), in one pass that also finds the first non-finite coordinate and
-  // whether a particle is more than `distance` from its place at the last upload(). With a
+  // whether a particle is more than `distance` from its place at the last exchange. With a
   // non-finite coordinate nothing is taken (the engine keeps its positions).
   struct Taken {
     std::size_t first_bad;  // index of the first owned particle with a non-finite coordinate,
@@ -43,8 +69,8 @@ class DeviceResidence {
     bool moved;             // some particle moved more than `distance`
   };
   virtual Taken take(const float* xyz, const float* carried, float distance) = 0;
-  // The plan's halo records at the owned particles' current positions (3 floats each, x + S .
-  // cell in double rounded to float, as the host makes its halo copies), in a device buffer.
+  // The plan's halo records at the owned particles' current positions (3 floats each,
+  // Domains::image), in a device buffer.
   virtual const float* gather() = 0;
   // Received halo positions from the host (3 floats per halo) into the local array.
   virtual void upload_halos(const float* xyz) = 0;

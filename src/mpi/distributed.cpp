@@ -64,19 +64,6 @@ std::vector<std::uint64_t> scaled(const std::vector<std::uint64_t>& counts, std:
   return out;
 }
 
-// The image x + S . cell of a position: in double, then rounded to float, as the halo copies are
-// made (and as the single-rank engine makes its images, core/image_frame.hpp).
-void image(const float* x, const std::int32_t* s, const Decomposition& dec, float* out) {
-  for (int c = 0; c < 3; ++c) {
-    if (s[0] == 0 && s[1] == 0 && s[2] == 0) {
-      out[c] = x[c];
-      continue;
-    }
-    out[c] = static_cast<float>(static_cast<double>(x[c]) + s[0] * dec.cell[0][c] +
-                                s[1] * dec.cell[1][c] + s[2] * dec.cell[2][c]);
-  }
-}
-
 // The unit vector of a row (zero stays zero).
 std::array<double, 3> unit(const std::array<double, 3>& v) {
   const double norm = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
@@ -125,32 +112,24 @@ void set_geometry(Decomposition& dec, const Box& box) {
       if (std::abs(dot(dec.normal[a], dec.normal[b])) > 1e-12) dec.orthogonal = false;
 }
 
-// Wraps a coordinate into [0, L) in double (the float result may round up to L itself).
-float wrap_coordinate(float v, double length) {
-  const double x = v;
-  double w = x - std::floor(x / length) * length;
-  if (w >= length) w -= length;
-  if (w < 0) w += length;
-  return static_cast<float>(w);
-}
-
-// A position wrapped into the cell along the periodic axes.
-void wrap_into_cell(float* x, const Decomposition& dec) {
-  if (dec.aligned) {
-    for (int a = 0; a < 3; ++a)
-      if (dec.periodic[a]) x[a] = wrap_coordinate(x[a], dec.length[a]);
-    return;
+// Decomposition's arithmetic as plain data (domains.hpp), over its cuts in place.
+detail::Domains domains_of(const Decomposition& dec) {
+  detail::Domains d{};
+  for (int a = 0; a < 3; ++a) {
+    d.dims[a] = dec.dims[a];
+    d.periodic[a] = dec.periodic[a];
+    d.images[a] = dec.images(a);
+    d.crossed[a] = dec.halo_axis(a);
+    d.length[a] = dec.length[a];
+    for (int c = 0; c < 3; ++c) {
+      d.normal[a][c] = dec.normal[a][c];
+      d.cell[a][c] = dec.cell[a][c];
+    }
+    d.cuts[a] = dec.cuts[a].data();
   }
-  // Through the fractional coordinates f_k = u_k / w_k, as raycut::wrap: x - floor(f) . cell.
-  double w[3] = {x[0], x[1], x[2]};
-  for (int k = 0; k < 3; ++k) {
-    if (!dec.periodic[k]) continue;
-    const double f = dec.coordinate(k, x) / dec.length[k];
-    double s = std::floor(f);
-    if (f - s >= 1) s += 1;
-    for (int c = 0; c < 3; ++c) w[c] -= s * dec.cell[k][c];
-  }
-  for (int c = 0; c < 3; ++c) x[c] = static_cast<float>(w[c]);
+  d.aligned = dec.aligned;
+  d.orthogonal = dec.orthogonal;
+  return d;
 }
 
 void refuse_sph_force_without_fields(Kernel kernel) {
@@ -181,59 +160,27 @@ double reach_of(const Decomposition& dec, double halo_width) {
   return halo_width + 1e-5 * scale;
 }
 
-// The faces of a domain that halos cross (Decomposition::halo_axis: not a local axis's, nor the
-// outer face of an open end slab), else -inf / +inf: a particle of the domain farther than the
-// halo reach from all of them sends no halo and meets none.
-struct Faces {
-  double low[3], high[3];
-  Faces(const Decomposition& dec, int domain) {
-    const auto c = dec.coords(domain);
-    for (int a = 0; a < 3; ++a) {
-      const bool crossed = dec.halo_axis(a);
-      low[a] = crossed && (dec.images(a) || c[a] > 0) ? dec.cuts[a][c[a]]
-                                                      : -std::numeric_limits<double>::infinity();
-      high[a] = crossed && (dec.images(a) || c[a] < dec.dims[a] - 1)
-                    ? dec.cuts[a][c[a] + 1]
-                    : std::numeric_limits<double>::infinity();
-    }
-  }
-  bool near(const Decomposition& dec, const float* xyz, double reach) const {
-    for (int a = 0; a < 3; ++a) {
-      if (low[a] == -std::numeric_limits<double>::infinity() &&
-          high[a] == std::numeric_limits<double>::infinity())
-        continue;  // no coordinate needed
-      const double u = dec.coordinate(a, xyz);
-      if (u - low[a] < reach || high[a] - u < reach) return true;
-    }
-    return false;
-  }
-};
-
 }  // namespace
 
 // ---- decomposition ----------------------------------------------------------------------------
 
+// One implementation, the exchange's (domains.hpp); loops over particles make their Domains once.
 double Decomposition::coordinate(int axis, const float* xyz) const {
-  const auto& n = normal[axis];
-  return static_cast<double>(xyz[0]) * n[0] + static_cast<double>(xyz[1]) * n[1] +
-         static_cast<double>(xyz[2]) * n[2];
+  return domains_of(*this).coordinate(axis, xyz);
 }
 
 int Decomposition::slab(int axis, double u) const {
-  const auto& c = cuts[axis];
-  if (dims[axis] == 1 || std::isnan(u)) return 0;
-  return static_cast<int>(std::upper_bound(c.begin() + 1, c.end() - 1, u) - (c.begin() + 1));
+  return domains_of(*this).slab(axis, u);
 }
 
 int Decomposition::owner(const float* xyz) const {
-  int domain = 0;
-  for (int a = 0; a < 3; ++a)  // an axis of one domain needs no coordinate
-    domain = domain * dims[a] + (dims[a] > 1 ? slab(a, coordinate(a, xyz)) : 0);
-  return domain;
+  return domains_of(*this).owner(xyz);
 }
 
 std::array<int, 3> Decomposition::coords(int domain) const {
-  return {domain / (dims[1] * dims[2]), (domain / dims[2]) % dims[1], domain % dims[2]};
+  int c[3];
+  domains_of(*this).coords(domain, c);
+  return {c[0], c[1], c[2]};
 }
 
 // Where halo records go: per destination rank, the owned particle and the image shift, in the
@@ -370,6 +317,7 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
           box.pbc[a] && decomposition_.dims[a] == 1 && options_.local_images && takes_boxes_;
       local_box_.pbc[a] = decomposition_.local[a];
     }
+    const detail::Domains domains = domains_of(decomposition_);
     for (std::size_t i = 0; i < positions.size; ++i) {
       for (int c = 0; c < 3; ++c)
         if (!std::isfinite(positions.xyz[3 * i + c]))
@@ -377,7 +325,7 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
                                                     std::to_string(ids[i]) +
                                                     " has a non-finite coordinate");
       for (int a = 0; a < 3; ++a) {
-        const double u = decomposition_.coordinate(a, &positions.xyz[3 * i]);
+        const double u = domains.coordinate(a, &positions.xyz[3 * i]);
         bounds[a] = std::min(bounds[a], u);
         bounds[3 + a] = std::min(bounds[3 + a], -u);
       }
@@ -464,6 +412,7 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
 
 bool DistributedEngine::update(const float* positions, const float* carried) {
   check_built("update");
+  const auto start = Clock::now();
   const std::size_t n = ids_.size();
   std::string error;
   if (n > 0 && positions == nullptr) error = "distributed update: null positions";
@@ -502,6 +451,7 @@ bool DistributedEngine::update(const float* positions, const float* carried) {
   moved = moved || options_.skin == 0;
   int any = 0;
   check(MPI_Allreduce(&moved, &any, 1, MPI_INT, MPI_MAX, comm_), "MPI_Allreduce");
+  stats_.update_ms = elapsed_ms(start);
   if (any) {
     exchange();
     return true;
@@ -514,24 +464,32 @@ bool DistributedEngine::update(const float* positions, const float* carried) {
 void DistributedEngine::exchange() {
   check_built("exchange");
   const auto start = Clock::now();
-  if (device_) device_->download(xyz_, carried_);  // planned on the host
-  const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(ids_.size());
-#pragma omp parallel for schedule(static)
-  for (std::ptrdiff_t i = 0; i < n; ++i) wrap_into_cell(&xyz_[3 * i], decomposition_);
   stats_.bytes_sent = 0;
   // Every rank counts the same exchanges, so all move the cuts together, before the migration
   // that takes the particles to their new owners.
-  if (options_.balance == Balance::particles &&
+  const bool balancing =
+      options_.balance == Balance::particles &&
       (stats_.exchanges == 0 ||
-       (options_.rebalance_every > 0 && stats_.exchanges % options_.rebalance_every == 0)))
-    balance();
+       (options_.rebalance_every > 0 && stats_.exchanges % options_.rebalance_every == 0));
+  if (device_) {  // planned on the GPU, from the same arithmetic
+    host_positions_ = host_carried_ = false;
+    device_->set_domains(domains_of(decomposition_));
+    device_->wrap();
+    if (balancing) {  // the quantiles on the host, from the wrapped positions
+      device_->download(xyz_, carried_);
+      balance();
+      device_->set_domains(domains_of(decomposition_));
+    }
+  } else {
+    const detail::Domains domains = domains_of(decomposition_);
+    const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(ids_.size());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < n; ++i) domains.wrap(&xyz_[3 * i]);
+    if (balancing) balance();
+  }
   migrate();
   build_halos();
-  if (device_)
-    device_->upload(local_xyz_, ids_.size(), carried_, plan_->index, plan_->shift,
-                    decomposition_.cell);
-  else
-    xyz_at_exchange_ = xyz_;
+  if (!device_) xyz_at_exchange_ = xyz_;
   ++stats_.exchanges;
   stats_.exchange_ms = elapsed_ms(start);
   build_local_engine(false);
@@ -551,11 +509,12 @@ void DistributedEngine::balance() {
   const double inf = std::numeric_limits<double>::infinity();
   std::vector<double> u[3];
   std::array<double, 6> bounds = {inf, inf, inf, inf, inf, inf}, global;  // min, -max
+  const detail::Domains domains = domains_of(dec);
   for (int a = 0; a < 3; ++a) {
     if (dec.dims[a] == 1) continue;
     u[a].resize(ids_.size());
     for (std::size_t i = 0; i < ids_.size(); ++i) {
-      u[a][i] = dec.coordinate(a, &xyz_[3 * i]);
+      u[a][i] = domains.coordinate(a, &xyz_[3 * i]);
       bounds[a] = std::min(bounds[a], u[a][i]);
       bounds[3 + a] = std::min(bounds[3 + a], -u[a][i]);
     }
@@ -596,56 +555,102 @@ void DistributedEngine::balance() {
   ++stats_.balances;
 }
 
-// Every particle outside this rank's domain goes to its owner: [id][xyz][carried] records.
-void DistributedEngine::migrate() {
-  const std::size_t n = ids_.size();
-  const std::size_t record = sizeof(std::uint64_t) + (3 + width_) * sizeof(float);
+namespace {
+
+// Rows `gone` (ascending) removed from v (`width` values a row), the others kept in order.
+template <class T>
+void remove_rows(std::vector<T>& v, std::size_t width, const std::vector<std::uint32_t>& gone) {
+  if (gone.empty() || width == 0) return;
+  const std::size_t rows = v.size() / width;
+  std::size_t to = width * gone[0];
+  for (std::size_t k = 0; k < gone.size(); ++k) {
+    const std::size_t from = gone[k] + 1, end = k + 1 < gone.size() ? gone[k + 1] : rows;
+    std::copy(v.begin() + width * from, v.begin() + width * end, v.begin() + to);
+    to += width * (end - from);
+  }
+  v.resize(to);
+}
+
+// migrate()'s owners on the host (the GPU's: DeviceResidence::find_owners): per rank the
+// particles it owns, and the leaving ones grouped by owner in index order, with their positions
+// and carried floats.
+void leaving_on_host(const detail::Domains& domains, int rank, int size,
+                     const std::vector<float>& xyz, const std::vector<float>& carried,
+                     std::size_t width, detail::DeviceResidence::Leaving& leaving) {
+  const std::size_t n = xyz.size() / 3;
   std::vector<int> dest(n);
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i)
-    dest[i] = decomposition_.owner(&xyz_[3 * i]);
-  std::vector<std::uint64_t> send_counts(static_cast<std::size_t>(size_), 0);
-  for (int d : dest) ++send_counts[static_cast<std::size_t>(d)];
-  const std::uint64_t staying = send_counts[static_cast<std::size_t>(rank_)];
-  send_counts[static_cast<std::size_t>(rank_)] = 0;  // kept in place, not copied
+    dest[i] = domains.owner(&xyz[3 * i]);
+  leaving.counts.assign(static_cast<std::size_t>(size), 0);
+  for (int d : dest) ++leaving.counts[static_cast<std::size_t>(d)];
+  std::vector<std::uint64_t> cursor(static_cast<std::size_t>(size), 0);
+  std::uint64_t at = 0;
+  for (int r = 0; r < size; ++r) {
+    cursor[r] = at;
+    if (r != rank) at += leaving.counts[r];
+  }
+  const std::size_t gone = n - leaving.counts[static_cast<std::size_t>(rank)];
+  leaving.index.resize(gone);
+  leaving.xyz.resize(3 * gone);
+  leaving.carried.resize(width * gone);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (dest[i] == rank) continue;
+    const std::uint64_t j = cursor[static_cast<std::size_t>(dest[i])]++;
+    leaving.index[j] = static_cast<std::uint32_t>(i);
+    std::copy_n(&xyz[3 * i], 3, &leaving.xyz[3 * j]);
+    std::copy_n(carried.begin() + width * i, width, leaving.carried.begin() + width * j);
+  }
+}
+
+}  // namespace
+
+// Every particle outside this rank's domain goes to its owner: [id][xyz][carried] records, by
+// owner, in index order. The staying particles keep their order; the arrivals follow them in
+// the order of their ranks. The owners are found where the positions live (leaving_on_host(), or
+// the GPU's find_owners(): the same owners, the same order); the records cross on the host.
+void DistributedEngine::migrate() {
+  const std::size_t record = sizeof(std::uint64_t) + (3 + width_) * sizeof(float);
+  detail::DeviceResidence::Leaving leaving;
+  if (device_)
+    device_->find_owners(rank_, size_, leaving);
+  else
+    leaving_on_host(domains_of(decomposition_), rank_, size_, xyz_, carried_, width_, leaving);
+  std::vector<std::uint64_t> send_counts = leaving.counts;
+  send_counts[static_cast<std::size_t>(rank_)] = 0;  // kept in place, not sent
   std::vector<std::uint64_t> recv_counts;
   exchange_counts(send_counts, recv_counts);
-
-  const auto send_offsets = offsets_of(send_counts, record);
-  const auto recv_offsets = offsets_of(recv_counts, record);
-  const std::uint64_t sent = std::accumulate(send_counts.begin(), send_counts.end(), 0ull);
   const std::uint64_t received = std::accumulate(recv_counts.begin(), recv_counts.end(), 0ull);
+  const std::size_t sent = leaving.index.size();
   std::vector<std::byte> send(sent * record), recv(received * record);
-  std::vector<std::byte*> cursor(static_cast<std::size_t>(size_));
-  for (int r = 0; r < size_; ++r) cursor[r] = send.data() + send_offsets[r];
-
-  // The staying particles compacted in place, in their order; the arrivals after them.
-  std::size_t kept = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    if (dest[i] == rank_) {
-      if (kept != i) {
-        ids_[kept] = ids_[i];
-        std::copy_n(&xyz_[3 * i], 3, &xyz_[3 * kept]);
-        std::copy_n(carried_.begin() + width_ * i, width_, carried_.begin() + width_ * kept);
-      }
-      ++kept;
-      continue;
-    }
-    std::byte*& at = cursor[static_cast<std::size_t>(dest[i])];
-    put(at, &ids_[i], 1);
-    put(at, &xyz_[3 * i], 3);
-    put(at, carried_.data() + width_ * i, width_);
+  std::byte* at = send.data();
+  for (std::size_t j = 0; j < sent; ++j) {
+    put(at, &ids_[leaving.index[j]], 1);
+    put(at, &leaving.xyz[3 * j], 3);
+    put(at, leaving.carried.data() + width_ * j, width_);
   }
-  host_transport_->exchange(send.data(), scaled(send_counts, record).data(), send_offsets.data(),
-                            recv.data(), scaled(recv_counts, record).data(), recv_offsets.data());
-  ids_.resize(staying + received);
-  xyz_.resize(3 * (staying + received));
-  carried_.resize(width_ * (staying + received));
-  const std::byte* at = recv.data();
-  for (std::uint64_t k = staying; k < staying + received; ++k) {
-    take(at, &ids_[k], 1);
-    take(at, &xyz_[3 * k], 3);
-    take(at, carried_.data() + width_ * k, width_);
+  host_transport_->exchange(
+      send.data(), scaled(send_counts, record).data(), offsets_of(send_counts, record).data(),
+      recv.data(), scaled(recv_counts, record).data(), offsets_of(recv_counts, record).data());
+
+  std::vector<std::uint32_t> gone = leaving.index;
+  std::sort(gone.begin(), gone.end());
+  remove_rows(ids_, 1, gone);
+  std::vector<float> xyz(3 * received), carried(width_ * received);  // the arrivals'
+  const std::byte* from = recv.data();
+  for (std::uint64_t k = 0; k < received; ++k) {
+    ids_.push_back(0);
+    take(from, &ids_.back(), 1);
+    take(from, &xyz[3 * k], 3);
+    take(from, carried.data() + width_ * k, width_);
+  }
+  if (device_) {
+    device_->keep_staying(rank_, xyz, carried);
+  } else {
+    remove_rows(xyz_, 3, gone);
+    remove_rows(carried_, width_, gone);
+    xyz_.insert(xyz_.end(), xyz.begin(), xyz.end());
+    carried_.insert(carried_.end(), carried.begin(), carried.end());
   }
   stats_.migrated_out = sent;
   stats_.bytes_sent += sent * record;
@@ -668,81 +673,89 @@ void DistributedEngine::migrate() {
 // moves u_a of another axis (g_a . row_k = 0; an open normal is orthogonal to the periodic rows),
 // so q has the gaps of p' along the other axes and none along the local ones (wrapped there): q
 // passes the test, is held here (owned or a halo), and the local engine finds (t, q, L).
+// The plan is made where the positions live (plan_halos_on_host(), or the GPU's plan_halos():
+// the same records in the same order); the records cross on the host.
 void DistributedEngine::build_halos() {
-  const Decomposition& dec = decomposition_;
   const std::size_t n = ids_.size();
-  const double reach = reach_of(dec, halo_width_);
-  const double reach2 = reach * reach;
-
-  struct Candidate {
-    int slab;
-    std::int32_t shift;
-    double gap2;
-  };
+  const double reach = reach_of(decomposition_, halo_width_);
   HaloPlan& plan = *plan_;
-  // An axis that no halo crosses has one candidate, the particle's own slab unshifted: with no
-  // such axis at all (one rank, every periodic axis local) nothing is sent.
-  bool crossed[3], any_crossed = false;
-  for (int a = 0; a < 3; ++a) {
-    crossed[a] = dec.halo_axis(a);
-    any_crossed = any_crossed || crossed[a];
+  std::vector<float> images;  // per record x + S . cell
+  if (device_) {
+    device_->plan_halos(rank_, size_, reach, plan.send_counts, plan.index, plan.shift);
+    device_->gather();
+    device_->download_gathered(images);
+  } else {
+    plan_halos_on_host(reach);
+    const detail::Domains domains = domains_of(decomposition_);
+    images.resize(3 * plan.index.size());
+    for (std::size_t k = 0; k < plan.index.size(); ++k)
+      domains.image(&xyz_[3 * plan.index[k]], &plan.shift[3 * k], &images[3 * k]);
   }
-  // Per thread, per destination rank: owned indices and shifts. Threads take contiguous blocks
-  // of particles in order (a static schedule), so appending their lists in thread order gives
-  // the serial order: the same plan whatever the thread count.
+  exchange_counts(plan.send_counts, plan.recv_counts);
+
+  const std::size_t record = sizeof(std::uint64_t) + 3 * sizeof(float) + 3 * sizeof(std::int32_t);
+  const std::uint64_t received =
+      std::accumulate(plan.recv_counts.begin(), plan.recv_counts.end(), 0ull);
+  std::vector<std::byte> send(plan.index.size() * record), recv(received * record);
+  std::byte* at = send.data();
+  for (std::size_t k = 0; k < plan.index.size(); ++k) {
+    put(at, &ids_[plan.index[k]], 1);
+    put(at, &images[3 * k], 3);
+    put(at, &plan.shift[3 * k], 3);
+  }
+  host_transport_->exchange(send.data(), scaled(plan.send_counts, record).data(),
+                            offsets_of(plan.send_counts, record).data(), recv.data(),
+                            scaled(plan.recv_counts, record).data(),
+                            offsets_of(plan.recv_counts, record).data());
+
+  halo_ids_.resize(received);
+  halo_shifts_.resize(3 * received);
+  std::vector<float> halo_xyz(3 * received);
+  const std::byte* from = recv.data();
+  for (std::uint64_t k = 0; k < received; ++k) {
+    take(from, &halo_ids_[k], 1);
+    take(from, &halo_xyz[3 * k], 3);
+    take(from, &halo_shifts_[3 * k], 3);
+  }
+  if (device_) {
+    device_->set_halos(halo_xyz);
+  } else {
+    local_xyz_.resize(3 * (n + received));
+    std::copy(xyz_.begin(), xyz_.end(), local_xyz_.begin());
+    std::copy(halo_xyz.begin(), halo_xyz.end(), local_xyz_.begin() + 3 * n);
+  }
+  stats_.bytes_sent += (plan.index.size() - plan.send_counts[rank_]) * record;
+}
+
+// build_halos()'s plan on the host: detail::for_each_halo over the owned particles, in OpenMP
+// threads. Threads take contiguous blocks of particles in order (a static schedule), so
+// appending their per-rank routes in thread order gives the serial order: the same plan
+// whatever the thread count (and the GPU's, which sorts the serial records by rank).
+void DistributedEngine::plan_halos_on_host(double reach) {
+  const detail::Domains domains = domains_of(decomposition_);
+  const std::size_t n = ids_.size();
+  bool any_crossed = false;  // else nothing is sent (one rank, every periodic axis local)
+  for (int a = 0; a < 3; ++a) any_crossed = any_crossed || domains.crossed[a];
   struct Routes {
     std::vector<std::vector<std::uint32_t>> index;
     std::vector<std::vector<std::int32_t>> shift;
   };
   std::vector<Routes> routes(static_cast<std::size_t>(omp_get_max_threads()));
-  const Faces faces(dec, rank_);
+  const detail::Faces faces(domains, rank_);
 #pragma omp parallel if (any_crossed)
   {
     Routes& mine = routes[static_cast<std::size_t>(omp_get_thread_num())];
     mine.index.resize(static_cast<std::size_t>(size_));
     mine.shift.resize(static_cast<std::size_t>(size_));
-    std::vector<Candidate> axis[3];
-    for (int a = 0; a < 3; ++a)
-      if (!crossed[a]) axis[a] = {{dec.coords(rank_)[a], 0, 0.0}};
 #pragma omp for schedule(static)
-    for (std::ptrdiff_t i = 0; i < (any_crossed ? static_cast<std::ptrdiff_t>(n) : 0); ++i) {
-      // Farther than the reach from every crossed face of its domain (it is owned: inside it),
-      // a particle has no candidate along any axis but its own slab, unshifted.
-      if (!faces.near(dec, &xyz_[3 * i], reach)) continue;
-      for (int a = 0; a < 3; ++a) {
-        if (!crossed[a]) continue;
-        axis[a].clear();
-        const int d = dec.dims[a];
-        const double u = dec.coordinate(a, &xyz_[3 * i]);
-        const bool images = dec.images(a);
-        for (std::int32_t s = images ? -1 : 0; s <= (images ? 1 : 0); ++s) {
-          // A shift by cell row a moves u_a by one face width; the other rows leave it.
-          const double y = u + s * dec.length[a];
-          const int first = dec.slab(a, y - reach), last = dec.slab(a, y + reach);
-          for (int k = first; k <= last; ++k) {
-            // An open axis's end slabs extend to infinity; a local axis's one slab is all of it.
-            const bool open_low = !images && k == 0;
-            const bool open_high = !images && k == d - 1;
-            const double lo = dec.cuts[a][k], hi = dec.cuts[a][k + 1];
-            double gap = 0;
-            if (!open_low && y < lo) gap = lo - y;
-            if (!open_high && y > hi) gap = y - hi;
-            if (gap < reach) axis[a].push_back({k, s, gap * gap});
-          }
-        }
-      }
-      for (const Candidate& cx : axis[0])
-        for (const Candidate& cy : axis[1])
-          for (const Candidate& cz : axis[2]) {
-            if (dec.orthogonal && cx.gap2 + cy.gap2 + cz.gap2 >= reach2) continue;
-            const int q = (cx.slab * dec.dims[1] + cy.slab) * dec.dims[2] + cz.slab;
-            if (q == rank_ && cx.shift == 0 && cy.shift == 0 && cz.shift == 0) continue;
-            mine.index[q].push_back(static_cast<std::uint32_t>(i));
-            mine.shift[q].insert(mine.shift[q].end(), {cx.shift, cy.shift, cz.shift});
-          }
-    }
+    for (std::ptrdiff_t i = 0; i < (any_crossed ? static_cast<std::ptrdiff_t>(n) : 0); ++i)
+      detail::for_each_halo(domains, faces, rank_, reach, &xyz_[3 * i],
+                            [&](int q, const std::int32_t* s) {
+                              mine.index[q].push_back(static_cast<std::uint32_t>(i));
+                              mine.shift[q].insert(mine.shift[q].end(), s, s + 3);
+                            });
   }
-
+  HaloPlan& plan = *plan_;
   plan.send_counts.assign(static_cast<std::size_t>(size_), 0);
   plan.index.clear();
   plan.shift.clear();
@@ -753,45 +766,11 @@ void DistributedEngine::build_halos() {
       plan.index.insert(plan.index.end(), mine.index[r].begin(), mine.index[r].end());
       plan.shift.insert(plan.shift.end(), mine.shift[r].begin(), mine.shift[r].end());
     }
-  exchange_counts(plan.send_counts, plan.recv_counts);
-
-  const std::size_t record = sizeof(std::uint64_t) + 3 * sizeof(float) + 3 * sizeof(std::int32_t);
-  const auto send_offsets = offsets_of(plan.send_counts, record);
-  const auto recv_offsets = offsets_of(plan.recv_counts, record);
-  const std::uint64_t received =
-      std::accumulate(plan.recv_counts.begin(), plan.recv_counts.end(), 0ull);
-  std::vector<std::byte> send(plan.index.size() * record), recv(received * record);
-  std::byte* at = send.data();
-  for (std::size_t k = 0; k < plan.index.size(); ++k) {
-    const std::uint32_t i = plan.index[k];
-    const std::int32_t* s = &plan.shift[3 * k];
-    float p[3];
-    image(&xyz_[3 * i], s, dec, p);
-    put(at, &ids_[i], 1);
-    put(at, p, 3);
-    put(at, s, 3);
-  }
-  host_transport_->exchange(send.data(), scaled(plan.send_counts, record).data(),
-                            send_offsets.data(), recv.data(),
-                            scaled(plan.recv_counts, record).data(), recv_offsets.data());
-
-  halo_ids_.resize(received);
-  halo_shifts_.resize(3 * received);
-  local_xyz_.resize(3 * (n + received));
-  std::copy(xyz_.begin(), xyz_.end(), local_xyz_.begin());
-  const std::byte* from = recv.data();
-  for (std::uint64_t k = 0; k < received; ++k) {
-    take(from, &halo_ids_[k], 1);
-    take(from, &local_xyz_[3 * (n + k)], 3);
-    take(from, &halo_shifts_[3 * k], 3);
-  }
-  stats_.bytes_sent += (plan.index.size() - plan.send_counts[rank_]) * record;
 }
 
 // The same halos at their owners' new positions: 3 floats per record, in the plan's order.
 void DistributedEngine::refresh_halos() {
   const auto start = Clock::now();
-  const Decomposition& dec = decomposition_;
   const HaloPlan& plan = *plan_;
   const std::size_t record = 3 * sizeof(float);
   const std::size_t n = ids_.size();
@@ -810,16 +789,17 @@ void DistributedEngine::refresh_halos() {
                            recv_counts.data(), recv_offsets.data());
     } else {
       device_->download_gathered(send);
+      std::vector<float> received(3 * halo_ids_.size());
       host_transport_->exchange(reinterpret_cast<const std::byte*>(send.data()), send_counts.data(),
-                                send_offsets.data(),
-                                reinterpret_cast<std::byte*>(local_xyz_.data() + 3 * n),
+                                send_offsets.data(), reinterpret_cast<std::byte*>(received.data()),
                                 recv_counts.data(), recv_offsets.data());
-      device_->upload_halos(local_xyz_.data() + 3 * n);
+      device_->upload_halos(received.data());
     }
   } else {
+    const detail::Domains domains = domains_of(decomposition_);
     send.resize(3 * plan.index.size());
     for (std::size_t k = 0; k < plan.index.size(); ++k)
-      image(&xyz_[3 * plan.index[k]], &plan.shift[3 * k], dec, &send[3 * k]);
+      domains.image(&xyz_[3 * plan.index[k]], &plan.shift[3 * k], &send[3 * k]);
     std::copy(xyz_.begin(), xyz_.end(), local_xyz_.begin());
     host_transport_->exchange(reinterpret_cast<const std::byte*>(send.data()), send_counts.data(),
                               send_offsets.data(),
@@ -848,13 +828,14 @@ void DistributedEngine::refresh_halos() {
 // its queries too (they are candidates it rejects), so fewer queries is most of what makes this
 // cheaper than all rows.
 void DistributedEngine::select_boundary() {
-  const Decomposition& dec = decomposition_;
-  const Faces faces(dec, rank_);
-  const double reach = reach_of(dec, halo_width_);  // as build_halos(): a hair wide is harmless
+  const detail::Domains domains = domains_of(decomposition_);
+  const detail::Faces faces(domains, rank_);
+  // As build_halos(): a hair wide is harmless.
+  const double reach = reach_of(decomposition_, halo_width_);
   boundary_.clear();
   boundary_xyz_.clear();
   for (std::size_t i = 0; i < ids_.size(); ++i) {
-    if (!faces.near(dec, &xyz_[3 * i], reach)) continue;
+    if (!faces.near(domains, &xyz_[3 * i], reach)) continue;
     boundary_.push_back(static_cast<std::uint32_t>(i));
     boundary_xyz_.insert(boundary_xyz_.end(), &xyz_[3 * i], &xyz_[3 * i] + 3);
   }
@@ -892,6 +873,23 @@ void DistributedEngine::build_local_engine(bool same_sources) {
 PositionsView DistributedEngine::local_positions(std::size_t count) {
   if (device_) return {device_->local(), count, MemorySpace::device};
   return {local_xyz_.data(), count, MemorySpace::host};
+}
+
+const std::vector<float>& DistributedEngine::positions() const {
+  if (device_ && !host_positions_) {
+    device_->download_reference(xyz_);
+    host_positions_ = true;
+  }
+  return xyz_;
+}
+
+const std::vector<float>& DistributedEngine::carried() const {
+  if (device_ && !host_carried_) {
+    std::vector<float> now;
+    device_->download(now, carried_);
+    host_carried_ = true;
+  }
+  return carried_;
 }
 
 PositionsView DistributedEngine::owned_positions() const {

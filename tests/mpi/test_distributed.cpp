@@ -1453,9 +1453,11 @@ void build_on_device(DistributedEngine& engine, const std::vector<float>& xyz,
                d_carried.data(), 3);
 }
 
-void expect_twins(const Box& box, float skin, int steps, DistributedOptions device_options) {
+// A device-resident engine (exchanges planned on the GPU) and a host-resident one step the same
+// particles: the same owners, order, halos and results, exactly; and the reference.
+void expect_twins(const Box& box, float skin, int steps, DistributedOptions device_options,
+                  const Twins& in = twins_input(), bool triclinic = false) {
   const float cutoff = 1.5f;
-  const Twins in = twins_input();
   DistributedOptions host_options = device_options;
   host_options.owned_rows_only = false;  // the device-resident engine's scheme
   host_options.transport = nullptr;
@@ -1503,9 +1505,15 @@ void expect_twins(const Box& box, float skin, int steps, DistributedOptions devi
     const raycut::ResultsView view = device.run(Kernel::count);
     EXPECT_EQ(view.space, MemorySpace::device);
 
-    // And the reference over the positions both hold.
-    expect_matches(device, reference(gather_positions(host, in.n), box, cutoff), what,
-                   host_exchanged, {}, frame_relative);
+    // And the reference over the positions both hold (a triclinic cell: the single-process
+    // engine's, as the triclinic tests above).
+    const std::vector<float> held = gather_positions(host, in.n);
+    if (triclinic)
+      expect_matches(device, engine_reference(held, box, cutoff), what, host_exchanged,
+                     triclinic_lj(), frame_relative);
+    else
+      expect_matches(device, reference(held, box, cutoff), what, host_exchanged, {},
+                     frame_relative);
   }
   if (skin > 0) {
     EXPECT_GT(device.stats().refreshes, 0u);
@@ -1552,6 +1560,31 @@ TEST(DistributedDevice, ImagedAxesRefreshOnTheDevice) {
   DistributedOptions options;
   options.local_images = false;
   expect_twins(Box::orthorhombic(12, 12, 12), 0.4f, 6, options);
+}
+
+TEST(DistributedDevice, SkewedCellStepLoopMatchesHostResidentTwin) {
+  // Wrapping through fractional coordinates, the per-axis halo test, domains along c: the GPU's
+  // exchange against the host's in a triclinic cell.
+  if (skip_without_device()) GTEST_SKIP() << "no CUDA device";
+  Twins in;
+  in.start = fractional_lattice(skewed, 17);
+  in.n = in.start.size() / 3;
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> u(-0.12, 0.12);
+  for (std::size_t k = 0; k < in.start.size(); ++k)
+    in.velocity.push_back(static_cast<float>(u(rng)));
+  DistributedOptions options;
+  options.dims = skewed_dims();
+  expect_twins(cell_of(skewed), 0.4f, 6, options, in, true);
+}
+
+TEST(DistributedDevice, BalancedStepLoopMatchesHostResidentTwin) {
+  // Balance::particles on the device path: the quantiles from the GPU's wrapped positions.
+  if (skip_without_device()) GTEST_SKIP() << "no CUDA device";
+  DistributedOptions options;
+  options.balance = raycut::mpi::Balance::particles;
+  options.rebalance_every = 2;
+  expect_twins(Box::orthorhombic(12, 12, 12), 0.2f, 8, options);
 }
 
 TEST(DistributedDevice, NcclRefreshesMatchHostStaging) {

@@ -191,8 +191,9 @@ struct DistributedStats {
   std::uint64_t migrated_out = 0;      // particles sent to other ranks by the last exchange
   std::uint64_t balances = 0;          // exchanges that moved the cuts (Balance::particles)
   std::uint64_t bytes_sent = 0;        // payload bytes sent to other ranks, last exchange/refresh
-  double exchange_ms = 0;              // wall time of the last exchange or refresh
-  double build_ms = 0;                 // the local engine's build/update, last pass
+  double update_ms = 0;    // update()'s own pass, last call: copy, checks, skin test, agreement
+  double exchange_ms = 0;  // wall time of the last exchange or refresh
+  double build_ms = 0;     // the local engine's build/update, last pass
 };
 
 class DistributedEngine {
@@ -266,11 +267,12 @@ class DistributedEngine {
   MemorySpace space() const { return device_ ? MemorySpace::device : MemorySpace::host; }
   // The owned particles: global indices, positions (wrapped into the cell at the last exchange;
   // as given since), carried floats (width() per particle). positions() and carried() are host
-  // copies: of a device-resident engine's as of the last exchange (owned_positions() and
+  // copies; a device-resident engine downloads them at the first call after an exchange:
+  // positions as of that exchange, carried floats as of that call (owned_positions() and
   // owned_carried() are current, in space() memory).
   const std::vector<std::uint64_t>& ids() const { return ids_; }
-  const std::vector<float>& positions() const { return xyz_; }
-  const std::vector<float>& carried() const { return carried_; }
+  const std::vector<float>& positions() const;
+  const std::vector<float>& carried() const;
   PositionsView owned_positions() const;
   const float* owned_carried() const;
   std::size_t width() const { return width_; }
@@ -298,6 +300,7 @@ class DistributedEngine {
   void balance();
   void migrate();
   void build_halos();
+  void plan_halos_on_host(double reach);
   void refresh_halos();
   void build_local_engine(bool same_sources);
   void select_boundary();
@@ -318,7 +321,10 @@ class DistributedEngine {
   std::size_t width_ = 0;
 
   std::vector<std::uint64_t> ids_;
-  std::vector<float> xyz_, carried_;
+  // A device-resident engine's are host copies, made when asked (positions(), carried()) or
+  // needed (Balance::particles): current while host_positions_ / host_carried_.
+  mutable std::vector<float> xyz_, carried_;
+  mutable bool host_positions_ = true, host_carried_ = true;
   std::vector<float> xyz_at_exchange_;  // the skin's reference
   std::vector<std::uint64_t> halo_ids_;
   std::vector<std::int32_t> halo_shifts_;
