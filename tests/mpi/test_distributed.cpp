@@ -1579,12 +1579,13 @@ TEST(DistributedDevice, SkewedCellStepLoopMatchesHostResidentTwin) {
 }
 
 TEST(DistributedDevice, BalancedStepLoopMatchesHostResidentTwin) {
-  // Balance::particles on the device path: the quantiles from the GPU's wrapped positions.
+  // Balance::particles on the device path, at every exchange: the quantiles from the GPU's
+  // wrapped positions.
   if (skip_without_device()) GTEST_SKIP() << "no CUDA device";
   DistributedOptions options;
   options.balance = raycut::mpi::Balance::particles;
-  options.rebalance_every = 2;
-  expect_twins(Box::orthorhombic(12, 12, 12), 0.2f, 8, options);
+  options.rebalance_every = 1;
+  expect_twins(Box::orthorhombic(12, 12, 12), 0.4f, 8, options);
 }
 
 TEST(DistributedDevice, NcclRefreshesMatchHostStaging) {
