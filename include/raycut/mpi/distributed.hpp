@@ -46,7 +46,7 @@ class DeviceResidence;
 // migration or a halo exchange. Sizes are agreed beforehand over MPI (the engine's control
 // plane), so a transport only moves data. A host transport moves everything; a device one
 // (NCCL) moves the halo refreshes of a device-resident engine (positions given in device
-// memory), GPU to GPU, while exchanges (planned on the host, rare with a skin) and halo fields go
+// memory), GPU to GPU, while the records of exchanges (rare with a skin) and halo fields go
 // through host-staged MPI.
 class Transport {
  public:
