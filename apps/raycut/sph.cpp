@@ -512,6 +512,7 @@ int run_sph(const SphOptions& o) {
     const MpiSession session;
     std::array<int, 3> dims = {0, 0, 0};
     std::copy(o.dims.begin(), o.dims.end(), dims.begin());
+    mpi::select_local_device(MPI_COMM_WORLD);  // one rank per GPU where there are several
     mpi::SphSolver solver(MPI_COMM_WORLD, scenario, o.method, o.skin, dims,
                           o.balance ? mpi::Balance::particles : mpi::Balance::none,
                           o.rebalance_every);
@@ -589,8 +590,9 @@ Command add_sph(CLI::App& app) {
       ->check(non_negative_finite());
   auto* distributed = cmd->add_flag(
       "--distributed", o->distributed,
-      "Under mpirun: the solver over the ranks (raycut::mpi::SphSolver, host methods), domains "
-      "over the particles' extent; rank 0 writes the outputs, pass times the largest over ranks");
+      "Under mpirun: the solver over the ranks (raycut::mpi::SphSolver; a GPU method keeps the "
+      "step on the GPU), domains over the particles' extent; rank 0 writes the outputs, pass "
+      "times the largest over ranks");
   cmd->add_option("--dims", o->dims, "--distributed: domains per axis, 0 = MPI chooses")
       ->delimiter(',')
       ->expected(3)

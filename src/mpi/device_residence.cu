@@ -356,6 +356,23 @@ class CudaResidence final : public DeviceResidence {
     download_to(xyz, send_.data(), 3 * records_);
   }
 
+  const float* gather_fields(const float* owned, std::size_t width) override {
+    fields_send_.resize(width * records_);
+    gather_rows_into(owned, index_.data(), records_, width, fields_send_.data());
+    return fields_send_.data();
+  }
+
+  std::array<float*, 3> sph_fields(std::size_t count) override {
+    velocity_.resize(3 * count);
+    density_.resize(count);
+    pressure_.resize(count);
+    return {velocity_.data(), density_.data(), pressure_.data()};
+  }
+
+  void copy(void* to, const void* from, std::size_t bytes) const override {
+    if (bytes > 0) RAYCUT_CUDA_CHECK(cudaMemcpy(to, from, bytes, cudaMemcpyDefault));
+  }
+
   std::size_t owned() const override { return owned_; }
   float* local() override { return local_.data(); }
   const float* carried() const override { return carried_.data(); }
@@ -404,6 +421,7 @@ class CudaResidence final : public DeviceResidence {
   // local_ is what the local engine was built over (owned, then halos); update() writes staged_
   // and swaps them. reference_: the owned positions at the last exchange.
   cuda::DeviceBuffer<float> local_, staged_, reference_, carried_, carried_staged_, send_, rows_;
+  cuda::DeviceBuffer<float> fields_send_, velocity_, density_, pressure_;  // sph_force's
   cuda::DeviceBuffer<unsigned long long> report_{2}, starts_;
   cuda::DeviceBuffer<double> cuts_;
   Domains domains_{};

@@ -9,6 +9,7 @@
 // local engines' (DistributedEngine never sets a stream).
 #pragma once
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -76,6 +77,16 @@ class DeviceResidence {
   virtual void upload_halos(const float* xyz) = 0;
   // The gathered records to the host (3 floats each).
   virtual void download_gathered(std::vector<float>& xyz) const = 0;
+
+  // ---- fields of the owned particles (sph_force's) ----
+  // The plan's records of `width` floats per owned particle (device, owned order), in a device
+  // buffer: the halos' copies to send.
+  virtual const float* gather_fields(const float* owned, std::size_t width) = 0;
+  // Three device arrays of `count`, 3 count and `count` floats (velocity, density, pressure of
+  // owned + halos), kept until the next call.
+  virtual std::array<float*, 3> sph_fields(std::size_t count) = 0;
+  // Bytes between any two of host and device memory (the direction from the pointers).
+  virtual void copy(void* to, const void* from, std::size_t bytes) const = 0;
 
   virtual std::size_t owned() const = 0;
   // Owned positions then halos: 3 (owned + halos) floats.

@@ -258,7 +258,11 @@ void DistributedEngine::agree(const std::string& local_error, ErrorCode code) {
   int failed = local_error.empty() ? size_ : rank_;
   int first = size_;
   check(MPI_Allreduce(&failed, &first, 1, MPI_INT, MPI_MIN, comm_), "MPI_Allreduce");
-  if (first == size_) return;
+  if (first != size_) throw_error_of(first, local_error, code);
+}
+
+// The error of rank `first` (the lowest that failed), thrown on every rank.
+void DistributedEngine::throw_error_of(int first, const std::string& local_error, ErrorCode code) {
   std::string message = local_error;
   int header[2] = {static_cast<int>(message.size()), static_cast<int>(code)};
   MPI_Bcast(header, 2, MPI_INT, first, comm_);
@@ -426,7 +430,6 @@ bool DistributedEngine::update(const float* positions, const float* carried) {
                 " has a non-finite coordinate";
       moved = taken.moved;
     }
-    agree(error, ErrorCode::invalid_input);
   } else {
     double moved2 = 0;
     for (std::size_t i = 0; error.empty() && i < n; ++i) {
@@ -443,16 +446,19 @@ bool DistributedEngine::update(const float* positions, const float* carried) {
       }
       moved2 = std::max(moved2, d2);
     }
-    agree(error, ErrorCode::invalid_input);
-    std::copy(positions, positions + 3 * n, xyz_.begin());
-    if (carried) std::copy(carried, carried + width_ * n, carried_.begin());
     moved = moved2 > half_skin * half_skin;
   }
-  moved = moved || options_.skin == 0;
-  int any = 0;
-  check(MPI_Allreduce(&moved, &any, 1, MPI_INT, MPI_MAX, comm_), "MPI_Allreduce");
+  // One collective for both verdicts: the lowest rank with an error, and whether any particle
+  // moved beyond the skin (as -1, so that MIN reduces both).
+  int verdict[2] = {error.empty() ? size_ : rank_, -(moved || options_.skin == 0)}, all[2];
+  check(MPI_Allreduce(verdict, all, 2, MPI_INT, MPI_MIN, comm_), "MPI_Allreduce");
+  if (all[0] != size_) throw_error_of(all[0], error, ErrorCode::invalid_input);
+  if (!device_) {  // taken only once every rank agreed
+    std::copy(positions, positions + 3 * n, xyz_.begin());
+    if (carried) std::copy(carried, carried + width_ * n, carried_.begin());
+  }
   stats_.update_ms = elapsed_ms(start);
-  if (any) {
+  if (all[1] < 0) {
     exchange();
     return true;
   }
@@ -946,6 +952,72 @@ Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options) 
   return r;
 }
 
+// sph_force's fields: given where this call needs them (compute(): host arrays, which a method
+// that works in device memory cannot take; run() of a device-resident engine: device arrays),
+// and none null on a rank with owned particles. Collective.
+void DistributedEngine::check_sph_fields(const SphFields& owned, bool device) {
+  std::string error;
+  ErrorCode code = ErrorCode::invalid_argument;
+  if (!device && engine_->space() != MemorySpace::host) {
+    error = "distributed sph_force: method '" + engine_->method() +
+            "' works in device memory: give device fields to run() of a device-resident engine "
+            "(positions in device memory), not host fields to compute()";
+    code = ErrorCode::unsupported;
+  } else if (!ids_.empty() && (!owned.velocity || !owned.density || !owned.pressure)) {
+    error =
+        "distributed sph_force needs velocity, density and pressure of the owned particles "
+        "(SphFields)";
+  }
+  agree(error, code);
+}
+
+ResultsView DistributedEngine::run(Kernel kernel, const KernelOptions& options,
+                                   const SphFields& owned) {
+  check_built("run");
+  if (kernel != Kernel::sph_force) return run(kernel, options);
+  if (!device_) {  // the host path, its rows kept for the view
+    summed_ = compute(kernel, options, owned);
+    return {nullptr, nullptr, summed_.force.data(), nullptr, nullptr, MemorySpace::host};
+  }
+  check_sph_fields(owned, true);
+  // One local engine over owned + halos (all rows): the fields in its order, on the GPU.
+  const std::size_t local = ids_.size() + halo_ids_.size();
+  const std::array<float*, 3> fields = device_->sph_fields(local);
+  device_halo_fields(owned.velocity, 3, fields[0]);
+  device_halo_fields(owned.density, 1, fields[1]);
+  device_halo_fields(owned.pressure, 1, fields[2]);
+  KernelOptions with_fields = options;
+  with_fields.sph = {fields[0], fields[1], fields[2]};
+  engine_->run(kernel, with_fields);
+  return engine_->results_view();
+}
+
+// halo_fields() of a device-resident engine, device arrays: the owned values, then the halos'
+// copies sent along the same plan by the refreshes' transport (GPU to GPU, or staged).
+void DistributedEngine::device_halo_fields(const float* owned, std::size_t width, float* local) {
+  const std::size_t n = ids_.size(), h = halo_ids_.size();
+  const HaloPlan& plan = *plan_;
+  const std::size_t record = width * sizeof(float);
+  device_->copy(local, owned, n * record);
+  const float* send = device_->gather_fields(owned, width);
+  const auto send_counts = scaled(plan.send_counts, record);
+  const auto recv_counts = scaled(plan.recv_counts, record);
+  const auto send_offsets = offsets_of(plan.send_counts, record);
+  const auto recv_offsets = offsets_of(plan.recv_counts, record);
+  if (transport_->space() == MemorySpace::device) {
+    transport_->exchange(reinterpret_cast<const std::byte*>(send), send_counts.data(),
+                         send_offsets.data(), reinterpret_cast<std::byte*>(local + width * n),
+                         recv_counts.data(), recv_offsets.data());
+    return;
+  }
+  std::vector<float> sent(width * plan.index.size()), received(width * h);
+  device_->copy(sent.data(), send, sent.size() * sizeof(float));
+  host_transport_->exchange(reinterpret_cast<const std::byte*>(sent.data()), send_counts.data(),
+                            send_offsets.data(), reinterpret_cast<std::byte*>(received.data()),
+                            recv_counts.data(), recv_offsets.data());
+  device_->copy(local + width * n, received.data(), received.size() * sizeof(float));
+}
+
 std::vector<float> DistributedEngine::halo_fields(const float* owned, std::size_t width) {
   check_built("halo_fields");
   const std::size_t n = ids_.size(), h = halo_ids_.size();
@@ -980,18 +1052,7 @@ Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options,
   check_built("compute");
   if (kernel != Kernel::sph_force) return compute(kernel, options);
   const std::size_t n = ids_.size();
-  std::string error;
-  ErrorCode code = ErrorCode::invalid_argument;
-  if (engine_->space() != MemorySpace::host) {
-    error = "distributed sph_force: method '" + engine_->method() +
-            "' works in device memory; this slice passes fields on the host only";
-    code = ErrorCode::unsupported;
-  } else if (n > 0 && (!owned.velocity || !owned.density || !owned.pressure)) {
-    error =
-        "distributed sph_force needs velocity, density and pressure of the owned particles "
-        "(SphFields)";
-  }
-  agree(error, code);
+  check_sph_fields(owned, false);
 
   // The three fields in one exchange: 5 floats per particle.
   std::vector<float> packed(5 * n);

@@ -8,6 +8,7 @@
 #include <utility>
 
 #include "mpi/mpi_check.hpp"
+#include "mpi/sph_device.hpp"
 #include "raycut/error.hpp"
 #include "sph/host_steps.hpp"
 
@@ -27,6 +28,16 @@ int checked_int(std::size_t n, const char* what) {
   return static_cast<int>(n);
 }
 
+// The state of a device-resident run: asked for by methods that work on the device only, which
+// builds without CUDA do not have.
+std::unique_ptr<detail::SphDevice> sph_device() {
+#if defined(RAYCUT_HAVE_CUDA)
+  return detail::make_sph_device();
+#else
+  throw Error(ErrorCode::internal, "a device-resident SPH solver in a build without CUDA");
+#endif
+}
+
 }  // namespace
 
 struct SphSolver::Impl {
@@ -43,7 +54,9 @@ struct SphSolver::Impl {
   std::uint64_t exchanges = 0, refreshes = 0, migrated = 0;
   double halo_sum = 0;  // this rank's halos summed over the steps
 
-  // The owned particles in engine.ids() order.
+  // The owned particles in engine.ids() order: on the host, or with a method that works in
+  // device memory in `device` (the engine is then device-resident: the step stays on the GPU).
+  std::unique_ptr<detail::SphDevice> device;
   std::vector<float> x, v, rho, p, fixed;
   std::vector<float> carried;  // v (and fixed) packed for the engine, width() per particle
 
@@ -66,6 +79,10 @@ struct SphSolver::Impl {
 
   // After an exchange the owned set and order changed: read them back from the engine.
   void take_owned() {
+    if (device) {
+      device->take(engine.owned_positions().xyz, engine.owned_carried(), engine.owned());
+      return;
+    }
     const std::size_t n = engine.owned(), w = width();
     x = engine.positions();
     const std::vector<float>& c = engine.carried();
@@ -81,6 +98,11 @@ struct SphSolver::Impl {
 
   // Density (neighbours j != i, owned rows, then the self term) and pressure.
   void density_pass() {
+    if (device) {
+      const ResultsView r = engine.run(Kernel::sph_density, sph::density_pass_options(params));
+      device->density_and_pressure(engine.owned() > 0 ? r.density : nullptr, constants);
+      return;
+    }
     const Results r = engine.compute(Kernel::sph_density, sph::density_pass_options(params));
     sph::host::density_and_pressure(r.density.empty() ? nullptr : r.density.data(), rho.data(),
                                     p.data(), engine.owned(), constants);
@@ -96,8 +118,8 @@ DistributedOptions options_of(const sph::SphScenario& scenario, std::string_view
   if (!(skin < 0) && !std::isfinite(skin))
     throw Error(ErrorCode::invalid_argument, "skin must be finite");
   DistributedOptions o;
-  // "auto" is the host path of this slice: auto_method() picks the GPU grid where there is one.
-  o.method = method == "auto" ? "cell-list" : std::string(method);
+  // "auto": the GPU grid where there is a GPU (the step on the device), else the cell list.
+  o.method = method == "auto" ? auto_method() : std::string(method);
   o.skin = skin < 0 ? 0.5f * scenario.params.smoothing_length : skin;
   o.dims = dims;
   o.balance = balance;
@@ -126,8 +148,15 @@ SphSolver::SphSolver(MPI_Comm comm, const sph::SphScenario& scenario, std::strin
   s.x.assign(scenario.position.begin() + 3 * first, scenario.position.begin() + 3 * last);
   s.v.assign(scenario.velocity.begin() + 3 * first, scenario.velocity.begin() + 3 * last);
   if (s.with_fixed) s.fixed.assign(scenario.fixed.begin() + first, scenario.fixed.begin() + last);
-  s.engine.build({s.x.data(), ids.size(), MemorySpace::host}, ids.data(), s.params.smoothing_length,
-                 Box::open(), s.pack(), s.width());
+  if (s.engine.local_engine().space() == MemorySpace::device) {
+    s.device = sph_device();
+    s.device->upload(s.x, s.v, s.fixed, s.with_fixed);
+    s.engine.build({s.device->x(), ids.size(), MemorySpace::device}, ids.data(),
+                   s.params.smoothing_length, Box::open(), s.device->pack(), s.width());
+  } else {
+    s.engine.build({s.x.data(), ids.size(), MemorySpace::host}, ids.data(),
+                   s.params.smoothing_length, Box::open(), s.pack(), s.width());
+  }
   s.take_owned();
   s.structure_current = true;
   s.density_pass();
@@ -144,7 +173,9 @@ void SphSolver::step() {
   auto start = Clock::now();
   if (!s.structure_current) {
     const std::uint64_t before = s.engine.stats().exchanges;
-    if (s.engine.update(s.x.data(), s.pack())) s.take_owned();
+    const bool exchanged = s.device ? s.engine.update(s.device->x(), s.device->pack())
+                                    : s.engine.update(s.x.data(), s.pack());
+    if (exchanged) s.take_owned();
     if (s.engine.stats().exchanges != before) {
       ++s.exchanges;
       s.migrated += s.engine.stats().migrated_out;
@@ -164,16 +195,20 @@ void SphSolver::step() {
 
   // 3. Pressure + viscosity force; the engine sends the fields' halo copies.
   start = Clock::now();
-  const Results f = s.engine.compute(Kernel::sph_force, sph::force_pass_options(s.params),
-                                     SphFields{s.v.data(), s.rho.data(), s.p.data()});
+  const SphFields fields = s.device ? SphFields{s.device->v(), s.device->rho(), s.device->p()}
+                                    : SphFields{s.v.data(), s.rho.data(), s.p.data()};
+  const ResultsView f = s.engine.run(Kernel::sph_force, sph::force_pass_options(s.params), fields);
+  const float* force = s.engine.owned() > 0 ? f.force : nullptr;
   t.force_ms = elapsed_ms(start);
 
   // 4. Walls, gravity, semi-implicit Euler on the owned particles.
   start = Clock::now();
   s.constants.velocity_keep = sph::velocity_keep_at(s.params, time());
-  sph::host::integrate(s.x.data(), s.v.data(), f.force.empty() ? nullptr : f.force.data(),
-                       s.rho.data(), s.with_fixed ? s.fixed.data() : nullptr, s.engine.owned(),
-                       s.constants);
+  if (s.device)
+    s.device->integrate(force, s.constants);
+  else
+    sph::host::integrate(s.x.data(), s.v.data(), force, s.rho.data(),
+                         s.with_fixed ? s.fixed.data() : nullptr, s.engine.owned(), s.constants);
   t.integrate_ms = elapsed_ms(start);
 
   // The slowest rank's passes (also a barrier: the step ends when every rank's has).
@@ -202,6 +237,9 @@ const sph::SphParameters& SphSolver::parameters() const {
 const std::string& SphSolver::method() const {
   return impl_->method;
 }
+MemorySpace SphSolver::space() const {
+  return impl_->device ? MemorySpace::device : MemorySpace::host;
+}
 float SphSolver::skin() const {
   return impl_->skin;
 }
@@ -216,14 +254,20 @@ void SphSolver::copy_state(std::vector<float>& x, std::vector<float>& v, std::ve
                            std::vector<float>& p, int root) const {
   const Impl& s = *impl_;
   const DistributedEngine& e = s.engine;
+  std::vector<float> dx, dv, drho, dp;  // a device-resident run's, downloaded
+  if (s.device) s.device->download(dx, dv, drho, dp);
+  const std::vector<float>& ox = s.device ? dx : s.x;
+  const std::vector<float>& ov = s.device ? dv : s.v;
+  const std::vector<float>& orho = s.device ? drho : s.rho;
+  const std::vector<float>& op = s.device ? dp : s.p;
   // 8 floats per particle: x, v, rho, p.
   const std::size_t n = e.owned();
   std::vector<float> mine(8 * n);
   for (std::size_t i = 0; i < n; ++i) {
-    std::copy_n(&s.x[3 * i], 3, &mine[8 * i]);
-    std::copy_n(&s.v[3 * i], 3, &mine[8 * i + 3]);
-    mine[8 * i + 6] = s.rho[i];
-    mine[8 * i + 7] = s.p[i];
+    std::copy_n(&ox[3 * i], 3, &mine[8 * i]);
+    std::copy_n(&ov[3 * i], 3, &mine[8 * i + 3]);
+    mine[8 * i + 6] = orho[i];
+    mine[8 * i + 7] = op[i];
   }
   checked_int(8 * e.global_size(), "8 floats per particle, over all ranks,");
   const int count = static_cast<int>(8 * n);

@@ -176,6 +176,41 @@ TEST(DistributedSph, DamBreakKeepsItsFixedParticles) {
   }
 }
 
+// The device-resident solver (grid: positions, fields and steps on the GPU, halo fields sent
+// there) against the single-process solver on the GPU. Ranks share the machine's GPUs.
+bool skip_without_device() {
+  raycut::mpi::select_local_device(MPI_COMM_WORLD);
+  return !raycut::cuda_device_available();
+}
+
+TEST(DistributedSph, ArticleDropOnTheGpuMatchesTheSingleProcessSolver) {
+  if (skip_without_device()) GTEST_SKIP() << "no CUDA device";
+  const SphScenario scenario = jittered_drop();
+  {
+    const SphSolver probe(MPI_COMM_WORLD, scenario, "grid");
+    EXPECT_EQ(probe.space(), raycut::MemorySpace::device);
+    EXPECT_EQ(probe.engine().space(), raycut::MemorySpace::device);
+  }
+  const Comparison r = compare_runs(scenario, "grid", 20);
+  expect_within_round_off(r, "small drop, grid on the GPU");
+  expect_migration(r, "grid on the GPU");
+  if (world_rank() == 0) {
+    EXPECT_GT(r.max_speed, 0.5);
+  }
+}
+
+TEST(DistributedSph, DamBreakOnTheGpuKeepsItsFixedParticles) {
+  if (skip_without_device()) GTEST_SKIP() << "no CUDA device";
+  raycut::sph::WcsphConfig config;
+  config.scenario = "dam-break";
+  config.resolution = 6;
+  const Comparison r = compare_runs(raycut::sph::wcsph_scenario(config), "grid", 20);
+  expect_within_round_off(r, "dam break, grid on the GPU");
+  if (world_rank() == 0) {
+    EXPECT_TRUE(r.fixed_held);
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {

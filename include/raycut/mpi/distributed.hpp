@@ -247,6 +247,10 @@ class DistributedEngine {
   // works in device memory (the fields are host arrays in this slice). Other kernels ignore
   // `owned` (no exchange: compute(kernel, options)).
   Results compute(Kernel kernel, const KernelOptions& options, const SphFields& owned);
+  // The same, results left where the method keeps them (run() above), with the fields in
+  // space() memory: a device-resident engine sends their halo copies on the GPU (halo refreshes'
+  // transport) and runs sph_force there. Other kernels ignore `owned`.
+  ResultsView run(Kernel kernel, const KernelOptions& options, const SphFields& owned);
   // Collective: `width` floats per owned particle (host, ids() order) extended to the local
   // order of the engines: the owned values as given, then one copy per halo in halo_ids() order
   // (a periodic image gets its particle's values unchanged). Sent along the halo routes of the
@@ -297,11 +301,14 @@ class DistributedEngine {
   void check_built(const char* call) const;
   PositionsView local_positions(std::size_t count);
   void agree(const std::string& local_error, ErrorCode code);
+  [[noreturn]] void throw_error_of(int first, const std::string& local_error, ErrorCode code);
   void balance();
   void migrate();
   void build_halos();
   void plan_halos_on_host(double reach);
   void refresh_halos();
+  void device_halo_fields(const float* owned, std::size_t width, float* local);
+  void check_sph_fields(const SphFields& owned, bool device);
   void build_local_engine(bool same_sources);
   void select_boundary();
   void exchange_counts(const std::vector<std::uint64_t>& send, std::vector<std::uint64_t>& recv);

@@ -2,8 +2,9 @@
 // each rank steps the particles it owns with the same passes as sph::Solver (density + self term
 // + pressure, the force pass, walls + gravity + semi-implicit Euler, the per-particle arithmetic
 // shared with it), DistributedEngine gives the halos (positions, and the force pass's velocity,
-// density and pressure) and migrates particles with their velocity. Host methods only in this
-// slice (cell-list, brute-force): the fields are host arrays.
+// density and pressure) and migrates particles with their velocity. A method that works in
+// device memory (grid, brute-force-gpu, the OptiX methods) keeps the whole step on the GPU: a
+// device-resident engine, sph::Solver's CUDA steps, the halo fields by the refreshes' transport.
 //
 //   raycut::mpi::SphSolver solver(MPI_COMM_WORLD, raycut::sph::hiprt_drop(), "cell-list");
 //   for (int f = 0; f < 200; ++f) solver.step();
@@ -45,7 +46,8 @@ class SphSolver {
   // [r N / P, (r + 1) N / P) to DistributedEngine::build, which sends each to its domain's rank.
   // The box is open (the pool's walls are penalties): the domains split the particles' extent at
   // build along each axis (dims; 0 entries: MPI_Dims_create), the end slabs reach to infinity.
-  // `method`: a host method, or "auto" (cell-list). `skin`: halos reach h + skin and are
+  // `method`: any method, or "auto" (auto_method(): the GPU grid where there is a GPU, else the
+  // cell list). `skin`: halos reach h + skin and are
   // refreshed in place while no particle has moved more than skin / 2 since the last exchange;
   // < 0: h / 2. `balance`, `rebalance_every`: DistributedOptions' (the cuts at the particle-count
   // quantiles at build and every rebalance_every-th exchange; the water moves). Then one density
@@ -58,8 +60,7 @@ class SphSolver {
   SphSolver(const SphSolver&) = delete;
   SphSolver& operator=(const SphSolver&) = delete;
 
-  // Collective: one time step of dt. A method that works in device memory is Error(unsupported)
-  // here (the force pass's fields are host arrays in this slice).
+  // Collective: one time step of dt.
   void step();
 
   double time() const;  // frame() * dt
@@ -67,7 +68,8 @@ class SphSolver {
   std::size_t size() const;  // N over all ranks
   const sph::SphParameters& parameters() const;
   const std::string& method() const;
-  MemorySpace space() const { return MemorySpace::host; }
+  // Where the particles' state lives: the method's space.
+  MemorySpace space() const;
   float skin() const;
 
   // Collective: the global state on `root` by global index, as sph::Solver::copy_state gives it
