@@ -258,6 +258,11 @@ class CudaResidence final : public DeviceResidence {
                   std::vector<std::uint32_t>& index, std::vector<std::int32_t>& shift) override {
     const std::size_t n = owned_;
     counts.assign(static_cast<std::size_t>(ranks), 0);
+    index.clear();
+    shift.clear();
+    records_ = 0;
+    // No axis that halos cross (one rank, every periodic axis local): no record, no pass.
+    if (!domains_.crossed[0] && !domains_.crossed[1] && !domains_.crossed[2]) return;
     halo_counts_.resize(n + 1);
     halo_offsets_.resize(n + 1);
     RAYCUT_CUDA_CHECK(cudaMemsetAsync(halo_counts_.data() + n, 0, sizeof(unsigned long long)));
@@ -314,6 +319,13 @@ class CudaResidence final : public DeviceResidence {
 
   void set_halos(const std::vector<float>& xyz) override {
     halos_ = xyz.size() / 3;
+    if (halos_ == 0) {  // the owned positions are local_'s already (a shrink keeps contents)
+      local_.resize(3 * owned_);
+      staged_.resize(3 * owned_);
+      reference_.resize(3 * owned_);
+      copy_on_device(reference_.data(), local_.data(), 3 * owned_);
+      return;
+    }
     staged_.resize(3 * (owned_ + halos_));
     copy_on_device(staged_.data(), local_.data(), 3 * owned_);
     upload_to(staged_.data() + 3 * owned_, xyz.data(), xyz.size());

@@ -980,14 +980,19 @@ ResultsView DistributedEngine::run(Kernel kernel, const KernelOptions& options,
     return {nullptr, nullptr, summed_.force.data(), nullptr, nullptr, MemorySpace::host};
   }
   check_sph_fields(owned, true);
-  // One local engine over owned + halos (all rows): the fields in its order, on the GPU.
-  const std::size_t local = ids_.size() + halo_ids_.size();
-  const std::array<float*, 3> fields = device_->sph_fields(local);
-  device_halo_fields(owned.velocity, 3, fields[0]);
-  device_halo_fields(owned.density, 1, fields[1]);
-  device_halo_fields(owned.pressure, 1, fields[2]);
+  // One local engine over owned + halos (all rows): the fields in its order, on the GPU. A rank
+  // that neither sends nor receives halos takes no part in the transports' exchanges (they move
+  // between pairs with something to move), so it passes the owned fields as given.
   KernelOptions with_fields = options;
-  with_fields.sph = {fields[0], fields[1], fields[2]};
+  with_fields.sph = {owned.velocity, owned.density, owned.pressure};
+  if (!halo_ids_.empty() || !plan_->index.empty()) {
+    const std::size_t local = ids_.size() + halo_ids_.size();
+    const std::array<float*, 3> fields = device_->sph_fields(local);
+    device_halo_fields(owned.velocity, 3, fields[0]);
+    device_halo_fields(owned.density, 1, fields[1]);
+    device_halo_fields(owned.pressure, 1, fields[2]);
+    with_fields.sph = {fields[0], fields[1], fields[2]};
+  }
   engine_->run(kernel, with_fields);
   return engine_->results_view();
 }
