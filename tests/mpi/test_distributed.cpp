@@ -658,6 +658,40 @@ TEST(Distributed, UserFunctorsSeeOwnedRowsAndLocalSources) {
     }
 }
 
+// Decomposition::slab and owner (domains.hpp's binary search, which the GPU's exchange runs too)
+// against std::upper_bound over the inner cuts and the rank formula, at the cuts themselves,
+// one float step either side, the ends, infinities and NaN.
+TEST(Distributed, SlabsAndOwnersAtTheCuts) {
+  raycut::mpi::Decomposition dec;
+  dec.dims = {5, 3, 1};
+  dec.cuts[0] = {0, 1.5, 2.25, 7, 7.5, 10};
+  dec.cuts[1] = {-3, -1, 4, 6};
+  dec.cuts[2] = {0, 2};
+  for (int a = 0; a < 2; ++a) {
+    const auto& c = dec.cuts[a];
+    std::vector<double> probes = {-INFINITY, INFINITY, NAN, -1e300, 1e300};
+    for (double cut : c)
+      probes.insert(probes.end(),
+                    {cut, std::nextafter(cut, -INFINITY), std::nextafter(cut, INFINITY)});
+    for (double u : probes) {
+      const int want =
+          std::isnan(u)
+              ? 0
+              : static_cast<int>(std::upper_bound(c.begin() + 1, c.end() - 1, u) - (c.begin() + 1));
+      EXPECT_EQ(dec.slab(a, u), want) << "axis " << a << ", u = " << u;
+    }
+  }
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<float> x(-1, 11), y(-4, 7);
+  for (int k = 0; k < 1000; ++k) {
+    const float p[3] = {x(rng), y(rng), 1};
+    const int want = dec.slab(0, p[0]) * 3 + dec.slab(1, p[1]);
+    EXPECT_EQ(dec.owner(p), want);
+    const std::array<int, 3> c = dec.coords(want);
+    EXPECT_EQ((std::array<int, 3>{dec.slab(0, p[0]), dec.slab(1, p[1]), 0}), c);
+  }
+}
+
 TEST(Distributed, ExchangePlanIsTheSameAtAnyThreadCount) {
   // The exchange's planning runs in OpenMP threads (wrap, owners, halo routes); per-thread routes
   // are appended in thread order, so owned order, halos and shifts must not depend on the count.
