@@ -29,7 +29,8 @@
 #   mpi-scaling  the MPI tests, then weak (2^24 per GPU) and strong (2^25) scaling of the
 #                device-resident engine with NCCL at 1, 2, 4 and all visible GPUs (kinds
 #                nvidia-h200-x2/x4/x8): weak-npK.csv, strong-npK.csv, scaling.md/.png
-#                (bench/plot_distributed.py; issues 16 and 17)
+#                (bench/plot_distributed.py; issues 16 and 17); then the distributed SPH solver
+#                on the GPUs (the article's drop and 524,288 particles): sph-scaling.csv
 set -uo pipefail
 cd "$(dirname "$0")/.." || exit 1
 out="${OUT:-/tmp/raycut-out}"
@@ -199,6 +200,19 @@ while [ $# -gt 0 ]; do
       done
       [ ${#csvs[@]} -gt 0 ] && "$py" bench/plot_distributed.py "${csvs[@]}" \
         --md "$res/scaling.md" --png "$res/scaling.png" && cat "$res/scaling.md"
+      # The distributed SPH solver on the GPUs (issue 16's "hiprt-drop and a scaled-up one"),
+      # beside the single-process solver: sph-single.csv and sph-scaling.csv, a row per run.
+      sph_summary() { grep -E "steps/s|distributed:"; }
+      "$raycut" sph --scenario hiprt-drop -m grid -q --csv "$res/sph-single.csv" | sph_summary
+      "$raycut" sph --scenario small -n 524288 --frames 100 -m grid -q \
+        --csv "$res/sph-single.csv" | sph_summary
+      for np in $(seq 1 "$gpus"); do
+        [ "$np" -eq 1 ] || [ "$np" -eq 2 ] || [ "$np" -eq 4 ] || [ "$np" -eq "$gpus" ] || continue
+        mpirun --allow-run-as-root --bind-to none -np "$np" "$raycut" sph --distributed \
+          --scenario hiprt-drop -m grid -q --csv "$res/sph-scaling.csv" | sph_summary
+        mpirun --allow-run-as-root --bind-to none -np "$np" "$raycut" sph --distributed \
+          --scenario small -n 524288 --frames 100 -m grid -q --csv "$res/sph-scaling.csv" | sph_summary
+      done
       ;;
     grid-suites)
       # Both suites, the grids beside the paper's own grid: the no-regression check.
