@@ -24,6 +24,9 @@ namespace raycut::mpi {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+// Owned particles per rank: the halo plan's and the migration's indices are 32-bit.
+constexpr std::uint64_t max_owned = std::numeric_limits<std::uint32_t>::max();
 double elapsed_ms(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
@@ -296,6 +299,10 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
   try {
     if (positions.size > 0 && (positions.xyz == nullptr || ids == nullptr))
       throw Error(ErrorCode::invalid_argument, "distributed build: null positions or ids");
+    if (positions.size > max_owned)
+      throw Error(ErrorCode::unsupported, "distributed build: " + std::to_string(positions.size) +
+                                              " particles given on one rank, more than 2^32 - 1 "
+                                              "(the exchange's indices are 32-bit)");
     if (positions.size > 0 && width > 0 && carried == nullptr)
       throw Error(ErrorCode::invalid_argument, "distributed build: null carried values");
     if (on_device) {
@@ -627,6 +634,13 @@ void DistributedEngine::migrate() {
   std::vector<std::uint64_t> recv_counts;
   exchange_counts(send_counts, recv_counts);
   const std::uint64_t received = std::accumulate(recv_counts.begin(), recv_counts.end(), 0ull);
+  const std::uint64_t owning = leaving.counts[static_cast<std::size_t>(rank_)] + received;
+  agree(owning > max_owned ? "distributed exchange: rank " + std::to_string(rank_) + " would own " +
+                                 std::to_string(owning) +
+                                 " particles, more than 2^32 - 1 (the exchange's indices are "
+                                 "32-bit); use more ranks"
+                           : std::string(),
+        ErrorCode::out_of_memory);
   const std::size_t sent = leaving.index.size();
   std::vector<std::byte> send(sent * record), recv(received * record);
   std::byte* at = send.data();
