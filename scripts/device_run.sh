@@ -208,10 +208,11 @@ while [ $# -gt 0 ]; do
         --csv "$res/sph-single.csv" | sph_summary
       for np in $(seq 1 "$gpus"); do
         [ "$np" -eq 1 ] || [ "$np" -eq 2 ] || [ "$np" -eq 4 ] || [ "$np" -eq "$gpus" ] || continue
-        mpirun --allow-run-as-root --bind-to none -np "$np" "$raycut" sph --distributed \
+        mpirun --allow-run-as-root --bind-to none -np "$np" "$raycut" sph --distributed --nccl \
           --scenario hiprt-drop -m grid -q --csv "$res/sph-scaling.csv" | sph_summary
-        mpirun --allow-run-as-root --bind-to none -np "$np" "$raycut" sph --distributed \
-          --scenario small -n 524288 --frames 100 -m grid -q --csv "$res/sph-scaling.csv" | sph_summary
+        mpirun --allow-run-as-root --bind-to none -np "$np" "$raycut" sph --distributed --nccl \
+          --scenario small -n 524288 --frames 100 -m grid -q --csv "$res/sph-scaling.csv" |
+          sph_summary
       done
       ;;
     grid-suites)

@@ -54,6 +54,7 @@ struct SphOptions {
   std::string result_csv;
   // Under mpirun: raycut::mpi::SphSolver over the ranks.
   bool distributed = false;
+  bool nccl = false;      // --distributed with a GPU method: refreshes and fields by NCCL
   std::vector<int> dims;  // empty: MPI_Dims_create
   bool balance = false;   // cuts at the particle-count quantiles
   int rebalance_every = 1;
@@ -515,7 +516,8 @@ int run_sph(const SphOptions& o) {
     mpi::select_local_device(MPI_COMM_WORLD);  // one rank per GPU where there are several
     mpi::SphSolver solver(MPI_COMM_WORLD, scenario, o.method, o.skin, dims,
                           o.balance ? mpi::Balance::particles : mpi::Balance::none,
-                          o.rebalance_every);
+                          o.rebalance_every,
+                          o.nccl ? mpi::make_nccl_transport(MPI_COMM_WORLD) : nullptr);
     return run_steps(o, config, scenario, frames, solver);
 #else
     throw Error(ErrorCode::unsupported,
@@ -596,6 +598,10 @@ Command add_sph(CLI::App& app) {
   cmd->add_option("--dims", o->dims, "--distributed: domains per axis, 0 = MPI chooses")
       ->delimiter(',')
       ->expected(3)
+      ->needs(distributed);
+  cmd->add_flag("--nccl", o->nccl,
+                "--distributed with a GPU method: halo refreshes and fields GPU to GPU by NCCL "
+                "(one rank per GPU)")
       ->needs(distributed);
   auto* balance =
       cmd->add_flag("--balance", o->balance,

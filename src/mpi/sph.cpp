@@ -113,7 +113,8 @@ namespace {
 
 // The sph::Solver's checks first (the same scenario on every rank, so every rank throws alike).
 DistributedOptions options_of(const sph::SphScenario& scenario, std::string_view method, float skin,
-                              std::array<int, 3> dims, Balance balance, int rebalance_every) {
+                              std::array<int, 3> dims, Balance balance, int rebalance_every,
+                              std::shared_ptr<Transport> transport) {
   sph::validate(scenario);
   if (!(skin < 0) && !std::isfinite(skin))
     throw Error(ErrorCode::invalid_argument, "skin must be finite");
@@ -124,15 +125,17 @@ DistributedOptions options_of(const sph::SphScenario& scenario, std::string_view
   o.dims = dims;
   o.balance = balance;
   o.rebalance_every = rebalance_every;
+  o.transport = std::move(transport);
   return o;
 }
 
 }  // namespace
 
 SphSolver::SphSolver(MPI_Comm comm, const sph::SphScenario& scenario, std::string_view method,
-                     float skin, std::array<int, 3> dims, Balance balance, int rebalance_every)
-    : impl_(std::make_unique<Impl>(
-          comm, options_of(scenario, method, skin, dims, balance, rebalance_every))) {
+                     float skin, std::array<int, 3> dims, Balance balance, int rebalance_every,
+                     std::shared_ptr<Transport> transport)
+    : impl_(std::make_unique<Impl>(comm, options_of(scenario, method, skin, dims, balance,
+                                                    rebalance_every, std::move(transport)))) {
   Impl& s = *impl_;
   s.params = scenario.params;
   s.constants = sph::constants_of(s.params);

@@ -1640,6 +1640,84 @@ TEST(DistributedDevice, NcclRefreshesMatchHostStaging) {
   expect_twins(Box::orthorhombic(12, 12, 12), 0.4f, 6, options);
 }
 
+// run(sph_force, options, device fields) of a device-resident engine: the halo copies of the
+// fields gathered on the GPU and sent by the refreshes' transport (host-staged, then NCCL where
+// each rank has a GPU), against the host-resident cell-list engine's compute() with host fields
+// over the same particles and fields (by global index). Every periodic axis imaged by halos, so
+// that one rank sends fields to itself.
+TEST(DistributedDevice, SphForceFieldsOnTheDevice) {
+  if (skip_without_device()) GTEST_SKIP() << "no CUDA device";
+  const Twins in = twins_input();
+  const Box box = Box::orthorhombic(12, 12, 12);
+  const float cutoff = 1.5f;
+  const raycut::KernelOptions options = sph_options();
+  std::vector<std::shared_ptr<raycut::mpi::Transport>> transports = {nullptr};
+  if (!ranks_share_a_device()) try {
+      transports.push_back(raycut::mpi::make_nccl_transport(MPI_COMM_WORLD));
+    } catch (const raycut::Error& e) {
+      if (e.code() != ErrorCode::unsupported) throw;
+    }
+  std::vector<float> first;  // the first transport's forces by global index
+  for (const auto& transport : transports) {
+    const std::string what = transport ? transport->name() : "host-staged";
+    DistributedOptions device_options, host_options;
+    device_options.method = "grid";
+    device_options.local_images = host_options.local_images = false;
+    device_options.transport = transport;
+    host_options.method = "cell-list";
+    DistributedEngine device(MPI_COMM_WORLD, device_options), host(MPI_COMM_WORLD, host_options);
+    build_on_device(device, in.start, in.velocity, cutoff, box);
+    build(host, in.start, cutoff, box, Spread::strided, in.velocity, 3);
+    ASSERT_GT(device.halos(), 0u) << what;  // fields to send, at one rank too
+
+    // Fields by global index: the velocities, a density from the host twin's pass, a pressure.
+    const std::size_t n = in.n;
+    const std::vector<float> rho =
+        gather_by_id(host, host.compute(Kernel::sph_density, options).density, 1, n);
+    std::vector<float> pressure(n);
+    for (std::size_t i = 0; i < n; ++i) pressure[i] = 2.0f * rho[i] - 1.0f;
+    const auto owned_fields = [&](const DistributedEngine& e) {
+      std::array<std::vector<float>, 3> f;
+      for (std::uint64_t id : e.ids()) {
+        f[0].insert(f[0].end(), &in.velocity[3 * id], &in.velocity[3 * id] + 3);
+        f[1].push_back(rho[id]);
+        f[2].push_back(pressure[id]);
+      }
+      return f;
+    };
+    const auto h = owned_fields(host);
+    const raycut::Results want =
+        host.compute(Kernel::sph_force, options, {h[0].data(), h[1].data(), h[2].data()});
+    const auto d = owned_fields(device);
+    const raycut::DeviceArray dv(d[0]), drho(d[1]), dp(d[2]);
+    const raycut::ResultsView view =
+        device.run(Kernel::sph_force, options, {dv.data(), drho.data(), dp.data()});
+    EXPECT_EQ(view.space, MemorySpace::device) << what;
+    std::vector<float> got = device.local_engine().results().force;
+    ASSERT_GE(got.size(), 3 * device.owned()) << what;
+    got.resize(3 * device.owned());
+
+    const std::vector<float> got_by_id = gather_by_id(device, got, 3, n);
+    const std::vector<float> want_by_id = gather_by_id(host, want.force, 3, n);
+    int failures = 0;
+    for (std::size_t i = 0; i < n && failures < 5; ++i) {
+      float scale = 0;
+      for (int c = 0; c < 3; ++c) scale = std::max(scale, std::abs(want_by_id[3 * i + c]));
+      for (int c = 0; c < 3; ++c)
+        if (!close(got_by_id[3 * i + c], want_by_id[3 * i + c], scale, 1e-4f)) {
+          ++failures;
+          ADD_FAILURE() << what << ": particle " << i << " component " << c << ": "
+                        << got_by_id[3 * i + c] << " vs " << want_by_id[3 * i + c];
+        }
+    }
+    // The transports move the same bytes: the same forces exactly.
+    if (first.empty())
+      first = got_by_id;
+    else
+      EXPECT_EQ(got_by_id, first) << what;
+  }
+}
+
 TEST(DistributedDevice, Errors) {
   using raycut_test::contains;
   using raycut_test::error_message;

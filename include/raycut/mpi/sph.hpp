@@ -51,11 +51,13 @@ class SphSolver {
   // refreshed in place while no particle has moved more than skin / 2 since the last exchange;
   // < 0: h / 2. `balance`, `rebalance_every`: DistributedOptions' (the cuts at the particle-count
   // quantiles at build and every rebalance_every-th exchange; the water moves). Then one density
-  // pass (copy_state has rho and p of frame 0), as sph::Solver.
+  // pass (copy_state has rho and p of frame 0), as sph::Solver. `transport`:
+  // DistributedOptions::transport (make_nccl_transport: a device method's halo refreshes and
+  // fields GPU to GPU; null: host-staged MPI).
   // Errors as sph::Solver's and DistributedEngine::build's, thrown on every rank.
   SphSolver(MPI_Comm comm, const sph::SphScenario& scenario, std::string_view method = "auto",
             float skin = -1, std::array<int, 3> dims = {0, 0, 0}, Balance balance = Balance::none,
-            int rebalance_every = 0);
+            int rebalance_every = 0, std::shared_ptr<Transport> transport = nullptr);
   ~SphSolver();
   SphSolver(const SphSolver&) = delete;
   SphSolver& operator=(const SphSolver&) = delete;
