@@ -168,6 +168,10 @@ class CudaResidence final : public DeviceResidence {
 
   void download(std::vector<float>& xyz, std::vector<float>& carried) const override {
     download_to(xyz, local_.data(), 3 * owned_);
+    download_carried(carried);
+  }
+
+  void download_carried(std::vector<float>& carried) const override {
     download_to(carried, carried_.data(), width_ * owned_);
   }
 
@@ -230,9 +234,7 @@ class CudaResidence final : public DeviceResidence {
     gather(carried_.data(), leaving_.data(), gone, width_, leaving.carried);
   }
 
-  void keep_staying(int rank, const std::vector<float>& xyz,
-                    const std::vector<float>& carried) override {
-    (void)rank;
+  void keep_staying(const std::vector<float>& xyz, const std::vector<float>& carried) override {
     if (!sorted_ && xyz.empty()) return;  // nothing left, nothing came
     const std::size_t staying = sorted_ ? staying_ : owned_;
     const std::size_t arrived = xyz.size() / 3, n = staying + arrived;

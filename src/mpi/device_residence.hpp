@@ -27,8 +27,9 @@ class DeviceResidence {
   // floats per particle), and the same to the host (build() checks them there).
   virtual void adopt(const float* xyz, const float* carried, std::size_t owned, std::size_t width,
                      std::vector<float>& host_xyz, std::vector<float>& host_carried) = 0;
-  // The owned positions (now) and carried floats to the host.
+  // The owned positions (now) and carried floats to the host; the carried floats alone.
   virtual void download(std::vector<float>& xyz, std::vector<float>& carried) const = 0;
+  virtual void download_carried(std::vector<float>& carried) const = 0;
   // The owned positions at the last exchange (the skin's reference) to the host.
   virtual void download_reference(std::vector<float>& xyz) const = 0;
 
@@ -48,8 +49,7 @@ class DeviceResidence {
   virtual void find_owners(int rank, int ranks, Leaving& leaving) = 0;
   // After find_owners: the staying particles compacted in their order, then the arrivals (host
   // arrays, 3 and width floats each) after them.
-  virtual void keep_staying(int rank, const std::vector<float>& xyz,
-                            const std::vector<float>& carried) = 0;
+  virtual void keep_staying(const std::vector<float>& xyz, const std::vector<float>& carried) = 0;
   // The halo plan of the owned particles (for_each_halo): per rank the records it gets, and per
   // record the owned index and image shift (3 int32), grouped by rank in the host's order, on
   // the host. gather() makes the records' positions.

@@ -665,7 +665,7 @@ void DistributedEngine::migrate() {
     take(from, carried.data() + width_ * k, width_);
   }
   if (device_) {
-    device_->keep_staying(rank_, xyz, carried);
+    device_->keep_staying(xyz, carried);
   } else {
     remove_rows(xyz_, 3, gone);
     remove_rows(carried_, width_, gone);
@@ -905,8 +905,7 @@ const std::vector<float>& DistributedEngine::positions() const {
 
 const std::vector<float>& DistributedEngine::carried() const {
   if (device_ && !host_carried_) {
-    std::vector<float> now;
-    device_->download(now, carried_);
+    device_->download_carried(carried_);
     host_carried_ = true;
   }
   return carried_;
