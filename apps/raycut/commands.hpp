@@ -76,12 +76,13 @@ struct DistributedBenchOptions {
   bool enabled = false;
   std::vector<std::uint64_t> n_per_rank, n_total;  // weak or strong scaling
   float skin = 0.3f;
-  std::vector<int> dims;  // empty: MPI_Dims_create
-  bool all_rows = false;  // DistributedOptions::owned_rows_only = false
-  bool balance = false;   // DistributedOptions::balance = particles
-  bool device = false;    // positions (and the step) in device memory: the device-resident path
-  bool nccl = false;      // halo refreshes by make_nccl_transport (with device)
-  int steps = 1;          // refresh steps timed after each exchange
+  std::vector<int> dims;     // empty: MPI_Dims_create
+  bool all_rows = false;     // DistributedOptions::owned_rows_only = false
+  bool balance = false;      // DistributedOptions::balance = particles
+  bool halo_images = false;  // DistributedOptions::local_images = false
+  bool device = false;       // positions (and the step) in device memory: the device-resident path
+  bool nccl = false;         // halo refreshes by make_nccl_transport (with device)
+  int steps = 1;             // refresh steps timed after each exchange
 };
 void add_distributed_bench_options(CLI::App& bench, DistributedBenchOptions& o);
 int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<std::string>& methods,

@@ -103,6 +103,7 @@ Run run_method(MPI_Comm comm, const DistributedBenchOptions& o, const std::strin
   options.skin = o.skin;
   options.owned_rows_only = !o.all_rows;
   if (o.balance) options.balance = mpi::Balance::particles;
+  options.local_images = !o.halo_images;
   if (o.nccl) options.transport = mpi::make_nccl_transport(comm);
   for (std::size_t a = 0; a < o.dims.size(); ++a) options.dims[a] = o.dims[a];
   mpi::DistributedEngine engine(comm, options);
@@ -235,6 +236,12 @@ void add_distributed_bench_options(CLI::App& bench, DistributedBenchOptions& o) 
                 "--distributed: cuts at the particle-count quantiles of each split axis at build "
                 "(DistributedOptions::balance), instead of equal slabs")
       ->needs(flag);
+  bench
+      .add_flag("--halo-images", o.halo_images,
+                "--distributed: every periodic axis imaged by halos, single-domain ones too "
+                "(DistributedOptions::local_images = false): at one rank, the exchanges and "
+                "refreshes of several ranks, sent to itself")
+      ->needs(flag);
   auto* device =
       bench
           .add_flag("--device", o.device,
@@ -287,7 +294,8 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
   const std::string environment = environment_columns(sys, true);
   if (rank == 0) {
     csv->write(
-        "suite,method,rows,ranks,dims,balance,scaling,N,N_per_rank,cutoff,skin,pairs,halos,owned_"
+        "suite,method,rows,ranks,dims,balance,images,scaling,N,N_per_rank,cutoff,skin,pairs,halos,"
+        "owned_"
         "min,"
         "owned_max,build_ms,exchange_ms,refresh_ms,compute_ms,step_ms,step_ms_min,step_ms_max,"
         "compute_cpu_ms,step_cpu_ms,update_ms,halo_refresh_ms,local_build_ms,positions,transport,"
@@ -321,13 +329,13 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
       char row[1024];
       std::snprintf(
           row, sizeof row,
-          "lj-liquid-pbc,%s,%s,%d,%dx%dx%d,%s,%s,%llu,%llu,%g,%g,%llu,%llu,%llu,%llu,%.4f,%.4f,"
+          "lj-liquid-pbc,%s,%s,%d,%dx%dx%d,%s,%s,%s,%llu,%llu,%g,%g,%llu,%llu,%llu,%llu,%.4f,%.4f,"
           "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%s,%s,%s,%d,%d,mpi_wtime_max,%s\n",
           method.c_str(), run.owned_rows_only ? "owned" : "all", size, run.dims[0], run.dims[1],
-          run.dims[2], o.balance ? "particles" : "none", weak ? "weak" : "strong",
-          static_cast<unsigned long long>(n), static_cast<unsigned long long>(n / size), lj_cutoff,
-          o.skin, static_cast<unsigned long long>(run.pairs),
-          static_cast<unsigned long long>(run.halos),
+          run.dims[2], o.balance ? "particles" : "none", o.halo_images ? "halos" : "local",
+          weak ? "weak" : "strong", static_cast<unsigned long long>(n),
+          static_cast<unsigned long long>(n / size), lj_cutoff, o.skin,
+          static_cast<unsigned long long>(run.pairs), static_cast<unsigned long long>(run.halos),
           static_cast<unsigned long long>(run.owned_min),
           static_cast<unsigned long long>(run.owned_max), run.build_ms, median(s[exchange_phase]),
           median(s[refresh_phase]), median(s[compute_phase]), median(s[step_phase]),

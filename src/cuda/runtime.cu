@@ -180,6 +180,10 @@ void download(void* host, const void* device, std::size_t bytes) {
   RAYCUT_CUDA_CHECK(cudaMemcpy(host, device, bytes, cudaMemcpyDeviceToHost));
 }
 
+void copy(void* to, const void* from, std::size_t bytes) {
+  if (bytes > 0) RAYCUT_CUDA_CHECK(cudaMemcpy(to, from, bytes, cudaMemcpyDefault));
+}
+
 DeviceMemory copy_on_device(const void* device, std::size_t bytes, void* stream) {
   require_device_memory(bytes, "a copy of the positions");
   void* p = nullptr;

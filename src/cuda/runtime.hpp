@@ -29,6 +29,9 @@ using DeviceMemory = std::unique_ptr<void, DeviceFree>;
 // not fit, saying how much was asked and how much is free.
 DeviceMemory upload(const void* host, std::size_t bytes);
 void download(void* host, const void* device, std::size_t bytes);
+// `bytes` between any two of host and device memory (the direction from the pointers),
+// synchronously; nothing when bytes is 0.
+void copy(void* to, const void* from, std::size_t bytes);
 // A device-to-device copy into new memory, queued on `stream` (a cudaStream_t).
 DeviceMemory copy_on_device(const void* device, std::size_t bytes, void* stream);
 

@@ -79,9 +79,10 @@ __global__ void key_starts(const std::uint32_t* sorted, std::size_t n, int keys,
   }
 }
 
-// to[k] = from[rows[k]], `width` floats a row.
-__global__ void gather_rows(const float* from, const std::uint32_t* rows, std::size_t count,
-                            std::size_t width, float* to) {
+// to[k] = from[rows[k]], `width` values a row.
+template <class T>
+__global__ void gather_rows(const T* from, const std::uint32_t* rows, std::size_t count,
+                            std::size_t width, T* to) {
   for (std::size_t e = first_index(); e < count * width; e += stride())
     to[e] = from[width * rows[e / width] + e % width];
 }
@@ -137,32 +138,31 @@ int bits_for(int keys) {
   return bits;
 }
 
+// `count` values between host and device memory, either way.
 template <class T>
-void copy_on_device(T* to, const T* from, std::size_t count) {
-  if (count > 0)
-    RAYCUT_CUDA_CHECK(cudaMemcpy(to, from, count * sizeof(T), cudaMemcpyDeviceToDevice));
-}
-template <class T>
-void upload_to(T* to, const T* from, std::size_t count) {
-  if (count > 0) RAYCUT_CUDA_CHECK(cudaMemcpy(to, from, count * sizeof(T), cudaMemcpyHostToDevice));
+void copy_n(T* to, const T* from, std::size_t count) {
+  cuda::copy(to, from, count * sizeof(T));
 }
 template <class T>
 void download_to(std::vector<T>& to, const T* from, std::size_t count) {
   to.resize(count);
-  if (count > 0) cuda::download(to.data(), from, count * sizeof(T));
+  copy_n(to.data(), from, count);
 }
 
 class CudaResidence final : public DeviceResidence {
  public:
-  void adopt(const float* xyz, const float* carried, std::size_t owned, std::size_t width,
-             std::vector<float>& host_xyz, std::vector<float>& host_carried) override {
+  void adopt(const float* xyz, const float* carried, const std::uint64_t* ids, std::size_t owned,
+             std::size_t width, std::vector<float>& host_xyz,
+             std::vector<float>& host_carried) override {
     owned_ = owned;
     halos_ = records_ = 0;
     width_ = width;
     local_.resize(3 * owned);
     carried_.resize(width * owned);
-    copy_on_device(local_.data(), xyz, 3 * owned);
-    copy_on_device(carried_.data(), carried, width * owned);
+    ids_.resize(owned);
+    copy_n(local_.data(), xyz, 3 * owned);
+    copy_n(carried_.data(), carried, width * owned);
+    copy_n(ids_.data(), ids, owned);
     download(host_xyz, host_carried);
   }
 
@@ -185,7 +185,7 @@ class CudaResidence final : public DeviceResidence {
     for (int a = 0; a < 3; ++a)
       cuts.insert(cuts.end(), domains.cuts[a], domains.cuts[a] + domains.dims[a] + 1);
     cuts_.resize(cuts.size());
-    upload_to(cuts_.data(), cuts.data(), cuts.size());
+    copy_n(cuts_.data(), cuts.data(), cuts.size());
     for (int a = 0, at = 0; a < 3; at += domains.dims[a] + 1, ++a)
       domains_.cuts[a] = cuts_.data() + at;
   }
@@ -225,43 +225,46 @@ class CudaResidence final : public DeviceResidence {
       return;
     }
     leaving_.resize(gone);
-    copy_on_device(leaving_.data(), order_.data(), staying_first_);
-    copy_on_device(leaving_.data() + staying_first_, order_.data() + staying_first_ + staying,
-                   gone - staying_first_);
+    copy_n(leaving_.data(), order_.data(), staying_first_);
+    copy_n(leaving_.data() + staying_first_, order_.data() + staying_first_ + staying,
+           gone - staying_first_);
     download_to(leaving.index, leaving_.data(), gone);
     rows_.resize(std::max<std::size_t>(3, width_) * gone);
     gather(local_.data(), leaving_.data(), gone, 3, leaving.xyz);
     gather(carried_.data(), leaving_.data(), gone, width_, leaving.carried);
   }
 
-  void keep_staying(const std::vector<float>& xyz, const std::vector<float>& carried) override {
-    if (!sorted_ && xyz.empty()) return;  // nothing left, nothing came
+  void keep_staying(const std::vector<float>& xyz, const std::vector<float>& carried,
+                    const std::vector<std::uint64_t>& ids) override {
+    if (!sorted_ && ids.empty()) return;  // nothing left, nothing came
     const std::size_t staying = sorted_ ? staying_ : owned_;
-    const std::size_t arrived = xyz.size() / 3, n = staying + arrived;
+    const std::size_t arrived = ids.size(), n = staying + arrived;
     staged_.resize(3 * n);
     carried_staged_.resize(width_ * n);
+    ids_staged_.resize(n);
     const std::uint32_t* kept = order_.data() + staying_first_;
     if (sorted_) {
       gather_rows_into(local_.data(), kept, staying, 3, staged_.data());
       gather_rows_into(carried_.data(), kept, staying, width_, carried_staged_.data());
+      gather_rows_into(ids_.data(), kept, staying, 1, ids_staged_.data());
     } else {
-      copy_on_device(staged_.data(), local_.data(), 3 * staying);
-      copy_on_device(carried_staged_.data(), carried_.data(), width_ * staying);
+      copy_n(staged_.data(), local_.data(), 3 * staying);
+      copy_n(carried_staged_.data(), carried_.data(), width_ * staying);
+      copy_n(ids_staged_.data(), ids_.data(), staying);
     }
-    upload_to(staged_.data() + 3 * staying, xyz.data(), xyz.size());
-    upload_to(carried_staged_.data() + width_ * staying, carried.data(), carried.size());
+    copy_n(staged_.data() + 3 * staying, xyz.data(), xyz.size());
+    copy_n(carried_staged_.data() + width_ * staying, carried.data(), carried.size());
+    copy_n(ids_staged_.data() + staying, ids.data(), arrived);
     std::swap(local_, staged_);
     std::swap(carried_, carried_staged_);
+    std::swap(ids_, ids_staged_);
     owned_ = n;
     sorted_ = false;
   }
 
-  void plan_halos(int rank, int ranks, double reach, std::vector<std::uint64_t>& counts,
-                  std::vector<std::uint32_t>& index, std::vector<std::int32_t>& shift) override {
+  void plan_halos(int rank, int ranks, double reach, std::vector<std::uint64_t>& counts) override {
     const std::size_t n = owned_;
     counts.assign(static_cast<std::size_t>(ranks), 0);
-    index.clear();
-    shift.clear();
     records_ = 0;
     // No axis that halos cross (one rank, every periodic axis local): no record, no pass.
     if (!domains_.crossed[0] && !domains_.crossed[1] && !domains_.crossed[2]) return;
@@ -315,26 +318,39 @@ class CudaResidence final : public DeviceResidence {
                                                  shift_.data());
       RAYCUT_CUDA_CHECK_LAUNCH();
     }
-    download_to(index, index_.data(), total);
-    download_to(shift, shift_.data(), 3 * std::size_t{total});
   }
 
-  void set_halos(const std::vector<float>& xyz) override {
-    halos_ = xyz.size() / 3;
-    if (halos_ == 0) {  // the owned positions are local_'s already (a shrink keeps contents)
-      local_.resize(3 * owned_);
-      staged_.resize(3 * owned_);
-      reference_.resize(3 * owned_);
-      copy_on_device(reference_.data(), local_.data(), 3 * owned_);
-      return;
+  const std::uint64_t* gather_ids() override {
+    send_ids_.resize(records_);
+    gather_rows_into(ids_.data(), index_.data(), records_, 1, send_ids_.data());
+    return send_ids_.data();
+  }
+
+  const std::int32_t* plan_shifts() const override { return shift_.data(); }
+
+  HaloSlots receive_halos(std::size_t count) override {
+    halos_ = count;
+    // The owned positions stay at the front of local_ (a shrink keeps contents; a growth goes
+    // through staged_).
+    if (3 * (owned_ + halos_) <= local_.size()) {
+      local_.resize(3 * (owned_ + halos_));
+    } else {
+      staged_.resize(3 * (owned_ + halos_));
+      copy_n(staged_.data(), local_.data(), 3 * owned_);
+      std::swap(local_, staged_);
     }
-    staged_.resize(3 * (owned_ + halos_));
-    copy_on_device(staged_.data(), local_.data(), 3 * owned_);
-    upload_to(staged_.data() + 3 * owned_, xyz.data(), xyz.size());
-    std::swap(local_, staged_);
     staged_.resize(3 * (owned_ + halos_));  // take()'s other half
     reference_.resize(3 * owned_);
-    copy_on_device(reference_.data(), local_.data(), 3 * owned_);
+    copy_n(reference_.data(), local_.data(), 3 * owned_);
+    halo_ids_.resize(count);
+    halo_shifts_.resize(3 * count);
+    return {local_.data() + 3 * owned_, halo_ids_.data(), halo_shifts_.data()};
+  }
+
+  void download_halos(std::vector<std::uint64_t>& ids,
+                      std::vector<std::int32_t>& shifts) const override {
+    download_to(ids, halo_ids_.data(), halos_);
+    download_to(shifts, halo_shifts_.data(), 3 * halos_);
   }
 
   Taken take(const float* xyz, const float* carried, float distance) override {
@@ -349,7 +365,7 @@ class CudaResidence final : public DeviceResidence {
     // The halos behind the owned positions are all rewritten by the refresh or the exchange
     // that follows, so the staged half becomes the local array as it is.
     std::swap(local_, staged_);
-    if (carried) copy_on_device(carried_.data(), carried, width_ * owned_);
+    if (carried) copy_n(carried_.data(), carried, width_ * owned_);
     return {owned_, report[1] == 0};
   }
 
@@ -362,29 +378,19 @@ class CudaResidence final : public DeviceResidence {
     return send_.data();
   }
 
-  void upload_halos(const float* xyz) override {
-    upload_to(local_.data() + 3 * owned_, xyz, 3 * halos_);
-  }
-
-  void download_gathered(std::vector<float>& xyz) const override {
-    download_to(xyz, send_.data(), 3 * records_);
-  }
-
   const float* gather_fields(const float* owned, std::size_t width) override {
     fields_send_.resize(width * records_);
     gather_rows_into(owned, index_.data(), records_, width, fields_send_.data());
     return fields_send_.data();
   }
 
-  std::array<float*, 3> sph_fields(std::size_t count) override {
-    velocity_.resize(3 * count);
-    density_.resize(count);
-    pressure_.resize(count);
-    return {velocity_.data(), density_.data(), pressure_.data()};
+  float* scratch(std::size_t count) override {
+    scratch_.resize(count);
+    return scratch_.data();
   }
 
   void copy(void* to, const void* from, std::size_t bytes) const override {
-    if (bytes > 0) RAYCUT_CUDA_CHECK(cudaMemcpy(to, from, bytes, cudaMemcpyDefault));
+    cuda::copy(to, from, bytes);
   }
 
   std::size_t owned() const override { return owned_; }
@@ -420,8 +426,9 @@ class CudaResidence final : public DeviceResidence {
     for (int r = 0; r < keys; ++r) counts[static_cast<std::size_t>(r)] = starts[r + 1] - starts[r];
   }
 
-  void gather_rows_into(const float* from, const std::uint32_t* rows, std::size_t count,
-                        std::size_t width, float* to) {
+  template <class T>
+  void gather_rows_into(const T* from, const std::uint32_t* rows, std::size_t count,
+                        std::size_t width, T* to) {
     if (count * width == 0) return;
     gather_rows<<<blocks_for(count * width), 256>>>(from, rows, count, width, to);
     RAYCUT_CUDA_CHECK_LAUNCH();
@@ -435,7 +442,11 @@ class CudaResidence final : public DeviceResidence {
   // local_ is what the local engine was built over (owned, then halos); update() writes staged_
   // and swaps them. reference_: the owned positions at the last exchange.
   cuda::DeviceBuffer<float> local_, staged_, reference_, carried_, carried_staged_, send_, rows_;
-  cuda::DeviceBuffer<float> fields_send_, velocity_, density_, pressure_;  // sph_force's
+  cuda::DeviceBuffer<float> fields_send_, scratch_;  // halo fields'
+  // The owned particles' global ids (kept in step with local_ by the migrations), the records'
+  // to send, the received halos' ids and shifts.
+  cuda::DeviceBuffer<std::uint64_t> ids_, ids_staged_, send_ids_, halo_ids_;
+  cuda::DeviceBuffer<std::int32_t> halo_shifts_;
   cuda::DeviceBuffer<unsigned long long> report_{2}, starts_;
   cuda::DeviceBuffer<double> cuts_;
   Domains domains_{};

@@ -2,14 +2,14 @@
 // what the local engine is built over and what a step touches, kept on the GPU so that a step
 // with a skin is the plain engine's build + pass plus a displacement test and the halo refresh.
 // Exchanges are planned on the GPU too, with the host's arithmetic (domains.hpp): the owners,
-// the migration's order, the halo plan. Only what crosses ranks (migrants, halo records) and the
-// plan's indices come to the host, where DistributedEngine sends them as a host-resident engine
-// does (docs/distributed.md, "The device-resident path"). Defined in device_residence.cu, only in
+// the migration's order, the halo plan. The halo records (ids, images, shifts) are gathered and
+// received here, so a device transport moves them GPU to GPU; the few migrants come to the host
+// and cross there (docs/distributed.md, "The device-resident path"). Defined in
+// device_residence.cu, only in
 // builds with CUDA; host-only interface. Every call queues on the legacy default stream, the
 // local engines' (DistributedEngine never sets a stream).
 #pragma once
 
-#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -24,9 +24,11 @@ class DeviceResidence {
   virtual ~DeviceResidence() = default;
 
   // build(): copies of the owned positions and carried floats given in device memory (width
-  // floats per particle), and the same to the host (build() checks them there).
-  virtual void adopt(const float* xyz, const float* carried, std::size_t owned, std::size_t width,
-                     std::vector<float>& host_xyz, std::vector<float>& host_carried) = 0;
+  // floats per particle), and the same to the host (build() checks them there); the global ids
+  // (host) uploaded.
+  virtual void adopt(const float* xyz, const float* carried, const std::uint64_t* ids,
+                     std::size_t owned, std::size_t width, std::vector<float>& host_xyz,
+                     std::vector<float>& host_carried) = 0;
   // The owned positions (now) and carried floats to the host; the carried floats alone.
   virtual void download(std::vector<float>& xyz, std::vector<float>& carried) const = 0;
   virtual void download_carried(std::vector<float>& carried) const = 0;
@@ -48,16 +50,28 @@ class DeviceResidence {
   };
   virtual void find_owners(int rank, int ranks, Leaving& leaving) = 0;
   // After find_owners: the staying particles compacted in their order, then the arrivals (host
-  // arrays, 3 and width floats each) after them.
-  virtual void keep_staying(const std::vector<float>& xyz, const std::vector<float>& carried) = 0;
-  // The halo plan of the owned particles (for_each_halo): per rank the records it gets, and per
-  // record the owned index and image shift (3 int32), grouped by rank in the host's order, on
-  // the host. gather() makes the records' positions.
-  virtual void plan_halos(int rank, int ranks, double reach, std::vector<std::uint64_t>& counts,
-                          std::vector<std::uint32_t>& index, std::vector<std::int32_t>& shift) = 0;
-  // The received halos (3 floats each, host) after the owned positions; the owned positions
-  // become the skin's reference.
-  virtual void set_halos(const std::vector<float>& xyz) = 0;
+  // arrays, 3 and width floats and one id each) after them.
+  virtual void keep_staying(const std::vector<float>& xyz, const std::vector<float>& carried,
+                            const std::vector<std::uint64_t>& ids) = 0;
+  // The halo plan of the owned particles (for_each_halo), kept on the device: per record the
+  // owned index and image shift, grouped by rank in the host's order; per rank the records it
+  // gets (host). The records to send, in that order, device arrays: gather() their positions,
+  // gather_ids() their global ids, plan_shifts() their shifts (3 int32 each).
+  virtual void plan_halos(int rank, int ranks, double reach,
+                          std::vector<std::uint64_t>& counts) = 0;
+  virtual const std::uint64_t* gather_ids() = 0;
+  virtual const std::int32_t* plan_shifts() const = 0;
+  // Room for `count` received halos, device arrays: their positions (after the owned ones in
+  // local()), global ids and shifts. The owned positions become the skin's reference.
+  struct HaloSlots {
+    float* xyz;
+    std::uint64_t* ids;
+    std::int32_t* shifts;
+  };
+  virtual HaloSlots receive_halos(std::size_t count) = 0;
+  // The received halos' ids and shifts to the host.
+  virtual void download_halos(std::vector<std::uint64_t>& ids,
+                              std::vector<std::int32_t>& shifts) const = 0;
 
   // ---- a step ----
   // update(): the new owned positions (device, 3 per owned particle) and carried floats
@@ -73,18 +87,13 @@ class DeviceResidence {
   // The plan's halo records at the owned particles' current positions (3 floats each,
   // Domains::image), in a device buffer.
   virtual const float* gather() = 0;
-  // Received halo positions from the host (3 floats per halo) into the local array.
-  virtual void upload_halos(const float* xyz) = 0;
-  // The gathered records to the host (3 floats each).
-  virtual void download_gathered(std::vector<float>& xyz) const = 0;
 
   // ---- fields of the owned particles (sph_force's) ----
   // The plan's records of `width` floats per owned particle (device, owned order), in a device
   // buffer: the halos' copies to send.
   virtual const float* gather_fields(const float* owned, std::size_t width) = 0;
-  // Three device arrays of `count`, 3 count and `count` floats (velocity, density, pressure of
-  // owned + halos), kept until the next call.
-  virtual std::array<float*, 3> sph_fields(std::size_t count) = 0;
+  // `count` floats of device memory, kept until the next call.
+  virtual float* scratch(std::size_t count) = 0;
   // Bytes between any two of host and device memory (the direction from the pointers).
   virtual void copy(void* to, const void* from, std::size_t bytes) const = 0;
 

@@ -187,11 +187,18 @@ std::array<int, 3> Decomposition::coords(int domain) const {
 }
 
 // Where halo records go: per destination rank, the owned particle and the image shift, in the
-// order they were sent (a refresh resends positions in the same order).
+// order they were sent (a refresh resends positions in the same order). A device-resident
+// engine keeps index and shift on the GPU (DeviceResidence::plan_halos), the counts here.
 struct DistributedEngine::HaloPlan {
   std::vector<std::uint64_t> send_counts, recv_counts;  // halos per rank
   std::vector<std::uint32_t> index;                     // owned index per record, by rank
   std::vector<std::int32_t> shift;                      // 3 per record
+  std::uint64_t sent() const {
+    return std::accumulate(send_counts.begin(), send_counts.end(), 0ull);
+  }
+  std::uint64_t received() const {
+    return std::accumulate(recv_counts.begin(), recv_counts.end(), 0ull);
+  }
 };
 
 // ---- construction -----------------------------------------------------------------------------
@@ -312,7 +319,8 @@ void DistributedEngine::build(PositionsView positions, const std::uint64_t* ids,
                         engine_->method() + "' works on the host; give host positions");
       // Planned on the host like any exchange (from host copies); device_ keeps them after it.
       device_ = device_residence();
-      device_->adopt(positions.xyz, carried, positions.size, width, staged_xyz, staged_carried);
+      device_->adopt(positions.xyz, carried, ids, positions.size, width, staged_xyz,
+                     staged_carried);
       positions.xyz = staged_xyz.data();
       carried = width > 0 ? staged_carried.data() : nullptr;
     } else {
@@ -657,15 +665,16 @@ void DistributedEngine::migrate() {
   std::sort(gone.begin(), gone.end());
   remove_rows(ids_, 1, gone);
   std::vector<float> xyz(3 * received), carried(width_ * received);  // the arrivals'
+  std::vector<std::uint64_t> ids(received);
   const std::byte* from = recv.data();
   for (std::uint64_t k = 0; k < received; ++k) {
-    ids_.push_back(0);
-    take(from, &ids_.back(), 1);
+    take(from, &ids[k], 1);
     take(from, &xyz[3 * k], 3);
     take(from, carried.data() + width_ * k, width_);
   }
+  ids_.insert(ids_.end(), ids.begin(), ids.end());
   if (device_) {
-    device_->keep_staying(xyz, carried);
+    device_->keep_staying(xyz, carried, ids);
   } else {
     remove_rows(xyz_, 3, gone);
     remove_rows(carried_, width_, gone);
@@ -696,31 +705,42 @@ void DistributedEngine::migrate() {
 // The plan is made where the positions live (plan_halos_on_host(), or the GPU's plan_halos():
 // the same records in the same order); the records cross on the host.
 void DistributedEngine::build_halos() {
-  const std::size_t n = ids_.size();
   const double reach = reach_of(decomposition_, halo_width_);
   HaloPlan& plan = *plan_;
-  std::vector<float> images;  // per record x + S . cell
-  if (device_) {
-    device_->plan_halos(rank_, size_, reach, plan.send_counts, plan.index, plan.shift);
-    device_->gather();
-    device_->download_gathered(images);
-  } else {
-    plan_halos_on_host(reach);
-    const detail::Domains domains = domains_of(decomposition_);
-    images.resize(3 * plan.index.size());
-    for (std::size_t k = 0; k < plan.index.size(); ++k)
-      domains.image(&xyz_[3 * plan.index[k]], &plan.shift[3 * k], &images[3 * k]);
-  }
-  exchange_counts(plan.send_counts, plan.recv_counts);
-
   const std::size_t record = sizeof(std::uint64_t) + 3 * sizeof(float) + 3 * sizeof(std::int32_t);
-  const std::uint64_t received =
-      std::accumulate(plan.recv_counts.begin(), plan.recv_counts.end(), 0ull);
+  if (device_) {
+    // Planned, gathered and received on the GPU, each column along the plan by the refreshes'
+    // transport (GPU to GPU, or staged); the halos' ids and shifts come to the host when asked.
+    device_->plan_halos(rank_, size_, reach, plan.send_counts);
+    exchange_counts(plan.send_counts, plan.recv_counts);
+    std::string error;
+    detail::DeviceResidence::HaloSlots slots{};
+    try {
+      slots = device_->receive_halos(plan.received());
+    } catch (const Error& e) {  // no room on this rank: every rank stops before the sends
+      error = e.what();
+    }
+    agree(error, ErrorCode::out_of_memory);
+    exchange_on_device(device_->gather_ids(), sizeof(std::uint64_t), slots.ids);
+    exchange_on_device(device_->gather(), 3 * sizeof(float), slots.xyz);
+    exchange_on_device(device_->plan_shifts(), 3 * sizeof(std::int32_t), slots.shifts);
+    halo_count_ = plan.received();
+    host_halos_ = false;
+    stats_.bytes_sent += (plan.sent() - plan.send_counts[rank_]) * record;
+    return;
+  }
+  const std::size_t n = ids_.size();
+  plan_halos_on_host(reach);
+  const detail::Domains domains = domains_of(decomposition_);
+  exchange_counts(plan.send_counts, plan.recv_counts);
+  const std::uint64_t received = plan.received();
   std::vector<std::byte> send(plan.index.size() * record), recv(received * record);
   std::byte* at = send.data();
   for (std::size_t k = 0; k < plan.index.size(); ++k) {
+    float image[3];  // x + S . cell
+    domains.image(&xyz_[3 * plan.index[k]], &plan.shift[3 * k], image);
     put(at, &ids_[plan.index[k]], 1);
-    put(at, &images[3 * k], 3);
+    put(at, image, 3);
     put(at, &plan.shift[3 * k], 3);
   }
   host_transport_->exchange(send.data(), scaled(plan.send_counts, record).data(),
@@ -730,21 +750,39 @@ void DistributedEngine::build_halos() {
 
   halo_ids_.resize(received);
   halo_shifts_.resize(3 * received);
-  std::vector<float> halo_xyz(3 * received);
+  local_xyz_.resize(3 * (n + received));
+  std::copy(xyz_.begin(), xyz_.end(), local_xyz_.begin());
   const std::byte* from = recv.data();
   for (std::uint64_t k = 0; k < received; ++k) {
     take(from, &halo_ids_[k], 1);
-    take(from, &halo_xyz[3 * k], 3);
+    take(from, &local_xyz_[3 * (n + k)], 3);
     take(from, &halo_shifts_[3 * k], 3);
   }
-  if (device_) {
-    device_->set_halos(halo_xyz);
-  } else {
-    local_xyz_.resize(3 * (n + received));
-    std::copy(xyz_.begin(), xyz_.end(), local_xyz_.begin());
-    std::copy(halo_xyz.begin(), halo_xyz.end(), local_xyz_.begin() + 3 * n);
-  }
+  halo_count_ = received;
+  host_halos_ = true;
   stats_.bytes_sent += (plan.index.size() - plan.send_counts[rank_]) * record;
+}
+
+// Per halo record `bytes` from `send` (device, the plan's order) to `recv` (device, the halos'
+// order), along the plan of the last exchange: by the refreshes' transport, GPU to GPU, or
+// staged through the host. Collective over the ranks that send or receive.
+void DistributedEngine::exchange_on_device(const void* send, std::size_t bytes, void* recv) {
+  const HaloPlan& plan = *plan_;
+  const auto send_counts = scaled(plan.send_counts, bytes);
+  const auto recv_counts = scaled(plan.recv_counts, bytes);
+  const auto send_offsets = offsets_of(plan.send_counts, bytes);
+  const auto recv_offsets = offsets_of(plan.recv_counts, bytes);
+  if (transport_->space() == MemorySpace::device) {
+    transport_->exchange(static_cast<const std::byte*>(send), send_counts.data(),
+                         send_offsets.data(), static_cast<std::byte*>(recv), recv_counts.data(),
+                         recv_offsets.data());
+    return;
+  }
+  std::vector<std::byte> sent(plan.sent() * bytes), received(plan.received() * bytes);
+  device_->copy(sent.data(), send, sent.size());
+  host_transport_->exchange(sent.data(), send_counts.data(), send_offsets.data(), received.data(),
+                            recv_counts.data(), recv_offsets.data());
+  device_->copy(recv, received.data(), received.size());
 }
 
 // build_halos()'s plan on the host: detail::for_each_halo over the owned particles, in OpenMP
@@ -794,40 +832,22 @@ void DistributedEngine::refresh_halos() {
   const HaloPlan& plan = *plan_;
   const std::size_t record = 3 * sizeof(float);
   const std::size_t n = ids_.size();
-  const auto send_counts = scaled(plan.send_counts, record);
-  const auto recv_counts = scaled(plan.recv_counts, record);
-  const auto send_offsets = offsets_of(plan.send_counts, record);
-  const auto recv_offsets = offsets_of(plan.recv_counts, record);
-  std::vector<float> send;
-  if (device_) {
-    // Gathered on the GPU; GPU to GPU by a device transport, else staged through the host.
-    const float* gathered = device_->gather();
-    if (transport_->space() == MemorySpace::device) {
-      transport_->exchange(reinterpret_cast<const std::byte*>(gathered), send_counts.data(),
-                           send_offsets.data(),
-                           reinterpret_cast<std::byte*>(device_->local() + 3 * n),
-                           recv_counts.data(), recv_offsets.data());
-    } else {
-      device_->download_gathered(send);
-      std::vector<float> received(3 * halo_ids_.size());
-      host_transport_->exchange(reinterpret_cast<const std::byte*>(send.data()), send_counts.data(),
-                                send_offsets.data(), reinterpret_cast<std::byte*>(received.data()),
-                                recv_counts.data(), recv_offsets.data());
-      device_->upload_halos(received.data());
-    }
+  if (device_) {  // gathered on the GPU
+    exchange_on_device(device_->gather(), record, device_->local() + 3 * n);
   } else {
     const detail::Domains domains = domains_of(decomposition_);
-    send.resize(3 * plan.index.size());
+    std::vector<float> send(3 * plan.index.size());
     for (std::size_t k = 0; k < plan.index.size(); ++k)
       domains.image(&xyz_[3 * plan.index[k]], &plan.shift[3 * k], &send[3 * k]);
     std::copy(xyz_.begin(), xyz_.end(), local_xyz_.begin());
-    host_transport_->exchange(reinterpret_cast<const std::byte*>(send.data()), send_counts.data(),
-                              send_offsets.data(),
-                              reinterpret_cast<std::byte*>(local_xyz_.data() + 3 * n),
-                              recv_counts.data(), recv_offsets.data());
+    host_transport_->exchange(
+        reinterpret_cast<const std::byte*>(send.data()), scaled(plan.send_counts, record).data(),
+        offsets_of(plan.send_counts, record).data(),
+        reinterpret_cast<std::byte*>(local_xyz_.data() + 3 * n),
+        scaled(plan.recv_counts, record).data(), offsets_of(plan.recv_counts, record).data());
   }
   ++stats_.refreshes;
-  stats_.bytes_sent = (plan.index.size() - plan.send_counts[rank_]) * record;
+  stats_.bytes_sent = (plan.sent() - plan.send_counts[rank_]) * record;
   stats_.exchange_ms = elapsed_ms(start);
 }
 
@@ -866,7 +886,7 @@ void DistributedEngine::build_local_engine(bool same_sources) {
   ErrorCode code = ErrorCode::internal;
   const auto start = Clock::now();
   try {
-    const std::size_t n = ids_.size(), h = halo_ids_.size();
+    const std::size_t n = ids_.size(), h = halo_count_;
     const PositionsView local = local_positions(split_ ? n : n + h);
     if (same_sources)
       engine_->update(local);
@@ -886,7 +906,7 @@ void DistributedEngine::build_local_engine(bool same_sources) {
   agree(error, code);
   stats_.build_ms = elapsed_ms(start);
   stats_.owned = ids_.size();
-  stats_.halos = halo_ids_.size();
+  stats_.halos = halo_count_;
   stats_.boundary = split_ ? boundary_.size() : ids_.size();
 }
 
@@ -901,6 +921,23 @@ const std::vector<float>& DistributedEngine::positions() const {
     host_positions_ = true;
   }
   return xyz_;
+}
+
+void DistributedEngine::fetch_halos() const {
+  if (device_ && !host_halos_) {
+    device_->download_halos(halo_ids_, halo_shifts_);
+    host_halos_ = true;
+  }
+}
+
+const std::vector<std::uint64_t>& DistributedEngine::halo_ids() const {
+  fetch_halos();
+  return halo_ids_;
+}
+
+const std::vector<std::int32_t>& DistributedEngine::halo_shifts() const {
+  fetch_halos();
+  return halo_shifts_;
 }
 
 const std::vector<float>& DistributedEngine::carried() const {
@@ -998,13 +1035,15 @@ ResultsView DistributedEngine::run(Kernel kernel, const KernelOptions& options,
   // between pairs with something to move), so it passes the owned fields as given.
   KernelOptions with_fields = options;
   with_fields.sph = {owned.velocity, owned.density, owned.pressure};
-  if (!halo_ids_.empty() || !plan_->index.empty()) {
-    const std::size_t local = ids_.size() + halo_ids_.size();
-    const std::array<float*, 3> fields = device_->sph_fields(local);
-    device_halo_fields(owned.velocity, 3, fields[0]);
-    device_halo_fields(owned.density, 1, fields[1]);
-    device_halo_fields(owned.pressure, 1, fields[2]);
-    with_fields.sph = {fields[0], fields[1], fields[2]};
+  if (halo_count_ > 0 || plan_->sent() > 0) {
+    const std::size_t local = ids_.size() + halo_count_;
+    float* velocity = device_->scratch(5 * local);
+    float* density = velocity + 3 * local;
+    float* pressure = density + local;
+    device_halo_fields(owned.velocity, 3, velocity);
+    device_halo_fields(owned.density, 1, density);
+    device_halo_fields(owned.pressure, 1, pressure);
+    with_fields.sph = {velocity, density, pressure};
   }
   engine_->run(kernel, with_fields);
   return engine_->results_view();
@@ -1013,32 +1052,15 @@ ResultsView DistributedEngine::run(Kernel kernel, const KernelOptions& options,
 // halo_fields() of a device-resident engine, device arrays: the owned values, then the halos'
 // copies sent along the same plan by the refreshes' transport (GPU to GPU, or staged).
 void DistributedEngine::device_halo_fields(const float* owned, std::size_t width, float* local) {
-  const std::size_t n = ids_.size(), h = halo_ids_.size();
-  const HaloPlan& plan = *plan_;
-  const std::size_t record = width * sizeof(float);
-  device_->copy(local, owned, n * record);
-  const float* send = device_->gather_fields(owned, width);
-  const auto send_counts = scaled(plan.send_counts, record);
-  const auto recv_counts = scaled(plan.recv_counts, record);
-  const auto send_offsets = offsets_of(plan.send_counts, record);
-  const auto recv_offsets = offsets_of(plan.recv_counts, record);
-  if (transport_->space() == MemorySpace::device) {
-    transport_->exchange(reinterpret_cast<const std::byte*>(send), send_counts.data(),
-                         send_offsets.data(), reinterpret_cast<std::byte*>(local + width * n),
-                         recv_counts.data(), recv_offsets.data());
-    return;
-  }
-  std::vector<float> sent(width * plan.index.size()), received(width * h);
-  device_->copy(sent.data(), send, sent.size() * sizeof(float));
-  host_transport_->exchange(reinterpret_cast<const std::byte*>(sent.data()), send_counts.data(),
-                            send_offsets.data(), reinterpret_cast<std::byte*>(received.data()),
-                            recv_counts.data(), recv_offsets.data());
-  device_->copy(local + width * n, received.data(), received.size() * sizeof(float));
+  const std::size_t n = ids_.size();
+  device_->copy(local, owned, n * width * sizeof(float));
+  exchange_on_device(device_->gather_fields(owned, width), width * sizeof(float),
+                     local + width * n);
 }
 
 std::vector<float> DistributedEngine::halo_fields(const float* owned, std::size_t width) {
   check_built("halo_fields");
-  const std::size_t n = ids_.size(), h = halo_ids_.size();
+  const std::size_t n = ids_.size(), h = halo_count_;
   // Record sizes are agreed by the width alone (the halo counts are the plan's): check it.
   const std::uint64_t w = width;
   std::uint64_t widths[2] = {w, ~w}, agreed[2];
@@ -1051,6 +1073,13 @@ std::vector<float> DistributedEngine::halo_fields(const float* owned, std::size_
   agree(error, ErrorCode::invalid_argument);
   std::vector<float> local(width * (n + h));
   if (width == 0) return local;
+  if (device_) {  // the plan is on the GPU: through it, owned values in, owned + halos out
+    float* in = device_->scratch(width * (2 * n + h));
+    device_->copy(in, owned, width * n * sizeof(float));
+    device_halo_fields(in, width, in + width * n);
+    device_->copy(local.data(), in + width * n, local.size() * sizeof(float));
+    return local;
+  }
   std::copy(owned, owned + width * n, local.begin());
   const HaloPlan& plan = *plan_;
   std::vector<float> send(width * plan.index.size());
@@ -1113,6 +1142,8 @@ DistributedList DistributedEngine::neighbours(const ListOptions& options) {
   NeighbourList halo_list;
   if (halo_engine_built_) halo_list = halo_engine_->neighbours(local);
   const std::size_t n = ids_.size();
+  const std::vector<std::uint64_t>& halo_ids = this->halo_ids();
+  const std::vector<std::int32_t>& halo_shifts = this->halo_shifts();
   // Local slot j of the engine over owned (+ halos): owned below n, else halo j - n. A pair's S
   // is the halo's (axes with images) plus the engine's (local axes, relative to the positions it
   // was given): r = (x_j + S_halo . cell) + S_local . cell - x_i.
@@ -1120,10 +1151,10 @@ DistributedList DistributedEngine::neighbours(const ListOptions& options) {
   out.targets = ids_;
   out.offsets.assign(n + 1, 0);
   auto emit = [&](std::size_t i, const NeighbourList& from, std::uint64_t e, std::size_t j) {
-    const std::uint64_t id = j < n ? ids_[j] : halo_ids_[j - n];
+    const std::uint64_t id = j < n ? ids_[j] : halo_ids[j - n];
     std::int32_t s[3];
     for (int c = 0; c < 3; ++c)
-      s[c] = from.shifts[3 * e + c] + (j < n ? 0 : halo_shifts_[3 * (j - n) + c]);
+      s[c] = from.shifts[3 * e + c] + (j < n ? 0 : halo_shifts[3 * (j - n) + c]);
     if (options.half) {
       const Shift shift{s[0], s[1], s[2]};
       if (id < ids_[i] || (id == ids_[i] && !shift.positive())) return;

@@ -31,9 +31,7 @@ __global__ void unpack_kernel(const float* carried, std::size_t n, int w, float*
   if (w == 4) fixed[i] = carried[w * i + 3];
 }
 
-void copy(void* to, const void* from, std::size_t bytes) {
-  if (bytes > 0) RAYCUT_CUDA_CHECK(cudaMemcpy(to, from, bytes, cudaMemcpyDefault));
-}
+using raycut::detail::cuda::copy;
 
 class CudaSph final : public SphDevice {
  public:

@@ -1536,6 +1536,10 @@ void expect_twins(const Box& box, float skin, int steps, DistributedOptions devi
     options.shifts = true;
     options.half = true;
     EXPECT_EQ(device.neighbours(options).indices, host.neighbours(options).indices) << what;
+    // halo_fields() of host values: through the plan on the GPU, and the host twin's.
+    std::vector<float> values;
+    for (std::uint64_t id : host.ids()) values.insert(values.end(), {float(id), -0.5f * id});
+    EXPECT_EQ(device.halo_fields(values.data(), 2), host.halo_fields(values.data(), 2)) << what;
     const raycut::ResultsView view = device.run(Kernel::count);
     EXPECT_EQ(view.space, MemorySpace::device);
 

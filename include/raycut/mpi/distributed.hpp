@@ -266,7 +266,7 @@ class DistributedEngine {
   int size() const { return size_; }
   float cutoff() const { return cutoff_; }
   std::size_t owned() const { return ids_.size(); }
-  std::size_t halos() const { return halo_ids_.size(); }
+  std::size_t halos() const { return halo_count_; }
   // Where the owned positions and carried floats live: the space of build()'s positions.
   MemorySpace space() const { return device_ ? MemorySpace::device : MemorySpace::host; }
   // The owned particles: global indices, positions (wrapped into the cell at the last exchange;
@@ -280,9 +280,10 @@ class DistributedEngine {
   PositionsView owned_positions() const;
   const float* owned_carried() const;
   std::size_t width() const { return width_; }
-  // The halo copies: global indices and image shifts (3 per halo; 0 along local axes).
-  const std::vector<std::uint64_t>& halo_ids() const { return halo_ids_; }
-  const std::vector<std::int32_t>& halo_shifts() const { return halo_shifts_; }
+  // The halo copies: global indices and image shifts (3 per halo; 0 along local axes). A
+  // device-resident engine downloads them at the first call after an exchange.
+  const std::vector<std::uint64_t>& halo_ids() const;
+  const std::vector<std::int32_t>& halo_shifts() const;
   std::uint64_t global_size() const { return global_size_; }
   const Decomposition& decomposition() const { return decomposition_; }
   const DistributedStats& stats() const { return stats_; }
@@ -307,7 +308,9 @@ class DistributedEngine {
   void build_halos();
   void plan_halos_on_host(double reach);
   void refresh_halos();
+  void exchange_on_device(const void* send, std::size_t bytes, void* recv);
   void device_halo_fields(const float* owned, std::size_t width, float* local);
+  void fetch_halos() const;
   void check_sph_fields(const SphFields& owned, bool device);
   void build_local_engine(bool same_sources);
   void select_boundary();
@@ -333,8 +336,11 @@ class DistributedEngine {
   mutable std::vector<float> xyz_, carried_;
   mutable bool host_positions_ = true, host_carried_ = true;
   std::vector<float> xyz_at_exchange_;  // the skin's reference
-  std::vector<std::uint64_t> halo_ids_;
-  std::vector<std::int32_t> halo_shifts_;
+  // The halos' (host copies of a device-resident engine's, current while host_halos_).
+  std::size_t halo_count_ = 0;
+  mutable std::vector<std::uint64_t> halo_ids_;
+  mutable std::vector<std::int32_t> halo_shifts_;
+  mutable bool host_halos_ = true;
   std::vector<float> local_xyz_;  // owned then halos: what the local engine is built over
   Results summed_;                // run()'s results when two engines' rows are added
   std::unique_ptr<HaloPlan> plan_;
