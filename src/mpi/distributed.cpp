@@ -765,9 +765,11 @@ void DistributedEngine::build_halos() {
 
 // Per halo record `bytes` from `send` (device, the plan's order) to `recv` (device, the halos'
 // order), along the plan of the last exchange: by the refreshes' transport, GPU to GPU, or
-// staged through the host. Collective over the ranks that send or receive.
+// staged through the host. Collective over the ranks that send or receive: a rank with neither
+// takes no part (one rank with every periodic axis local: no transport call at all).
 void DistributedEngine::exchange_on_device(const void* send, std::size_t bytes, void* recv) {
   const HaloPlan& plan = *plan_;
+  if (plan.sent() == 0 && plan.received() == 0) return;
   const auto send_counts = scaled(plan.send_counts, bytes);
   const auto recv_counts = scaled(plan.recv_counts, bytes);
   const auto send_offsets = offsets_of(plan.send_counts, bytes);
