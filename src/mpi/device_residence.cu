@@ -393,6 +393,9 @@ class CudaResidence final : public DeviceResidence {
     cuda::copy(to, from, bytes);
   }
 
+  const std::uint64_t* ids() const override { return ids_.data(); }
+  const std::uint64_t* halo_ids() const override { return halo_ids_.data(); }
+  const std::int32_t* halo_shifts() const override { return halo_shifts_.data(); }
   std::size_t owned() const override { return owned_; }
   float* local() override { return local_.data(); }
   const float* carried() const override { return carried_.data(); }

@@ -97,6 +97,10 @@ class DeviceResidence {
   // Bytes between any two of host and device memory (the direction from the pointers).
   virtual void copy(void* to, const void* from, std::size_t bytes) const = 0;
 
+  // The owned particles' global ids, the halos' ids and shifts (device).
+  virtual const std::uint64_t* ids() const = 0;
+  virtual const std::uint64_t* halo_ids() const = 0;
+  virtual const std::int32_t* halo_shifts() const = 0;
   virtual std::size_t owned() const = 0;
   // Owned positions then halos: 3 (owned + halos) floats.
   virtual float* local() = 0;

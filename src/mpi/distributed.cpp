@@ -1060,19 +1060,46 @@ void DistributedEngine::device_halo_fields(const float* owned, std::size_t width
                      local + width * n);
 }
 
-std::vector<float> DistributedEngine::halo_fields(const float* owned, std::size_t width) {
-  check_built("halo_fields");
-  const std::size_t n = ids_.size(), h = halo_count_;
-  // Record sizes are agreed by the width alone (the halo counts are the plan's): check it.
+// Record sizes are agreed by the width alone (the halo counts are the plan's): check it, and the
+// owned values, on every rank. Collective.
+void DistributedEngine::check_field_width(const char* call, const float* owned, std::size_t width) {
+  check_built(call);
   const std::uint64_t w = width;
   std::uint64_t widths[2] = {w, ~w}, agreed[2];
   check(MPI_Allreduce(widths, agreed, 2, MPI_UINT64_T, MPI_MAX, comm_), "MPI_Allreduce");
   std::string error;
   if (agreed[0] != w || ~agreed[1] != w)
-    error = "distributed halo_fields: width " + std::to_string(width) + " differs between ranks";
-  else if (width > 0 && n > 0 && owned == nullptr)
-    error = "distributed halo_fields: null owned values";
+    error = std::string("distributed ") + call + ": width " + std::to_string(width) +
+            " differs between ranks";
+  else if (width > 0 && !ids_.empty() && owned == nullptr)
+    error = std::string("distributed ") + call + ": null owned values";
   agree(error, ErrorCode::invalid_argument);
+}
+
+void DistributedEngine::halo_fields(const float* owned, std::size_t width, float* local) {
+  check_field_width("halo_fields", owned, width);
+  std::string error;
+  ErrorCode code = ErrorCode::unsupported;
+  if (!device_) {
+    error =
+        "distributed halo_fields: device arrays need a device-resident engine (built from device "
+        "positions); give host arrays to halo_fields(owned, width)";
+  } else if (width > 0 && ids_.size() + halo_count_ > 0 && local == nullptr) {
+    error = "distributed halo_fields: null local values";
+    code = ErrorCode::invalid_argument;
+  }
+  agree(error, code);
+  if (width > 0) device_halo_fields(owned, width, local);
+}
+
+DistributedEngine::DeviceIds DistributedEngine::device_ids() const {
+  if (!device_) return {};
+  return {device_->ids(), device_->halo_ids(), device_->halo_shifts()};
+}
+
+std::vector<float> DistributedEngine::halo_fields(const float* owned, std::size_t width) {
+  check_field_width("halo_fields", owned, width);
+  const std::size_t n = ids_.size(), h = halo_count_;
   std::vector<float> local(width * (n + h));
   if (width == 0) return local;
   if (device_) {  // the plan is on the GPU: through it, owned values in, owned + halos out

@@ -257,6 +257,10 @@ class DistributedEngine {
   // last exchange or refresh: the same neighbours and record order as the positions. `width`
   // must be the same on every rank (else Error(invalid_argument) on every rank).
   std::vector<float> halo_fields(const float* owned, std::size_t width);
+  // The same with device arrays, for a device-resident engine (else Error(unsupported) on every
+  // rank): `owned` width floats per owned particle in, `local` width (owned() + halos()) floats
+  // out, the halo copies gathered and sent on the GPU (the refreshes' transport).
+  void halo_fields(const float* owned, std::size_t width, float* local);
   // The owned targets' neighbour lists with global indices. `half`: each pair (i, j, S) once
   // over all ranks, in the row of the smaller global index (i == j: S lexicographically
   // positive), as the single-rank half list orients local indices.
@@ -284,6 +288,15 @@ class DistributedEngine {
   // device-resident engine downloads them at the first call after an exchange.
   const std::vector<std::uint64_t>& halo_ids() const;
   const std::vector<std::int32_t>& halo_shifts() const;
+  // A device-resident engine's global indices in device memory (all null for a host-resident
+  // one), current until the next exchange: the owned particles' (ids() order), the halos' and
+  // their shifts (halo_ids() order, 3 per halo). For functors on the GPU (mpi/pairs.cuh).
+  struct DeviceIds {
+    const std::uint64_t* ids = nullptr;
+    const std::uint64_t* halo_ids = nullptr;
+    const std::int32_t* halo_shifts = nullptr;
+  };
+  DeviceIds device_ids() const;
   std::uint64_t global_size() const { return global_size_; }
   const Decomposition& decomposition() const { return decomposition_; }
   const DistributedStats& stats() const { return stats_; }
@@ -311,6 +324,7 @@ class DistributedEngine {
   void exchange_on_device(const void* send, std::size_t bytes, void* recv);
   void device_halo_fields(const float* owned, std::size_t width, float* local);
   void fetch_halos() const;
+  void check_field_width(const char* call, const float* owned, std::size_t width);
   void check_sph_fields(const SphFields& owned, bool device);
   void build_local_engine(bool same_sources);
   void select_boundary();

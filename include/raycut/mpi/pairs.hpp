@@ -1,6 +1,7 @@
 // A caller's pair functor (include/raycut/kernels.hpp says its shape) over the owned targets of a
 // DistributedEngine, fused in its local engines' traversals as raycut::for_each_pair runs one on
-// a single engine (host methods).
+// a single engine (host methods; include/raycut/mpi/pairs.cuh runs one on the GPU methods of a
+// device-resident engine).
 //
 //   const std::vector<float> q_local = engine.halo_fields(q_owned.data(), 1);  // owned + halos
 //   raycut::mpi::for_each_pair(engine, Coulomb{q_local.data(), energy.data()});
@@ -28,13 +29,15 @@ namespace detail {
 // sources to local source indices, shifts to global ones. A target whose pairs come from both
 // engines (owned rows only: a boundary particle) keeps its state between the two passes in
 // `carry`: the halo pass stores it there instead of finishing, the owned pass starts from it.
+// Holds f by value and runs on either side (a GPU traversal copies it to the device; all rows
+// only there, and every pointer a device one).
 template <class F>
 struct LocalPass {
   using Accumulator = typename F::Accumulator;
   static constexpr bool takes_shift = true;
   enum class Kind { all_rows, owned, halos };
 
-  const F& f;
+  F f;
   Kind kind;
   std::uint32_t owned;              // owned particles: local sources below, rows of all_rows
   const std::int32_t* halo_shifts;  // 3 per halo
@@ -42,30 +45,34 @@ struct LocalPass {
   const std::int32_t* slot;         // owned pass: owned row -> its carry slot, or -1
   Accumulator* carry;               // one per boundary row
 
-  std::uint32_t row(std::uint32_t i) const { return kind == Kind::halos ? boundary[i] : i; }
-  std::uint32_t source(std::uint32_t j) const { return kind == Kind::halos ? owned + j : j; }
-  Shift global(std::uint32_t j, const Shift& s) const {
+  RAYCUT_HD std::uint32_t row(std::uint32_t i) const {
+    return kind == Kind::halos ? boundary[i] : i;
+  }
+  RAYCUT_HD std::uint32_t source(std::uint32_t j) const {
+    return kind == Kind::halos ? owned + j : j;
+  }
+  RAYCUT_HD Shift global(std::uint32_t j, const Shift& s) const {
     if (j < owned) return s;
     const std::int32_t* h = halo_shifts + 3 * (j - owned);
     return {s.a + h[0], s.b + h[1], s.c + h[2]};
   }
 
-  Accumulator init(std::uint32_t i) const {
+  RAYCUT_HD Accumulator init(std::uint32_t i) const {
     if (kind == Kind::owned && slot[i] >= 0) return carry[slot[i]];
     if (kind == Kind::all_rows && i >= owned) return Accumulator{};  // a halo's row: unused
     return initial_state(f, row(i));
   }
-  bool accepts(std::uint32_t i, std::uint32_t j, const Shift& s) const {
+  RAYCUT_HD bool accepts(std::uint32_t i, std::uint32_t j, const Shift& s) const {
     if (kind == Kind::all_rows && i >= owned) return false;  // a halo's row
     const std::uint32_t k = source(j);
     return raycut::accepts(f, row(i), k, global(k, s));
   }
-  void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3 r, float r2,
-                  const Shift& s) const {
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3 r, float r2,
+                            const Shift& s) const {
     const std::uint32_t k = source(j);
     apply(f, acc, row(i), k, r, r2, global(k, s));
   }
-  void finish(std::uint32_t i, Accumulator& acc) const {
+  RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
     if (kind == Kind::halos)
       carry[i] = acc;
     else if (kind == Kind::owned || i < owned)
@@ -76,13 +83,15 @@ struct LocalPass {
 }  // namespace detail
 
 // Runs f for every owned target of the built engine (not collective: halos are the last
-// exchange's or refresh's). The method must work on the host; Error(unsupported) otherwise.
+// exchange's or refresh's). The method must work on the host (a GPU method: raycut::mpi::cuda::
+// for_each_pair, include/raycut/mpi/pairs.cuh); Error(unsupported) otherwise.
 template <class F>
 void for_each_pair(const DistributedEngine& engine, const F& f) {
   if (engine.local_engine().space() != MemorySpace::host)
     throw Error(ErrorCode::unsupported,
                 "raycut::mpi::for_each_pair: method '" + engine.local_engine().method() +
-                    "' works on the GPU; this runs host methods (cell-list, brute-force)");
+                    "' works on the GPU; this runs host methods (cell-list, brute-force), "
+                    "raycut::mpi::cuda::for_each_pair (raycut/mpi/pairs.cuh) GPU ones");
   using Pass = detail::LocalPass<F>;
   using Kind = typename Pass::Kind;
   const auto owned = static_cast<std::uint32_t>(engine.owned());
