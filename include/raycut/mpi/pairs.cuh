@@ -35,7 +35,7 @@ void for_each_pair(const DistributedEngine& engine, const F& f, cudaStream_t str
                     "' works on the GPU, but the engine was built from host positions; build it "
                     "from device positions (a device-resident engine)");
   // A device-resident engine runs all rows (one local engine over owned + halos).
-  using Pass = detail::LocalPass<F>;
+  using Pass = detail::LocalPass<F, F>;  // f copied to the device
   using Kind = typename Pass::Kind;
   const auto owned = static_cast<std::uint32_t>(engine.owned());
   raycut::cuda::for_each_pair(

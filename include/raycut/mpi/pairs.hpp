@@ -29,15 +29,16 @@ namespace detail {
 // sources to local source indices, shifts to global ones. A target whose pairs come from both
 // engines (owned rows only: a boundary particle) keeps its state between the two passes in
 // `carry`: the halo pass stores it there instead of finishing, the owned pass starts from it.
-// Holds f by value and runs on either side (a GPU traversal copies it to the device; all rows
-// only there, and every pointer a device one).
-template <class F>
+// Runs on either side: on the host it refers to f (Held = const F&), on a GPU traversal it holds
+// a copy (Held = F: copied to the device by value; all rows only there, every pointer a device
+// one).
+template <class F, class Held = const F&>
 struct LocalPass {
   using Accumulator = typename F::Accumulator;
   static constexpr bool takes_shift = true;
   enum class Kind { all_rows, owned, halos };
 
-  F f;
+  Held f;
   Kind kind;
   std::uint32_t owned;              // owned particles: local sources below, rows of all_rows
   const std::int32_t* halo_shifts;  // 3 per halo
