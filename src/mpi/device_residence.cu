@@ -3,10 +3,12 @@
 #include <cuda_runtime.h>
 
 #include <algorithm>
+#include <cstddef>
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "core/validation.hpp"
 #include "cuda/device_buffer.cuh"
@@ -148,6 +150,44 @@ void download_to(std::vector<T>& to, const T* from, std::size_t count) {
   to.resize(count);
   copy_n(to.data(), from, count);
 }
+
+// Grow-only host memory, pinned when the host allows it (else pageable: a failed pin is no
+// error, the copies are only slower).
+class StagingBuffer {
+ public:
+  StagingBuffer() = default;
+  StagingBuffer(const StagingBuffer&) = delete;
+  StagingBuffer& operator=(const StagingBuffer&) = delete;
+  ~StagingBuffer() { release(); }
+  std::byte* at_least(std::size_t bytes) {
+    if (bytes <= capacity_) return data_;
+    release();
+    void* p = nullptr;
+    if (cudaHostAlloc(&p, bytes, cudaHostAllocPortable) == cudaSuccess) {
+      pinned_ = static_cast<std::byte*>(p);
+      data_ = pinned_;
+    } else {
+      (void)cudaGetLastError();  // clear the failed allocation's error
+      pageable_.resize(bytes);
+      data_ = pageable_.data();
+    }
+    capacity_ = bytes;
+    return data_;
+  }
+
+ private:
+  void release() {
+    if (pinned_) cudaFreeHost(pinned_);
+    pinned_ = data_ = nullptr;
+    pageable_.clear();
+    pageable_.shrink_to_fit();
+    capacity_ = 0;
+  }
+  std::byte* pinned_ = nullptr;
+  std::byte* data_ = nullptr;
+  std::vector<std::byte> pageable_;
+  std::size_t capacity_ = 0;
+};
 
 class CudaResidence final : public DeviceResidence {
  public:
@@ -396,6 +436,10 @@ class CudaResidence final : public DeviceResidence {
   const std::uint64_t* ids() const override { return ids_.data(); }
   const std::uint64_t* halo_ids() const override { return halo_ids_.data(); }
   const std::int32_t* halo_shifts() const override { return halo_shifts_.data(); }
+  std::byte* staging(int which, std::size_t bytes) override {
+    return staging_[which].at_least(bytes);
+  }
+
   std::size_t owned() const override { return owned_; }
   float* local() override { return local_.data(); }
   const float* carried() const override { return carried_.data(); }
@@ -459,7 +503,8 @@ class CudaResidence final : public DeviceResidence {
   cuda::DeviceBuffer<std::uint32_t> record_dest_, record_index_;
   cuda::DeviceBuffer<std::int32_t> record_shift_;
   cuda::DeviceBuffer<unsigned char> temp_;
-  bool sorted_ = false;  // find_owners sorted: the staying run is order_[staying_first_ ...)
+  StagingBuffer staging_[2];  // a host transport's send and receive copies
+  bool sorted_ = false;       // find_owners sorted: the staying run is order_[staying_first_ ...)
   std::size_t staying_first_ = 0, staying_ = 0;
   // The halo plan: per record the owned index and the shift (3 int32), in send order.
   cuda::DeviceBuffer<std::uint32_t> index_;

@@ -96,6 +96,10 @@ class DeviceResidence {
   virtual float* scratch(std::size_t count) = 0;
   // Bytes between any two of host and device memory (the direction from the pointers).
   virtual void copy(void* to, const void* from, std::size_t bytes) const = 0;
+  // Host memory for staging `bytes` through a host transport, kept until the next call with
+  // the same `which` (0 or 1): pinned (copies at the link's speed) where the host can pin it,
+  // else pageable.
+  virtual std::byte* staging(int which, std::size_t bytes) = 0;
 
   // The owned particles' global ids, the halos' ids and shifts (device).
   virtual const std::uint64_t* ids() const = 0;

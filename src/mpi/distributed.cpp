@@ -780,11 +780,13 @@ void DistributedEngine::exchange_on_device(const void* send, std::size_t bytes, 
                          recv_offsets.data());
     return;
   }
-  std::vector<std::byte> sent(plan.sent() * bytes), received(plan.received() * bytes);
-  device_->copy(sent.data(), send, sent.size());
-  host_transport_->exchange(sent.data(), send_counts.data(), send_offsets.data(), received.data(),
+  const std::size_t sent_bytes = plan.sent() * bytes, received_bytes = plan.received() * bytes;
+  std::byte* sent = device_->staging(0, sent_bytes);
+  std::byte* received = device_->staging(1, received_bytes);
+  device_->copy(sent, send, sent_bytes);
+  host_transport_->exchange(sent, send_counts.data(), send_offsets.data(), received,
                             recv_counts.data(), recv_offsets.data());
-  device_->copy(recv, received.data(), received.size());
+  device_->copy(recv, received, received_bytes);
 }
 
 // build_halos()'s plan on the host: detail::for_each_halo over the owned particles, in OpenMP
