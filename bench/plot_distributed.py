@@ -2,7 +2,8 @@
 """Scaling tables (and a plot) of `raycut bench --distributed` runs, against issue 16's goals.
 
 Reads the CSVs that `mpirun -np K raycut bench --distributed` writes (one per rank count; rows
-of the same method, rows scheme, positions and transport are compared with each other). Weak
+of the same method, rows scheme, periodic images, positions and transport are compared with
+each other). Weak
 scaling (rows with scaling = weak): the step at K ranks over the step at the fewest ranks of the
 same N_per_rank, goal <= --weak-goal. Strong scaling (scaling = strong): the step at the fewest
 ranks over the step at K ranks of the same N (the speed-up), goal >= --strong-goal at --strong-at
@@ -25,7 +26,9 @@ def read_rows(paths):
 
 
 def key(row):
-    return (row["method"], row["rows"], row.get("positions", "host"),
+    # "images" since session 9: local (single-domain periodic axes imaged by the local engine) or
+    # halos (--halo-images: every periodic axis by halos).
+    return (row["method"], row["rows"], row.get("images", "local"), row.get("positions", "host"),
             row.get("transport", "mpi-host"))
 
 
@@ -43,9 +46,9 @@ def scaling_tables(rows, weak_goal, strong_goal, strong_at):
         size_name = "N per rank" if scaling == "weak" else "N"
         measure = "step / fewest ranks' step" if scaling == "weak" else "speed-up"
         lines += [f"### {title}", "",
-                  f"| method | rows | positions | transport | {size_name} | ranks | dims | halos "
-                  f"| refresh ms | lj_forces ms | step ms | {measure} | goal |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                  f"| method | rows | images | positions | transport | {size_name} | ranks | dims "
+                  f"| halos | refresh ms | lj_forces ms | step ms | {measure} | goal |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for group in chosen:
             by_ranks = sorted(groups[group], key=lambda r: int(r["ranks"]))
             base = float(by_ranks[0]["step_ms"])
@@ -62,8 +65,8 @@ def scaling_tables(rows, weak_goal, strong_goal, strong_at):
                     goal = f">= {strong_goal}: {'met' if value >= strong_goal else 'MISSED'}"
                 else:
                     goal = ""
-                method, rows_scheme, positions, transport = group[1]
-                lines.append(f"| {method} | {rows_scheme} | {positions} | {transport} | "
+                method, rows_scheme, images, positions, transport = group[1]
+                lines.append(f"| {method} | {rows_scheme} | {images} | {positions} | {transport} | "
                              f"{group[2]} | {ranks} | {r['dims']} | {r['halos']} | "
                              f"{float(r['refresh_ms']):.3f} | {float(r['compute_ms']):.3f} | "
                              f"{step:.3f} | {value:.3f} | {goal} |")
@@ -78,15 +81,17 @@ def plain_table(rows):
     if not chosen:
         return []
     lines = ["### One rank against the plain engine (same run)", "",
-             "| method | positions | N | steps per exchange | step ms | plain build + lj_forces ms "
-             "| step / plain | goal <= 1.05 | update / halos / local build ms |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| method | images | positions | transport | N | steps per exchange | step ms "
+             "| plain build + lj_forces ms | step / plain | goal <= 1.05 "
+             "| update / halos / local build ms |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(chosen, key=lambda r: (r["method"], int(r["N"]), int(r.get("steps") or 1))):
         ratio = float(r["step_ms"]) / float(r["plain_step_ms"])
         parts = ("update_ms", "halo_refresh_ms", "local_build_ms")  # CSVs since session 8
         breakdown = (" / ".join(f"{float(r[p]):.3f}" for p in parts)
                      if all(r.get(p) for p in parts) else "")
-        lines.append(f"| {r['method']} | {r.get('positions', 'host')} | {r['N']} | "
+        lines.append(f"| {r['method']} | {r.get('images', 'local')} | {r.get('positions', 'host')} | "
+                     f"{r.get('transport', 'mpi-host')} | {r['N']} | "
                      f"{r.get('steps') or 1} | {float(r['step_ms']):.3f} | "
                      f"{float(r['plain_step_ms']):.3f} | {ratio:.3f} | "
                      f"{'met' if ratio <= 1.05 else 'MISSED'} | {breakdown} |")
@@ -101,7 +106,7 @@ def plot(curves, path):
     for (scaling, k, size), curve in sorted(curves.items()):
         ax = axes[0 if scaling == "weak" else 1]
         ax.plot([c[0] for c in curve], [c[1] for c in curve], marker="o",
-                label=f"{k[0]} {k[2]} {k[3]} {size}")
+                label=f"{k[0]} {k[2]} {k[3]} {k[4]} {size}")
     axes[0].set(title="Weak scaling", xlabel="ranks (GPUs)", ylabel="step / fewest ranks' step")
     axes[1].set(title="Strong scaling", xlabel="ranks (GPUs)", ylabel="speed-up")
     for ax in axes:

@@ -25,7 +25,9 @@
 #   mpi          the MPI tests (ctest -R mpi, the device-resident ones among them) and
 #                `mpirun -np 1 raycut bench --distributed` at 2^20 and 2^22 with host positions
 #                (distributed-np1.csv), then --device at 2^20, 2^22, 2^24 (MPI_DEVICE_SIZES)
-#                beside the plain engine (distributed-device-np1.csv; docs/distributed.md)
+#                beside the plain engine (distributed-device-np1.csv; docs/distributed.md), and
+#                with --halo-images (a rank's own images as halo records), host-staged and by
+#                NCCL (distributed-halo-images-np1-{mpi-host,nccl}.csv)
 #   mpi-scaling  the MPI tests, then weak (2^24 per GPU) and strong (2^25) scaling of the
 #                device-resident engine with NCCL at 1, 2, 4 and all visible GPUs (kinds
 #                nvidia-h200-x2/x4/x8): weak-npK.csv, strong-npK.csv, scaling.md/.png
@@ -174,6 +176,18 @@ while [ $# -gt 0 ]; do
         > "$res/distributed-device-np1-steps5.log" 2>&1
       echo "distributed --device --steps 5 np1 exit $?"
       grep -E "step|plain" "$res/distributed-device-np1-steps5.log"
+      # Halo records at one rank: every periodic axis imaged by halos, the rank's own images
+      # exchanged with itself (the records and refreshes of a slab split, on one GPU).
+      for transport in mpi-host nccl; do
+        flag=()
+        [ "$transport" = nccl ] && flag=(--nccl)
+        mpirun --allow-run-as-root -np 1 "$raycut" bench --distributed --device "${flag[@]}" \
+          --halo-images --n 4194304,16777216 -m grid -r 10 \
+          -o "$res/distributed-halo-images-np1-$transport.csv" \
+          > "$res/distributed-halo-images-np1-$transport.log" 2>&1
+        echo "distributed --device --halo-images ($transport) np1 exit $?"
+        grep -E "step|plain" "$res/distributed-halo-images-np1-$transport.log"
+      done
       ;;
     mpi-scaling)
       # Issue 16 (2 GPUs) and 17 (4, 8): weak (MPI_WEAK_N per GPU, default 2^24) and strong
