@@ -1442,6 +1442,13 @@ TEST(Distributed, Errors) {
       });
       EXPECT_TRUE(contains(w, "differs between ranks")) << w;
     }
+    // Device arrays need a device-resident engine: refused on every rank, none left waiting.
+    std::vector<float> owned(engine.owned() + 1, 1.0f), local(engine.owned() + engine.halos() + 1);
+    const std::string d = error_message(ErrorCode::unsupported,
+                                        [&] { engine.halo_fields(owned.data(), 1, local.data()); });
+    EXPECT_TRUE(contains(d, "device-resident")) << d;
+    EXPECT_EQ(engine.device_ids().ids, nullptr);
+    EXPECT_EQ(engine.device_ids().halo_shifts, nullptr);
   }
 }
 
