@@ -703,7 +703,8 @@ void DistributedEngine::migrate() {
 // so q has the gaps of p' along the other axes and none along the local ones (wrapped there): q
 // passes the test, is held here (owned or a halo), and the local engine finds (t, q, L).
 // The plan is made where the positions live (plan_halos_on_host(), or the GPU's plan_halos():
-// the same records in the same order); the records cross on the host.
+// the same records in the same order); a host-resident engine's records cross on the host, a
+// device-resident engine's by the refreshes' transport (exchange_on_device).
 void DistributedEngine::build_halos() {
   const double reach = reach_of(decomposition_, halo_width_);
   HaloPlan& plan = *plan_;
