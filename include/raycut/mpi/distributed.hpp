@@ -45,9 +45,9 @@ class DeviceResidence;
 // Moves per-rank blocks of bytes between the ranks of a communicator: the payload of a
 // migration or a halo exchange. Sizes are agreed beforehand over MPI (the engine's control
 // plane), so a transport only moves data. A host transport moves everything; a device one
-// (NCCL) moves the halo refreshes of a device-resident engine (positions given in device
-// memory), GPU to GPU, while the records of exchanges (rare with a skin) and halo fields go
-// through host-staged MPI.
+// (NCCL) moves what a device-resident engine (positions given in device memory) sends along its
+// halo plan, GPU to GPU: the halo refreshes, the exchanges' halo records and halo fields; the
+// migrants of an exchange (few) go through host-staged MPI.
 class Transport {
  public:
   virtual ~Transport() = default;
@@ -139,9 +139,9 @@ struct DistributedOptions {
   // Domains per axis; 0 entries are chosen by MPI_Dims_create. The product must be the
   // communicator's size.
   std::array<int, 3> dims = {0, 0, 0};
-  // Payload transport of halo refreshes; null: make_host_transport(comm). A device transport
-  // (make_nccl_transport) serves a device-resident engine; host-resident ones stage through
-  // host-staged MPI whatever is given here.
+  // Payload transport of what goes along the halo plan (refreshes, new halo records, halo
+  // fields); null: make_host_transport(comm). A device transport (make_nccl_transport) serves a
+  // device-resident engine; host-resident ones use host-staged MPI whatever is given here.
   std::shared_ptr<Transport> transport;
   // Owned rows only: one engine over the owned particles (pairs among them) and one with the
   // owned particles near a face as query points over the halos (pairs with halos), summed.
@@ -333,8 +333,8 @@ class DistributedEngine {
   MPI_Comm comm_;
   int rank_ = 0, size_ = 1;
   DistributedOptions options_;
-  // Refreshes of a device-resident engine through transport_ (the option's, or host_transport_);
-  // everything else through host_transport_.
+  // What a device-resident engine sends along its halo plan through transport_ (the option's,
+  // or host_transport_); everything else through host_transport_.
   std::shared_ptr<Transport> transport_, host_transport_;
   std::unique_ptr<detail::DeviceResidence> device_;  // device-resident engines only
   Decomposition decomposition_;
