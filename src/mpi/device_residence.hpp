@@ -5,9 +5,8 @@
 // the migration's order, the halo plan. The halo records (ids, images, shifts) are gathered and
 // received here, so a device transport moves them GPU to GPU; the few migrants come to the host
 // and cross there (docs/distributed.md, "The device-resident path"). Defined in
-// device_residence.cu, only in
-// builds with CUDA; host-only interface. Every call queues on the legacy default stream, the
-// local engines' (DistributedEngine never sets a stream).
+// device_residence.cu, only in builds with CUDA; host-only interface. Every call queues on the
+// legacy default stream, the local engines' (DistributedEngine never sets a stream).
 #pragma once
 
 #include <cstddef>
