@@ -13,7 +13,7 @@
 //
 // With --periodic, the periodic workloads of spec/NEIGHBOURS.md section 8 (density 0.8442,
 // rc 2.5, cube sides from the density, uniform random positions in [0, side)^3 of each system):
-//   lj-liquid-pbc  one periodic cube of 2^20 particles (side ~107.5)
+//   lj-liquid-pbc  one periodic cube of 2^20 particles (side ~107.5; --periodic-n: other sizes)
 //   batch-pbc      512 periodic cubes of 128 particles (side ~5.33) as one batch
 //                  (Systems::offsets, one box shared by all), and 64 cubes of 4096 (side ~16.9)
 // with their own operations (--ops overrides them), the lists with image shifts:
@@ -178,6 +178,7 @@ struct Options {
   int reps = 5;
   bool lj_liquid = false;
   bool periodic = false;
+  std::vector<int> periodic_n = {1 << 20};  // the periodic liquid's sizes
   bool no_suite = false;
   bool own_stream = false;
   double padded_factor = 1.25;
@@ -522,7 +523,7 @@ int run(const Options& o) {
       for (int p : o.ps) configs.push_back({"uniform", {beta, p}});
   if (o.lj_liquid) configs.push_back({"lj-liquid", {0, 0}});
   if (o.periodic) {  // (systems, particles per system)
-    configs.push_back({"lj-liquid-pbc", {1, 1 << 20}});
+    for (int n : o.periodic_n) configs.push_back({"lj-liquid-pbc", {1, n}});
     configs.push_back({"batch-pbc", {512, 128}});
     configs.push_back({"batch-pbc", {64, 4096}});
   }
@@ -663,6 +664,10 @@ int main(int argc, char** argv) {
   app.add_flag("--periodic", o.periodic,
                "Also the periodic workloads: the LJ liquid in a periodic cube (2^20), batches of "
                "512 x 128 and 64 x 4096 periodic cubes; lists with shifts, lj_forces");
+  app.add_option("--periodic-n", o.periodic_n,
+                 "The periodic liquid's sizes (default 1048576: 2^20; 4194304 is ncu's 2^22)")
+      ->delimiter(',')
+      ->check(CLI::PositiveNumber);
   app.add_flag("--no-suite", o.no_suite,
                "Skip the uniform suite (with --lj-liquid / --periodic: only those)");
   app.add_flag("--stream", o.own_stream,

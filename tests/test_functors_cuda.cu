@@ -1,19 +1,26 @@
 // A caller's own pair functor through raycut::cuda::for_each_pair on every GPU method: functors
 // with the built-in Lennard-Jones math give Engine::compute's results bit for bit (the same
 // traversal in the same order); a functor without combine() runs where the grid would share a
-// target between lanes, with the same answer; N = 0 and 1; the OptiX methods refuse. Methods not
-// available here (no GPU, no OptiX) are skipped with the reason.
+// target between lanes, with the same answer; N = 0 and 1; the OptiX methods refuse; a functor
+// that reads j and S in a periodic box gets every triple of the double-precision oracle, on
+// whichever streams its passes run, after a build and a rebuild (the grid gathers its images on
+// the first pass that reads them). Methods not available here (no GPU, no OptiX) are skipped
+// with the reason.
 #include <cuda_runtime.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstring>
+#include <memory>
+#include <numeric>
+#include <random>
 #include <string>
 #include <vector>
 
 #include "raycut/cuda/pairs.cuh"
 #include "raycut/engine.hpp"
 #include "raycut/generators.hpp"
+#include "periodic_oracle.hpp"
 #include "user_functors.hpp"
 
 namespace raycut {
@@ -215,6 +222,125 @@ TEST_P(GpuFunctors, EmptyAndSingleParticle) {
   EXPECT_EQ(energy.to_host(), std::vector<float>(1, 0.0f));
   EXPECT_EQ(force.to_host(), std::vector<float>(3, 0.0f));
   EXPECT_EQ(virial.to_host(), std::vector<float>(6, 0.0f));
+}
+
+// Each target's triples (i, j, S) at its row of a CSR list sized by a count pass: reads j and S,
+// so a periodic pass takes the image tables. end[i] is where the row stopped.
+struct FillTriples {
+  static constexpr bool takes_shift = true;
+  using Accumulator = std::uint32_t;
+  const std::uint32_t* offsets;
+  std::uint32_t capacity;
+  std::uint32_t *i_out, *j_out, *end;
+  std::int32_t* s_out;
+  RAYCUT_HD Accumulator init(std::uint32_t i) const { return offsets[i]; }
+  RAYCUT_HD void operator()(Accumulator& at, std::uint32_t i, std::uint32_t j, raycut::Vec3, float,
+                            const raycut::Shift& s) const {
+    if (at < capacity) {
+      i_out[at] = i;
+      j_out[at] = j;
+      s_out[3 * at] = s.a;
+      s_out[3 * at + 1] = s.b;
+      s_out[3 * at + 2] = s.c;
+    }
+    ++at;
+  }
+  RAYCUT_HD void finish(std::uint32_t i, Accumulator& at) const { end[i] = at; }
+};
+
+// nvcc once took every takes_shift functor for one with accepts(), so FillTriples did not compile.
+static_assert(!raycut::has_accepts<FillTriples>::value && raycut::takes_shift<FillTriples>::value);
+
+// A periodic build's triples through a caller's functor, in rows sized by the built-in count
+// (which reads no images: the open traversal).
+class Triples {
+ public:
+  explicit Triples(Engine& engine)
+      : count_(engine.compute(Kernel::count).count),
+        offsets_(count_.size() + 1, 0),
+        offsets_d_(offsets_.size()),
+        end_d_(count_.size()) {
+    std::partial_sum(count_.begin(), count_.end(), offsets_.begin() + 1);
+    const std::uint32_t total = offsets_.back();
+    i_d_ = std::make_unique<DeviceBuffer<std::uint32_t>>(total);
+    j_d_ = std::make_unique<DeviceBuffer<std::uint32_t>>(total);
+    s_d_ = std::make_unique<DeviceBuffer<std::int32_t>>(3 * std::size_t{total});
+    cudaMemcpy(offsets_d_.p, offsets_.data(), offsets_.size() * sizeof(std::uint32_t),
+               cudaMemcpyHostToDevice);
+  }
+  // Queued on `stream`; nothing waits.
+  void launch(const Engine& engine, cudaStream_t stream) const {
+    raycut::cuda::for_each_pair(engine,
+                                FillTriples{offsets_d_.p, offsets_.back(), i_d_->p, j_d_->p,
+                                            end_d_.p, s_d_->p},
+                                stream);
+  }
+  // After the launch's stream: every row full, every triple of the oracle once.
+  void expect_oracle(const std::vector<float>& xyz, const raycut::Box& box, float cutoff) const {
+    ASSERT_EQ(cudaDeviceSynchronize(), cudaSuccess);
+    const std::vector<std::uint32_t> end = end_d_.to_host();
+    for (std::size_t i = 0; i < count_.size(); ++i)
+      ASSERT_EQ(end[i], offsets_[i + 1]) << "row " << i << " ended elsewhere than its count";
+    const raycut_test::PeriodicCheck check = raycut_test::check_periodic_pairs(
+        raycut_test::make_periodic_oracle(xyz, box, cutoff), i_d_->to_host(), j_d_->to_host(),
+        s_d_->to_host(), false);
+    EXPECT_TRUE(check.ok) << check.problems;
+    EXPECT_GT(check.listed, count_.size()) << "too few pairs for the test to mean anything";
+  }
+
+ private:
+  std::vector<std::uint32_t> count_, offsets_;
+  DeviceBuffer<std::uint32_t> offsets_d_, end_d_;
+  std::unique_ptr<DeviceBuffer<std::uint32_t>> i_d_, j_d_;
+  std::unique_ptr<DeviceBuffer<std::int32_t>> s_d_;
+};
+
+// The first pass that reads images runs on stream a, the next at once on stream b (non-blocking:
+// only the gather's event orders it), then one on the engine's own; a rebuild over moved
+// positions gathers again. A box thinner than the cutoff along x gives self-images.
+TEST_P(GpuFunctors, PeriodicFunctorReadsImagesOnAnyStream) {
+  if (is_optix(method())) GTEST_SKIP() << "OptiX methods refuse functors (OptixRefuses)";
+  const raycut::Box boxes[] = {raycut::Box::orthorhombic(3.0, 3.5, 4.0),
+                               raycut::Box::orthorhombic(0.9, 2.6, 3.1)};
+  const float cutoff = 1.2f;
+  cudaStream_t a = nullptr, b = nullptr;
+  CHECK_CUDA(cudaStreamCreateWithFlags(&a, cudaStreamNonBlocking));
+  CHECK_CUDA(cudaStreamCreateWithFlags(&b, cudaStreamNonBlocking));
+  std::mt19937 rng(11);
+  for (const raycut::Box& box : boxes) {
+    SCOPED_TRACE("box " + std::to_string(box.cell[0][0]));
+    std::uniform_real_distribution<float> u(-0.5f, 1.5f);  // unwrapped, up to half a box out
+    std::vector<float> xyz(3 * 300);
+    for (std::size_t k = 0; k < xyz.size(); ++k)
+      xyz[k] = u(rng) * static_cast<float>(box.cell[k % 3][k % 3]);
+    Engine engine(method());
+    raycut::DeviceArray positions(xyz);
+    try {
+      engine.build(positions.view(), cutoff, box);
+    } catch (const raycut::Error& e) {
+      if (e.code() != raycut::ErrorCode::unsupported) throw;
+      GTEST_SKIP() << method() << " refuses periodic boxes: " << e.what();
+    }
+    {
+      const Triples on_a(engine), on_b(engine), on_engine(engine);
+      on_a.launch(engine, a);
+      on_b.launch(engine, b);
+      on_engine.launch(engine, nullptr);
+      on_a.expect_oracle(xyz, box, cutoff);
+      on_b.expect_oracle(xyz, box, cutoff);
+      on_engine.expect_oracle(xyz, box, cutoff);
+    }
+    for (float& v : xyz) v += 0.37f * u(rng);  // a rebuild: new slots, the table again
+    positions = raycut::DeviceArray(xyz);
+    engine.update(positions.view());
+    const Triples on_b(engine), on_a(engine);
+    on_b.launch(engine, b);
+    on_a.launch(engine, a);
+    on_b.expect_oracle(xyz, box, cutoff);
+    on_a.expect_oracle(xyz, box, cutoff);
+  }
+  CHECK_CUDA(cudaStreamDestroy(a));
+  CHECK_CUDA(cudaStreamDestroy(b));
 }
 
 // The OptiX methods run programs compiled ahead: a caller's functor is refused, by both entry

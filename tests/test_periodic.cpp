@@ -12,6 +12,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <random>
@@ -1138,6 +1139,40 @@ TEST_P(PeriodicErrors, SingularCells) {
     engine.build({xyz.data(), 2, MemorySpace::host}, 1.0f, s);
   });
   EXPECT_TRUE(contains(m, "singular")) << m;
+}
+
+// Device positions of a GPU method are checked in the image expansion's first pass (no check
+// of their own): the first non-finite index is named, before one whose image shift would leave
+// int32, and the engine builds again after the refusal.
+TEST_P(PeriodicErrors, NonFiniteDevicePositionsNameTheirIndex) {
+  const std::string& method = GetParam();
+  SKIP_UNAVAILABLE(method);
+  if (!raycut::cuda_device_available()) GTEST_SKIP() << "no CUDA device: no device positions";
+  std::vector<float> xyz(3 * 40);
+  for (std::size_t k = 0; k < xyz.size(); ++k) xyz[k] = 0.05f * static_cast<float>(k % 17);
+  const Box box = Box::orthorhombic(1, 1, 1);
+  Engine engine(method);
+  xyz[3 * 2 + 1] = 3e30f;  // finite, more than 2^31 boxes away
+  xyz[3 * 7 + 2] = std::numeric_limits<float>::quiet_NaN();
+  xyz[3 * 31] = -std::numeric_limits<float>::infinity();
+  std::string m = error_message(ErrorCode::invalid_input, [&] {
+    engine.build(raycut::DeviceArray(xyz).view(), 0.3f, box);
+  });
+  EXPECT_TRUE(contains(m, "non-finite coordinate at particle index 7")) << m;
+  xyz[3 * 7 + 2] = 0.5f;
+  xyz[3 * 31] = 0.5f;
+  m = error_message(ErrorCode::invalid_argument, [&] {
+    engine.build(raycut::DeviceArray(xyz).view(), 0.3f, box);
+  });
+  EXPECT_TRUE(contains(m, "particle 2 ") && contains(m, "int32")) << m;
+  xyz[3 * 2 + 1] = 0.5f;
+  const raycut::DeviceArray good(xyz);
+  engine.build(good.view(), 0.3f, box);
+  EXPECT_EQ(engine.compute(Kernel::count).count.size(), 40u);
+  xyz[3 * 9] = std::numeric_limits<float>::infinity();  // a step loop's update: the same check
+  m = error_message(ErrorCode::invalid_input,
+                    [&] { engine.update(raycut::DeviceArray(xyz).view()); });
+  EXPECT_TRUE(contains(m, "non-finite coordinate at particle index 9")) << m;
 }
 
 TEST_P(PeriodicErrors, BadOffsets) {

@@ -252,6 +252,7 @@ class Method;
 class ImagePoints;
 struct ImagePlan;
 struct PairPass;
+struct EngineAccess;
 }  // namespace detail
 
 class Engine {
@@ -331,6 +332,10 @@ class Engine {
   detail::PairPass pair_pass() const;
 
  private:
+  friend struct detail::EngineAccess;
+  // update(); `checked`: the caller has checked the coordinates (raycut's own engines over
+  // positions they checked), no pass of its own for it.
+  void update(PositionsView positions, bool checked);
   template <class F>
   void with_positions_in_method_space(const PositionsView& positions, F&& f);
   detail::Method& impl(const char* call) const;

@@ -181,17 +181,25 @@ struct emits_entries : std::false_type {};
 template <class F>
 struct emits_entries<F, std::enable_if_t<F::emits_entries>> : std::true_type {};
 
+// accepts(i, j), or accepts(i, j, s) for a functor that takes shifts. Two plain detections and a
+// choice: nvcc's front end took any takes_shift functor for one with accepts when the shift's
+// detection sat inside enable_if_t.
 template <class F, class = void>
-struct has_accepts : std::false_type {};
+struct has_accepts_of_pair : std::false_type {};
 template <class F>
-struct has_accepts<
+struct has_accepts_of_pair<
     F, std::void_t<decltype(std::declval<const F&>().accepts(std::uint32_t{}, std::uint32_t{}))>>
     : std::true_type {};
+template <class F, class = void>
+struct has_accepts_of_shifted_pair : std::false_type {};
 template <class F>
-struct has_accepts<F, std::enable_if_t<takes_shift<F>::value,
-                                       std::void_t<decltype(std::declval<const F&>().accepts(
-                                           std::uint32_t{}, std::uint32_t{}, Shift{}))>>>
+struct has_accepts_of_shifted_pair<F, std::void_t<decltype(std::declval<const F&>().accepts(
+                                          std::uint32_t{}, std::uint32_t{}, Shift{}))>>
     : std::true_type {};
+template <class F>
+struct has_accepts
+    : std::bool_constant<takes_shift<F>::value ? has_accepts_of_shifted_pair<F>::value
+                                               : has_accepts_of_pair<F>::value> {};
 
 // Whether f takes the in-range pair (i, j, s).
 template <class F>

@@ -46,7 +46,8 @@ class ImagePoints {
  public:
   virtual ~ImagePoints() = default;
   virtual MemorySpace space() const = 0;
-  // `sources` (and `queries`) in space(); GPU work queued on `stream` (a cudaStream_t).
+  // `sources` (and `queries`) in space(); GPU work queued on `stream` (a cudaStream_t). The
+  // device expansion checks that the sources are finite (throw_non_finite) in its first pass.
   virtual void expand(const ImagePlan& plan, const float* sources, const float* queries,
                       void* stream) = 0;
   const Points& points() const { return points_; }
@@ -58,7 +59,7 @@ class ImagePoints {
     points_.xyz = xyz;
     points_.size = size;
     points_.targets = plan.target_count();
-    points_.images = {image, !plan.has_queries()};
+    points_.images = {image, nullptr, !plan.has_queries()};
     points_.systems = plan.systems();
     points_.system = plan.systems() > 1 ? system : nullptr;
   }

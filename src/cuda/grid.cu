@@ -41,10 +41,8 @@ class Grid final : public CudaPairMethod<Grid> {
     tables_.build(points.xyz, static_cast<std::uint32_t>(n), plan_, stream_);
     if (points.targets < n)
       tables_.select_targets(static_cast<std::uint32_t>(points.targets), stream_);
-    if (images_.active()) {
-      tables_.gather_images(images_.image, stream_);
-      images_.image = tables_.slot_images();  // the traversal indexes images by slot
-    }
+    if (images_.active())  // the traversal indexes images by slot
+      images_.deferred = tables_.slot_images(images_.image);
     build_timer_.stop(stream_);
   }
 

@@ -262,11 +262,41 @@ __global__ void gather_images_kernel(const float4* pos, const PointImage* image,
   if (s < n) slot_images[s] = image[__float_as_uint(pos[s].w)];
 }
 
-void GridTables::gather_images(const PointImage* image, cudaStream_t stream) {
-  slot_images_.resize(std::max<std::uint32_t>(n_, 1));
-  gather_images_kernel<<<blocks_for(n_, 256), 256, 0, stream>>>(pos_.data(), image, n_,
-                                                                slot_images_.data());
-  RAYCUT_CUDA_CHECK_LAUNCH();
+SlotImages::~SlotImages() {
+  if (done_) cudaEventDestroy(done_);
+}
+
+void SlotImages::reset(const float4* pos, std::uint32_t n, const PointImage* by_point) {
+  const std::lock_guard<std::mutex> lock(mutex_);
+  pos_ = pos;
+  n_ = n;
+  by_point_ = by_point;
+  gathered_ = false;
+}
+
+const PointImage* SlotImages::on(void* stream_ptr) const {
+  const auto stream = static_cast<cudaStream_t>(stream_ptr);
+  const std::lock_guard<std::mutex> lock(mutex_);
+  if (!gathered_) {
+    table_.resize(std::max<std::uint32_t>(n_, 1));
+    if (n_ > 0) {
+      gather_images_kernel<<<blocks_for(n_, 256), 256, 0, stream>>>(pos_, by_point_, n_,
+                                                                    table_.data());
+      RAYCUT_CUDA_CHECK_LAUNCH();
+    }
+    if (!done_) RAYCUT_CUDA_CHECK(cudaEventCreateWithFlags(&done_, cudaEventDisableTiming));
+    RAYCUT_CUDA_CHECK(cudaEventRecord(done_, stream));
+    gathered_ = true;
+    gathered_on_ = stream;
+  } else if (stream != gathered_on_) {
+    RAYCUT_CUDA_CHECK(cudaStreamWaitEvent(stream, done_, 0));
+  }
+  return table_.data();
+}
+
+const DeferredImages* GridTables::slot_images(const PointImage* by_point) {
+  slot_images_.reset(pos_.data(), n_, by_point);
+  return &slot_images_;
 }
 
 GridPass GridTables::pass(const GridPlan& plan) const {

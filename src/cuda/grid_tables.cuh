@@ -13,12 +13,38 @@
 #include <cuda_runtime.h>
 
 #include <cstdint>
+#include <mutex>
 
 #include "cuda/device_buffer.cuh"
 #include "cuda/device_results.cuh"
 #include "cuda/grid_policy.hpp"
 
 namespace raycut::detail::cuda {
+
+// The image of each slot's point (image[point] gathered into slot order: a row's candidates then
+// read consecutive entries), gathered by the first pass after a build that reads images. Most
+// kernels never do (count, lj_forces, sph: with_images), and the gather was 15 % of a periodic
+// build (docs/periodic.md). Passes on other streams wait for the gather's event.
+class SlotImages final : public DeferredImages {
+ public:
+  SlotImages() = default;
+  ~SlotImages();
+  SlotImages(const SlotImages&) = delete;
+  SlotImages& operator=(const SlotImages&) = delete;
+  // After a build: the slots' float4 (w = point index) and the table by point.
+  void reset(const float4* pos, std::uint32_t n, const PointImage* by_point);
+  const PointImage* on(void* stream) const override;
+
+ private:
+  const float4* pos_ = nullptr;
+  std::uint32_t n_ = 0;
+  const PointImage* by_point_ = nullptr;
+  mutable std::mutex mutex_;  // concurrent passes from host threads gather once
+  mutable bool gathered_ = false;
+  mutable cudaStream_t gathered_on_ = nullptr;
+  mutable cudaEvent_t done_ = nullptr;
+  mutable DeviceBuffer<PointImage> table_;
+};
 
 class GridTables {
  public:
@@ -27,10 +53,9 @@ class GridTables {
   void build(const float* xyz, std::uint32_t n, const GridPlan& plan, cudaStream_t stream);
   // The slots of points [0, targets) in slot order, for a pass over those targets only.
   void select_targets(std::uint32_t targets, cudaStream_t stream);
-  // The image of each slot's point (image[point], gathered into slot order: the traversal's
-  // candidates of a row then read consecutive entries).
-  void gather_images(const PointImage* image, cudaStream_t stream);
-  const PointImage* slot_images() const { return slot_images_.data(); }
+  // The traversal's images by slot, from `by_point` (images of the last build's points),
+  // gathered when a pass first reads them.
+  const DeferredImages* slot_images(const PointImage* by_point);
   // The traversal's view of the last build.
   GridPass pass(const GridPlan& plan) const;
 
@@ -50,7 +75,7 @@ class GridTables {
   std::uint32_t* order_ = nullptr;  // index_ or index_alt_: sorted slot -> original index
   DeviceBuffer<float4> pos_;
   DeviceBuffer<std::uint32_t> targets_;   // select_targets()
-  DeviceBuffer<PointImage> slot_images_;  // gather_images()
+  SlotImages slot_images_;
   DeviceBuffer<std::uint32_t> selected_;  // its count (device; the number is known)
   DeviceBuffer<std::uint32_t> start_;     // dense: per cell; compact: per non-empty cell
   DeviceBuffer<std::uint64_t> cell_keys_, row_keys_;

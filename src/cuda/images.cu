@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "core/validation.hpp"
 #include "cuda/device_buffer.cuh"
 #include "cuda/device_results.cuh"
 #include "raycut/detail/cuda/visit.cuh"
@@ -48,13 +49,21 @@ __global__ void origins_kernel(Plan plan, const float* sources, const float* que
     system_origin(plan.frames[s], queries + 3 * plan.queries[s]);
 }
 
-// Images per particle; the first particle whose shift leaves int32 in *bad (else ~0).
+// Images per particle; the first particle whose shift leaves int32 in bad[0], the first with a
+// non-finite coordinate in bad[1] (else ~0): the engine's finiteness check, fused in this pass
+// (one kernel and one read-back less per build).
 __global__ void count_kernel(Plan plan, const float* sources, std::uint32_t* counts,
                              unsigned long long* bad) {
   const std::uint64_t p = blockIdx.x * std::uint64_t{block} + threadIdx.x;
   if (p >= plan.n) return;
+  const float* x = sources + 3 * p;
+  if (!(isfinite(x[0]) && isfinite(x[1]) && isfinite(x[2]))) {
+    atomicMin(bad + 1, static_cast<unsigned long long>(p));
+    counts[p] = 0;
+    return;
+  }
   const ImageFrame& frame = plan.frames[system_of(plan.sources, plan.systems, p)];
-  const WrappedPoint w = wrap_point(frame, sources + 3 * p);
+  const WrappedPoint w = wrap_point(frame, x);
   if (!w.ok) atomicMin(bad, static_cast<unsigned long long>(p));
   counts[p] = static_cast<std::uint32_t>(image_count(frame, w, false));
 }
@@ -113,6 +122,11 @@ struct CountOrZero {
   }
 };
 
+// count_kernel's findings: the first index whose shift leaves int32, the first non-finite one.
+struct Bad {
+  unsigned long long shift, non_finite;
+};
+
 class DeviceImagePoints final : public ImagePoints {
  public:
   MemorySpace space() const override { return MemorySpace::device; }
@@ -127,7 +141,7 @@ class DeviceImagePoints final : public ImagePoints {
   DeviceBuffer<std::uint64_t> source_offsets_, query_offsets_, image_offset_;
   DeviceBuffer<unsigned long long> bad_;  // atomics to mapped host memory are not portable
   DeviceBuffer<unsigned char> temp_;
-  MappedValue<unsigned long long> bad_host_;
+  MappedValue<Bad> bad_host_;
   MappedValue<std::uint64_t> total_;
   // What frames_ and the offsets hold: a step loop's next expansion uploads nothing.
   std::vector<ImageFrame> uploaded_frames_;
@@ -177,9 +191,9 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
 
-  // Count, scan (the total lands at image_offset[n]), read the total and any bad shift back.
-  bad_.resize(1);
-  RAYCUT_CUDA_CHECK(cudaMemsetAsync(bad_.data(), 0xFF, sizeof(unsigned long long), stream));
+  // Count, scan (the total lands at image_offset[n]), read the total and any bad point back.
+  bad_.resize(2);
+  RAYCUT_CUDA_CHECK(cudaMemsetAsync(bad_.data(), 0xFF, sizeof(Bad), stream));
   counts_.resize(std::max<std::uint64_t>(n, 1));
   image_offset_.resize(n + 1);
   if (n > 0) {
@@ -197,16 +211,18 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
                                                   image_offset_.data(), n + 1, stream));
   RAYCUT_CUDA_CHECK(cudaMemcpyAsync(total_.device(), image_offset_.data() + n,
                                     sizeof(std::uint64_t), cudaMemcpyDeviceToDevice, stream));
-  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(bad_host_.device(), bad_.data(), sizeof(unsigned long long),
+  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(bad_host_.device(), bad_.data(), sizeof(Bad),
                                     cudaMemcpyDeviceToDevice, stream));
   RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
-  if (bad_host_.host() != ~0ull) {
+  const Bad bad = bad_host_.host();
+  if (bad.non_finite != ~0ull || bad.shift != ~0ull) {
+    const unsigned long long first = bad.non_finite != ~0ull ? bad.non_finite : bad.shift;
     float x[3];
-    RAYCUT_CUDA_CHECK(
-        cudaMemcpy(x, sources + 3 * bad_host_.host(), sizeof x, cudaMemcpyDeviceToHost));
+    RAYCUT_CUDA_CHECK(cudaMemcpy(x, sources + 3 * first, sizeof x, cudaMemcpyDeviceToHost));
+    if (bad.non_finite != ~0ull) throw_non_finite(first, x);
     throw Error(ErrorCode::invalid_argument,
-                "particle " + std::to_string(bad_host_.host()) + " at (" + std::to_string(x[0]) +
-                    ", " + std::to_string(x[1]) + ", " + std::to_string(x[2]) +
+                "particle " + std::to_string(first) + " at (" + std::to_string(x[0]) + ", " +
+                    std::to_string(x[1]) + ", " + std::to_string(x[2]) +
                     ") lies more than 2^31 boxes away: its image shift leaves the int32 range");
   }
   p.first_image = targets + (with_queries ? n : 0);
@@ -226,12 +242,12 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
   if (with_queries && targets > 0) {
     queries_kernel<<<blocks_for(targets, block), block, 0, stream>>>(p, queries, out, bad_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
-    RAYCUT_CUDA_CHECK(cudaMemcpyAsync(bad_host_.device(), bad_.data(), sizeof(unsigned long long),
+    RAYCUT_CUDA_CHECK(cudaMemcpyAsync(bad_host_.device(), bad_.data(), sizeof(Bad),
                                       cudaMemcpyDeviceToDevice, stream));
     RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
-    if (bad_host_.host() != ~0ull)
+    if (bad_host_.host().shift != ~0ull)
       throw Error(ErrorCode::invalid_argument,
-                  "query point " + std::to_string(bad_host_.host() - n) +
+                  "query point " + std::to_string(bad_host_.host().shift - n) +
                       " lies more than 2^31 boxes away: its image shift leaves the int32 range");
   }
   if (n > 0) {

@@ -15,6 +15,7 @@
 
 #include <omp.h>
 
+#include "core/engine_access.hpp"
 #include "mpi/device_residence.hpp"
 #include "mpi/mpi_check.hpp"
 #include "raycut/mpi/pairs.hpp"
@@ -893,8 +894,8 @@ void DistributedEngine::build_local_engine(bool same_sources) {
   try {
     const std::size_t n = ids_.size(), h = halo_count_;
     const PositionsView local = local_positions(split_ ? n : n + h);
-    if (same_sources)
-      engine_->update(local);
+    if (same_sources)  // update() checked the owned positions; halos are their images
+      raycut::detail::EngineAccess::update_checked(*engine_, local);
     else
       engine_->build(local, cutoff_, local_box_);
     if (split_) select_boundary();

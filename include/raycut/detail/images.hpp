@@ -22,7 +22,7 @@ struct NoImages {
 
 struct WithImages {
   static constexpr bool active = true;
-  const PointImage* image;  // by point, or by slot for the grid
+  const PointImage* image;  // ImageTables::table(): by point, or by slot for the grid
   struct Target {
     std::int32_t shift[3];
   };
@@ -63,11 +63,12 @@ inline constexpr bool needs_images = uses_source<F>::value || has_accepts<F>::va
 // Runs launch(images) with the image policy of `pass` for functor F: one instantiation per
 // policy. A functor that needs no tables runs the open traversal (j = the point's index, which
 // it does not read) unless a candidate may be a query point, never a source: no per-pair lookup
-// or branch, the very loop of an open cloud (measured: 10 % of a periodic LJ pair on the CPU).
+// or branch, the very loop of an open cloud (measured: 10 % of a periodic LJ pair on the CPU),
+// and no deferred table is made. `stream`: where a GPU traversal is launched (null on the host).
 template <class F, class Launch>
-void with_images(const PairPass& pass, Launch&& launch) {
+void with_images(const PairPass& pass, Launch&& launch, void* stream = nullptr) {
   if (pass.images.active() && (needs_images<F> || !pass.images.candidates_are_sources))
-    launch(WithImages{pass.images.image});
+    launch(WithImages{pass.images.table(stream)});
   else
     launch(NoImages{});
 }

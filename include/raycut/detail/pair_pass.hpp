@@ -1,6 +1,7 @@
 // What a built method exposes so that a functor compiled by the caller runs through the
 // method's own traversal (include/raycut/pairs.hpp, include/raycut/cuda/pairs.cuh): plain data,
-// passed to kernels by value. Not a stable interface: it follows the methods' internals.
+// passed to kernels by value (but DeferredImages, asked on the host before a launch). Not a
+// stable interface: it follows the methods' internals.
 #pragma once
 
 #include <cstddef>
@@ -102,14 +103,29 @@ struct alignas(16) PointImage {
   std::uint32_t source;
   std::int32_t shift[3];
 };
-// Null: the points are the caller's particles. The grid hands its traversal a copy in slot order.
+// A table of the points' images in a traversal's own order, made on the first pass that reads
+// it (the grid's, in slot order: most kernels never read one, docs/periodic.md).
+class DeferredImages {
+ public:
+  // The table; the first call queues its making on `stream` (a cudaStream_t), and every call
+  // orders it before the work queued next on `stream`.
+  virtual const PointImage* on(void* stream) const = 0;
+
+ protected:
+  ~DeferredImages() = default;
+};
+
+// Null: the points are the caller's particles.
 struct ImageTables {
-  const PointImage* image = nullptr;
+  const PointImage* image = nullptr;          // by point
+  const DeferredImages* deferred = nullptr;  // set: the traversal reads deferred->on(stream)
   // Every point the traversal offers as a candidate is some particle's image: no query points,
   // or a structure that never offers them (the CPU cell list). Then a functor that reads
   // neither j nor S runs the open traversal (with_images).
   bool candidates_are_sources = true;
   bool active() const { return image != nullptr; }
+  // What a traversal launched on `stream` indexes: by point, or the deferred table.
+  const PointImage* table(void* stream) const { return deferred ? deferred->on(stream) : image; }
 };
 
 struct PairPass {

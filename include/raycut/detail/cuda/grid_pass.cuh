@@ -426,12 +426,15 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
         break;
     }
   };
-  with_images<F>(pass, [&](const auto& images) {
-    if (g.dense)
-      launch(DenseTable{g.dense_table.start}, images);
-    else
-      launch(CompactTable{g.compact_table}, images);
-  });
+  with_images<F>(
+      pass,
+      [&](const auto& images) {
+        if (g.dense)
+          launch(DenseTable{g.dense_table.start}, images);
+        else
+          launch(CompactTable{g.compact_table}, images);
+      },
+      stream);
   RAYCUT_CUDA_CHECK_LAUNCH();
 }
 
