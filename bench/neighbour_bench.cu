@@ -422,9 +422,19 @@ Measurement measure(Op op, bool cold, int reps, const Context& c,
           m.bytes = s.list.bytes();
           m.has_entries = true;
           // A half list holds one of (i, j, S) and (j, i, -S), self-images (i, i, +-S) included.
+          // With images the two orientations are two different float differences (the target
+          // minus another point's image), so a pair within float rounding of the cutoff may be
+          // in one and out of the other: the spec's band, either answer exact. At 2^22 such
+          // pairs exist (1 in 231,729,614 in session 10): a half list may differ from half the
+          // pairs by at most the pairs within a few ulps of the cutoff, 1e-6 of them here.
           const bool half = op == Op::list_half || op == Op::list_half_s;
           const std::uint64_t want = half ? pairs / 2 : pairs;
-          m.check = m.entries == want ? "ok" : "MISMATCH";
+          const std::uint64_t off = 2 * m.entries > pairs ? 2 * m.entries - pairs
+                                                          : pairs - 2 * m.entries;
+          const bool band = half && !c.systems->plain() && off <= pairs / 1000000;
+          m.check = m.entries == want ? "ok"
+                    : band            ? "ok(band " + std::to_string(off) + ")"
+                                      : "MISMATCH";
           const bool shifts = op == Op::list_full_s || op == Op::list_half_s;
           if (shifts && m.entries > 0 && s.list.shifts() == nullptr)
             m.check = "MISMATCH(no shifts)";
