@@ -281,7 +281,9 @@ class Engine {
   // The same with periodic boxes, a batch or query points (Systems says what each means).
   // Throws Error(invalid_argument) for a bad box (Box's validate), bad offsets or a box count
   // that matches neither 1 nor the systems, and Error(unsupported) for a method that cannot
-  // (the OptiX methods and grid-paper: no images or batches; docs/methods.md).
+  // (the OptiX methods and grid-paper: no images or batches; docs/methods.md). Device sources
+  // of a GPU method are checked by the image expansion's first pass instead (the same error,
+  // one read-back less); that refusal leaves the engine unbuilt.
   void build(PositionsView positions, float cutoff, const Systems& systems);
   void build(PositionsView positions, float cutoff, const Box& box) {
     build(positions, cutoff, Systems::periodic(box));
