@@ -429,8 +429,8 @@ Measurement measure(Op op, bool cold, int reps, const Context& c,
           // pairs by at most the pairs within a few ulps of the cutoff, 1e-6 of them here.
           const bool half = op == Op::list_half || op == Op::list_half_s;
           const std::uint64_t want = half ? pairs / 2 : pairs;
-          const std::uint64_t off = 2 * m.entries > pairs ? 2 * m.entries - pairs
-                                                          : pairs - 2 * m.entries;
+          const std::uint64_t off =
+              2 * m.entries > pairs ? 2 * m.entries - pairs : pairs - 2 * m.entries;
           const bool band = half && !c.systems->plain() && off <= pairs / 1000000;
           m.check = m.entries == want ? "ok"
                     : band            ? "ok(band " + std::to_string(off) + ")"

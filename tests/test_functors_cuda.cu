@@ -17,10 +17,10 @@
 #include <string>
 #include <vector>
 
+#include "periodic_oracle.hpp"
 #include "raycut/cuda/pairs.cuh"
 #include "raycut/engine.hpp"
 #include "raycut/generators.hpp"
-#include "periodic_oracle.hpp"
 #include "user_functors.hpp"
 
 namespace raycut {
@@ -270,10 +270,9 @@ class Triples {
   }
   // Queued on `stream`; nothing waits.
   void launch(const Engine& engine, cudaStream_t stream) const {
-    raycut::cuda::for_each_pair(engine,
-                                FillTriples{offsets_d_.p, offsets_.back(), i_d_->p, j_d_->p,
-                                            end_d_.p, s_d_->p},
-                                stream);
+    raycut::cuda::for_each_pair(
+        engine, FillTriples{offsets_d_.p, offsets_.back(), i_d_->p, j_d_->p, end_d_.p, s_d_->p},
+        stream);
   }
   // After the launch's stream: every row full, every triple of the oracle once.
   void expect_oracle(const std::vector<float>& xyz, const raycut::Box& box, float cutoff) const {
@@ -281,9 +280,9 @@ class Triples {
     const std::vector<std::uint32_t> end = end_d_.to_host();
     for (std::size_t i = 0; i < count_.size(); ++i)
       ASSERT_EQ(end[i], offsets_[i + 1]) << "row " << i << " ended elsewhere than its count";
-    const raycut_test::PeriodicCheck check = raycut_test::check_periodic_pairs(
-        raycut_test::make_periodic_oracle(xyz, box, cutoff), i_d_->to_host(), j_d_->to_host(),
-        s_d_->to_host(), false);
+    const raycut_test::PeriodicCheck check =
+        raycut_test::check_periodic_pairs(raycut_test::make_periodic_oracle(xyz, box, cutoff),
+                                          i_d_->to_host(), j_d_->to_host(), s_d_->to_host(), false);
     EXPECT_TRUE(check.ok) << check.problems;
     EXPECT_GT(check.listed, count_.size()) << "too few pairs for the test to mean anything";
   }

@@ -1155,15 +1155,13 @@ TEST_P(PeriodicErrors, NonFiniteDevicePositionsNameTheirIndex) {
   xyz[3 * 2 + 1] = 3e30f;  // finite, more than 2^31 boxes away
   xyz[3 * 7 + 2] = std::numeric_limits<float>::quiet_NaN();
   xyz[3 * 31] = -std::numeric_limits<float>::infinity();
-  std::string m = error_message(ErrorCode::invalid_input, [&] {
-    engine.build(raycut::DeviceArray(xyz).view(), 0.3f, box);
-  });
+  std::string m = error_message(ErrorCode::invalid_input,
+                                [&] { engine.build(raycut::DeviceArray(xyz).view(), 0.3f, box); });
   EXPECT_TRUE(contains(m, "non-finite coordinate at particle index 7")) << m;
   xyz[3 * 7 + 2] = 0.5f;
   xyz[3 * 31] = 0.5f;
-  m = error_message(ErrorCode::invalid_argument, [&] {
-    engine.build(raycut::DeviceArray(xyz).view(), 0.3f, box);
-  });
+  m = error_message(ErrorCode::invalid_argument,
+                    [&] { engine.build(raycut::DeviceArray(xyz).view(), 0.3f, box); });
   EXPECT_TRUE(contains(m, "particle 2 ") && contains(m, "int32")) << m;
   xyz[3 * 2 + 1] = 0.5f;
   const raycut::DeviceArray good(xyz);

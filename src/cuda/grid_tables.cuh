@@ -74,7 +74,7 @@ class GridTables {
   DeviceBuffer<std::uint32_t> index_, index_alt_, run_start_;
   std::uint32_t* order_ = nullptr;  // index_ or index_alt_: sorted slot -> original index
   DeviceBuffer<float4> pos_;
-  DeviceBuffer<std::uint32_t> targets_;   // select_targets()
+  DeviceBuffer<std::uint32_t> targets_;  // select_targets()
   SlotImages slot_images_;
   DeviceBuffer<std::uint32_t> selected_;  // its count (device; the number is known)
   DeviceBuffer<std::uint32_t> start_;     // dense: per cell; compact: per non-empty cell

@@ -117,7 +117,7 @@ class DeferredImages {
 
 // Null: the points are the caller's particles.
 struct ImageTables {
-  const PointImage* image = nullptr;          // by point
+  const PointImage* image = nullptr;         // by point
   const DeferredImages* deferred = nullptr;  // set: the traversal reads deferred->on(stream)
   // Every point the traversal offers as a candidate is some particle's image: no query points,
   // or a structure that never offers them (the CPU cell list). Then a functor that reads

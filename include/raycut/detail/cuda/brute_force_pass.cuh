@@ -58,9 +58,9 @@ void run_brute_force(const PairPass& pass, const F& f, cudaStream_t stream) {
   with_images<F>(
       pass,
       [&](const auto& images) {
-        brute_force_kernel<<<blocks_for(pass.n, brute_force_block_size), brute_force_block_size,
-                             0, stream>>>(pass.brute_force.xyz, pass.n, pass.points,
-                                          pass.brute_force.system, pass.cutoff_squared, f, images);
+        brute_force_kernel<<<blocks_for(pass.n, brute_force_block_size), brute_force_block_size, 0,
+                             stream>>>(pass.brute_force.xyz, pass.n, pass.points,
+                                       pass.brute_force.system, pass.cutoff_squared, f, images);
       },
       stream);
   RAYCUT_CUDA_CHECK_LAUNCH();
