@@ -336,7 +336,8 @@ class Engine {
  private:
   friend struct detail::EngineAccess;
   // update(); `checked`: the caller has checked the coordinates (raycut's own engines over
-  // positions they checked), no pass of its own for it.
+  // positions they checked), so a plain update skips its finiteness pass (one with systems
+  // rebuilds, and checks as build() does).
   void update(PositionsView positions, bool checked);
   template <class F>
   void with_positions_in_method_space(const PositionsView& positions, F&& f);
