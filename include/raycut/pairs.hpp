@@ -37,23 +37,29 @@ void for_each_in_range(std::size_t i, const float* xyz, float cutoff_squared, co
   });
 }
 
-// Runs functor f for every target (points [0, n)), in parallel over targets (OpenMP); candidate
+// Runs functor f for every target (points [0, n)), in parallel over targets (OpenMP), visited
+// in `order` (null: 0 .. n - 1; each target's own sum is the same in any order); candidate
 // points become the caller's sources and shifts through `images` (detail/images.hpp).
 template <class Walk, class F, class Images = NoImages>
 void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk& walk, const F& f,
-              const Images& images = {}) {
-#pragma omp parallel for schedule(dynamic, 256)
-  for (std::size_t t = 0; t < n; ++t) {
-    const auto i = static_cast<std::uint32_t>(t);
+              const Images& images = {}, const std::uint32_t* order = nullptr) {
+  const auto visit = [&](const std::uint32_t i) {
     typename F::Accumulator acc = initial_state(f, i);
     const typename Images::Target ti = images.target(i);
-    for_each_in_range(t, xyz, cutoff_squared, walk, [&](std::size_t point, Vec3 r, float r2) {
+    for_each_in_range(i, xyz, cutoff_squared, walk, [&](std::size_t point, Vec3 r, float r2) {
       const auto k = static_cast<std::uint32_t>(point);
       std::uint32_t j;
       Shift s{};
       if (resolve(f, images, ti, true, i, k, k, j, s)) apply(f, acc, i, j, r, r2, s);
     });
     f.finish(i, acc);
+  };
+  if (order) {
+#pragma omp parallel for schedule(dynamic, 256)
+    for (std::size_t t = 0; t < n; ++t) visit(order[t]);
+  } else {
+#pragma omp parallel for schedule(dynamic, 256)
+    for (std::size_t t = 0; t < n; ++t) visit(static_cast<std::uint32_t>(t));
   }
 }
 
@@ -61,7 +67,7 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk&
 template <class Walk, class F>
 void run_host_pass(const PairPass& pass, const Walk& walk, const F& f) {
   with_images<F>(pass, [&](const auto& images) {
-    run_host(pass.n, pass.host.xyz, pass.cutoff_squared, walk, f, images);
+    run_host(pass.n, pass.host.xyz, pass.cutoff_squared, walk, f, images, pass.host.order);
   });
 }
 

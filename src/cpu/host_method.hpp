@@ -3,7 +3,8 @@
 // HostMethod<Self> and provides:
 //   build(xyz, n, cutoff)  (storing what candidates() needs, and calling set_positions)
 //   candidates()           a callable walk(i, f) that calls f(j, xyz_j) for every candidate
-//                          source j of target i (j == i allowed), each at most once.
+//                          source j of target i (j == i allowed), each at most once;
+// and optionally target_order(): the targets in the order to visit them (else 0 .. n - 1).
 #pragma once
 
 #include <cstddef>
@@ -83,12 +84,16 @@ class HostMethod : public Method {
     pass.cutoff_squared = cutoff_squared_;
     pass.host.method = this;
     pass.host.xyz = xyz_;
+    pass.host.order = static_cast<const Self*>(this)->target_order();
     pass.host.walk = [](const void* method, std::size_t i, CandidateSink sink, void* context) {
       static_cast<const Self*>(method)->candidates()(
           i, [&](std::size_t j, const float* xj) { sink(context, j, xj); });
     };
     return pass;
   }
+
+  // The visiting order of targets; a method whose candidates lie in cell order gives its own.
+  const std::uint32_t* target_order() const { return nullptr; }
 
  protected:
   // Lists index particles with 32 bits: called first by build(), before any copy.

@@ -26,6 +26,9 @@ struct HostPass {
   const void* method = nullptr;
   void (*walk)(const void* method, std::size_t i, CandidateSink sink, void* context) = nullptr;
   const float* xyz = nullptr;  // (points, 3): the caller's order, or the points with images
+  // The n targets in the order to visit them (the cell list: cell order, so that consecutive
+  // targets share cached cells); null: 0 .. n - 1.
+  const std::uint32_t* order = nullptr;
 };
 
 struct BruteForcePass {
