@@ -66,10 +66,25 @@ class DeviceBuffer {
     size_ = capacity_ = count;
   }
 
+  // As resize(), the first `keep` entries kept: copied on `stream` when it reallocates (the old
+  // block is freed after the copy, as cudaFree waits for the device).
+  void resize_keeping(std::size_t count, std::size_t keep, cudaStream_t stream) {
+    if (count <= capacity_) {
+      size_ = count;
+      return;
+    }
+    DeviceBuffer bigger(count);
+    if (keep > 0)
+      RAYCUT_CUDA_CHECK(
+          cudaMemcpyAsync(bigger.data_, data_, keep * sizeof(T), cudaMemcpyDeviceToDevice, stream));
+    *this = std::move(bigger);
+  }
+
   T* data() { return data_; }
   const T* data() const { return data_; }
   std::size_t size() const { return size_; }
   std::size_t bytes() const { return size_ * sizeof(T); }
+  std::size_t capacity_bytes() const { return capacity_ * sizeof(T); }
 
  private:
   bool allocate(std::size_t bytes) {

@@ -31,12 +31,12 @@ class SlotImages final : public DeferredImages {
   ~SlotImages();
   SlotImages(const SlotImages&) = delete;
   SlotImages& operator=(const SlotImages&) = delete;
-  // After a build: the slots' float4 (w = point index) and the table by point.
-  void reset(const float4* pos, std::uint32_t n, const PointImage* by_point);
+  // After a build: the point of each slot and the table by point.
+  void reset(const std::uint32_t* order, std::uint32_t n, const PointImage* by_point);
   const PointImage* on(void* stream) const override;
 
  private:
-  const float4* pos_ = nullptr;
+  const std::uint32_t* order_ = nullptr;
   std::uint32_t n_ = 0;
   const PointImage* by_point_ = nullptr;
   mutable std::mutex mutex_;  // concurrent passes from host threads gather once
@@ -72,7 +72,8 @@ class GridTables {
   DeviceBuffer<std::uint32_t> keys32_, keys32_alt_;
   DeviceBuffer<std::uint64_t> keys64_, keys64_alt_;
   DeviceBuffer<std::uint32_t> index_, index_alt_, run_start_;
-  std::uint32_t* order_ = nullptr;  // index_ or index_alt_: sorted slot -> original index
+  // index_ or index_alt_: the point (original index) of each slot, whatever sorted them.
+  std::uint32_t* order_ = nullptr;
   DeviceBuffer<float4> pos_;
   DeviceBuffer<std::uint32_t> targets_;  // select_targets()
   SlotImages slot_images_;

@@ -49,23 +49,19 @@ __global__ void origins_kernel(Plan plan, const float* sources, const float* que
     system_origin(plan.frames[s], queries + 3 * plan.queries[s]);
 }
 
-// Images per particle; the first particle whose shift leaves int32 in bad[0], the first with a
-// non-finite coordinate in bad[1] (else ~0): the engine's finiteness check, fused in this pass
-// (one kernel and one read-back less per build).
-__global__ void count_kernel(Plan plan, const float* sources, std::uint32_t* counts,
-                             unsigned long long* bad) {
-  const std::uint64_t p = blockIdx.x * std::uint64_t{block} + threadIdx.x;
-  if (p >= plan.n) return;
-  const float* x = sources + 3 * p;
-  if (!(isfinite(x[0]) && isfinite(x[1]) && isfinite(x[2]))) {
-    atomicMin(bad + 1, static_cast<unsigned long long>(p));
-    counts[p] = 0;
-    return;
-  }
-  const ImageFrame& frame = plan.frames[system_of(plan.sources, plan.systems, p)];
-  const WrappedPoint w = wrap_point(frame, x);
-  if (!w.ok) atomicMin(bad, static_cast<unsigned long long>(p));
-  counts[p] = static_cast<std::uint32_t>(image_count(frame, w, false));
+// What the wrap pass finds, read back once: the first particle whose shift leaves int32 (a
+// query's as index + n) and the first with a non-finite coordinate, each kept as ~index by
+// atomicMax (0: none, so that one memset clears all), and how many particles have images
+// (listed by wrap_kernel for images_kernel).
+struct Findings {
+  unsigned long long not_shift, not_non_finite, with_images;
+};
+constexpr std::uint64_t none = ~0ull;
+__host__ __device__ inline std::uint64_t first_of(unsigned long long inverted) {
+  return ~inverted;  // none when nothing was found
+}
+__device__ inline void report(unsigned long long& inverted, std::uint64_t index) {
+  atomicMax(&inverted, ~static_cast<unsigned long long>(index));
 }
 
 struct Out {
@@ -87,26 +83,67 @@ struct Out {
   }
 };
 
-// Query points: the targets, wrapped. Bad shifts of queries go to *bad too (as index + n).
-__global__ void queries_kernel(Plan plan, const float* queries, Out out, unsigned long long* bad) {
+// Particle p wrapped and placed as a point of its own (a target, or a source after the queries:
+// its place needs no scan), its images counted; whether it has any.
+__device__ bool wrap_one(const Plan& plan, const float* sources, bool with_queries, const Out& out,
+                         std::uint32_t* counts, Findings* found, std::uint64_t p) {
+  const float* x = sources + 3 * p;
+  if (!(isfinite(x[0]) && isfinite(x[1]) && isfinite(x[2]))) {
+    report(found->not_non_finite, p);
+    counts[p] = 0;
+    return false;
+  }
+  const std::uint32_t s = system_of(plan.sources, plan.systems, p);
+  const ImageFrame& frame = plan.frames[s];
+  const WrappedPoint w = wrap_point(frame, x);
+  if (!w.ok) report(found->not_shift, p);
+  out.place_wrapped(with_queries ? plan.targets + p : p, frame, w, static_cast<std::uint32_t>(p),
+                    s);
+  const auto count = static_cast<std::uint32_t>(image_count(frame, w, false));
+  counts[p] = count;
+  return count > 0;
+}
+
+// Every particle through wrap_one, and those with images listed (in any order: the scan of the
+// counts places their images). The engine's finiteness check is fused here (one kernel and one
+// read-back less per build). Only ~5 % of a liquid's particles have images, spread over every
+// warp: images_kernel over the list keeps its warps full (docs/periodic.md). One list atomic
+// per block: one per warp contended enough to double this kernel's time (session 11, ncu).
+__global__ void wrap_kernel(Plan plan, const float* sources, bool with_queries, Out out,
+                            std::uint32_t* counts, std::uint32_t* with_images, Findings* found) {
+  __shared__ std::uint32_t listed;
+  __shared__ unsigned long long first;
+  if (threadIdx.x == 0) listed = 0;
+  __syncthreads();
+  const std::uint64_t p = blockIdx.x * std::uint64_t{block} + threadIdx.x;
+  const bool has = p < plan.n && wrap_one(plan, sources, with_queries, out, counts, found, p);
+  const std::uint32_t rank = has ? atomicAdd(&listed, 1u) : 0;
+  __syncthreads();
+  if (threadIdx.x == 0 && listed > 0) first = atomicAdd(&found->with_images, listed);
+  __syncthreads();
+  if (has) with_images[first + rank] = static_cast<std::uint32_t>(p);
+}
+
+// Query points: the targets, wrapped.
+__global__ void queries_kernel(Plan plan, const float* queries, Out out, Findings* found) {
   const std::uint64_t q = blockIdx.x * std::uint64_t{block} + threadIdx.x;
   if (q >= plan.targets) return;
   const std::uint32_t s = system_of(plan.queries, plan.systems, q);
   const WrappedPoint w = wrap_point(plan.frames[s], queries + 3 * q);
-  if (!w.ok) atomicMin(bad, static_cast<unsigned long long>(plan.n + q));
+  if (!w.ok) report(found->not_shift, plan.n + q);
   out.place_wrapped(q, plan.frames[s], w, not_a_source, s);
 }
 
-// Each particle: itself wrapped (a target, or a source after the queries), then its images.
-__global__ void particles_kernel(Plan plan, const float* sources, const std::uint64_t* image_offset,
-                                 bool with_queries, Out out) {
-  const std::uint64_t p = blockIdx.x * std::uint64_t{block} + threadIdx.x;
-  if (p >= plan.n) return;
+// The images of each listed particle, at the places the scan of the counts gave them.
+__global__ void images_kernel(Plan plan, const float* sources, const std::uint32_t* with_images,
+                              std::uint64_t listed, const std::uint64_t* image_offset, Out out) {
+  const std::uint64_t k = blockIdx.x * std::uint64_t{block} + threadIdx.x;
+  if (k >= listed) return;
+  const std::uint64_t p = with_images[k];
   const std::uint32_t s = system_of(plan.sources, plan.systems, p);
   const ImageFrame& frame = plan.frames[s];
   const WrappedPoint w = wrap_point(frame, sources + 3 * p);
   const auto source = static_cast<std::uint32_t>(p);
-  out.place_wrapped(with_queries ? plan.targets + p : p, frame, w, source, s);
   std::uint64_t next = plan.first_image + image_offset[p];
   for_each_image(frame, w, false, [&](const int n[3], const float position[3]) {
     const std::int32_t t[3] = {n[0] - w.shift[0], n[1] - w.shift[1], n[2] - w.shift[2]};
@@ -122,11 +159,6 @@ struct CountOrZero {
   }
 };
 
-// count_kernel's findings: the first index whose shift leaves int32, the first non-finite one.
-struct Bad {
-  unsigned long long shift, non_finite;
-};
-
 class DeviceImagePoints final : public ImagePoints {
  public:
   MemorySpace space() const override { return MemorySpace::device; }
@@ -134,14 +166,15 @@ class DeviceImagePoints final : public ImagePoints {
               void* stream) override;
 
  private:
+  Out reserve(std::uint64_t points, std::uint64_t keep, bool systems, cudaStream_t stream);
   DeviceBuffer<float> xyz_;
   DeviceBuffer<PointImage> image_;
-  DeviceBuffer<std::uint32_t> system_, counts_;
+  DeviceBuffer<std::uint32_t> system_, counts_, with_images_;
   DeviceBuffer<ImageFrame> frames_;
   DeviceBuffer<std::uint64_t> source_offsets_, query_offsets_, image_offset_;
-  DeviceBuffer<unsigned long long> bad_;  // atomics to mapped host memory are not portable
+  DeviceBuffer<Findings> found_;  // atomics to mapped host memory are not portable
   DeviceBuffer<unsigned char> temp_;
-  MappedValue<Bad> bad_host_;
+  MappedValue<Findings> found_host_;
   MappedValue<std::uint64_t> total_;
   // What frames_ and the offsets hold: a step loop's next expansion uploads nothing.
   std::vector<ImageFrame> uploaded_frames_;
@@ -159,6 +192,21 @@ void upload_async(DeviceBuffer<T>& buffer, const std::vector<T>& host, cudaStrea
   if (!host.empty())
     RAYCUT_CUDA_CHECK(cudaMemcpyAsync(buffer.data(), host.data(), host.size() * sizeof(T),
                                       cudaMemcpyHostToDevice, stream));
+}
+
+// xyz_, image_ and system_ hold at least `points`, their first `keep` kept; refused up front
+// (out_of_memory, saying how much) when the device cannot hold them.
+Out DeviceImagePoints::reserve(std::uint64_t points, std::uint64_t keep, bool systems,
+                               cudaStream_t stream) {
+  const double held = static_cast<double>(xyz_.capacity_bytes() + image_.capacity_bytes() +
+                                          (systems ? system_.capacity_bytes() : 0));
+  const double need = (12.0 + 16.0 + (systems ? 4.0 : 0.0)) * static_cast<double>(points);
+  if (need > held)
+    require_device_memory(static_cast<std::size_t>(need - held), "points with periodic images");
+  xyz_.resize_keeping(3 * points, 3 * keep, stream);
+  image_.resize_keeping(points, keep, stream);
+  if (systems) system_.resize_keeping(points, keep, stream);
+  return {xyz_.data(), image_.data(), systems ? system_.data() : nullptr};
 }
 
 void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, const float* queries,
@@ -191,14 +239,26 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
 
-  // Count, scan (the total lands at image_offset[n]), read the total and any bad point back.
-  bad_.resize(2);
-  RAYCUT_CUDA_CHECK(cudaMemsetAsync(bad_.data(), 0xFF, sizeof(Bad), stream));
+  // Every particle (and query) in its place and its images counted, the scan (the total lands
+  // at image_offset[n]), then the total and any bad point read back at once.
+  p.first_image = targets + (with_queries ? n : 0);
+  if (std::string why = too_many_points(p.first_image, targets); !why.empty())
+    throw Error(ErrorCode::invalid_argument, why);
+  const bool batch = systems > 1;
+  Out out = reserve(p.first_image, 0, batch, stream);
+  found_.resize(1);
+  RAYCUT_CUDA_CHECK(cudaMemsetAsync(found_.data(), 0, sizeof(Findings), stream));
   counts_.resize(std::max<std::uint64_t>(n, 1));
+  with_images_.resize(std::max<std::uint64_t>(n, 1));
   image_offset_.resize(n + 1);
   if (n > 0) {
-    count_kernel<<<blocks_for(n, block), block, 0, stream>>>(p, sources, counts_.data(),
-                                                             bad_.data());
+    wrap_kernel<<<blocks_for(n, block), block, 0, stream>>>(
+        p, sources, with_queries, out, counts_.data(), with_images_.data(), found_.data());
+    RAYCUT_CUDA_CHECK_LAUNCH();
+  }
+  if (with_queries && targets > 0) {
+    queries_kernel<<<blocks_for(targets, block), block, 0, stream>>>(p, queries, out,
+                                                                     found_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
   const auto input = thrust::make_transform_iterator(thrust::counting_iterator<std::uint64_t>(0),
@@ -211,48 +271,37 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
                                                   image_offset_.data(), n + 1, stream));
   RAYCUT_CUDA_CHECK(cudaMemcpyAsync(total_.device(), image_offset_.data() + n,
                                     sizeof(std::uint64_t), cudaMemcpyDeviceToDevice, stream));
-  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(bad_host_.device(), bad_.data(), sizeof(Bad),
+  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(found_host_.device(), found_.data(), sizeof(Findings),
                                     cudaMemcpyDeviceToDevice, stream));
   RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
-  const Bad bad = bad_host_.host();
-  if (bad.non_finite != ~0ull || bad.shift != ~0ull) {
-    const unsigned long long first = bad.non_finite != ~0ull ? bad.non_finite : bad.shift;
+  const Findings found = found_host_.host();
+  const std::uint64_t non_finite = first_of(found.not_non_finite),
+                      shift = first_of(found.not_shift);
+  if (non_finite != none) {
     float x[3];
-    RAYCUT_CUDA_CHECK(cudaMemcpy(x, sources + 3 * first, sizeof x, cudaMemcpyDeviceToHost));
-    if (bad.non_finite != ~0ull) throw_non_finite(first, x);
+    RAYCUT_CUDA_CHECK(cudaMemcpy(x, sources + 3 * non_finite, sizeof x, cudaMemcpyDeviceToHost));
+    throw_non_finite(non_finite, x);
+  }
+  if (shift != none && shift >= n)
     throw Error(ErrorCode::invalid_argument,
-                "particle " + std::to_string(first) + " at (" + std::to_string(x[0]) + ", " +
+                "query point " + std::to_string(shift - n) +
+                    " lies more than 2^31 boxes away: its image shift leaves the int32 range");
+  if (shift != none) {
+    float x[3];
+    RAYCUT_CUDA_CHECK(cudaMemcpy(x, sources + 3 * shift, sizeof x, cudaMemcpyDeviceToHost));
+    throw Error(ErrorCode::invalid_argument,
+                "particle " + std::to_string(shift) + " at (" + std::to_string(x[0]) + ", " +
                     std::to_string(x[1]) + ", " + std::to_string(x[2]) +
                     ") lies more than 2^31 boxes away: its image shift leaves the int32 range");
   }
-  p.first_image = targets + (with_queries ? n : 0);
   const std::uint64_t points = p.first_image + total_.host();
   if (std::string why = too_many_points(points, targets); !why.empty())
     throw Error(ErrorCode::invalid_argument, why);
 
-  const double held =
-      static_cast<double>(xyz_.bytes() + image_.bytes() + (systems > 1 ? system_.bytes() : 0));
-  const double need = (12.0 + 16.0 + (systems > 1 ? 4.0 : 0.0)) * static_cast<double>(points);
-  if (need > held)
-    require_device_memory(static_cast<std::size_t>(need - held), "points with periodic images");
-  xyz_.resize(3 * points);
-  image_.resize(points);
-  if (systems > 1) system_.resize(points);
-  const Out out{xyz_.data(), image_.data(), systems > 1 ? system_.data() : nullptr};
-  if (with_queries && targets > 0) {
-    queries_kernel<<<blocks_for(targets, block), block, 0, stream>>>(p, queries, out, bad_.data());
-    RAYCUT_CUDA_CHECK_LAUNCH();
-    RAYCUT_CUDA_CHECK(cudaMemcpyAsync(bad_host_.device(), bad_.data(), sizeof(Bad),
-                                      cudaMemcpyDeviceToDevice, stream));
-    RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
-    if (bad_host_.host().shift != ~0ull)
-      throw Error(ErrorCode::invalid_argument,
-                  "query point " + std::to_string(bad_host_.host().shift - n) +
-                      " lies more than 2^31 boxes away: its image shift leaves the int32 range");
-  }
-  if (n > 0) {
-    particles_kernel<<<blocks_for(n, block), block, 0, stream>>>(p, sources, image_offset_.data(),
-                                                                 with_queries, out);
+  out = reserve(points, p.first_image, batch, stream);
+  if (found.with_images > 0) {
+    images_kernel<<<blocks_for(found.with_images, block), block, 0, stream>>>(
+        p, sources, with_images_.data(), found.with_images, image_offset_.data(), out);
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
 
