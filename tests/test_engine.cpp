@@ -183,6 +183,48 @@ TEST_P(EngineEdges, UpdateNeedsTheSameParticleCount) {
       ErrorCode::invalid_argument, "needs the 2 particles");
 }
 
+// With query points (M targets over N sources): update() refuses (open builds too: it used to
+// treat the first M new positions as one set and answer wrongly), sph_force refuses (its fields
+// are read at both ends of a pair from one array), and the padded matrix pads with N, the
+// invalid source index (it padded with M, a valid one when M < N). Session 11's adversarial
+// tests.
+TEST_P(EngineEdges, QueryPointsRefuseUpdateAndSphForceAndPadWithTheSourceCount) {
+  std::vector<float> sources, queries;
+  for (int i = 0; i < 50; ++i)
+    for (float v : {0.1f * (i % 5), 0.1f * ((i / 5) % 5), 0.1f * (i / 25)}) sources.push_back(v);
+  for (int q = 0; q < 3; ++q)
+    for (float v : {0.15f + 0.1f * q, 0.2f, 0.05f}) queries.push_back(v);
+  raycut::Systems systems;
+  systems.queries = {queries.data(), 3, MemorySpace::host};
+  Engine e(GetParam());
+  try {
+    e.build({sources.data(), 50, MemorySpace::host}, 0.3f, systems);
+  } catch (const Error& err) {
+    if (err.code() == ErrorCode::unsupported) GTEST_SKIP() << err.what();
+    throw;
+  }
+  const std::vector<std::uint32_t> count = e.compute(Kernel::count).count;
+  raycut::PaddedNeighbourBuffer padded;
+  e.padded_neighbours(padded, 40);
+  const std::vector<std::uint32_t> indices = padded.indices_to_host();
+  for (std::size_t q = 0; q < 3; ++q) {
+    ASSERT_GT(count[q], 0u);
+    for (std::uint32_t c = 0; c < 40; ++c)
+      if (c < count[q])
+        EXPECT_LT(indices[40 * q + c], 50u) << "query " << q << " entry " << c;
+      else
+        EXPECT_EQ(indices[40 * q + c], 50u) << "query " << q << " padding " << c;
+  }
+  expect_error([&] { e.update({sources.data(), 50, MemorySpace::host}); }, ErrorCode::unsupported,
+               "query points");
+  std::vector<float> velocity(3 * 50, 0.0f), density(50, 1.0f), pressure(50, 1.0f);
+  raycut::KernelOptions options;
+  options.sph_mass = 1.0f;
+  options.sph = {velocity.data(), density.data(), pressure.data()};
+  expect_error([&] { e.compute(Kernel::sph_force, options); }, ErrorCode::unsupported,
+               "query points");
+}
+
 TEST(EngineMemory, AListLargerThanMemoryIsAClearError) {
   raycut::NeighbourList list;
   expect_error([&] { raycut::detail::allocate_indices(list, std::uint64_t{1} << 62); },

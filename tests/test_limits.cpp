@@ -175,6 +175,35 @@ TEST(KernelRange, TheReportedCases) {
   expect_invalid([&] { validate_kernel_range(Kernel::lj, huge_sigma, 1.0f); }, "sigma^6");
 }
 
+// lj_forces at the edges of the accepted sigma range (4 eps sigma^6 a normal float): two particles at
+// 1.05 sigma, cutoff 2.5 sigma, against the double-precision force and virial. The raw factor
+// r^-8 gave inf below sigma ~1e-5 and zero above ~3e5 (session 11's adversarial tests).
+TEST(KernelRange, LjForcesAcrossTheSigmaRange) {
+  for (const char* method : {"brute-force", "cell-list"})
+    for (float sigma : {5e-7f, 1e-6f, 1e-5f, 1.0f, 3e5f, 1e6f, 2e6f}) {
+      const float d = 1.05f * sigma;  // repulsive: 2u - 1 = 0.49, no cancellation
+      const std::vector<float> xyz = {0, 0, 0, d, 0, 0};
+      KernelOptions options;
+      options.lj_sigma = sigma;
+      options.lj_epsilon = 0.5f;
+      Engine engine(method);
+      engine.build({xyz.data(), 2, MemorySpace::host}, 2.5f * sigma);
+      const raycut::Results r = engine.compute(Kernel::lj_forces, options);
+      const double rr = d, q = std::pow(static_cast<double>(sigma) / rr, 6);
+      const double energy = 4.0 * 0.5 * q * (q - 1.0);
+      // Force on particle 0 along x: -dU/dx_0 = -24 eps u (2u - 1) / r^2 * (x_1 - x_0).
+      const double force = -24.0 * 0.5 * q * (2.0 * q - 1.0) / (rr * rr) * rr;
+      const double virial = 12.0 * 0.5 * q * (2.0 * q - 1.0) / (rr * rr) * rr * rr;
+      const auto near = [](double got, double want) {
+        return std::abs(got - want) <= 1e-5 * std::abs(want);
+      };
+      EXPECT_TRUE(near(r.energy[0], energy)) << method << " sigma " << sigma << ": " << r.energy[0];
+      EXPECT_TRUE(near(r.force[0], force)) << method << " sigma " << sigma << ": " << r.force[0];
+      EXPECT_TRUE(near(r.force[3], -force)) << method << " sigma " << sigma << ": " << r.force[3];
+      EXPECT_TRUE(near(r.virial[0], virial)) << method << " sigma " << sigma << ": " << r.virial[0];
+    }
+}
+
 // The SPH solver's own scenarios stay inside the kernels' range (Engine::run will refuse what
 // validate_kernel_range refuses).
 TEST(KernelRange, TheSphScenariosAreInRange) {

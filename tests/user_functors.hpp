@@ -38,14 +38,15 @@ struct LjForces {
     float energy = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0};
   };
   static constexpr bool vanishes_at_infinity = true;
-  float sigma6, four_epsilon_sigma6;
+  float sigma2, four_epsilon;  // reduced units: u = (sigma^2 / r^2)^3
   float *energy, *force, *virial;
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, raycut::Vec3 r,
                             float r2) const {
     const float t = raycut::fast_reciprocal(r2);
-    const float w = t * t * t;
-    acc.energy += w * (sigma6 * w - 1.0f);
-    const float g = t * w * (2.0f * sigma6 * w - 1.0f);
+    const float s = sigma2 * t;
+    const float u = s * s * s;
+    acc.energy += u * (u - 1.0f);
+    const float g = t * u * (2.0f * u - 1.0f);
     const float gx = g * r.x, gy = g * r.y, gz = g * r.z;
     acc.f[0] += gx;
     acc.f[1] += gy;
@@ -63,8 +64,8 @@ struct LjForces {
     for (int k = 0; k < 6; ++k) a.v[k] += b.v[k];
   }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
-    energy[i] = acc.energy * four_epsilon_sigma6;
-    const float fs = -6.0f * four_epsilon_sigma6, vs = 3.0f * four_epsilon_sigma6;
+    energy[i] = acc.energy * four_epsilon;
+    const float fs = -6.0f * four_epsilon, vs = 3.0f * four_epsilon;
     for (int k = 0; k < 3; ++k) force[3 * std::size_t{i} + k] = fs * acc.f[k];
     for (int k = 0; k < 6; ++k) virial[6 * std::size_t{i} + k] = vs * acc.v[k];
   }

@@ -267,29 +267,34 @@ struct LennardJonesKernel {
   }
 };
 
-// Energy, force and virial of Lennard-Jones in one pass. With t = 1/r^2 and w = t^3:
-//   energy_i = sum_j 4 eps sigma^6 w (sigma^6 w - 1)        (as `lj`: every pair, both sides)
-//   force_i  = -dU/dx_i = -24 eps sigma^6 sum_j t w (2 sigma^6 w - 1) r_ij   (r_ij = x_j - x_i)
-//   virial_i = -1/2 sum_j r_ij (x) force_i(j)  = 12 eps sigma^6 sum_j t w (2 sigma^6 w - 1) r r
+// Energy, force and virial of Lennard-Jones in one pass, in reduced units: with t = 1/r^2 and
+// u = (sigma^2 t)^3 = (sigma/r)^6,
+//   energy_i = 4 eps sum_j u (u - 1)                          (as `lj`: every pair, both sides)
+//   force_i  = -dU/dx_i = -24 eps sum_j t u (2 u - 1) r_ij      (r_ij = x_j - x_i)
+//   virial_i = -1/2 sum_j r_ij (x) force_i(j) = 12 eps sum_j t u (2 u - 1) r r
 // so that sum_i virial_i is the system's virial sum_{i<j} (x_i - x_j) (x) f_ij (LAMMPS's per-atom
 // convention; positive under compression). Components xx yy zz xy xz yz. Vanishes at r2 = +inf.
+// Reduced, because the raw force factor t w = r^-8 leaves float at every accepted sigma below
+// ~1e-5 or above ~3e5 (inf, or zero forces), where u stays near 1 around the minimum and t
+// scales as 1 / sigma^2 (session 11's adversarial tests; docs/limits.md).
 struct LennardJonesForceKernel {
   struct Accumulator {
     float energy = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0};
   };
   static constexpr bool vanishes_at_infinity = true;
   static constexpr bool uses_source = false;
-  float sigma6;               // sigma^6
-  float four_epsilon_sigma6;  // 4 eps sigma^6
-  float* energy;              // 1 per target
-  float* force;               // 3 per target
-  float* virial;              // 6 per target
+  float sigma2;        // sigma^2
+  float four_epsilon;  // 4 eps
+  float* energy;       // 1 per target
+  float* force;        // 3 per target
+  float* virial;       // 6 per target
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3 r,
                             float r2) const {
     const float t = fast_reciprocal(r2);
-    const float w = t * t * t;
-    acc.energy += w * (sigma6 * w - 1.0f);
-    const float g = t * w * (2.0f * sigma6 * w - 1.0f);  // force factor, times -6 (4 eps s^6)
+    const float s = sigma2 * t;
+    const float u = s * s * s;
+    acc.energy += u * (u - 1.0f);
+    const float g = t * u * (2.0f * u - 1.0f);  // force factor, times -6 (4 eps)
     const float gx = g * r.x, gy = g * r.y, gz = g * r.z;
     acc.f[0] += gx;
     acc.f[1] += gy;
@@ -307,8 +312,8 @@ struct LennardJonesForceKernel {
     for (int k = 0; k < 6; ++k) a.v[k] += b.v[k];
   }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
-    energy[i] = acc.energy * four_epsilon_sigma6;
-    const float fs = -6.0f * four_epsilon_sigma6, vs = 3.0f * four_epsilon_sigma6;
+    energy[i] = acc.energy * four_epsilon;
+    const float fs = -6.0f * four_epsilon, vs = 3.0f * four_epsilon;
     for (int k = 0; k < 3; ++k) force[3 * std::size_t{i} + k] = fs * acc.f[k];
     for (int k = 0; k < 6; ++k) virial[6 * std::size_t{i} + k] = vs * acc.v[k];
   }
@@ -415,7 +420,7 @@ void with_kernel(Kernel kernel, const KernelOptions& options, float cutoff_squar
       f(LennardJonesKernel{sigma6, 4.0f * options.lj_epsilon * sigma6, out.energy});
       break;
     case Kernel::lj_forces:
-      f(LennardJonesForceKernel{sigma6, 4.0f * options.lj_epsilon * sigma6, out.energy, out.force,
+      f(LennardJonesForceKernel{sigma2, 4.0f * options.lj_epsilon, out.energy, out.force,
                                 out.virial});
       break;
     case Kernel::smooth:

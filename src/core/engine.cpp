@@ -235,11 +235,12 @@ void Engine::update(PositionsView positions, bool checked) {
     throw Error(ErrorCode::invalid_argument,
                 "Engine::update() needs the " + std::to_string(sources_) +
                     " particles of build(), got " + std::to_string(positions.size));
+  // Query points are not kept beyond build(): there is nothing to rebuild them from. Checked
+  // first: systems_ has dropped them, so an open build with queries looks plain.
+  if (queries_)
+    throw Error(ErrorCode::unsupported,
+                "Engine::update() with query points: call build() with the new positions");
   if (!systems_.plain()) {
-    // Query points are not kept beyond build(): there is nothing to rebuild them from.
-    if (queries_)
-      throw Error(ErrorCode::unsupported,
-                  "Engine::update() with query points: call build() with the new positions");
     const Systems systems = systems_;
     build(positions, cutoff_, systems);
     return;
@@ -299,6 +300,13 @@ void Engine::run(Kernel kernel, const KernelOptions& options) {
   if (!built_) throw Error(ErrorCode::invalid_argument, "Engine::run() called before build()");
   has_run_ = false;  // a run that throws leaves no results behind
   validate_kernel_range(kernel, options, cutoff_);
+  // sph_force reads density, pressure and velocity at both ends of a pair, from one array
+  // indexed by target (i) and by source (j): with query points those are two sets.
+  if (kernel == Kernel::sph_force && queries_)
+    throw Error(ErrorCode::unsupported,
+                "sph_force with query points: its density, pressure and velocity are read for "
+                "the target and the source of each pair from one array per field; build without "
+                "query points (the targets are then the sources)");
   if (size_ > 0) {
     const auto start = Clock::now();
     m.compute(kernel, options);
@@ -381,6 +389,7 @@ PaddedReport Engine::padded_neighbours(PaddedNeighbourBuffer& list, std::uint32_
     list.storage_->report = {};
     return {};
   }
+  list.storage_->padding = static_cast<std::uint32_t>(sources_);
   m.padded_neighbours(*list.storage_, k, false, shifts);
   m.synchronize();
   detail::report_padded(*list.storage_, throw_on_overflow);

@@ -95,7 +95,7 @@ PaddedFill HostPaddedStorage::prepare(std::size_t targets, std::uint32_t width, 
   indices = data_or_null(indices_);
   counts = data_or_null(counts_);
   shifts = with_shifts ? data_or_null(shifts_) : nullptr;
-  return {{half},          width,          static_cast<std::uint32_t>(targets),
+  return {{half},          width,          padding,
           indices_.data(), counts_.data(), with_shifts ? shifts_.data() : nullptr,
           overflow};
 }

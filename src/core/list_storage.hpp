@@ -50,6 +50,9 @@ class PaddedStorage {
 
   std::size_t n = 0;
   std::uint32_t k = 0;
+  // The invalid index after each row's entries: N, the number of sources (not of the rows:
+  // with query points they differ). Set by the engine before each fill.
+  std::uint32_t padding = 0;
   PaddedReport report;
   const std::uint32_t* indices = nullptr;
   const std::uint32_t* counts = nullptr;

@@ -235,7 +235,7 @@ PaddedFill DevicePaddedStorage::prepare(std::size_t targets, std::uint32_t width
   shifts = with_shifts ? shifts_.data() : nullptr;
   overflow_.resize(1);
   RAYCUT_CUDA_CHECK(cudaMemsetAsync(overflow_.data(), 0, sizeof(PaddedOverflow), stream));
-  return {{half},          width,          static_cast<std::uint32_t>(targets),
+  return {{half},          width,          padding,
           indices_.data(), counts_.data(), with_shifts ? shifts_.data() : nullptr,
           overflow_.data()};
 }
