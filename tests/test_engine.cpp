@@ -215,8 +215,11 @@ TEST_P(EngineEdges, QueryPointsRefuseUpdateAndSphForceAndPadWithTheSourceCount) 
       else
         EXPECT_EQ(indices[40 * q + c], 50u) << "query " << q << " padding " << c;
   }
-  expect_error([&] { e.update({sources.data(), 50, MemorySpace::host}); }, ErrorCode::unsupported,
-               "query points");
+  expect_error(
+      [&] {
+        e.update({sources.data(), 50, MemorySpace::host});
+      },
+      ErrorCode::unsupported, "query points");
   std::vector<float> velocity(3 * 50, 0.0f), density(50, 1.0f), pressure(50, 1.0f);
   raycut::KernelOptions options;
   options.sph_mass = 1.0f;

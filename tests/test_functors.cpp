@@ -79,9 +79,9 @@ TEST(Functors, UserLennardJonesForcesEqualBuiltInBitForBit) {
     const raycut::Results want = engine.compute(Kernel::lj_forces, options);
     const std::size_t n = engine.size();
     std::vector<float> energy(n, -1.0f), force(3 * n, -1.0f), virial(6 * n, -1.0f);
-    raycut::for_each_pair(engine, user::LjForces{options.lj_sigma * options.lj_sigma,
-                                                 4.0f * options.lj_epsilon, energy.data(),
-                                                 force.data(), virial.data()});
+    raycut::for_each_pair(
+        engine, user::LjForces{options.lj_sigma * options.lj_sigma, 4.0f * options.lj_epsilon,
+                               energy.data(), force.data(), virial.data()});
     EXPECT_TRUE(same_bits(energy, want.energy)) << first_difference(energy, want.energy);
     EXPECT_TRUE(same_bits(force, want.force)) << first_difference(force, want.force);
     EXPECT_TRUE(same_bits(virial, want.virial)) << first_difference(virial, want.virial);

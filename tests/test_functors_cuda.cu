@@ -157,9 +157,9 @@ TEST_P(GpuFunctors, UserLennardJonesForcesEqualBuiltInBitForBit) {
     const raycut::Results want = engine.compute(Kernel::lj_forces, options);
     const std::size_t n = engine.size();
     DeviceBuffer<float> energy(n), force(3 * n), virial(6 * n);
-    raycut::cuda::for_each_pair(engine, user::LjForces{options.lj_sigma * options.lj_sigma,
-                                                       4.0f * options.lj_epsilon, energy.p,
-                                                       force.p, virial.p});
+    raycut::cuda::for_each_pair(
+        engine, user::LjForces{options.lj_sigma * options.lj_sigma, 4.0f * options.lj_epsilon,
+                               energy.p, force.p, virial.p});
     CHECK_CUDA(cudaDeviceSynchronize());
     const auto e = energy.to_host(), f = force.to_host(), v = virial.to_host();
     EXPECT_TRUE(same_bits(e, want.energy)) << first_difference(e, want.energy);

@@ -175,8 +175,8 @@ TEST(KernelRange, TheReportedCases) {
   expect_invalid([&] { validate_kernel_range(Kernel::lj, huge_sigma, 1.0f); }, "sigma^6");
 }
 
-// lj_forces at the edges of the accepted sigma range (4 eps sigma^6 a normal float): two particles at
-// 1.05 sigma, cutoff 2.5 sigma, against the double-precision force and virial. The raw factor
+// lj_forces at the edges of the accepted sigma range (4 eps sigma^6 a normal float): two particles
+// at 1.05 sigma, cutoff 2.5 sigma, against the double-precision force and virial. The raw factor
 // r^-8 gave inf below sigma ~1e-5 and zero above ~3e5 (session 11's adversarial tests).
 TEST(KernelRange, LjForcesAcrossTheSigmaRange) {
   for (const char* method : {"brute-force", "cell-list"})

@@ -318,55 +318,66 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
       const auto& s = run.samples;
       const bool pairs_ok = side < 2 * lj_cutoff ||
                             std::abs(static_cast<double>(run.pairs) - expected) <= 0.02 * expected;
-      if (rank != 0) {
-        status = pairs_ok ? status : 1;
-        continue;
-      }
-      char plain_text[32] = "";  // empty: not measured (more than one rank, or host positions)
-      if (!run.plain.empty())
-        std::snprintf(plain_text, sizeof plain_text, "%.4f", median(run.plain));
-      const std::string plain = plain_text;
-      char row[1024];
-      std::snprintf(
-          row, sizeof row,
-          "lj-liquid-pbc,%s,%s,%d,%dx%dx%d,%s,%s,%s,%llu,%llu,%g,%g,%llu,%llu,%llu,%llu,%.4f,%.4f,"
-          "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%s,%s,%s,%d,%d,mpi_wtime_max,%s\n",
-          method.c_str(), run.owned_rows_only ? "owned" : "all", size, run.dims[0], run.dims[1],
-          run.dims[2], o.balance ? "particles" : "none", o.halo_images ? "halos" : "local",
-          weak ? "weak" : "strong", static_cast<unsigned long long>(n),
-          static_cast<unsigned long long>(n / size), lj_cutoff, o.skin,
-          static_cast<unsigned long long>(run.pairs), static_cast<unsigned long long>(run.halos),
-          static_cast<unsigned long long>(run.owned_min),
-          static_cast<unsigned long long>(run.owned_max), run.build_ms, median(s[exchange_phase]),
-          median(s[refresh_phase]), median(s[compute_phase]), median(s[step_phase]),
-          *std::min_element(s[step_phase].begin(), s[step_phase].end()),
-          *std::max_element(s[step_phase].begin(), s[step_phase].end()), median(s[compute_cpu]),
-          median(s[step_cpu]), median(run.update), median(run.halo_refresh),
-          median(run.local_build), o.device ? "device" : "host", o.nccl ? "nccl" : "mpi-host",
-          plain.c_str(), reps, o.steps, environment.c_str());
-      csv->write(row);
-      csv->flush();
-      std::fprintf(
-          stderr,
-          "  N=%llu %s (%s rows): step %.3f ms = refresh %.3f + lj_forces %.3f; exchange "
-          "%.3f ms; CPU over ranks: step %.3f ms, lj_forces %.3f ms; %llu pairs, %llu "
-          "halos\n",
-          static_cast<unsigned long long>(n), method.c_str(), run.owned_rows_only ? "owned" : "all",
-          median(s[step_phase]), median(s[refresh_phase]), median(s[compute_phase]),
-          median(s[exchange_phase]), median(s[step_cpu]), median(s[compute_cpu]),
-          static_cast<unsigned long long>(run.pairs), static_cast<unsigned long long>(run.halos));
-      if (!run.plain.empty())
-        std::fprintf(stderr,
-                     "  plain engine build + lj_forces %.3f ms (build %.3f): distributed step / "
-                     "plain %.3f (rank 0's refresh: update %.3f + halos %.3f + local build %.3f)\n",
-                     median(run.plain), median(run.plain_build),
-                     median(s[step_phase]) / median(run.plain), median(run.update),
-                     median(run.halo_refresh), median(run.local_build));
-      if (!pairs_ok) {
-        std::fprintf(stderr, "  check failed: %llu pairs, expected %.0f +- 2%%\n",
-                     static_cast<unsigned long long>(run.pairs), expected);
-        status = 1;
-      }
+      if (!pairs_ok) status = 1;
+      // Rank 0 writes the row; a write that fails (a full disk) stops every rank here, not only
+      // rank 0 (the others would wait in the next run's collectives).
+      const auto write_row = [&] {
+        char plain_text[32] = "";  // empty: not measured (more than one rank, or host positions)
+        if (!run.plain.empty())
+          std::snprintf(plain_text, sizeof plain_text, "%.4f", median(run.plain));
+        const std::string plain = plain_text;
+        char row[1024];
+        std::snprintf(
+            row, sizeof row,
+            "lj-liquid-pbc,%s,%s,%d,%dx%dx%d,%s,%s,%s,%llu,%llu,%g,%g,%llu,%llu,%llu,%llu,%.4f,%."
+            "4f,"
+            "%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%s,%s,%s,%d,%d,mpi_wtime_max,%s\n",
+            method.c_str(), run.owned_rows_only ? "owned" : "all", size, run.dims[0], run.dims[1],
+            run.dims[2], o.balance ? "particles" : "none", o.halo_images ? "halos" : "local",
+            weak ? "weak" : "strong", static_cast<unsigned long long>(n),
+            static_cast<unsigned long long>(n / size), lj_cutoff, o.skin,
+            static_cast<unsigned long long>(run.pairs), static_cast<unsigned long long>(run.halos),
+            static_cast<unsigned long long>(run.owned_min),
+            static_cast<unsigned long long>(run.owned_max), run.build_ms, median(s[exchange_phase]),
+            median(s[refresh_phase]), median(s[compute_phase]), median(s[step_phase]),
+            *std::min_element(s[step_phase].begin(), s[step_phase].end()),
+            *std::max_element(s[step_phase].begin(), s[step_phase].end()), median(s[compute_cpu]),
+            median(s[step_cpu]), median(run.update), median(run.halo_refresh),
+            median(run.local_build), o.device ? "device" : "host", o.nccl ? "nccl" : "mpi-host",
+            plain.c_str(), reps, o.steps, environment.c_str());
+        csv->write(row);
+        csv->flush();
+        std::fprintf(
+            stderr,
+            "  N=%llu %s (%s rows): step %.3f ms = refresh %.3f + lj_forces %.3f; exchange "
+            "%.3f ms; CPU over ranks: step %.3f ms, lj_forces %.3f ms; %llu pairs, %llu "
+            "halos\n",
+            static_cast<unsigned long long>(n), method.c_str(),
+            run.owned_rows_only ? "owned" : "all", median(s[step_phase]), median(s[refresh_phase]),
+            median(s[compute_phase]), median(s[exchange_phase]), median(s[step_cpu]),
+            median(s[compute_cpu]), static_cast<unsigned long long>(run.pairs),
+            static_cast<unsigned long long>(run.halos));
+        if (!run.plain.empty())
+          std::fprintf(
+              stderr,
+              "  plain engine build + lj_forces %.3f ms (build %.3f): distributed step / "
+              "plain %.3f (rank 0's refresh: update %.3f + halos %.3f + local build %.3f)\n",
+              median(run.plain), median(run.plain_build), median(s[step_phase]) / median(run.plain),
+              median(run.update), median(run.halo_refresh), median(run.local_build));
+        if (!pairs_ok)
+          std::fprintf(stderr, "  check failed: %llu pairs, expected %.0f +- 2%%\n",
+                       static_cast<unsigned long long>(run.pairs), expected);
+      };
+      std::string write_error;
+      if (rank == 0) try {
+          write_row();
+        } catch (const Error& e) {
+          write_error = e.what();
+        }
+      int write_failed = !write_error.empty();
+      MPI_Bcast(&write_failed, 1, MPI_INT, 0, comm);
+      if (write_failed)
+        throw Error(ErrorCode::io, rank == 0 ? write_error : "rank 0 cannot write " + out);
     }
   }
   if (rank == 0) {

@@ -204,10 +204,61 @@ struct DistributedEngine::HaloPlan {
 
 // ---- construction -----------------------------------------------------------------------------
 
+namespace {
+
+// The options every rank must share (a rank with other dims or another skin decomposes, or
+// exchanges, differently: wrong answers or a hang, session 11's adversarial tests), as numbers
+// whose minimum and maximum over the ranks must agree.
+std::vector<std::int64_t> shared_options(const DistributedOptions& o) {
+  std::int64_t method = 1469598103934665603ll;  // FNV-1a of the method's name
+  for (unsigned char c : o.method) method = (method ^ c) * 1099511628211ll;
+  std::int32_t skin_bits = 0;
+  std::memcpy(&skin_bits, &o.skin, sizeof skin_bits);
+  return {method,           skin_bits,         o.dims[0],      o.dims[1],
+          o.dims[2],        o.owned_rows_only, o.local_images, static_cast<int>(o.balance),
+          o.rebalance_every};
+}
+constexpr const char* shared_option_names[] = {"method",       "skin",    "dims[0]",
+                                               "dims[1]",      "dims[2]", "owned_rows_only",
+                                               "local_images", "balance", "rebalance_every"};
+
+}  // namespace
+
 DistributedEngine::DistributedEngine(MPI_Comm comm, DistributedOptions options)
     : comm_(comm), options_(std::move(options)) {
   check(MPI_Comm_rank(comm_, &rank_), "MPI_Comm_rank");
   check(MPI_Comm_size(comm_, &size_), "MPI_Comm_size");
+  // Collective: every rank checks, then all agree, so that a rank that refuses (or knows no such
+  // method) does not leave the others waiting in build().
+  std::string error;
+  ErrorCode code = ErrorCode::invalid_argument;
+  try {
+    setup();
+  } catch (const Error& e) {
+    error = e.what();
+    code = e.code();
+  }
+  agree(error, code);
+  const std::vector<std::int64_t> mine = shared_options(options_);
+  std::vector<std::int64_t> low(mine.size()), high(mine.size());
+  check(MPI_Allreduce(mine.data(), low.data(), static_cast<int>(mine.size()), MPI_INT64_T, MPI_MIN,
+                      comm_),
+        "MPI_Allreduce");
+  check(MPI_Allreduce(mine.data(), high.data(), static_cast<int>(mine.size()), MPI_INT64_T, MPI_MAX,
+                      comm_),
+        "MPI_Allreduce");
+  for (std::size_t k = 0; k < mine.size(); ++k)
+    if (low[k] != high[k])
+      throw Error(ErrorCode::invalid_argument,
+                  std::string("distributed options differ between ranks: ") +
+                      shared_option_names[k] + " (every rank must pass the same options)");
+  // Collective (MPI_Comm_dup): only once every rank got this far.
+  const bool host_given = options_.transport && options_.transport->space() == MemorySpace::host;
+  host_transport_ = host_given ? options_.transport : make_host_transport(comm_);
+  transport_ = options_.transport ? options_.transport : host_transport_;
+}
+
+void DistributedEngine::setup() {
   if (!std::isfinite(options_.skin) || options_.skin < 0)
     throw Error(ErrorCode::invalid_argument,
                 "distributed skin must be finite and >= 0, got " + std::to_string(options_.skin));
@@ -215,23 +266,26 @@ DistributedEngine::DistributedEngine(MPI_Comm comm, DistributedOptions options)
     throw Error(ErrorCode::invalid_argument, "distributed rebalance_every must be >= 0, got " +
                                                  std::to_string(options_.rebalance_every));
   std::array<int, 3> dims = options_.dims;
-  int fixed = 1;
+  std::int64_t fixed = 1;  // 64-bit, each factor at most the ranks: no overflow
+  bool all_given = true;
   for (int d : dims) {
     if (d < 0)
       throw Error(ErrorCode::invalid_argument, "distributed dims " + dims_text(dims) +
                                                    ": entries must be >= 0 (0: MPI chooses)");
+    if (d > size_)
+      throw Error(ErrorCode::invalid_argument, "distributed dims " + dims_text(dims) +
+                                                   ": more domains along an axis than the " +
+                                                   std::to_string(size_) + " ranks");
     if (d > 0) fixed *= d;
+    all_given = all_given && d > 0;
   }
-  if (size_ % fixed != 0)
-    throw Error(ErrorCode::invalid_argument, "distributed dims " + dims_text(dims) +
-                                                 " do not divide the " + std::to_string(size_) +
-                                                 " ranks of the communicator");
+  if (size_ % fixed != 0 || (all_given && fixed != size_))
+    throw Error(ErrorCode::invalid_argument,
+                "distributed dims " + dims_text(dims) +
+                    (all_given ? " make " + std::to_string(fixed) + " domains for the "
+                               : " do not divide the ") +
+                    std::to_string(size_) + " ranks of the communicator");
   check(MPI_Dims_create(size_, 3, dims.data()), "MPI_Dims_create");
-  if (dims[0] * dims[1] * dims[2] != size_)
-    throw Error(ErrorCode::invalid_argument, "distributed dims " + dims_text(dims) + " make " +
-                                                 std::to_string(dims[0] * dims[1] * dims[2]) +
-                                                 " domains for " + std::to_string(size_) +
-                                                 " ranks");
   decomposition_.dims = dims;
   engine_ = std::make_unique<Engine>(options_.method);  // an unknown method throws here
   // Does the method take periodic boxes and query points (one refusal covers both)? One point
@@ -249,9 +303,6 @@ DistributedEngine::DistributedEngine(MPI_Comm comm, DistributedOptions options)
   }
   split_ = options_.owned_rows_only && takes_boxes_;
   if (split_) halo_engine_ = std::move(probe_engine);
-  const bool host_given = options_.transport && options_.transport->space() == MemorySpace::host;
-  host_transport_ = host_given ? options_.transport : make_host_transport(comm_);
-  transport_ = options_.transport ? options_.transport : host_transport_;
   plan_ = std::make_unique<HaloPlan>();
 }
 
@@ -1158,6 +1209,7 @@ Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options,
   r.force.assign(3 * n, 0.0f);
   KernelOutputs out;
   out.force = r.force.data();
+  if (n == 0) return r;  // a rank the particles left: no rows (and no output to point at)
   with_kernel(Kernel::sph_force, with_fields, squared_cutoff(cutoff_), out, [&](const auto& f) {
     if constexpr (std::is_same_v<std::decay_t<decltype(f)>, SphForceKernel>)
       for_each_pair(*this, f);

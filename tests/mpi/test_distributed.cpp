@@ -1221,6 +1221,29 @@ TEST(Distributed, SphForceWithHaloFieldsMatchesSingleProcess) {
     }
 }
 
+// Every particle near one edge: from two ranks on, some ranks own none and compute an
+// empty force (they threw "an output it writes has a null pointer" while the owner waited in
+// the next collective: `raycut sph --distributed` hung once the drop left a domain).
+TEST(Distributed, SphForceOnRanksWithoutParticles) {
+  // Low x (the first domain of an x split), across the periodic faces of y and z (images).
+  const std::vector<float> corner = uniform(200, {0.2, -0.8, -0.8}, {2, 1, 1}, 21);
+  const Box box = Box::orthorhombic(12, 12, 12);
+  for (bool owned_rows_only : {true, false}) {
+    DistributedOptions options;
+    options.owned_rows_only = owned_rows_only;
+    options.skin = 0.2f;
+    DistributedEngine engine(MPI_COMM_WORLD, options);
+    build(engine, corner, 1.5f, box, Spread::strided);
+    if (world_size() > 1) {
+      int empty = engine.ids().empty(), any_empty = 0;
+      MPI_Allreduce(&empty, &any_empty, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
+      EXPECT_EQ(any_empty, 1) << "the corner should leave some rank without particles";
+    }
+    expect_sph_matches(engine, box, random_velocities(200, 3),
+                       owned_rows_only ? "corner" : "corner, every row");
+  }
+}
+
 TEST(Distributed, HaloFieldsFollowTheHalos) {
   // Each owned particle's field is its global index (twice): every halo must read its own.
   const Box box = Box::orthorhombic(12, 12, 12);
@@ -1401,6 +1424,33 @@ TEST(Distributed, Errors) {
                   contains(m, "cutoff + skin"))
           << m;
     }
+  }
+  {
+    // dims whose product overflowed int (a division by zero), or that do not make one domain
+    // per rank (Open MPI aborted in MPI_Dims_create): clear errors on every rank.
+    DistributedOptions options;
+    options.dims = {65536, 65536, 1};
+    std::string m = error_message(ErrorCode::invalid_argument,
+                                  [&] { DistributedEngine engine(MPI_COMM_WORLD, options); });
+    EXPECT_TRUE(contains(m, "more domains along an axis than the")) << m;
+    if (world_size() > 1) {
+      options.dims = {1, 1, 1};
+      m = error_message(ErrorCode::invalid_argument,
+                        [&] { DistributedEngine engine(MPI_COMM_WORLD, options); });
+      EXPECT_TRUE(contains(m, "make 1 domains for the " + std::to_string(world_size()))) << m;
+    }
+  }
+  if (world_size() > 1) {
+    // Options that differ between ranks decompose or exchange differently (wrong answers, or a
+    // hang): refused on every rank, naming the option. A method unknown to one rank likewise.
+    DistributedOptions options;
+    options.skin = world_rank() == 0 ? 0.1f : 0.2f;
+    std::string m = error_message(ErrorCode::invalid_argument,
+                                  [&] { DistributedEngine engine(MPI_COMM_WORLD, options); });
+    EXPECT_TRUE(contains(m, "differ between ranks: skin")) << m;
+    DistributedOptions unknown;
+    if (world_rank() == world_size() - 1) unknown.method = "no-such-method";
+    EXPECT_THROW(DistributedEngine(MPI_COMM_WORLD, unknown), raycut::Error);
   }
   {
     // A bad coordinate on the last rank only: every rank throws, naming it (and takes part in

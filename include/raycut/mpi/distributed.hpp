@@ -198,9 +198,10 @@ struct DistributedStats {
 
 class DistributedEngine {
  public:
-  // Collective over `comm` (kept, not duplicated: the caller keeps it alive). Throws
-  // Error(invalid_argument) for bad dims or options, Error(unsupported) for a transport that is
-  // not on the host.
+  // Collective over `comm` (kept, not duplicated: the caller keeps it alive). Throws, on every
+  // rank, Error(invalid_argument) for bad dims or options or options that differ between ranks
+  // (method, skin, dims, owned_rows_only, local_images, balance, rebalance_every), and the
+  // error of a method that some rank does not know.
   explicit DistributedEngine(MPI_Comm comm, DistributedOptions options = {});
   ~DistributedEngine();
   DistributedEngine(const DistributedEngine&) = delete;
@@ -315,6 +316,7 @@ class DistributedEngine {
   void check_built(const char* call) const;
   PositionsView local_positions(std::size_t count);
   void agree(const std::string& local_error, ErrorCode code);
+  void setup();  // the constructor's local part, no collectives (its errors are agreed)
   [[noreturn]] void throw_error_of(int first, const std::string& local_error, ErrorCode code);
   void balance();
   void migrate();
