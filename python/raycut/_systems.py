@@ -211,6 +211,21 @@ def batch(boxes_: Optional[Boxes], n: Optional[int], batch_: Any, m: Optional[in
                        else HostIndex(np.zeros(m, np.int64)))
     largest = max([a.last for a in (index, query_index) if a is not None and a.last is not None],
                   default=-1)
+    points = (n or 0) + (m or 0)
+    if not per_system and largest + 1 > points + 1:
+        # More system indices than points: most systems are empty, and each costs memory
+        # (offsets, a frame), so [0, 10**9] asked for gigabytes. With one box for all, a
+        # system's number means nothing beyond grouping: renumber the used ones densely.
+        indices = [a for a in (index, query_index) if a is not None]
+        if not all(isinstance(a, HostIndex) for a in indices):
+            raise ValueError(f"the batch's system indices go up to {largest} for {points} "
+                             "points: renumber them densely (e.g. torch.unique(batch, "
+                             "return_inverse=True)[1])")
+        used = np.unique(np.concatenate([a.index for a in indices]))
+        for a in indices:
+            a.index = np.searchsorted(used, a.index).astype(np.int64)
+            a.last = int(a.index[-1]) if len(a.index) else None
+        largest = len(used) - 1
     systems = boxes_.count if per_system else max(largest + 1, 1)
     if largest >= systems:
         raise ValueError(f"the batch has system index {largest} but cell/pbc give {systems} "

@@ -13,8 +13,11 @@ int (int64). The order of pairs within a row may differ from ASE's.
 
 The pairs are found by ``raycut.neighbor_list`` in float32 (the one float32 predicate): on
 positions wrapped into the cell in float64 first (so that far-unwrapped positions lose no float32
-precision), the shifts then translated back to the positions given. Pairs within a few float32
-ulps of the cutoff may differ from ASE's float64 answer. ASE itself is not imported: anything
+precision) and translated in float64 so that their bounding box is centred on the origin (so
+that Atoms far from the origin along an open axis lose none either), the shifts then translated
+back to the positions given. Pairs within a few float32 ulps of the cutoff may differ from ASE's
+float64 answer; a float32 ulp here is that of half the system's extent (of the cell along
+periodic axes), so a system spanning 1e6 decides pairs to ~0.03. ASE itself is not imported: anything
 with ``positions``, ``cell`` and ``pbc`` works (``cell`` may be absent for open systems).
 
 Per-atom or per-pair cutoffs (ASE's list and dict cutoffs) are not supported (``ValueError``).
@@ -67,6 +70,17 @@ def _wrap(positions: np.ndarray, cell: np.ndarray, pbc: np.ndarray) -> tuple:
     return positions - n.astype(np.float64) @ cell, n
 
 
+def _centred_float32(positions: np.ndarray) -> np.ndarray:
+    """float32 positions translated (in float64) so that their bounding box is centred on the
+    origin: the same vectors D and shifts S, with the float32 rounding of the extent's half
+    instead of the absolute coordinates' (Atoms 1e6 away along an open axis gave a pair at 1.062
+    for a cutoff of 1.01: float32 rounds 1e6 to multiples of 0.0625)."""
+    if len(positions) == 0:
+        return positions.astype(np.float32)
+    centre = 0.5 * (positions.min(axis=0) + positions.max(axis=0))
+    return (positions - centre).astype(np.float32)
+
+
 def neighbor_list(quantities: str, atoms: Any, cutoff: float, self_interaction: bool = False,
                   method: str = "auto") -> Any:
     """``ase.neighborlist.neighbor_list(quantities, atoms, cutoff, self_interaction)``, computed
@@ -89,14 +103,14 @@ def neighbor_list(quantities: str, atoms: Any, cutoff: float, self_interaction: 
 
     if pbc.any():
         wrapped, n = _wrap(positions, cell, pbc)
-        i, j, S = _neighbor_list("ijS", wrapped.astype(np.float32), cutoff, cell=cell, pbc=pbc,
+        i, j, S = _neighbor_list("ijS", _centred_float32(wrapped), cutoff, cell=cell, pbc=pbc,
                                  method=method)
         i = np.asarray(i, dtype=np.intp)
         j = np.asarray(j, dtype=np.intp)
         # wrapped = positions - n @ cell, so S for the positions as given is S_w + n_i - n_j.
         S = np.asarray(S, dtype=np.int64) + n[i] - n[j]
     else:
-        i, j = _neighbor_list("ij", positions.astype(np.float32), cutoff, method=method)
+        i, j = _neighbor_list("ij", _centred_float32(positions), cutoff, method=method)
         i = np.asarray(i, dtype=np.intp)
         j = np.asarray(j, dtype=np.intp)
         S = np.zeros((len(i), 3), dtype=np.int64)

@@ -228,3 +228,16 @@ def test_drop_in_periodic_self_interaction_and_bulk():
     assert isinstance(S, np.ndarray) and S.dtype == np.int64 and S.shape[1] == 3
     S2, i2 = raycut.ase.neighbor_list("Si", atoms, 5.0)
     assert np.array_equal(S2, S) and len(i2) == len(S)
+
+
+def test_drop_in_far_along_an_open_axis():
+    # 1e6 away: float32 rounds to multiples of 0.0625, and a pair 1.0624 apart came out within
+    # 1.01 (session 11's adversarial tests). The positions are centred in float64 first.
+    for pbc in (False, (False, True, True)):
+        atoms = Atoms("H3", positions=[[1e6 + 0.0313, 0, 0], [1e6 + 1.0937, 0, 0],
+                                       [1e6 + 2.0, 0.5, 0]], cell=[10.0, 10.0, 10.0], pbc=pbc)
+        for cutoff in (1.01, 1.07):
+            got = raycut.ase.neighbor_list("ijS", atoms, cutoff)
+            want = ase_neighbor_list("ijS", atoms, cutoff)
+            assert sorted(zip(*[a.tolist() if a.ndim == 1 else map(tuple, a) for a in got])) == \
+                sorted(zip(*[a.tolist() if a.ndim == 1 else map(tuple, a) for a in want]))

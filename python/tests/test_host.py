@@ -224,3 +224,26 @@ def test_other_framework_host_dlpack():
         raycut.neighbor_list("ij", Foreign(x.astype(np.float64)), CUTOFF)
     with pytest.raises(TypeError, match="__dlpack__"):
         raycut.Engine().build(object(), CUTOFF)
+
+
+def test_sparse_batch_indices_cost_nothing():
+    # [0, 10**9] with one box for all asked for gigabytes (a frame and offsets per empty system).
+    x = np.array([[0, 0, 0], [0.5, 0, 0], [0.6, 0, 0]], np.float32)
+    i, j = raycut.neighbor_list("ij", x, 0.7, batch=[0, 10**9, 10**9])
+    assert sorted(zip(i.tolist(), j.tolist())) == [(1, 2), (2, 1)]
+
+
+def test_query_points_refuse_update_and_sph_force_and_pad_with_the_source_count():
+    rng = np.random.default_rng(0)
+    x = rng.random((50, 3)).astype(np.float32)
+    q = x[:7] + 0.01
+    e = raycut.Engine("cell-list")
+    e.build(x, 0.3, queries=q)
+    with pytest.raises(NotImplementedError, match="query points"):
+        e.update(x + 0.1)
+    indices, counts, _ = e.padded_neighbours(40)
+    for row, c in zip(np.asarray(indices), np.asarray(counts)):
+        assert (row[:c] < 50).all() and (row[c:] == 50).all()
+    with pytest.raises(NotImplementedError, match="query points"):
+        e.compute("sph_force", sph_mass=1.0, velocity=np.zeros((7, 3), np.float32),
+                  density=np.ones(7, np.float32), pressure=np.ones(7, np.float32))
