@@ -226,6 +226,14 @@ TEST_P(EngineEdges, QueryPointsRefuseUpdateAndSphForceAndPadWithTheSourceCount) 
   options.sph = {velocity.data(), density.data(), pressure.data()};
   expect_error([&] { e.compute(Kernel::sph_force, options); }, ErrorCode::unsupported,
                "query points");
+  // A non-finite query is named as a query point (it was "particle index 1": the wrong array).
+  queries[3 * 1 + 2] = std::numeric_limits<float>::quiet_NaN();
+  systems.queries = {queries.data(), 3, MemorySpace::host};
+  expect_error(
+      [&] {
+        e.build({sources.data(), 50, MemorySpace::host}, 0.3f, systems);
+      },
+      ErrorCode::invalid_input, "query point index 1");
 }
 
 TEST(EngineMemory, AListLargerThanMemoryIsAClearError) {

@@ -278,8 +278,8 @@ class Engine:
         and the largest count (grow K to ``largest_count`` and retry); with
         ``raise_on_overflow`` an overflow raises ``CapacityError``.
         """
-        if int(k) < 0:
-            raise ValueError(f"padded neighbour list: K must be >= 1, got {k}")
+        if int(k) < 0 or int(k) != k:
+            raise ValueError(f"padded neighbour list: K must be a whole number >= 1, got {k}")
         like = self._like
         indices, counts, report, s = self._call(like, self._engine.padded, int(k),
                                                 bool(raise_on_overflow), like.host, bool(shifts))

@@ -42,14 +42,15 @@ bool same_layout(const Systems& a, const Systems& b) {
 // Checks coordinates where they live, before any work on them (device ones on `stream`); throws
 // naming the first bad one. `values` false: the pointer and the device only (a pass that reads
 // every coordinate anyway checks them).
-void validate_positions(const PositionsView& positions, void* stream, bool values = true) {
+void validate_positions(const PositionsView& positions, void* stream, bool values = true,
+                        const char* what = "particle") {
   if (positions.size > 0 && positions.xyz == nullptr)
     throw Error(ErrorCode::invalid_argument, "positions pointer is null for N = " +
                                                  std::to_string(positions.size) + " particles");
   if (positions.space == MemorySpace::host) {
     if (!values) return;
     const std::size_t bad = detail::first_non_finite_host(positions.xyz, positions.size);
-    if (bad < positions.size) detail::throw_non_finite(bad, positions.xyz + 3 * bad);
+    if (bad < positions.size) detail::throw_non_finite(bad, positions.xyz + 3 * bad, what);
     return;
   }
 #if defined(RAYCUT_HAVE_CUDA)
@@ -61,7 +62,7 @@ void validate_positions(const PositionsView& positions, void* stream, bool value
   if (bad < positions.size) {
     float xyz[3];
     detail::cuda::download(xyz, positions.xyz + 3 * bad, sizeof xyz);
-    detail::throw_non_finite(bad, xyz);
+    detail::throw_non_finite(bad, xyz, what);
   }
 #else
   (void)stream;
@@ -168,7 +169,7 @@ void Engine::build(PositionsView positions, float cutoff, const Systems& systems
     if (systems.queries.space != positions.space)
       throw Error(ErrorCode::invalid_argument,
                   "query points and sources must be in the same memory space (host or device)");
-    validate_positions(systems.queries, stream_);
+    validate_positions(systems.queries, stream_, true, "query point");
   }
   if (const std::string why = m.points_unsupported(); !why.empty())
     throw Error(ErrorCode::unsupported, "method '" + method_ +

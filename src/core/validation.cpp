@@ -46,9 +46,9 @@ std::size_t first_non_finite_host(const float* xyz, std::size_t n) {
   return first;
 }
 
-void throw_non_finite(std::size_t index, const float* p) {
+void throw_non_finite(std::size_t index, const float* p, const char* what) {
   char buf[160];
-  std::snprintf(buf, sizeof buf, "non-finite coordinate at particle index %zu: (%g, %g, %g)", index,
+  std::snprintf(buf, sizeof buf, "non-finite coordinate at %s index %zu: (%g, %g, %g)", what, index,
                 static_cast<double>(p[0]), static_cast<double>(p[1]), static_cast<double>(p[2]));
   throw Error(ErrorCode::invalid_input, buf);
 }

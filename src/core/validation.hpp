@@ -24,7 +24,9 @@ void validate_cutoff(float cutoff);
 std::size_t first_non_finite_host(const float* xyz, std::size_t n);
 
 // Throws Error(invalid_input) naming particle `index` and its coordinates.
-[[noreturn]] void throw_non_finite(std::size_t index, const float* xyz_of_index);
+// `what`: which points, "particle" (the sources) or "query point".
+[[noreturn]] void throw_non_finite(std::size_t index, const float* xyz_of_index,
+                                   const char* what = "particle");
 
 // Sizes list.indices for `pairs` entries; throws Error(out_of_memory) saying how much a list
 // that does not fit in host memory would need, instead of std::bad_alloc.
