@@ -276,7 +276,14 @@ int run_distributed_bench(const DistributedBenchOptions& o, const std::vector<st
   const auto methods = resolve_methods(names);
   const bool weak = !o.n_per_rank.empty();
   std::vector<std::uint64_t> sizes;
-  for (std::uint64_t n : weak ? o.n_per_rank : o.n_total) sizes.push_back(weak ? n * size : n);
+  for (std::uint64_t n : weak ? o.n_per_rank : o.n_total) {
+    // The same on every rank: a refusal here stops them all alike.
+    if (n == 0 || n > (std::uint64_t{1} << 48) / static_cast<std::uint64_t>(size))
+      throw Error(ErrorCode::invalid_argument,
+                  std::string("bench --distributed: ") + (weak ? "--n-per-rank " : "--n ") +
+                      std::to_string(n) + " particles: give 1 to 2^48 in total");
+    sizes.push_back(weak ? n * size : n);
+  }
 
   // Rank 0 writes; an output it cannot open stops every rank before any work.
   std::unique_ptr<io::OutputFile> csv;
