@@ -107,7 +107,6 @@ __global__ void __launch_bounds__(one_block_threads)
   __syncthreads();
   for (Slot i = threadIdx.x; i < n; i += one_block_threads)
     members[start[keys[i]] + provisional[i]] = i;
-  __syncthreads();
   __syncthreads();  // provisional[] read for the last time: it becomes the order
   for (Slot i = threadIdx.x; i < n; i += one_block_threads)
     place_one(xyz, members, start[keys[i]], start[keys[i] + 1], i, pos, provisional);

@@ -208,15 +208,24 @@ namespace {
 
 // The options every rank must share (a rank with other dims or another skin decomposes, or
 // exchanges, differently: wrong answers or a hang, session 11's adversarial tests), as numbers
-// whose minimum and maximum over the ranks must agree.
-std::vector<std::int64_t> shared_options(const DistributedOptions& o) {
-  std::int64_t method = 1469598103934665603ll;  // FNV-1a of the method's name
-  for (unsigned char c : o.method) method = (method ^ c) * 1099511628211ll;
-  std::int32_t skin_bits = 0;
+// that must be the same on every rank.
+std::vector<std::uint64_t> shared_options(const DistributedOptions& o) {
+  std::uint64_t method = 14695981039346656037ull;  // FNV-1a of the method's name
+  for (unsigned char c : o.method) method = (method ^ c) * 1099511628211ull;
+  std::uint32_t skin_bits = 0;
   std::memcpy(&skin_bits, &o.skin, sizeof skin_bits);
-  return {method,           skin_bits,         o.dims[0],      o.dims[1],
-          o.dims[2],        o.owned_rows_only, o.local_images, static_cast<int>(o.balance),
-          o.rebalance_every};
+  const auto as_bits = [](int v) {
+    return static_cast<std::uint64_t>(static_cast<std::uint32_t>(v));
+  };
+  return {method,
+          skin_bits,
+          as_bits(o.dims[0]),
+          as_bits(o.dims[1]),
+          as_bits(o.dims[2]),
+          o.owned_rows_only,
+          o.local_images,
+          as_bits(static_cast<int>(o.balance)),
+          as_bits(o.rebalance_every)};
 }
 constexpr const char* shared_option_names[] = {"method",       "skin",    "dims[0]",
                                                "dims[1]",      "dims[2]", "owned_rows_only",
@@ -239,16 +248,16 @@ DistributedEngine::DistributedEngine(MPI_Comm comm, DistributedOptions options)
     code = e.code();
   }
   agree(error, code);
-  const std::vector<std::int64_t> mine = shared_options(options_);
-  std::vector<std::int64_t> low(mine.size()), high(mine.size());
-  check(MPI_Allreduce(mine.data(), low.data(), static_cast<int>(mine.size()), MPI_INT64_T, MPI_MIN,
-                      comm_),
+  // One collective for both bounds: the largest of v and of ~v (~ of the smallest v).
+  std::vector<std::uint64_t> mine = shared_options(options_);
+  const std::size_t count = mine.size();
+  for (std::size_t k = 0; k < count; ++k) mine.push_back(~mine[k]);
+  std::vector<std::uint64_t> largest(mine.size());
+  check(MPI_Allreduce(mine.data(), largest.data(), static_cast<int>(mine.size()), MPI_UINT64_T,
+                      MPI_MAX, comm_),
         "MPI_Allreduce");
-  check(MPI_Allreduce(mine.data(), high.data(), static_cast<int>(mine.size()), MPI_INT64_T, MPI_MAX,
-                      comm_),
-        "MPI_Allreduce");
-  for (std::size_t k = 0; k < mine.size(); ++k)
-    if (low[k] != high[k])
+  for (std::size_t k = 0; k < count; ++k)
+    if (largest[k] != ~largest[count + k])
       throw Error(ErrorCode::invalid_argument,
                   std::string("distributed options differ between ranks: ") +
                       shared_option_names[k] + " (every rank must pass the same options)");
