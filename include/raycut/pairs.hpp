@@ -23,12 +23,48 @@
 namespace raycut {
 namespace detail {
 
+// Candidate point k of target point i with images, decided in double from the caller's
+// positions (ExactImages): in range iff |r|^2 < C^2 for r = (x_j - x_i) + S . cell, and then r
+// and r2 are that vector rounded to float. A query point is never a source.
+inline bool in_range_exact(const ExactImages& e, std::size_t i, std::size_t k, Vec3& r, float& r2) {
+  const PointImage& pk = e.image[k];
+  if (pk.source == not_a_source) return false;
+  const PointImage& pi = e.image[i];
+  const float* xi =
+      pi.source == not_a_source ? e.queries + 3 * i : e.sources + 3 * std::size_t{pi.source};
+  const float* xj = e.sources + 3 * std::size_t{pk.source};
+  const double* cell = e.cells + 9 * std::size_t{e.system ? e.system[i] : 0};
+  double s[3];
+  for (int a = 0; a < 3; ++a)
+    s[a] = static_cast<double>(std::int64_t{pk.shift[a]} - std::int64_t{pi.shift[a]});
+  double d[3];
+  for (int c = 0; c < 3; ++c)
+    d[c] = (static_cast<double>(xj[c]) - static_cast<double>(xi[c])) +
+           ((s[0] * cell[c] + s[1] * cell[3 + c]) + s[2] * cell[6 + c]);
+  if (!(d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < e.cutoff_squared)) return false;
+  r = {static_cast<float>(d[0]), static_cast<float>(d[1]), static_cast<float>(d[2])};
+  r2 = squared_distance(r.x, r.y, r.z);
+  return true;
+}
+
 // Calls on_pair(j, r, r2) for every in-range candidate j != i of target i, r = x_j - x_i.
 // walk(i, f) calls f(j, xyz_j) for every candidate source j of target i, each at most once.
+// With `exact` (points with images), the float predicate only rules candidates out; the rest are
+// decided by in_range_exact.
 template <class Walk, class OnPair>
 void for_each_in_range(std::size_t i, const float* xyz, float cutoff_squared, const Walk& walk,
-                       OnPair&& on_pair) {
+                       OnPair&& on_pair, const ExactImages* exact = nullptr) {
   const float xi = xyz[3 * i], yi = xyz[3 * i + 1], zi = xyz[3 * i + 2];
+  if (exact) {
+    const float limit = exact->float_limit;
+    walk(i, [&](std::size_t j, const float* xj) {
+      if (j == i) return;
+      Vec3 r{xj[0] - xi, xj[1] - yi, xj[2] - zi};
+      float r2 = squared_distance(r.x, r.y, r.z);
+      if (r2 < limit && in_range_exact(*exact, i, j, r, r2)) on_pair(j, r, r2);
+    });
+    return;
+  }
   walk(i, [&](std::size_t j, const float* xj) {
     if (j == i) return;
     const Vec3 r{xj[0] - xi, xj[1] - yi, xj[2] - zi};
@@ -42,16 +78,20 @@ void for_each_in_range(std::size_t i, const float* xyz, float cutoff_squared, co
 // points become the caller's sources and shifts through `images` (detail/images.hpp).
 template <class Walk, class F, class Images = NoImages>
 void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk& walk, const F& f,
-              const Images& images = {}, const std::uint32_t* order = nullptr) {
+              const Images& images = {}, const std::uint32_t* order = nullptr,
+              const ExactImages* exact = nullptr) {
   const auto visit = [&](const std::uint32_t i) {
     typename F::Accumulator acc = initial_state(f, i);
     const typename Images::Target ti = images.target(i);
-    for_each_in_range(i, xyz, cutoff_squared, walk, [&](std::size_t point, Vec3 r, float r2) {
-      const auto k = static_cast<std::uint32_t>(point);
-      std::uint32_t j;
-      Shift s{};
-      if (resolve(f, images, ti, true, i, k, k, j, s)) apply(f, acc, i, j, r, r2, s);
-    });
+    for_each_in_range(
+        i, xyz, cutoff_squared, walk,
+        [&](std::size_t point, Vec3 r, float r2) {
+          const auto k = static_cast<std::uint32_t>(point);
+          std::uint32_t j;
+          Shift s{};
+          if (resolve(f, images, ti, true, i, k, k, j, s)) apply(f, acc, i, j, r, r2, s);
+        },
+        exact);
     f.finish(i, acc);
   };
   if (order) {
@@ -67,7 +107,8 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk&
 template <class Walk, class F>
 void run_host_pass(const PairPass& pass, const Walk& walk, const F& f) {
   with_images<F>(pass, [&](const auto& images) {
-    run_host(pass.n, pass.host.xyz, pass.cutoff_squared, walk, f, images, pass.host.order);
+    run_host(pass.n, pass.host.xyz, pass.cutoff_squared, walk, f, images, pass.host.order,
+             pass.host.exact);
   });
 }
 

@@ -1,6 +1,7 @@
 #include "core/images.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <string>
 
@@ -71,7 +72,31 @@ class HostImagePoints final : public ImagePoints {
   std::vector<std::uint32_t> system_;
   std::vector<WrappedPoint> wrapped_;
   std::vector<std::uint64_t> image_offset_;
+  // What decides the pairs in double: the caller's positions, kept while the build lives.
+  std::vector<float> sources_, queries_;
+  std::vector<double> cells_;
+  ExactImages exact_;
 };
+
+// How far a point may lie from its real frame position: the float rounding of a coordinate of
+// magnitude up to `extent` (half an ulp, <= 2^-24 extent), doubled for the double arithmetic
+// before it (x - W . cell, far below a float ulp for any position the int32 shifts allow).
+double rounding_bound(double extent) {
+  return 2 * std::ldexp(extent, -24);
+}
+
+// The float r2 from which a candidate is out for certain: C^2 plus the largest error of a float
+// r2 near the cutoff when each coordinate is off by up to `rounding` (r_f = p_k - p_i: 2 rounding
+// per component plus its own relative rounding; r2 in three roundings), with a factor 2 to
+// spare. Rounded up to a float.
+float float_limit(double cutoff, double rounding) {
+  constexpr double u = 0x1p-24;
+  const double slack =
+      2 * (7 * cutoff * rounding + 6 * u * cutoff * cutoff + 12 * rounding * rounding);
+  const double limit = cutoff * cutoff + slack;
+  const auto f = static_cast<float>(limit);
+  return static_cast<double>(f) >= limit ? f : std::nextafter(f, INFINITY);
+}
 
 [[noreturn]] void refuse_wrap(std::size_t index, const float* x, const char* what) {
   refuse(std::string(what) + " " + std::to_string(index) + " at (" + std::to_string(x[0]) + ", " +
@@ -152,7 +177,22 @@ void HostImagePoints::expand(const ImagePlan& plan, const float* sources, const 
     }
   }
 
-  publish(plan, xyz_.data(), total, image_.data(), system_.data());
+  sources_.assign(sources, sources + 3 * n);
+  queries_.assign(queries, queries + (with_queries ? 3 * plan.queries.back() : 0));
+  cells_.resize(9 * std::size_t{systems});
+  for (std::uint32_t s = 0; s < systems; ++s)
+    for (int k = 0; k < 3; ++k)
+      for (int c = 0; c < 3; ++c) cells_[9 * s + 3 * k + c] = plan.frames[s].cell[k][c];
+  float extent = 0;
+  for (const float v : xyz_) extent = std::max(extent, std::fabs(v));
+  exact_.sources = sources_.data();
+  exact_.queries = with_queries ? queries_.data() : nullptr;
+  exact_.image = image_.data();
+  exact_.system = systems > 1 ? system_.data() : nullptr;
+  exact_.cells = cells_.data();
+  exact_.cutoff_squared = plan.cutoff * plan.cutoff;
+  exact_.float_limit = float_limit(plan.cutoff, rounding_bound(extent));
+  publish(plan, xyz_.data(), total, image_.data(), system_.data(), &exact_);
 }
 
 }  // namespace
@@ -183,6 +223,7 @@ ImagePlan plan_images(const Systems& systems, std::size_t sources, double cutoff
     plan.frames.push_back(frame_of(box, cutoff, s, count > 1));
   }
   plan.own_frames = count > 1;
+  plan.cutoff = cutoff;
   return plan;
 }
 

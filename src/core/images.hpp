@@ -30,6 +30,7 @@ struct ImagePlan {
   std::vector<std::uint64_t> sources;  // S + 1 offsets of the systems' particles
   std::vector<std::uint64_t> queries;  // S + 1 offsets of their queries; empty: none
   bool own_frames = false;             // batches: each system in its own frame
+  double cutoff = 0;
   std::uint32_t systems() const { return static_cast<std::uint32_t>(frames.size()); }
   bool has_queries() const { return !queries.empty(); }
   std::size_t source_count() const { return sources.back(); }
@@ -55,7 +56,8 @@ class ImagePoints {
  protected:
   // What points() hands the method after an expansion into these arrays.
   void publish(const ImagePlan& plan, const float* xyz, std::size_t size, const PointImage* image,
-               const std::uint32_t* system) {
+               const std::uint32_t* system, const ExactImages* exact = nullptr) {
+    points_.exact = exact;
     points_.xyz = xyz;
     points_.size = size;
     points_.targets = plan.target_count();

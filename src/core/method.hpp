@@ -26,6 +26,8 @@ struct Points {
   ImageTables images;
   const std::uint32_t* system = nullptr;  // per point; null: one system
   std::uint32_t systems = 1;
+  // Host points with images: what decides their pairs in double (CPU methods; null on GPU).
+  const ExactImages* exact = nullptr;
   // n plain particles: every point a target and its own source, one system.
   static Points plain(const float* xyz, std::size_t n) {
     Points p;

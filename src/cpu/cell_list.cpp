@@ -146,8 +146,12 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     // Query points are sorted after every source and never offered as candidates (below).
     ImageTables images = points.images;
     images.candidates_are_sources = true;
-    set_positions(xyz_.data(), n, cutoff, points.targets, images);
-    inverse_width_ = 1.0 / (static_cast<double>(cutoff) * (1.0 + width_margin));
+    set_positions(xyz_.data(), n, cutoff, points.targets, images, points.exact);
+    // Points rounded at their box's scale: cells as wide as the float distance below which the
+    // exact decision is asked, so that they hold every pair it may take (docs/limits.md).
+    const double exact_reach = points.exact ? std::sqrt(points.exact->float_limit) * (1 + 1e-6) : 0;
+    inverse_width_ =
+        1.0 / std::max(static_cast<double>(cutoff) * (1.0 + width_margin), exact_reach);
 
     // Sort particles by (query, cell key, index): the sources by cell, then the query points by
     // cell.

@@ -19,6 +19,26 @@ enum class PassKind {
   grid,             // the production grid: dense or compact table, culled rows
 };
 
+struct PointImage;
+
+// Points with images are float positions rounded at the scale of their box, so the float
+// predicate on them can misjudge a pair within ~(box / C) 2^-23 of the cutoff, and judge
+// (i, j, S) and (j, i, -S) apart. The CPU pass therefore decides every candidate that the float
+// predicate cannot rule out (r2 < float_limit) in double, from the caller's own positions:
+// r = (x_j - x_i) + S . cell, which is exactly antisymmetric (IEEE rounding is symmetric), so a
+// full list holds (i, j, S) iff it holds (j, i, -S), and every pair is the float64 answer.
+struct ExactImages {
+  const float* sources = nullptr;         // the caller's particles (N, 3), as given
+  const float* queries = nullptr;         // the caller's query points (M, 3); null: none
+  const PointImage* image = nullptr;      // by point: source and shift T
+  const std::uint32_t* system = nullptr;  // by point; null: one system
+  const double* cells = nullptr;          // per system, 9 each: rows a, b, c
+  double cutoff_squared = 0;              // C^2 in double
+  // A float r2 at or above it is out for certain; cells at least sqrt(float_limit) wide offer
+  // every pair in range.
+  float float_limit = 0;
+};
+
 // CPU methods: walk(method, i, sink, context) calls sink(context, j, xyz + 3 j) for every
 // candidate source j of target i (j == i included), each at most once.
 using CandidateSink = void (*)(void* context, std::size_t j, const float* xyz_j);
@@ -29,6 +49,7 @@ struct HostPass {
   // The n targets in the order to visit them (the cell list: cell order, so that consecutive
   // targets share cached cells); null: 0 .. n - 1.
   const std::uint32_t* order = nullptr;
+  const ExactImages* exact = nullptr;  // set with periodic images (see ExactImages)
 };
 
 struct BruteForcePass {
