@@ -49,19 +49,20 @@ inline bool in_range_exact(const ExactImages& e, std::size_t i, std::size_t k, V
 
 // Calls on_pair(j, r, r2) for every in-range candidate j != i of target i, r = x_j - x_i.
 // walk(i, f) calls f(j, xyz_j) for every candidate source j of target i, each at most once.
-// With `exact` (points with images), the float predicate only rules candidates out; the rest are
-// decided by in_range_exact.
+// With `exact` (points with images), candidates in its float band are decided by
+// in_range_exact (every candidate in range, in boxes that need exact vectors).
 template <class Walk, class OnPair>
 void for_each_in_range(std::size_t i, const float* xyz, float cutoff_squared, const Walk& walk,
                        OnPair&& on_pair, const ExactImages* exact = nullptr) {
   const float xi = xyz[3 * i], yi = xyz[3 * i + 1], zi = xyz[3 * i + 2];
   if (exact) {
-    const float limit = exact->float_limit;
+    const float sure_in = exact->exact_vectors ? 0.0f : exact->float_in;
+    const float sure_out = exact->float_out;
     walk(i, [&](std::size_t j, const float* xj) {
       if (j == i) return;
       Vec3 r{xj[0] - xi, xj[1] - yi, xj[2] - zi};
       float r2 = squared_distance(r.x, r.y, r.z);
-      if (r2 < limit && in_range_exact(*exact, i, j, r, r2)) on_pair(j, r, r2);
+      if (r2 < sure_in || (r2 < sure_out && in_range_exact(*exact, i, j, r, r2))) on_pair(j, r, r2);
     });
     return;
   }

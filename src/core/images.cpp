@@ -85,17 +85,20 @@ double rounding_bound(double extent) {
   return 2 * std::ldexp(extent, -24);
 }
 
-// The float r2 from which a candidate is out for certain: C^2 plus the largest error of a float
-// r2 near the cutoff when each coordinate is off by up to `rounding` (r_f = p_k - p_i: 2 rounding
-// per component plus its own relative rounding; r2 in three roundings), with a factor 2 to
-// spare. Rounded up to a float.
-float float_limit(double cutoff, double rounding) {
+// The float band [in, out) of r2 around C^2 where the float predicate may misjudge a pair: C^2
+// give or take the largest error of a float r2 near the cutoff when each coordinate is off by up
+// to `rounding` (r_f = p_k - p_i: 2 rounding per component plus its own relative rounding; r2
+// in three roundings; the float C^2 in one), with a factor 2 to spare; rounded outwards.
+void set_float_band(ExactImages& exact, double cutoff, double rounding) {
   constexpr double u = 0x1p-24;
   const double slack =
       2 * (7 * cutoff * rounding + 6 * u * cutoff * cutoff + 12 * rounding * rounding);
-  const double limit = cutoff * cutoff + slack;
-  const auto f = static_cast<float>(limit);
-  return static_cast<double>(f) >= limit ? f : std::nextafter(f, INFINITY);
+  const double c2 = cutoff * cutoff;
+  const auto in = static_cast<float>(c2 - slack), out = static_cast<float>(c2 + slack);
+  exact.float_in = static_cast<double>(in) <= c2 - slack ? in : std::nextafter(in, 0.0f);
+  exact.float_out = static_cast<double>(out) >= c2 + slack ? out : std::nextafter(out, INFINITY);
+  exact.cutoff_squared = c2;
+  exact.exact_vectors = rounding > std::ldexp(cutoff, -16);
 }
 
 [[noreturn]] void refuse_wrap(std::size_t index, const float* x, const char* what) {
@@ -190,8 +193,7 @@ void HostImagePoints::expand(const ImagePlan& plan, const float* sources, const 
   exact_.image = image_.data();
   exact_.system = systems > 1 ? system_.data() : nullptr;
   exact_.cells = cells_.data();
-  exact_.cutoff_squared = plan.cutoff * plan.cutoff;
-  exact_.float_limit = float_limit(plan.cutoff, rounding_bound(extent));
+  set_float_band(exact_, plan.cutoff, rounding_bound(extent));
   publish(plan, xyz_.data(), total, image_.data(), system_.data(), &exact_);
 }
 

@@ -149,7 +149,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     set_positions(xyz_.data(), n, cutoff, points.targets, images, points.exact);
     // Points rounded at their box's scale: cells as wide as the float distance below which the
     // exact decision is asked, so that they hold every pair it may take (docs/limits.md).
-    const double exact_reach = points.exact ? std::sqrt(points.exact->float_limit) * (1 + 1e-6) : 0;
+    const double exact_reach = points.exact ? std::sqrt(points.exact->float_out) * (1 + 1e-6) : 0;
     inverse_width_ =
         1.0 / std::max(static_cast<double>(cutoff) * (1.0 + width_margin), exact_reach);
 

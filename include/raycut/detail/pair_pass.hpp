@@ -23,8 +23,8 @@ struct PointImage;
 
 // Points with images are float positions rounded at the scale of their box, so the float
 // predicate on them can misjudge a pair within ~(box / C) 2^-23 of the cutoff, and judge
-// (i, j, S) and (j, i, -S) apart. The CPU pass therefore decides every candidate that the float
-// predicate cannot rule out (r2 < float_limit) in double, from the caller's own positions:
+// (i, j, S) and (j, i, -S) apart. The CPU pass therefore decides every candidate whose float r2
+// lies in the band [float_in, float_out) in double, from the caller's own positions:
 // r = (x_j - x_i) + S . cell, which is exactly antisymmetric (IEEE rounding is symmetric), so a
 // full list holds (i, j, S) iff it holds (j, i, -S), and every pair is the float64 answer.
 struct ExactImages {
@@ -34,9 +34,12 @@ struct ExactImages {
   const std::uint32_t* system = nullptr;  // by point; null: one system
   const double* cells = nullptr;          // per system, 9 each: rows a, b, c
   double cutoff_squared = 0;              // C^2 in double
-  // A float r2 at or above it is out for certain; cells at least sqrt(float_limit) wide offer
-  // every pair in range.
-  float float_limit = 0;
+  // A float r2 below float_in is in for certain, at or above float_out out for certain. Cells
+  // at least sqrt(float_out) wide offer every pair in range.
+  float float_in = 0, float_out = 0;
+  // Boxes so large that float r is off by more than 2^-16 C: every pair's r from the double
+  // vector (rounded once), not only the band's.
+  bool exact_vectors = false;
 };
 
 // CPU methods: walk(method, i, sink, context) calls sink(context, j, xyz + 3 j) for every
