@@ -14,6 +14,7 @@
 #include <string>
 #include <type_traits>
 
+#include "raycut/detail/host_threads.hpp"
 #include "raycut/detail/images.hpp"
 #include "raycut/detail/pair_pass.hpp"
 #include "raycut/engine.hpp"
@@ -96,10 +97,10 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk&
     f.finish(i, acc);
   };
   if (order) {
-#pragma omp parallel for schedule(dynamic, 256)
+#pragma omp parallel for schedule(dynamic, 256) if (n >= parallel_targets)
     for (std::size_t t = 0; t < n; ++t) visit(order[t]);
   } else {
-#pragma omp parallel for schedule(dynamic, 256)
+#pragma omp parallel for schedule(dynamic, 256) if (n >= parallel_targets)
     for (std::size_t t = 0; t < n; ++t) visit(static_cast<std::uint32_t>(t));
   }
 }

@@ -32,12 +32,18 @@ raise ``NotImplementedError``.
 from __future__ import annotations
 
 import numbers
+import os
 from typing import Any, Optional
 
-from . import _arrays
-from . import _raycut
-from . import _systems
-from ._raycut import CapacityError
+# OpenMP threads sleep between parallel regions instead of spinning on cores that the caller's
+# own threads (or other processes) need. Read when the OpenMP runtime starts, so only when
+# raycut is the first to load it; set OMP_WAIT_POLICY yourself to choose otherwise.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+from . import _arrays  # noqa: E402
+from . import _raycut  # noqa: E402
+from . import _systems  # noqa: E402
+from ._raycut import CapacityError  # noqa: E402
 
 __version__ = "0.1.0"
 __all__ = [

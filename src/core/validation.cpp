@@ -10,6 +10,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "raycut/detail/host_threads.hpp"
 #include "raycut/error.hpp"
 #include "raycut/host_memory.hpp"
 
@@ -37,7 +38,7 @@ void validate_cutoff(float cutoff) {
 std::size_t first_non_finite_host(const float* xyz, std::size_t n) {
   std::size_t first = n;
   // Parallel scan; the minimum bad index keeps the message deterministic.
-#pragma omp parallel for reduction(min : first) schedule(static)
+#pragma omp parallel for reduction(min : first) schedule(static) if (n >= parallel_items)
   for (std::size_t i = 0; i < n; ++i) {
     if (!std::isfinite(xyz[3 * i]) || !std::isfinite(xyz[3 * i + 1]) ||
         !std::isfinite(xyz[3 * i + 2]))

@@ -25,6 +25,7 @@
 
 #include "core/method.hpp"
 #include "cpu/host_method.hpp"
+#include "raycut/detail/host_threads.hpp"
 
 namespace raycut::detail {
 namespace {
@@ -157,7 +158,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     // cell.
     const PointImage* image = points.images.image;  // which points are queries
     std::vector<Entry> entries(n);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (n >= parallel_items)
     for (std::size_t i = 0; i < n; ++i)
       entries[i] = {
           image && image[i].source == not_a_source ? 1u : 0u,
@@ -226,7 +227,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   void walk_neighbour_cells(Emit&& emit) const {
     const std::size_t cells = cell_keys_.size();
     constexpr std::size_t chunk = 4096;
-#pragma omp parallel for schedule(dynamic, 1)
+#pragma omp parallel for schedule(dynamic, 1) if (cells > chunk)
     for (std::size_t begin = 0; begin < cells; begin += chunk) {
       std::size_t cursor[3][3];
       bool started[3][3] = {};

@@ -6,6 +6,7 @@
 
 #include <cstddef>
 
+#include "raycut/detail/host_threads.hpp"
 #include "raycut/sph/scenario.hpp"
 #include "sph/physics.hpp"
 
@@ -48,7 +49,7 @@ namespace host {
 inline void density_and_pressure(const float* neighbour_density, float* rho, float* p,
                                  std::size_t n, const StepConstants& c) {
   const long long count = static_cast<long long>(n);
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (n >= raycut::detail::parallel_items)
   for (long long i = 0; i < count; ++i) {
     rho[i] = density_with_self(neighbour_density ? neighbour_density[i] : 0.0f, c);
     p[i] = pressure_of(rho[i], c);
@@ -62,12 +63,12 @@ inline void integrate(float* x, float* v, const float* force, const float* rho, 
   const long long count = static_cast<long long>(n);
   const float zero[3] = {0.0f, 0.0f, 0.0f};
   if (fixed) {
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (n >= raycut::detail::parallel_items)
     for (long long i = 0; i < count; ++i)
       integrate_or_hold(&x[3 * i], &v[3 * i], force ? &force[3 * i] : zero, rho[i], fixed[i], c);
     return;
   }
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (n >= raycut::detail::parallel_items)
   for (long long i = 0; i < count; ++i)
     integrate_particle(&x[3 * i], &v[3 * i], force ? &force[3 * i] : zero, rho[i], c);
 }
