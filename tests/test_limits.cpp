@@ -289,4 +289,31 @@ TEST(CompareValues, NaNAndOneSidedInfinityAreMismatches) {
                    2.0);
 }
 
+// `raycut check`'s smooth tolerance grows with the terms: 3,000 coincident particles far from
+// the origin (at x = 1e5), C = 0.9: each target sums 2,999 equal terms w^2 (not a power of two),
+// whose float sum is 3e-5 off the double one (more than the 1e-5 relative the check used to
+// allow, which flagged exact results) and within the float summation bound. An error of 1e-3 of
+// one target's sum (a wrong term, say) is still caught; a single term out of 3,000 near-equal
+// ones is within what float summation may lose, and is the list comparison's to catch (pairs
+// are compared exactly).
+TEST(CompareValues, SmoothBoundGrowsWithTheTermsAndStillCatchesAnError) {
+  const std::size_t n = 3000;
+  std::vector<float> xyz(3 * n, 0.0f);
+  for (std::size_t i = 0; i < n; ++i) xyz[3 * i] = 1e5f;
+  raycut::Engine engine("cell-list");
+  engine.build({xyz.data(), n, raycut::MemorySpace::host}, 0.9f);
+  const raycut::NeighbourList list = engine.neighbours();
+  ASSERT_EQ(list.indices.size(), n * (n - 1));
+  const raycut::SmoothReference ref = raycut::smooth_reference(xyz.data(), 0.9f, list);
+  raycut::Results got = engine.compute(raycut::Kernel::smooth);
+  double old_relative = 0;  // the former criterion: |e - e_ref| / (count C^4)
+  for (std::size_t i = 0; i < n; ++i)
+    old_relative = std::max(
+        old_relative, std::fabs(got.energy[i] - ref.energy[i]) / ((n - 1) * std::pow(0.9, 4)));
+  EXPECT_GT(old_relative, 1e-5) << "the case no longer shows the float sum's error";
+  EXPECT_LE(raycut::smooth_bound_ratio(got, ref), 1.0);
+  got.energy[17] *= 1.001f;
+  EXPECT_GT(raycut::smooth_bound_ratio(got, ref), 1.0);
+}
+
 }  // namespace

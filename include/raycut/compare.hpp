@@ -37,4 +37,23 @@ double scaled_difference(double got, double want, double scale);
 double max_scaled_difference(const std::vector<float>& got, const std::vector<float>& want,
                              const std::vector<double>& scale, std::size_t stride = 1);
 
+// The smooth kernel (include/raycut/kernels.hpp: w = C^2 - r^2, energy += w^2, force += w r)
+// summed in double over a list's entries (r = x_j - x_i + S . cell, S from the list's shifts in
+// a box), and per target the error a float evaluation of the same terms may have:
+//   bound = 2 ((n + 1) u sum|t| + n e_t),  u = 2^-24, n the target's terms,
+// the first part the worst case of a float sum of n terms in any order, e_t the error of one
+// float term (13 u C^4 for the energy, 9 u C^3 for the force, plus what r's rounding at the box's
+// scale adds in a periodic box), doubled to spare. A tolerance a check can defend: it grows
+// with the number and the size of the terms, not with the magnitude of the positions.
+struct SmoothReference {
+  std::vector<double> energy, force;              // per target (force: 3 per target)
+  std::vector<double> energy_bound, force_bound;  // per target
+};
+SmoothReference smooth_reference(const float* xyz, float cutoff, const NeighbourList& list,
+                                 const Box& box = Box::open());
+
+// The largest |got - reference| / bound over every energy and force value: <= 1 passes. +inf
+// when a value is NaN, non-finite on one side only, or the sizes differ (scaled_difference).
+double smooth_bound_ratio(const Results& got, const SmoothReference& reference);
+
 }  // namespace raycut

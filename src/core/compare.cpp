@@ -109,4 +109,68 @@ double max_scaled_difference(const std::vector<float>& got, const std::vector<fl
   return worst;
 }
 
+SmoothReference smooth_reference(const float* xyz, float cutoff, const NeighbourList& list,
+                                 const Box& box) {
+  constexpr double u = 0x1p-24;
+  const std::size_t n = list.offsets.empty() ? 0 : list.offsets.size() - 1;
+  const bool with_shifts = !list.shifts.empty();
+  const double c = cutoff, c2 = c * c;
+  // In a box, the methods' r carries the rounding of image positions at the box's scale.
+  double extent = 0;
+  for (int k = 0; k < 3; ++k)
+    if (box.pbc[k])
+      extent += std::fabs(box.cell[k][0]) + std::fabs(box.cell[k][1]) + std::fabs(box.cell[k][2]);
+  const double r_error = 4 * std::sqrt(3.0) * u * (extent + c);
+  const double energy_term_error = 13 * u * c2 * c2 + 4 * c2 * c * r_error;
+  const double force_term_error = 9 * u * c2 * c + 3 * c2 * r_error;
+  SmoothReference ref;
+  ref.energy.assign(n, 0);
+  ref.force.assign(3 * n, 0);
+  ref.energy_bound.assign(n, 0);
+  ref.force_bound.assign(n, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    double energy_abs = 0, force_abs[3] = {0, 0, 0};
+    for (std::uint64_t p = list.offsets[i]; p < list.offsets[i + 1]; ++p) {
+      const std::size_t j = list.indices[p];
+      double r[3];
+      for (int a = 0; a < 3; ++a) {
+        r[a] = static_cast<double>(xyz[3 * j + a]) - static_cast<double>(xyz[3 * i + a]);
+        if (with_shifts)
+          for (int k = 0; k < 3; ++k) r[a] += list.shifts[3 * p + k] * box.cell[k][a];
+      }
+      const double w = c2 - (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+      ref.energy[i] += w * w;
+      energy_abs += w * w;
+      for (int a = 0; a < 3; ++a) {
+        ref.force[3 * i + a] += w * r[a];
+        force_abs[a] += std::fabs(w * r[a]);
+      }
+    }
+    const double terms = static_cast<double>(list.offsets[i + 1] - list.offsets[i]);
+    ref.energy_bound[i] = 2 * ((terms + 1) * u * energy_abs + terms * energy_term_error);
+    const double largest_force_abs = std::max({force_abs[0], force_abs[1], force_abs[2]});
+    ref.force_bound[i] = 2 * ((terms + 1) * u * largest_force_abs + terms * force_term_error);
+  }
+  return ref;
+}
+
+double smooth_bound_ratio(const Results& got, const SmoothReference& ref) {
+  constexpr double failure = std::numeric_limits<double>::infinity();
+  const std::size_t n = ref.energy.size();
+  if (got.energy.size() != n || got.force.size() != 3 * n) return failure;
+  double worst = 0;
+  const auto take = [&](double d) {
+    if (!(d <= worst)) worst = d;
+  };
+  for (std::size_t i = 0; i < n; ++i) {
+    // A bound of 0 (no terms): any difference fails, none passes.
+    const double eb = ref.energy_bound[i] > 0 ? ref.energy_bound[i] : 1e-300;
+    const double fb = ref.force_bound[i] > 0 ? ref.force_bound[i] : 1e-300;
+    take(scaled_difference(got.energy[i], ref.energy[i], eb));
+    for (int a = 0; a < 3; ++a)
+      take(scaled_difference(got.force[3 * i + a], ref.force[3 * i + a], fb));
+  }
+  return worst;
+}
+
 }  // namespace raycut
