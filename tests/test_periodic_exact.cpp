@@ -188,6 +188,52 @@ TEST(PeriodicExact, FuzzFixedSeeds) {
   }
 }
 
+// Batches: three random systems in one build, each in its own box (and its own frame), each
+// system's rows checked against its own oracle, and no pair across systems.
+TEST(PeriodicExact, FuzzBatches) {
+  for (std::uint64_t seed = 1000; seed < 1060; ++seed) {
+    const FuzzCase cases[3] = {make_case(seed), make_case(seed + 7919), make_case(seed + 104729)};
+    std::vector<float> xyz;
+    raycut::Systems systems;
+    systems.offsets = {0};
+    // One cutoff for the batch: the smallest, so every system's own cutoff-scaled layout stays
+    // near its pairs (the oracle takes the same cutoff).
+    double cutoff = cases[0].cutoff;
+    for (const FuzzCase& c : cases) cutoff = std::min(cutoff, c.cutoff);
+    for (const FuzzCase& c : cases) {
+      xyz.insert(xyz.end(), c.xyz.begin(), c.xyz.end());
+      systems.offsets.push_back(xyz.size() / 3);
+      systems.boxes.push_back(c.box);
+    }
+    const auto c32 = static_cast<float>(cutoff);
+    for (const std::string& method : exact_methods) {
+      raycut::Engine engine(method);
+      engine.build({xyz.data(), xyz.size() / 3, raycut::MemorySpace::host}, c32, systems);
+      const raycut::NeighbourList list = engine.neighbours({.shifts = true});
+      for (std::size_t s = 0; s < 3; ++s) {
+        const std::uint64_t first = systems.offsets[s], last = systems.offsets[s + 1];
+        std::vector<std::uint32_t> i, j;
+        std::vector<std::int32_t> shifts;
+        for (std::uint64_t r = first; r < last; ++r)
+          for (std::uint64_t p = list.offsets[r]; p < list.offsets[r + 1]; ++p) {
+            ASSERT_TRUE(list.indices[p] >= first && list.indices[p] < last)
+                << method << ", seed " << seed << ": a pair across systems";
+            i.push_back(static_cast<std::uint32_t>(r - first));
+            j.push_back(static_cast<std::uint32_t>(list.indices[p] - first));
+            shifts.insert(shifts.end(), &list.shifts[3 * p], &list.shifts[3 * p + 3]);
+          }
+        const raycut_test::PeriodicOracle oracle = raycut_test::make_periodic_oracle(
+            cases[s].xyz, cases[s].box, static_cast<double>(c32), 1e-6);
+        const raycut_test::PeriodicCheck check =
+            raycut_test::check_periodic_pairs(oracle, i, j, shifts, false);
+        ASSERT_TRUE(check.ok) << method << ", batch of seed " << seed << ", system " << s << " ("
+                              << cases[s].description << "):\n"
+                              << check.problems;
+      }
+    }
+  }
+}
+
 TEST(PeriodicExact, FuzzFreshSeed) {
   const std::uint64_t seed = std::random_device{}() | (std::uint64_t{std::random_device{}()} << 32);
   SCOPED_TRACE("fresh seed " + std::to_string(seed));
