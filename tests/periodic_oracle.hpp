@@ -44,9 +44,10 @@ using PeriodicTriple = std::array<std::int64_t, 5>;
 enum class ImageClass { in, band, out };
 
 struct PeriodicOracle {
-  std::vector<float> xyz;      // the particles; with query points, the queries (the i of triples)
-  std::vector<float> sources;  // with query points, the sources (the j); else unused
-  bool query = false;          // two point sets: no (i, i, 0) exclusion, j indexes `sources`
+  // In double: float positions exactly, or float64 ones as given.
+  std::vector<double> xyz;      // the particles; with query points, the queries (the i of triples)
+  std::vector<double> sources;  // with query points, the sources (the j); else unused
+  bool query = false;           // two point sets: no (i, i, 0) exclusion, j indexes `sources`
   double cell[3][3] = {};
   bool pbc[3] = {};
   double cutoff = 0;
@@ -56,11 +57,11 @@ struct PeriodicOracle {
 
   std::size_t size() const { return xyz.size() / 3; }  // targets (rows)
   std::size_t source_count() const { return query ? sources.size() / 3 : size(); }
-  const float* source_xyz() const { return query ? sources.data() : xyz.data(); }
+  const double* source_xyz() const { return query ? sources.data() : xyz.data(); }
 
   std::array<double, 3> vector(std::size_t i, std::size_t j, const std::int64_t s[3]) const {
     std::array<double, 3> r;
-    const float* xj = source_xyz() + 3 * j;
+    const double* xj = source_xyz() + 3 * j;
     for (int c = 0; c < 3; ++c) {
       r[c] = static_cast<double>(xj[c]) - static_cast<double>(xyz[3 * i + c]);
       for (int m = 0; m < 3; ++m) r[c] += static_cast<double>(s[m]) * cell[m][c];
@@ -160,7 +161,7 @@ inline void enumerate(PeriodicOracle& o) {
   const auto g = reciprocal(o.cell, o.pbc);
   const double reach = o.cutoff * (1 + o.band);
   const std::size_t n = o.size(), m = o.source_count();
-  const float* xs = o.source_xyz();
+  const double* xs = o.source_xyz();
   for (std::size_t i = 0; i < n; ++i) {
     for (std::size_t j = 0; j < m; ++j) {
       double d[3];
@@ -199,25 +200,32 @@ inline void enumerate(PeriodicOracle& o) {
 }  // namespace periodic_detail
 
 // `box`: anything with double cell[3][3] and bool pbc[3] (raycut::Box; only its fields are read).
-template <class BoxLike>
-PeriodicOracle make_periodic_oracle(const std::vector<float>& xyz, const BoxLike& box,
-                                    double cutoff, double band = 1e-5) {
+// `Real`: float or double positions.
+template <class Real, class BoxLike>
+PeriodicOracle make_periodic_oracle(const std::vector<Real>& xyz, const BoxLike& box, double cutoff,
+                                    double band = 1e-5) {
   PeriodicOracle o;
-  o.xyz = xyz;
+  o.xyz.assign(xyz.begin(), xyz.end());
   periodic_detail::set_box(o, box, cutoff, band);
   periodic_detail::enumerate(o);
   return o;
 }
 
+// Float positions written as a braced list, {0, 0, 0, 0.5f, 0, 0}.
+template <class BoxLike>
+PeriodicOracle make_periodic_oracle(const std::vector<float>& xyz, const BoxLike& box,
+                                    double cutoff, double band = 1e-5) {
+  return make_periodic_oracle<float, BoxLike>(xyz, box, cutoff, band);
+}
+
 // Queries (targets, rows) against sources: triples (q, p, S), r = p - q + S . cell, every one
 // with |r| < C, (q, p, 0) included when they coincide.
-template <class BoxLike>
-PeriodicOracle make_query_oracle(const std::vector<float>& queries,
-                                 const std::vector<float>& sources, const BoxLike& box,
-                                 double cutoff, double band = 1e-5) {
+template <class Real, class BoxLike>
+PeriodicOracle make_query_oracle(const std::vector<Real>& queries, const std::vector<Real>& sources,
+                                 const BoxLike& box, double cutoff, double band = 1e-5) {
   PeriodicOracle o;
-  o.xyz = queries;
-  o.sources = sources;
+  o.xyz.assign(queries.begin(), queries.end());
+  o.sources.assign(sources.begin(), sources.end());
   o.query = true;
   periodic_detail::set_box(o, box, cutoff, band);
   periodic_detail::enumerate(o);

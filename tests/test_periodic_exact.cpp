@@ -37,6 +37,7 @@ struct FuzzCase {
   double cutoff = 1;
   raycut::Box box;
   std::vector<float> xyz;
+  std::vector<double> xyz64;  // the same points before their rounding to float
   std::string description;
 };
 
@@ -104,7 +105,10 @@ FuzzCase make_case(std::uint64_t seed) {
     }
   }
   for (const auto& x : points)
-    for (double v : x) c.xyz.push_back(static_cast<float>(v));
+    for (double v : x) {
+      c.xyz.push_back(static_cast<float>(v));
+      c.xyz64.push_back(v);
+    }
   c.description = "seed " + std::to_string(seed) + ": L/C " + std::to_string(ratio) + ", cell " +
                   (kind == 0   ? "orthorhombic"
                    : kind == 1 ? "skewed"
@@ -125,19 +129,26 @@ std::vector<PeriodicTriple> triples(const raycut::NeighbourList& list) {
   return out;
 }
 
-// Runs one case on one method; returns the failures (empty when it passes).
-std::string run_case(const FuzzCase& c, const std::string& method) {
+// Runs one case on one method, from the float positions or the float64 ones (then the oracle
+// takes those); returns the failures (empty when it passes).
+std::string run_case(const FuzzCase& c, const std::string& method, bool float64) {
   raycut::Engine engine(method);
   try {
-    engine.build({c.xyz.data(), c.xyz.size() / 3, raycut::MemorySpace::host},
-                 static_cast<float>(c.cutoff), c.box);
+    if (float64)
+      engine.build(raycut::Float64Positions{c.xyz64.data(), c.xyz64.size() / 3},
+                   static_cast<float>(c.cutoff), raycut::Systems::periodic(c.box));
+    else
+      engine.build({c.xyz.data(), c.xyz.size() / 3, raycut::MemorySpace::host},
+                   static_cast<float>(c.cutoff), c.box);
   } catch (const raycut::Error& e) {
     return std::string("build refused: ") + e.what();
   }
   const raycut::NeighbourList full = engine.neighbours({.shifts = true});
   const raycut::NeighbourList half = engine.neighbours({.half = true, .shifts = true});
-  const raycut_test::PeriodicOracle oracle = raycut_test::make_periodic_oracle(
-      c.xyz, c.box, static_cast<double>(static_cast<float>(c.cutoff)), 1e-6);
+  const double cutoff = static_cast<float>(c.cutoff);
+  const raycut_test::PeriodicOracle oracle =
+      float64 ? raycut_test::make_periodic_oracle(c.xyz64, c.box, cutoff, 1e-6)
+              : raycut_test::make_periodic_oracle(c.xyz, c.box, cutoff, 1e-6);
   std::string failures;
   for (const bool is_half : {false, true}) {
     const raycut::NeighbourList& list = is_half ? half : full;
@@ -169,12 +180,14 @@ std::string run_case(const FuzzCase& c, const std::string& method) {
 
 void run_seed(std::uint64_t seed) {
   const FuzzCase c = make_case(seed);
-  for (const std::string& method : exact_methods) {
-    const std::string failures = run_case(c, method);
-    EXPECT_TRUE(failures.empty()) << method << ", " << c.description << " (replay with "
-                                  << "RAYCUT_FUZZ_SEED=" << seed << "):\n"
-                                  << failures.substr(0, 2000);
-  }
+  for (const std::string& method : exact_methods)
+    for (const bool float64 : {false, true}) {
+      const std::string failures = run_case(c, method, float64);
+      EXPECT_TRUE(failures.empty())
+          << method << (float64 ? ", float64 positions" : "") << ", " << c.description
+          << " (replay with RAYCUT_FUZZ_SEED=" << seed << "):\n"
+          << failures.substr(0, 2000);
+    }
 }
 
 TEST(PeriodicExact, FuzzFixedSeeds) {
@@ -267,6 +280,41 @@ TEST(PeriodicExact, PairAcrossTheFaceOfAHugeBoxAtTheCutoff) {
     EXPECT_EQ(list.shifts[0], -1) << method;
     EXPECT_EQ(list.shifts[3], 1) << method;
   }
+}
+
+// float64 positions in an open cloud far from the origin: the two points round to floats 1.0
+// apart (spacing 0.0625 at 1e6) while they are 1 - 1e-9 apart, so the float search alone says
+// "no pair". The float64 build lists the pair, with r from the doubles; update() keeps that.
+TEST(PeriodicExact, Float64OpenCloudFarFromTheOrigin) {
+  const std::vector<double> xyz = {1e6 + 0.01, 0, 0, 1e6 + 1.01 - 1e-9, 0, 0};
+  for (const std::string& method : exact_methods) {
+    raycut::Engine engine(method);
+    engine.build(raycut::Float64Positions{xyz.data(), 2}, 1.0f);
+    raycut::NeighbourList list = engine.neighbours({.vectors = true});
+    ASSERT_EQ(list.indices.size(), 2u) << method;
+    EXPECT_EQ(list.vectors[0], static_cast<float>(xyz[3] - xyz[0])) << method;
+    std::vector<double> moved = xyz;
+    moved[3] += 2e-9;  // now 1 + 1e-9 apart: out
+    engine.update(raycut::Float64Positions{moved.data(), 2});
+    EXPECT_EQ(engine.neighbours().indices.size(), 0u) << method;
+    // The same positions as float32: their rounding decides (1.0 apart: no pair).
+    const std::vector<float> rounded(xyz.begin(), xyz.end());
+    engine.build({rounded.data(), 2, raycut::MemorySpace::host}, 1.0f);
+    EXPECT_EQ(engine.neighbours().indices.size(), 0u) << method;
+  }
+}
+
+TEST(PeriodicExact, Float64RefusesWhatFloatCannotHold) {
+  raycut::Engine engine("cell-list");
+  const std::vector<double> huge = {0, 0, 0, 1e39, 0, 0};
+  try {
+    engine.build(raycut::Float64Positions{huge.data(), 2}, 1.0f);
+    FAIL() << "1e39 accepted";
+  } catch (const raycut::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("particle index 1"), std::string::npos) << e.what();
+  }
+  const std::vector<double> nan = {0, 0, std::nan(""), 0, 0, 0};
+  EXPECT_THROW(engine.build(raycut::Float64Positions{nan.data(), 2}, 1.0f), raycut::Error);
 }
 
 }  // namespace

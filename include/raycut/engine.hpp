@@ -30,6 +30,14 @@ struct PositionsView {
   MemorySpace space = MemorySpace::host;
 };
 
+// (N,3) float64 positions in host memory. The search runs on them rounded to float; on the CPU
+// methods every pair that rounding could decide is decided in double from these, so the pairs
+// are the float64 answer (docs/limits.md). The engine does not keep the pointer beyond build().
+struct Float64Positions {
+  const double* xyz = nullptr;
+  std::size_t size = 0;
+};
+
 // What build() takes beyond positions and a cutoff (spec/NEIGHBOURS.md, 2-4): periodic boxes,
 // batches of independent systems, and a second point set. The default is one open system.
 //
@@ -288,11 +296,15 @@ class Engine {
   void build(PositionsView positions, float cutoff, const Box& box) {
     build(positions, cutoff, Systems::periodic(box));
   }
+  // float64 positions (host memory), open or with Systems (query points stay float32). A value
+  // beyond the float range is refused, naming the particle.
+  void build(Float64Positions positions, float cutoff, const Systems& systems = {});
 
   // New positions of the same N particles, cutoff and systems unchanged: refit or rebuild per
   // the policy (with boxes or batches: a rebuild; with query points: Error(unsupported), build
   // again).
   void update(PositionsView positions);
+  void update(Float64Positions positions);  // after a float64 build: rebuilds
   void set_update_policy(const UpdatePolicy& policy);
 
   // Computes `kernel` for every target and keeps the results in the method's memory.
@@ -339,6 +351,10 @@ class Engine {
   // positions they checked), so a plain update skips its finiteness pass (one with systems
   // rebuilds, and checks as build() does).
   void update(PositionsView positions, bool checked);
+  // build(positions, cutoff, systems) over the points path; `float64`: the caller's positions
+  // in double when `positions` are their float rounding (Float64Positions).
+  void build_points(PositionsView positions, float cutoff, const Systems& systems,
+                    const double* float64);
   template <class F>
   void with_positions_in_method_space(const PositionsView& positions, F&& f);
   detail::Method& impl(const char* call) const;
@@ -358,6 +374,7 @@ class Engine {
   float plan_cutoff_ = 0;
   bool plan_queries_ = false;
   bool queries_ = false;  // built with query points
+  bool float64_ = false;  // built from Float64Positions
   bool built_ = false;
   bool has_run_ = false;
   Timings timings_;

@@ -3,6 +3,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <limits>
+#include <new>
+#include <string>
 #include <vector>
 
 #include "core/images.hpp"
@@ -131,6 +134,7 @@ void Engine::build(PositionsView positions, float cutoff) {
   detail::Method& m = impl("build");
   detail::validate_cutoff(cutoff);
   validate_positions(positions, stream_);
+  float64_ = false;
   built_ = false;
   has_run_ = false;
   size_ = sources_ = positions.size;
@@ -159,7 +163,63 @@ void Engine::build(PositionsView positions, float cutoff, const Systems& systems
     build(positions, cutoff);
     return;
   }
+  build_points(positions, cutoff, systems, nullptr);
+}
+
+void Engine::build(Float64Positions positions, float cutoff, const Systems& systems) {
+  if (positions.size > 0 && positions.xyz == nullptr)
+    throw Error(ErrorCode::invalid_argument, "float64 positions pointer is null for N = " +
+                                                 std::to_string(positions.size) + " particles");
+  // Rounded to float for the search; the doubles decide what that rounding could (images.cpp).
+  std::vector<float> rounded;
+  try {
+    rounded.resize(3 * positions.size);
+  } catch (const std::bad_alloc&) {
+    throw Error(ErrorCode::out_of_memory, "not enough host memory for the float copy of " +
+                                              std::to_string(positions.size) +
+                                              " float64 positions");
+  }
+  for (std::size_t k = 0; k < 3 * positions.size; ++k) {
+    const double v = positions.xyz[k];
+    if (!std::isfinite(v) || std::fabs(v) > std::numeric_limits<float>::max())
+      throw Error(
+          ErrorCode::invalid_input,
+          std::string(std::isfinite(v) ? "coordinate beyond the float range (|x| <= " +
+                                             std::to_string(std::numeric_limits<float>::max()) + ")"
+                                       : "non-finite coordinate") +
+              " at particle index " + std::to_string(k / 3) + ": " + std::to_string(v));
+    rounded[k] = static_cast<float>(v);
+  }
+  const PositionsView view{rounded.data(), positions.size, MemorySpace::host};
+  // A method without the points path (OptiX, grid-paper) searches the rounded positions.
+  if (systems.plain() && !impl("build").points_unsupported().empty()) {
+    build(view, cutoff);
+  } else {
+    build_points(view, cutoff, systems, positions.xyz);
+  }
+  float64_ = true;
+}
+
+void Engine::update(Float64Positions positions) {
+  if (!built_) throw Error(ErrorCode::invalid_argument, "Engine::update() called before build()");
+  if (!float64_)
+    throw Error(ErrorCode::invalid_argument,
+                "Engine::update() with float64 positions after a float32 build: build() again");
+  if (positions.size != sources_)
+    throw Error(ErrorCode::invalid_argument,
+                "Engine::update() needs the " + std::to_string(sources_) +
+                    " particles of build(), got " + std::to_string(positions.size));
+  if (queries_)
+    throw Error(ErrorCode::unsupported,
+                "Engine::update() with query points: call build() with the new positions");
+  const Systems systems = systems_;
+  build(positions, cutoff_, systems);
+}
+
+void Engine::build_points(PositionsView positions, float cutoff, const Systems& systems,
+                          const double* float64) {
   detail::Method& m = impl("build");
+  float64_ = false;
   detail::validate_cutoff(cutoff);
   // Device sources of a device method: the device expansion's first pass checks their values
   // (src/cuda/images.cu), one kernel and one read-back less per build.
@@ -215,6 +275,7 @@ void Engine::build(PositionsView positions, float cutoff, const Systems& systems
 #endif
         }
       }
+      images_->set_float64_sources(float64);
       images_->expand(plan, sources, queries, stream_);
       m.build_points(images_->points(), cutoff);
       m.synchronize();

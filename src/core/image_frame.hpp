@@ -34,7 +34,9 @@ struct WrappedPoint {
   bool ok;
 };
 
-RAYCUT_HD WrappedPoint wrap_point(const ImageFrame& frame, const float* xyz) {
+// `Real`: float, or double for float64 positions (Engine::build(Float64Positions), host).
+template <class Real>
+RAYCUT_HD WrappedPoint wrap_point(const ImageFrame& frame, const Real* xyz) {
   WrappedPoint w{};
   w.ok = true;
   const double x[3] = {xyz[0], xyz[1], xyz[2]};
@@ -92,7 +94,8 @@ RAYCUT_HD std::uint64_t for_each_image(const ImageFrame& frame, const WrappedPoi
 // The frame origin of a system of a batch, from its first point: that point's components along
 // the non-periodic directions (its wrapped position less its periodic part), so that every
 // system lies near the origin, each in its own frame, whatever its absolute position.
-RAYCUT_HD void system_origin(ImageFrame& frame, const float* first) {
+template <class Real>
+RAYCUT_HD void system_origin(ImageFrame& frame, const Real* first) {
   const WrappedPoint w = wrap_point(frame, first);
   for (int c = 0; c < 3; ++c) {
     double o = w.x[c];

@@ -74,6 +74,7 @@ class HostImagePoints final : public ImagePoints {
   std::vector<std::uint64_t> image_offset_;
   // What decides the pairs in double: the caller's positions, kept while the build lives.
   std::vector<float> sources_, queries_;
+  std::vector<double> sources64_;
   std::vector<double> cells_;
   ExactImages exact_;
 };
@@ -101,7 +102,8 @@ void set_float_band(ExactImages& exact, double cutoff, double rounding) {
   exact.exact_vectors = rounding > std::ldexp(cutoff, -16);
 }
 
-[[noreturn]] void refuse_wrap(std::size_t index, const float* x, const char* what) {
+template <class Real>
+[[noreturn]] void refuse_wrap(std::size_t index, const Real* x, const char* what) {
   refuse(std::string(what) + " " + std::to_string(index) + " at (" + std::to_string(x[0]) + ", " +
          std::to_string(x[1]) + ", " + std::to_string(x[2]) +
          ") lies more than 2^31 boxes away: its image shift leaves the int32 range");
@@ -109,6 +111,7 @@ void set_float_band(ExactImages& exact, double cutoff, double rounding) {
 
 void HostImagePoints::expand(const ImagePlan& plan, const float* sources, const float* queries,
                              void*) {
+  const double* float64 = float64_sources_;
   const std::uint32_t systems = plan.systems();
   const std::size_t n = plan.source_count(), targets = plan.target_count();
   const bool with_queries = plan.has_queries();
@@ -116,7 +119,8 @@ void HostImagePoints::expand(const ImagePlan& plan, const float* sources, const 
   if (plan.own_frames)
     for (std::uint32_t s = 0; s < systems; ++s) {
       if (plan.sources[s] < plan.sources[s + 1])
-        system_origin(frames[s], sources + 3 * plan.sources[s]);
+        float64 ? system_origin(frames[s], float64 + 3 * plan.sources[s])
+                : system_origin(frames[s], sources + 3 * plan.sources[s]);
       else if (with_queries && plan.queries[s] < plan.queries[s + 1])
         system_origin(frames[s], queries + 3 * plan.queries[s]);
     }
@@ -126,7 +130,8 @@ void HostImagePoints::expand(const ImagePlan& plan, const float* sources, const 
   image_offset_.assign(n + 1, 0);
   for (std::uint32_t s = 0; s < systems; ++s)
     for (std::uint64_t p = plan.sources[s]; p < plan.sources[s + 1]; ++p) {
-      wrapped_[p] = wrap_point(frames[s], sources + 3 * p);
+      wrapped_[p] =
+          float64 ? wrap_point(frames[s], float64 + 3 * p) : wrap_point(frames[s], sources + 3 * p);
       if (!wrapped_[p].ok) refuse_wrap(p, sources + 3 * p, "particle");
       image_offset_[p + 1] = image_count(frames[s], wrapped_[p], false);
     }
@@ -181,6 +186,7 @@ void HostImagePoints::expand(const ImagePlan& plan, const float* sources, const 
   }
 
   sources_.assign(sources, sources + 3 * n);
+  sources64_.assign(float64, float64 ? float64 + 3 * n : float64);
   queries_.assign(queries, queries + (with_queries ? 3 * plan.queries.back() : 0));
   cells_.resize(9 * std::size_t{systems});
   for (std::uint32_t s = 0; s < systems; ++s)
@@ -189,6 +195,7 @@ void HostImagePoints::expand(const ImagePlan& plan, const float* sources, const 
   float extent = 0;
   for (const float v : xyz_) extent = std::max(extent, std::fabs(v));
   exact_.sources = sources_.data();
+  exact_.sources64 = float64 ? sources64_.data() : nullptr;
   exact_.queries = with_queries ? queries_.data() : nullptr;
   exact_.image = image_.data();
   exact_.system = systems > 1 ? system_.data() : nullptr;

@@ -52,6 +52,10 @@ class ImagePoints {
   virtual void expand(const ImagePlan& plan, const float* sources, const float* queries,
                       void* stream) = 0;
   const Points& points() const { return points_; }
+  // The caller's positions in double, of which the next expand()'s sources are the float
+  // rounding (Engine::build(Float64Positions)); null: the sources as given. The host expansion
+  // wraps and decides pairs from them; the device one searches the floats.
+  void set_float64_sources(const double* xyz) { float64_sources_ = xyz; }
 
  protected:
   // What points() hands the method after an expansion into these arrays.
@@ -65,6 +69,7 @@ class ImagePoints {
     points_.systems = plan.systems();
     points_.system = plan.systems() > 1 ? system : nullptr;
   }
+  const double* float64_sources_ = nullptr;
 
  private:
   Points points_;

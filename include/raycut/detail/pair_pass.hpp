@@ -29,6 +29,7 @@ struct PointImage;
 // full list holds (i, j, S) iff it holds (j, i, -S), and every pair is the float64 answer.
 struct ExactImages {
   const float* sources = nullptr;         // the caller's particles (N, 3), as given
+  const double* sources64 = nullptr;      // the same in double when given so (else null)
   const float* queries = nullptr;         // the caller's query points (M, 3); null: none
   const PointImage* image = nullptr;      // by point: source and shift T
   const std::uint32_t* system = nullptr;  // by point; null: one system
