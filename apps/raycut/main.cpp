@@ -128,6 +128,27 @@ CLI::Validator count_option() {
       "a whole number >= 0");
 }
 
+CLI::Validator cutoff_option() {
+  return validator(
+      [](const std::string& t) {
+        double v = 0;
+        const auto [ptr, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
+        return !t.empty() && ec == std::errc() && ptr == t.data() + t.size() && v >= 0x1p-60 &&
+               v <= 0x1p60;
+      },
+      "a cutoff in [2^-60, 2^60] = [8.67e-19, 1.15e18]");
+}
+
+CLI::Validator seed_option() {
+  return validator(
+      [](const std::string& t) {
+        std::uint64_t v = 0;
+        const auto [ptr, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
+        return !t.empty() && ec == std::errc() && ptr == t.data() + t.size();
+      },
+      "a whole number in [0, 2^64 - 1 = 18446744073709551615]");
+}
+
 CLI::Validator one_of(std::vector<std::string> names, std::string what) {
   std::string list;
   for (const auto& name : names) list += (list.empty() ? "" : ", ") + name;
@@ -280,11 +301,11 @@ Command add_generate(CLI::App& app) {
       ->check(CLI::IsMember({"uniform", "surface"}));
   cmd->add_option("-n,--n", o->n, "Number of particles (families)")->check(count_option());
   cmd->add_option("-c,--cutoff", o->cutoff, "Cutoff the family is made for")
-      ->check(positive_finite());
+      ->check(cutoff_option());
   cmd->add_option("--param", o->param, "beta (uniform) or alpha (surface)")
       ->check(positive_integer());
   cmd->add_option("--p", o->p, "Mean particles per cell")->check(positive_integer());
-  cmd->add_option("--seed", o->seed, "Random seed");
+  cmd->add_option("--seed", o->seed, "Random seed")->check(seed_option());
   cmd->add_option("-o,--out", o->out, "Output file (.csv or .xyz, any case)")->required();
   return [o] {
     check_positions_extension(o->out);

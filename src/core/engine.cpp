@@ -1,5 +1,6 @@
 #include "raycut/engine.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -9,6 +10,7 @@
 #include "core/list_storage.hpp"
 #include "core/method.hpp"
 #include "core/validation.hpp"
+#include "raycut/host_memory.hpp"
 #if defined(RAYCUT_HAVE_CUDA)
 #include "cuda/images.hpp"
 #include "cuda/runtime.hpp"
@@ -391,7 +393,26 @@ PaddedReport Engine::padded_neighbours(PaddedNeighbourBuffer& list, std::uint32_
     return {};
   }
   list.storage_->padding = static_cast<std::uint32_t>(sources_);
-  m.padded_neighbours(*list.storage_, k, false, shifts);
+  // No row holds more entries than there are candidate points (each source once per image):
+  // a K above that only adds padding. A matrix that does not fit is refused before it is
+  // allocated, the message saying which K is enough.
+  const std::uint64_t candidates =
+      images_ ? images_->points().size - (queries_ ? images_->points().targets : 0) : sources_;
+  const double bytes =
+      4.0 * static_cast<double>(size_) * ((shifts ? 4.0 : 1.0) * static_cast<double>(k) + 1);
+  const std::string what = "the padded neighbour list [N = " + std::to_string(size_) +
+                           ", K = " + std::to_string(k) + "]" + (shifts ? " with shifts" : "");
+  const std::string bound =
+      "; no row can hold more than " + std::to_string(candidates) + " neighbours here (" +
+      std::to_string(sources_) + " particles" + (images_ ? " and their images" : "") +
+      "), so K = " + std::to_string(std::max<std::uint64_t>(candidates, 1)) + " is always enough";
+  try {
+    if (m.space() == MemorySpace::host) require_host_memory(bytes, what);
+    m.padded_neighbours(*list.storage_, k, false, shifts);
+  } catch (const Error& e) {
+    if (e.code() != ErrorCode::out_of_memory || k <= candidates) throw;
+    throw Error(ErrorCode::out_of_memory, e.what() + bound);
+  }
   m.synchronize();
   detail::report_padded(*list.storage_, throw_on_overflow);
   return list.storage_->report;
