@@ -56,7 +56,7 @@ expect_match("${last_out}" "Steps to run \\(default: the scenario's, 200; 0 runs
 # The uniform family made for cutoff 0.01 fits in a box of side < 1: at cutoff 10 every pair.
 expect_exit(0 generate -f uniform -n 12000 -c 0.01 -o ${WORK}/dense.xyz)
 expect_exit_with_budget(300M 2 check -m cell-list -i ${WORK}/dense.xyz -c 10)
-expect_match("${last_err}" "out of memory: a neighbour list of 143988000 pairs .* needs [0-9.]+ MiB of host memory, more than the budget of 300.00 MiB \\(RAYCUT_MAX_MEMORY=300M")
+expect_match("${last_err}" "out of memory: a neighbour list of 143988000 pairs .* needs [0-9.]+ MiB of host memory, more than the budget: 300.00 MiB is available \\(RAYCUT_MAX_MEMORY=300M")
 # A suite configuration larger than the budget (64^3 x 32 particles, 16 bytes each).
 expect_exit_with_budget(100M 2 bench --suite uniform -m cell-list --param 64 --p 32 -o ${WORK}/b.csv)
 expect_match("${last_err}" "out of memory: .*N = 8388608 particles.*RAYCUT_MAX_MEMORY=100M")

@@ -129,14 +129,22 @@ CLI::Validator count_option() {
 }
 
 CLI::Validator cutoff_option() {
-  return validator(
-      [](const std::string& t) {
+  const std::string wanted = "a finite number > 0";
+  return CLI::Validator(
+      [wanted](std::string& text) -> std::string {
         double v = 0;
-        const auto [ptr, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
-        return !t.empty() && ec == std::errc() && ptr == t.data() + t.size() && v >= 0x1p-60 &&
-               v <= 0x1p60;
+        const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+        const bool number = !text.empty() && ptr == text.data() + text.size() &&
+                            (ec == std::errc() || ec == std::errc::result_out_of_range);
+        // Checked as given (a double, or beyond one): 1e-50 and 1e39 are numbers out of range,
+        // not "0" or "inf" as they would be in float.
+        if (!number || text[0] == '-' || (ec == std::errc() && !(std::isfinite(v) && v > 0)))
+          return "must be " + wanted + ", got '" + io::printable(text) + "'";
+        if (ec == std::errc() && v >= 0x1p-60 && v <= 0x1p60) return "";
+        return "must be in the supported range [2^-60, 2^60] = [8.67e-19, 1.15e18], got '" +
+               io::printable(text) + "'";
       },
-      "a cutoff in [2^-60, 2^60] = [8.67e-19, 1.15e18]");
+      wanted + " in [2^-60, 2^60]", "");
 }
 
 CLI::Validator seed_option() {
@@ -301,7 +309,7 @@ Command add_generate(CLI::App& app) {
       ->check(CLI::IsMember({"uniform", "surface"}));
   cmd->add_option("-n,--n", o->n, "Number of particles (families)")->check(count_option());
   cmd->add_option("-c,--cutoff", o->cutoff, "Cutoff the family is made for")
-      ->check(cutoff_option());
+      ->check(positive_finite());
   cmd->add_option("--param", o->param, "beta (uniform) or alpha (surface)")
       ->check(positive_integer());
   cmd->add_option("--p", o->p, "Mean particles per cell")->check(positive_integer());

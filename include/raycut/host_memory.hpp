@@ -31,9 +31,9 @@ MemoryBudget host_memory_budget();
 double available_host_memory();
 
 // Throws Error(out_of_memory) when `bytes` (an estimate, in double so that it cannot overflow) is
-// more than the budget: "<what> needs 3.20 GiB of host memory, more than the budget of 300 MiB
-// (RAYCUT_MAX_MEMORY=300M; ...)". Requests below 16 MiB are not compared with the system's
-// figures (reading them costs more than such an allocation), only with RAYCUT_MAX_MEMORY.
+// more than the budget: "<what> needs 3.20 GiB of host memory, more than the budget: 300.00 MiB
+// is available (RAYCUT_MAX_MEMORY=300M; ...)". Requests below 16 MiB are not compared with the
+// system's figures (reading them costs more than such an allocation), only with RAYCUT_MAX_MEMORY.
 void require_host_memory(double bytes, const std::string& what);
 
 }  // namespace raycut

@@ -26,7 +26,6 @@
 
 #include "raycut/engine.hpp"
 #include "raycut/error.hpp"
-#include "raycut/host_memory.hpp"
 #include "raycut/kernels.hpp"
 
 #if defined(RAYCUT_PY_CUDA)

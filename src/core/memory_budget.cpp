@@ -176,8 +176,8 @@ void require_host_memory(double bytes, const std::string& what) {
   using detail::format_bytes;
   throw Error(
       ErrorCode::out_of_memory,
-      what + " needs " + format_bytes(bytes) + " of host memory, more than the budget of " +
-          format_bytes(budget.bytes) + " (" + budget.source +
+      what + " needs " + format_bytes(bytes) + " of host memory, more than the budget: " +
+          format_bytes(budget.bytes) + " is available (" + budget.source +
           (budget.from_environment ? "; raise RAYCUT_MAX_MEMORY to allow more)"
                                    : "; RAYCUT_MAX_MEMORY=<bytes, K/M/G suffix> sets the budget)"));
 }
