@@ -93,7 +93,8 @@ def cuda_available() -> bool:
 
 def _cutoff(cutoff: Any) -> float:
     if getattr(cutoff, "shape", None) == () and not isinstance(cutoff, (str, bytes)):
-        _arrays._refuse_complex("cutoff", getattr(cutoff, "dtype", ""))
+        dtype = getattr(cutoff, "dtype", "")
+        _arrays._refuse_complex("cutoff", dtype, "complex" in str(dtype))
         return float(cutoff)  # a 0-d array or tensor: one number (the library checks its range)
     if isinstance(cutoff, (dict, list, tuple)) or hasattr(cutoff, "__len__"):
         raise ValueError("cutoff must be one number: per-atom or per-pair cutoffs are not "
@@ -584,10 +585,10 @@ def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = No
     letters = _letters(quantities)
     grad = _requires_grad(positions) or (_arrays.framework_of(positions) == "torch"
                                          and _requires_grad(cell))
-    search = _search_input(positions, grad)
-    _, like = _arrays.prepare(search)
+    x, like = _arrays.prepare(_search_input(positions, grad))
     engine, key = _take_engine(method, like)
-    engine.build(search, cutoff, cell=_host_cell(cell), pbc=pbc, batch=batch)  # keeps its dtype
+    engine.build(x, cutoff, cell=_host_cell(cell), pbc=pbc, batch=batch)
+    engine._like = like  # the caller's dtype: x may be its float32 conversion
     out = _pair_quantities(letters, engine, half, grad, positions, positions, cell)
     _put_back(key, engine)
     return out
@@ -621,11 +622,11 @@ def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any 
     torch_in = _arrays.framework_of(points) == "torch"
     grad = torch_in and (_requires_grad(points) or _requires_grad(queries) or
                          _requires_grad(cell))
-    search = _search_input(points, grad)
-    _, like = _arrays.prepare(search)
+    x, like = _arrays.prepare(_search_input(points, grad))
     engine, key = _take_engine(method, like)
-    engine.build(search, cutoff, cell=_host_cell(cell), pbc=pbc, batch=batch_points,
+    engine.build(x, cutoff, cell=_host_cell(cell), pbc=pbc, batch=batch_points,
                  queries=_search_input(queries, grad), batch_queries=batch_queries)
+    engine._like = like  # the caller's dtype: x may be its float32 conversion
     out = _pair_quantities(letters, engine, False, grad, points, queries, cell)
     _put_back(key, engine)
     return out

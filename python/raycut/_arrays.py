@@ -46,8 +46,8 @@ def framework_of(x: Any) -> str:
     return "numpy"  # lists, tuples, array likes
 
 
-def _refuse_complex(name: str, dtype: Any) -> None:
-    if "complex" in str(dtype):
+def _refuse_complex(name: str, dtype: Any, complex_: bool) -> None:
+    if complex_:
         raise ValueError(f"{name} must be real numbers, got dtype {dtype}: the imaginary part "
                          "would be dropped (pass the real part if that is what you mean)")
 
@@ -64,7 +64,7 @@ def prepare(x: Any, name: str = "positions", points: bool = True) -> tuple[Any, 
     if framework == "numpy":
         try:
             array = np.asarray(x)
-            _refuse_complex(name, array.dtype)
+            _refuse_complex(name, array.dtype, array.dtype.kind == "c")
             wide = array.dtype == np.float64
             array = np.ascontiguousarray(array, dtype=np.float32)
         except (TypeError, ValueError) as e:
@@ -76,7 +76,6 @@ def prepare(x: Any, name: str = "positions", points: bool = True) -> tuple[Any, 
         if points and array.size == 0 and array.ndim < 2:
             array = array.reshape(0, 3)  # [] -> no particles
         return array, (Like("numpy", float64=True) if wide else HOST)
-    _refuse_complex(name, getattr(x, "dtype", ""))
     if framework == "torch":
         if x.requires_grad:  # DLPack refuses tensors that require grad; the list does not need it
             x = x.detach()
@@ -84,20 +83,26 @@ def prepare(x: Any, name: str = "positions", points: bool = True) -> tuple[Any, 
         if device.type not in ("cpu", "cuda"):
             raise ValueError(f"{name} is on the {device.type!r} device: raycut reads tensors on "
                              "the CPU and on CUDA devices (move it with .cpu() or .cuda())")
-        wide = x.dtype == _torch().float64
-        if x.is_floating_point() and x.dtype != _torch().float32:
-            x = x.to(_torch().float32)
+        torch = _torch()
+        wide = False
+        if x.dtype is not torch.float32:  # the usual case costs one comparison
+            _refuse_complex(name, x.dtype, x.is_complex())
+            wide = x.dtype is torch.float64
+            if x.is_floating_point():
+                x = x.to(torch.float32)
         if not x.is_contiguous():
             x = x.contiguous()
         return x, Like("torch", device, device.type == "cpu", device.index or 0, wide)
     if framework == "cupy":
         import cupy
 
+        _refuse_complex(name, x.dtype, x.dtype.kind == "c")
         wide = x.dtype == cupy.float64
         if x.dtype.kind == "f" and x.dtype != cupy.float32:
             x = x.astype(cupy.float32)
         return cupy.ascontiguousarray(x), Like("cupy", x.device.id, False, 0, wide)
     if framework == "jax":
+        _refuse_complex(name, x.dtype, "complex" in str(x.dtype))
         device = next(iter(x.devices()))
         wide = _is_float64(x.dtype)
         if "float" in str(x.dtype) and not str(x.dtype).endswith("float32"):
@@ -112,10 +117,15 @@ def prepare(x: Any, name: str = "positions", points: bool = True) -> tuple[Any, 
     return x, Like("other", None, host)
 
 
-def _torch() -> Any:
-    import torch
+_TORCH = []  # the torch module once imported (an import statement costs ~1 us a call)
 
-    return torch
+
+def _torch() -> Any:
+    if not _TORCH:
+        import torch
+
+        _TORCH.append(torch)
+    return _TORCH[0]
 
 
 def device_context(like: Like):
