@@ -141,6 +141,20 @@ TEST(MemoryBudget, PaddedKFarAboveNIsRefusedNamingTheKThatIsEnough) {
   }
 }
 
+TEST(MemoryBudget, BuildBeyondTheBudgetIsRefusedBeforeItAllocates) {
+  Budget b("1M");
+  const std::size_t n = 20000;  // ~1.5 MiB of structure at ~80 B a point
+  std::vector<float> xyz(3 * n, 0.5f);
+  for (const std::string& method : cpu_methods()) {
+    Engine engine(method);
+    const std::string message = error_message(ErrorCode::out_of_memory, [&] {
+      engine.build({xyz.data(), n, MemorySpace::host}, 0.1f);
+    });
+    EXPECT_TRUE(contains(message, "method '" + method + "' over 20000 points")) << message;
+    EXPECT_TRUE(contains(message, "RAYCUT_MAX_MEMORY=1M")) << message;
+  }
+}
+
 TEST(PaddedReport, LargestCountIsTheLargestRowWithoutOverflow) {
   // Particle 0 has 3 neighbours, the others 1 each.
   const std::vector<float> xyz = {0, 0, 0, 0.5f, 0, 0, 0, 0.5f, 0, 0, 0, 0.5f};

@@ -286,8 +286,10 @@ class Engine:
         Row i holds min(counts[i], K) neighbours, then N (an invalid index); in a periodic box a
         row can hold a source once per image, S says which. Rows with more than K neighbours
         are never truncated silently: ``report`` says how many overflowed (``overflowed_rows``)
-        and the largest count (grow K to ``largest_count`` and retry); with
-        ``raise_on_overflow`` an overflow raises ``CapacityError``.
+        and the largest row's count (``largest_count``: grow K to it and retry); with
+        ``raise_on_overflow`` an overflow raises ``CapacityError``. K is a whole number in
+        [1, 2^32 - 1] (ValueError otherwise); a matrix beyond the memory budget raises
+        MemoryError before it is allocated, saying which K is always enough.
         """
         if (isinstance(k, bool) or not isinstance(k, numbers.Real) or int(k) != k or int(k) < 0
                 or int(k) > _K_MAX):

@@ -19,6 +19,19 @@
 namespace raycut {
 namespace {
 
+// What a CPU method allocates per point when it builds: the cell list's keys, order and cells
+// and its sort's scratch (~70 B), more than brute force's copy of the positions (12 B).
+constexpr double host_build_bytes_per_point = 80;
+
+// Refuses a CPU method's build over `points` points beyond the host memory budget, before it
+// allocates (device methods check the free device memory themselves).
+void require_build_memory(const detail::Method& m, const std::string& method, std::size_t points) {
+  if (m.space() != MemorySpace::host) return;
+  require_host_memory(host_build_bytes_per_point * static_cast<double>(points),
+                      "method '" + method + "' over " + std::to_string(points) + " points (~" +
+                          detail::number(host_build_bytes_per_point) + " B each)");
+}
+
 using Clock = std::chrono::steady_clock;
 
 double elapsed_ms(Clock::time_point start) {
@@ -133,6 +146,7 @@ void Engine::build(PositionsView positions, float cutoff) {
   detail::Method& m = impl("build");
   detail::validate_cutoff(cutoff);
   validate_positions(positions, stream_);
+  require_build_memory(m, method_, positions.size);
   built_ = false;
   has_run_ = false;
   size_ = sources_ = positions.size;
@@ -178,6 +192,8 @@ void Engine::build(PositionsView positions, float cutoff, const Systems& systems
                                             "' does not take periodic boxes, batches or query "
                                             "points: " +
                                             why);
+  require_build_memory(m, method_,
+                       positions.size + (systems.has_queries() ? systems.queries.size : 0));
   // A step loop builds the same systems again: their plan (validation, frames) is kept.
   if (!plan_ || plan_queries_ != systems.has_queries() || !same_layout(systems, plan_key_) ||
       positions.size != plan_sources_ || cutoff != plan_cutoff_) {
