@@ -114,8 +114,7 @@ def bench_input(label, x, sync, method: str, cutoff: float, calls: int, warmup: 
             return engine.compute("count")
 
         def ext_count():
-            raw.run("count")
-            return raw.results("count", host)
+            return raw.compute("count", to_host=host)
 
         def api_build_count():
             engine.build(x, cutoff)
@@ -123,8 +122,7 @@ def bench_input(label, x, sync, method: str, cutoff: float, calls: int, warmup: 
 
         def ext_build_count():
             raw.build(x_ext, cutoff)
-            raw.run("count")
-            return raw.results("count", host)
+            return raw.compute("count", to_host=host)
 
         def api_list():
             return raycut.neighbor_list("ij", x, cutoff, method=method)

@@ -276,12 +276,15 @@ Command add_bench(CLI::App& app) {
       ->check(CLI::IsMember({"count", "lj", "lj_forces", "smooth"}));
   cmd->add_option("-r,--reps", o->reps, "Timed repetitions after one warm-up")
       ->check(CLI::Range(1, 1000));
-  cmd->add_option("--max-n", o->max_n, "Skip configurations with more particles than this")
+  cmd->add_option("--max-n", o->max_n,
+                  "Skip configurations with more particles than this (0, the default: no limit)")
       ->check(count_option());
   cmd->add_option("-o,--out", o->out, "CSV file to write");
-  cmd->add_option("--seed", o->seed, "Random seed");
-  cmd->add_option("--large-n", o->large_n,
-                  "Above this many particles, time --large-reps repetitions instead of --reps")
+  cmd->add_option("--seed", o->seed, "Random seed")->check(seed_option());
+  cmd->add_option(
+         "--large-n", o->large_n,
+         "Above this many particles, time --large-reps repetitions instead of --reps (0, the "
+         "default: never)")
       ->check(count_option());
   cmd->add_option("--large-reps", o->large_reps, "Repetitions above --large-n")
       ->check(CLI::Range(1, 1000));

@@ -189,8 +189,8 @@ Command add_check(CLI::App& app) {
   cmd->add_option("-n,--n", o->sizes, "Particle counts (comma-separated)")
       ->delimiter(',')
       ->check(count_option());
-  cmd->add_option("-c,--cutoff", o->cutoff, "Cutoff radius")->check(positive_finite());
-  cmd->add_option("--seed", o->seed, "Random seed of the families");
+  cmd->add_option("-c,--cutoff", o->cutoff, "Cutoff radius")->check(cutoff_option());
+  cmd->add_option("--seed", o->seed, "Random seed of the families")->check(seed_option());
   cmd->add_option(
          "-i,--input", o->input,
          "Positions file (.csv, .xyz) instead of families; an extended XYZ's Lattice and pbc are "

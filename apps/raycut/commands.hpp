@@ -43,6 +43,8 @@ CLI::Validator positive_finite();      // a float, finite and > 0
 CLI::Validator non_negative_finite();  // a float, finite and >= 0
 CLI::Validator positive_integer();     // 1 .. 2^31 - 1
 CLI::Validator count_option();         // a whole number >= 0 (no sign, no exponent)
+CLI::Validator cutoff_option();        // a double in [2^-60, 2^60], checked before float
+CLI::Validator seed_option();          // a whole number in [0, 2^64 - 1]: -1 does not wrap
 CLI::Validator one_of(std::vector<std::string> names, std::string what);
 
 // --cell and --pbc as given: tokens, each holding one or more values (separated by spaces or

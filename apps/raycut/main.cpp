@@ -128,6 +128,35 @@ CLI::Validator count_option() {
       "a whole number >= 0");
 }
 
+CLI::Validator cutoff_option() {
+  const std::string wanted = "a finite number > 0";
+  return CLI::Validator(
+      [wanted](std::string& text) -> std::string {
+        double v = 0;
+        const auto [ptr, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+        const bool number = !text.empty() && ptr == text.data() + text.size() &&
+                            (ec == std::errc() || ec == std::errc::result_out_of_range);
+        // Checked as given (a double, or beyond one): 1e-50 and 1e39 are numbers out of range,
+        // not "0" or "inf" as they would be in float.
+        if (!number || text[0] == '-' || (ec == std::errc() && !(std::isfinite(v) && v > 0)))
+          return "must be " + wanted + ", got '" + io::printable(text) + "'";
+        if (ec == std::errc() && v >= 0x1p-60 && v <= 0x1p60) return "";
+        return "must be in the supported range [2^-60, 2^60] = [8.67e-19, 1.15e18], got '" +
+               io::printable(text) + "'";
+      },
+      wanted + " in [2^-60, 2^60]", "");
+}
+
+CLI::Validator seed_option() {
+  return validator(
+      [](const std::string& t) {
+        std::uint64_t v = 0;
+        const auto [ptr, ec] = std::from_chars(t.data(), t.data() + t.size(), v);
+        return !t.empty() && ec == std::errc() && ptr == t.data() + t.size();
+      },
+      "a whole number in [0, 2^64 - 1 = 18446744073709551615]");
+}
+
 CLI::Validator one_of(std::vector<std::string> names, std::string what) {
   std::string list;
   for (const auto& name : names) list += (list.empty() ? "" : ", ") + name;
@@ -284,7 +313,7 @@ Command add_generate(CLI::App& app) {
   cmd->add_option("--param", o->param, "beta (uniform) or alpha (surface)")
       ->check(positive_integer());
   cmd->add_option("--p", o->p, "Mean particles per cell")->check(positive_integer());
-  cmd->add_option("--seed", o->seed, "Random seed");
+  cmd->add_option("--seed", o->seed, "Random seed")->check(seed_option());
   cmd->add_option("-o,--out", o->out, "Output file (.csv or .xyz, any case)")->required();
   return [o] {
     check_positions_extension(o->out);

@@ -578,7 +578,7 @@ Command add_sph(CLI::App& app) {
                   "wcsph: write the pressure profile (hydrostatic) or the surge front (dam-break)");
   cmd->add_option("-n,--n", o->n, "Particles of the small scenario")->check(positive_integer());
   cmd->add_option("-m,--method", o->method, "Interaction method, or auto");
-  cmd->add_option("--frames", o->frames, "Steps to run (default: the scenario's, 200)")
+  cmd->add_option("--frames", o->frames, "Steps to run (default: the scenario's, 200; 0 runs none)")
       ->check(count_option());
   cmd->add_option("--every", o->every, "Save every k-th frame (with --out)")
       ->check(positive_integer());

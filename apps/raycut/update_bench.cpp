@@ -96,7 +96,8 @@ Command add_update_bench(CLI::App& app) {
   cmd->add_option("--param", o->param, "beta or alpha")->check(positive_integer());
   cmd->add_option("--p", o->p, "Mean particles per cell")->check(positive_integer());
   cmd->add_option("--steps", o->steps, "Steps of the random walk")->check(CLI::Range(1, 100000));
-  cmd->add_option("--jitter", o->jitter, "Step size per coordinate, in cutoffs")
+  cmd->add_option("--jitter", o->jitter,
+                  "Step size per coordinate, in cutoffs (0: particles do not move)")
       ->check(non_negative_finite());
   cmd->add_option("--skin", o->skin, "Refit skin, in cutoffs")->check(positive_finite());
   cmd->add_option("-k,--kernel", o->kernel, "count, lj or smooth")

@@ -163,7 +163,9 @@ class NeighbourListBuffer {
 // Rows past K of a padded list, never truncated silently.
 struct PaddedReport {
   std::uint64_t overflowed_rows = 0;  // rows with more than K neighbours
-  std::uint32_t largest_count = 0;    // the largest row over K (0 if none): grow K to it, retry
+  // The largest row's count, overflowed or not (GPU methods: the largest row over K, 0 if none):
+  // grow K to it and retry.
+  std::uint32_t largest_count = 0;
   bool overflowed() const { return overflowed_rows > 0; }
 };
 
@@ -254,6 +256,10 @@ std::vector<MethodDescription> list_methods();
 std::string auto_method();
 // True when a CUDA device is usable in this process.
 bool cuda_device_available();
+// A cutoff given in double (Python, option parsers) as the float Engine::build takes: checked as
+// given first, so that 1e-50 (0 in float) and 1e39 (inf) are refused naming the value passed and
+// the supported range [2^-60, 2^60]: Error(invalid_argument).
+float checked_cutoff(double cutoff);
 
 namespace detail {
 class Method;
@@ -329,7 +335,8 @@ class Engine {
   // The padded [N, K] matrix in one pass. Overflowing rows are reported (and raise
   // Error(capacity_exceeded) when `throw_on_overflow`), never truncated silently.
   // `shifts`: the image shift S of each entry too (3 int32; with a periodic box a row can hold
-  // one source once per image).
+  // one source once per image). A matrix beyond the memory budget (raycut/host_memory.hpp; on
+  // the GPU the free device memory) is Error(out_of_memory) before anything is allocated.
   PaddedReport padded_neighbours(PaddedNeighbourBuffer& list, std::uint32_t k,
                                  bool throw_on_overflow = false, bool shifts = false);
 

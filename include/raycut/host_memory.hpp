@@ -1,5 +1,6 @@
 // Host memory up front: a request that cannot fit is refused with a message naming the memory it
-// needs and the memory there is, instead of a bare std::bad_alloc (or the OOM killer) later.
+// needs, the budget and the knob that sets it, instead of a bare std::bad_alloc or the kernel's
+// OOM killer later (which overcommit makes the usual outcome: `resize` rarely throws).
 #pragma once
 
 #include <string>
@@ -8,14 +9,31 @@
 
 namespace raycut {
 
-// Bytes of host memory a new allocation can get: MemAvailable of /proc/meminfo (free memory plus
-// what the kernel can reclaim, such as the page cache), else sysconf's available pages, else the
-// physical memory.
+// What one new host allocation may take, and where that figure comes from.
+struct MemoryBudget {
+  double bytes = 0;
+  // "RAYCUT_MAX_MEMORY=300M", or what the system figure is: "the memory available (MemAvailable
+  // 1.20 GiB; cgroup limit 2.00 GiB minus 0.80 GiB in use)".
+  std::string source;
+  bool from_environment = false;
+};
+
+// The budget of one host allocation:
+// - RAYCUT_MAX_MEMORY when set: bytes, with an optional K, M, G or T suffix (powers of 1024:
+//   300M = 300 x 2^20 bytes), a whole or decimal number; anything else is
+//   Error(invalid_argument) naming the variable, its value and the accepted form;
+// - otherwise the smaller of MemAvailable (/proc/meminfo) and the headroom of every memory
+//   cgroup above this process (v2: memory.max minus memory.current; v1: memory.limit_in_bytes
+//   minus memory.usage_in_bytes; reclaimable page cache, inactive_file, not counted as used).
+MemoryBudget host_memory_budget();
+
+// The bytes of host_memory_budget() (kept for callers of the older interface).
 double available_host_memory();
 
 // Throws Error(out_of_memory) when `bytes` (an estimate, in double so that it cannot overflow) is
-// more than the available host memory: "<what> needs 3.2 GiB of host memory, 1.1 GiB is
-// available".
+// more than the budget: "<what> needs 3.20 GiB of host memory, more than the budget: 300.00 MiB
+// is available (RAYCUT_MAX_MEMORY=300M; ...)". Requests below 16 MiB are not compared with the
+// system's figures (reading them costs more than such an allocation), only with RAYCUT_MAX_MEMORY.
 void require_host_memory(double bytes, const std::string& what);
 
 }  // namespace raycut

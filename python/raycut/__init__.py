@@ -4,12 +4,19 @@ Every pair (i, j), i != j, with ``|x_j - x_i|^2 < cutoff^2`` (one shared float32
 found exactly once per direction, by every method. Methods: ``methods()``; ``"auto"`` picks the
 CUDA grid with a GPU and the CPU cell list without.
 
-Positions are an (N, 3) float32 array: NumPy (float64 or non-contiguous NumPy arrays and array
-likes are converted on the host, with a copy), or anything with ``__dlpack__`` or
-``__cuda_array_interface__`` (PyTorch, CuPy, JAX, ...), read in place: those must already be
-float32 and C-contiguous (``ValueError`` otherwise). Outputs come back in the caller's framework
-on the caller's device: NumPy in, NumPy out; CUDA tensors in, CUDA tensors out, wrapping the
-library's device memory without a copy (the arrays keep it alive).
+Positions are an (N, 3) float32 array: NumPy, array likes, or anything with ``__dlpack__`` or
+``__cuda_array_interface__`` (PyTorch, CuPy, JAX, ...), read in place when float32 and
+C-contiguous; other float dtypes and non-contiguous NumPy, PyTorch, CuPy and JAX arrays are
+converted by their own framework, on their device (a copy), and float64 inputs get float64
+distances, vectors and kernel results. Complex dtypes and devices other than the CPU and CUDA
+are refused. Outputs come back in the caller's framework on the caller's device: NumPy in, NumPy
+out; CUDA tensors in, CUDA tensors out, wrapping the library's device memory without a copy (the
+arrays keep it alive).
+
+Threads: calls on one ``Engine`` or ``VerletList`` from several threads are serialised by its
+lock (taken with the GIL released); calls on different objects run in parallel. Sizes above the
+memory budget (``RAYCUT_MAX_MEMORY``, e.g. ``300M``, else the memory available to the process)
+raise ``MemoryError`` before anything is allocated (docs/limits.md, "Threads" and "Memory").
 
 Errors carry the library's message: ``ValueError`` for bad input (NaN coordinate: its index;
 cutoff <= 0; unknown method or kernel), ``MemoryError`` when it does not fit,
@@ -91,12 +98,19 @@ def cuda_available() -> bool:
 
 
 def _cutoff(cutoff: Any) -> float:
+    if getattr(cutoff, "shape", None) == () and not isinstance(cutoff, (str, bytes)):
+        dtype = getattr(cutoff, "dtype", "")
+        _arrays._refuse_complex("cutoff", dtype, "complex" in str(dtype))
+        return float(cutoff)  # a 0-d array or tensor: one number (the library checks its range)
     if isinstance(cutoff, (dict, list, tuple)) or hasattr(cutoff, "__len__"):
         raise ValueError("cutoff must be one number: per-atom or per-pair cutoffs are not "
                          "supported")
     if not isinstance(cutoff, numbers.Real):
         raise ValueError(f"cutoff must be a real number, got {type(cutoff).__name__}")
     return float(cutoff)
+
+
+_K_MAX = 2**32 - 1  # the padded list's K is a 32-bit count
 
 
 class Engine:
@@ -240,12 +254,9 @@ class Engine:
         like = self._like
         engine = self._engine
 
-        def run():
-            engine.run(kernel, float(lj_epsilon), float(lj_sigma), float(sph_mass),
-                       float(sph_viscosity), velocity, density, pressure)
-            return engine.results(kernel, like.host)
-
-        out = self._call(like, run)
+        out = self._call(like, engine.compute, kernel, float(lj_epsilon), float(lj_sigma),
+                         float(sph_mass), float(sph_viscosity), velocity, density, pressure,
+                         like.host)
         return {name: _arrays.output(array, like) for name, array in out.items()}
 
     def neighbours(self, half: bool = False, distances: bool = False, vectors: bool = False,
@@ -281,11 +292,15 @@ class Engine:
         Row i holds min(counts[i], K) neighbours, then N (an invalid index); in a periodic box a
         row can hold a source once per image, S says which. Rows with more than K neighbours
         are never truncated silently: ``report`` says how many overflowed (``overflowed_rows``)
-        and the largest count (grow K to ``largest_count`` and retry); with
-        ``raise_on_overflow`` an overflow raises ``CapacityError``.
+        and the largest row's count (``largest_count``: grow K to it and retry); with
+        ``raise_on_overflow`` an overflow raises ``CapacityError``. K is a whole number in
+        [1, 2^32 - 1] (ValueError otherwise); a matrix beyond the memory budget raises
+        MemoryError before it is allocated, saying which K is always enough.
         """
-        if int(k) < 0 or int(k) != k:
-            raise ValueError(f"padded neighbour list: K must be a whole number >= 1, got {k}")
+        if (isinstance(k, bool) or not isinstance(k, numbers.Real) or int(k) != k or int(k) < 0
+                or int(k) > _K_MAX):
+            raise ValueError(f"padded neighbour list: K must be a whole number in [1, 2^32 - 1 = "
+                             f"{_K_MAX}], got {k!r}")
         like = self._like
         indices, counts, report, s = self._call(like, self._engine.padded, int(k),
                                                 bool(raise_on_overflow), like.host, bool(shifts))
@@ -581,6 +596,7 @@ def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = No
     x, like = _arrays.prepare(_search_input(positions, grad))
     engine, key = _take_engine(method, like)
     engine.build(x, cutoff, cell=_host_cell(cell), pbc=pbc, batch=batch)
+    engine._like = like  # the caller's dtype: x may be its float32 conversion
     out = _pair_quantities(letters, engine, half, grad, positions, positions, cell)
     _put_back(key, engine)
     return out
@@ -618,6 +634,7 @@ def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any 
     engine, key = _take_engine(method, like)
     engine.build(x, cutoff, cell=_host_cell(cell), pbc=pbc, batch=batch_points,
                  queries=_search_input(queries, grad), batch_queries=batch_queries)
+    engine._like = like  # the caller's dtype: x may be its float32 conversion
     out = _pair_quantities(letters, engine, False, grad, points, queries, cell)
     _put_back(key, engine)
     return out

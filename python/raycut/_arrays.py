@@ -27,6 +27,7 @@ class Like:
     device: Any = None  # the framework's device object (torch.device, cupy device id, jax Device)
     host: bool = True  # the outputs are wanted in host memory
     index: int = 0  # the CUDA device index (torch), read once: every call of the API needs it
+    float64: bool = False  # the input was float64: float outputs (d, D, kernels) come back so
 
 
 HOST = Like("numpy")
@@ -45,34 +46,86 @@ def framework_of(x: Any) -> str:
     return "numpy"  # lists, tuples, array likes
 
 
+def _refuse_complex(name: str, dtype: Any, complex_: bool) -> None:
+    if complex_:
+        raise ValueError(f"{name} must be real numbers, got dtype {dtype}: the imaginary part "
+                         "would be dropped (pass the real part if that is what you mean)")
+
+
+def _is_float64(dtype: Any) -> bool:
+    return str(dtype).rsplit(".", 1)[-1] == "float64"
+
+
 def prepare(x: Any, name: str = "positions", points: bool = True) -> tuple[Any, Like]:
-    """The object the extension reads (in place) and where the caller's outputs go."""
+    """The object the extension reads (in place) and where the caller's outputs go. Float
+    arrays of another precision and non-contiguous ones are converted to float32 C-contiguous
+    by their own framework (a copy, on their device); float64 inputs get float64 outputs."""
     framework = framework_of(x)
     if framework == "numpy":
         try:
-            array = np.ascontiguousarray(np.asarray(x), dtype=np.float32)
+            array = np.asarray(x)
+            _refuse_complex(name, array.dtype, array.dtype.kind == "c")
+            wide = array.dtype == np.float64
+            array = np.ascontiguousarray(array, dtype=np.float32)
         except (TypeError, ValueError) as e:
+            if "complex" in str(e):
+                raise
             raise TypeError(f"{name} must be a NumPy array, an array like, or an array with "
                             f"__dlpack__ or __cuda_array_interface__; got {type(x).__name__} "
                             f"({e})") from None
         if points and array.size == 0 and array.ndim < 2:
             array = array.reshape(0, 3)  # [] -> no particles
-        return array, HOST
+        return array, (Like("numpy", float64=True) if wide else HOST)
     if framework == "torch":
         if x.requires_grad:  # DLPack refuses tensors that require grad; the list does not need it
             x = x.detach()
         device = x.device
-        return x, Like("torch", device, device.type == "cpu", device.index or 0)
+        if device.type not in ("cpu", "cuda"):
+            raise ValueError(f"{name} is on the {device.type!r} device: raycut reads tensors on "
+                             "the CPU and on CUDA devices (move it with .cpu() or .cuda())")
+        torch = _torch()
+        wide = False
+        if x.dtype is not torch.float32:  # the usual case costs one comparison
+            _refuse_complex(name, x.dtype, x.is_complex())
+            wide = x.dtype is torch.float64
+            if x.is_floating_point():
+                x = x.to(torch.float32)
+        if not x.is_contiguous():
+            x = x.contiguous()
+        return x, Like("torch", device, device.type == "cpu", device.index or 0, wide)
     if framework == "cupy":
-        return x, Like("cupy", x.device.id, False)
+        import cupy
+
+        _refuse_complex(name, x.dtype, x.dtype.kind == "c")
+        wide = x.dtype == cupy.float64
+        if x.dtype.kind == "f" and x.dtype != cupy.float32:
+            x = x.astype(cupy.float32)
+        return cupy.ascontiguousarray(x), Like("cupy", x.device.id, False, 0, wide)
     if framework == "jax":
+        _refuse_complex(name, x.dtype, "complex" in str(x.dtype))
         device = next(iter(x.devices()))
-        return x, Like("jax", device, device.platform == "cpu")
+        wide = _is_float64(x.dtype)
+        if "float" in str(x.dtype) and not str(x.dtype).endswith("float32"):
+            import jax.numpy as jnp
+
+            x = x.astype(jnp.float32)
+        return x, Like("jax", device, device.platform == "cpu", 0, wide)
     if hasattr(x, "__dlpack_device__"):
         host = int(x.__dlpack_device__()[0]) in _DLPACK_HOST
     else:
         host = False  # __cuda_array_interface__ only
     return x, Like("other", None, host)
+
+
+_TORCH = []  # the torch module once imported (an import statement costs ~1 us a call)
+
+
+def _torch() -> Any:
+    if not _TORCH:
+        import torch
+
+        _TORCH.append(torch)
+    return _TORCH[0]
 
 
 def device_context(like: Like):
@@ -193,7 +246,16 @@ def dlpack_object(array: Any, like: Like) -> Any:
 def output(array: Any, like: Like) -> Any:
     """An array from the extension (NumPy on the host, DLPack on the device) in the caller's
     framework and device: zero-copy where it already is there, a copy to the caller's device
-    when the method worked elsewhere."""
+    when the method worked elsewhere; float arrays in float64 for float64 inputs (a copy)."""
+    out = _output(array, like)
+    if like.float64 and out is not None and str(out.dtype).endswith("float32"):
+        if like.framework == "torch":
+            return out.to(_torch().float64)
+        return out.astype("float64")
+    return out
+
+
+def _output(array: Any, like: Like) -> Any:
     if array is None or like.framework == "numpy":
         return array
     on_host = isinstance(array, np.ndarray)

@@ -41,9 +41,12 @@ class Engine:
         query_offsets (S + 1,) uint64, queries (M, 3) float32: raycut::Systems."""
     def update(self, positions: Any) -> None: ...
     def set_skin(self, skin: float) -> None: ...
-    def run(self, kernel: str, lj_epsilon: float = 1.0, lj_sigma: float = 1.0,
-            sph_mass: float = 0.0, sph_viscosity: float = 0.0, velocity: Optional[Any] = None,
-            density: Optional[Any] = None, pressure: Optional[Any] = None) -> None: ...
+    def compute(self, kernel: str, lj_epsilon: float = 1.0, lj_sigma: float = 1.0,
+                sph_mass: float = 0.0, sph_viscosity: float = 0.0,
+                velocity: Optional[Any] = None, density: Optional[Any] = None,
+                pressure: Optional[Any] = None, to_host: bool = True) -> dict[str, Any]:
+        """run() and results() in one call under the engine's lock (a run of another thread in
+        between would take the results)."""
     def results(self, kernel: str, to_host: bool) -> dict[str, Any]:
         """The last run's arrays, handed over (Engine::take_results; host copies of device
         results with to_host): the engine holds no results after it."""

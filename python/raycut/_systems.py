@@ -160,6 +160,9 @@ def _system_index(batch: Any, n: Optional[int], name: str) -> Any:
     if b.ndim != 1 or (n is not None and len(b) != n):
         raise _wrong_length(name, n, b.shape)
     n = len(b)
+    if n and b.dtype.kind == "u" and b.dtype.itemsize >= 8 and int(b.max()) > np.iinfo(np.int64).max:
+        raise ValueError(f"{name} holds system index {int(b.max())}, above the largest supported "
+                         f"2^63 - 1 = {np.iinfo(np.int64).max} (system indices are int64)")
     if n and b[0] < 0:
         raise ValueError(f"{name} holds a negative system index ({int(b.min())})")
     if n > 1:

@@ -11,10 +11,13 @@
 #include <nanobind/stl/vector.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <type_traits>
@@ -40,6 +43,33 @@ PyObject* capacity_error = nullptr;  // raycut.CapacityError(RuntimeError)
   throw raycut::Error(raycut::ErrorCode::invalid_argument, message);
 }
 
+// ---- threads -----------------------------------------------------------------------------------
+
+// Calls on one Engine or VerletList from several Python threads are serialised by the object's
+// mutex; calls on different objects run in parallel (the GIL is released while the library
+// works). The GIL is released before the mutex is taken, and taken again only after the mutex
+// is released: a thread never waits for the mutex while holding the GIL, nor for the GIL while
+// holding the mutex, so the two cannot deadlock.
+struct Exclusive {
+  nb::gil_scoped_release release;  // first: released before locking, taken after unlocking
+  std::lock_guard<std::mutex> lock;
+  explicit Exclusive(std::mutex& mutex) : lock(mutex) {}
+};
+
+// raycut::Engine with its lock (what the Python class Engine holds).
+struct PyEngine {
+  raycut::Engine engine;
+  std::mutex mutex;
+  explicit PyEngine(std::string_view method) : engine(method) {}
+};
+
+// A value of the engine read under its lock.
+template <class F>
+auto locked(PyEngine& e, F&& read) {
+  Exclusive hold(e.mutex);
+  return read(e.engine);
+}
+
 // ---- inputs ------------------------------------------------------------------------------------
 
 // A float32 C-contiguous array read in place, on the host or the CUDA device.
@@ -49,6 +79,13 @@ struct FloatInput {
   MemorySpace space = MemorySpace::host;
   std::optional<nb::ndarray<nb::ro>> keep;  // the imported DLPack tensor, alive during the call
 };
+
+// A value in messages ("1e-50", "0.25").
+std::string number(double value) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.6g", value);
+  return text;
+}
 
 std::string describe_shape(const std::vector<std::size_t>& shape) {
   std::string s = "(";
@@ -288,12 +325,12 @@ nb::dlpack::dtype index_dtype(std::size_t n) {
 
 // The list of `engine`'s positions where the method works (a new buffer: earlier results stay
 // valid).
-std::shared_ptr<raycut::NeighbourListBuffer> fill_list(raycut::Engine& engine, bool half,
-                                                       bool distances, bool vectors, bool shifts,
+std::shared_ptr<raycut::NeighbourListBuffer> fill_list(PyEngine& e, bool half, bool distances,
+                                                       bool vectors, bool shifts,
                                                        bool coo = false) {
   auto list = std::make_shared<raycut::NeighbourListBuffer>();
-  nb::gil_scoped_release release;
-  engine.neighbours(*list, raycut::ListOptions{half, distances, vectors, shifts, coo});
+  Exclusive hold(e.mutex);
+  e.engine.neighbours(*list, raycut::ListOptions{half, distances, vectors, shifts, coo});
   return list;
 }
 
@@ -340,7 +377,7 @@ ListArrays arrays_of(std::shared_ptr<raycut::NeighbourListBuffer> list, bool to_
 
 // CSR: (offsets int64 [N+1], indices int32 [P], distances [P] or None, vectors [P, 3] or None,
 // shifts int32 [P, 3] or None).
-nb::tuple neighbours(raycut::Engine& engine, bool half, bool distances, bool vectors, bool to_host,
+nb::tuple neighbours(PyEngine& engine, bool half, bool distances, bool vectors, bool to_host,
                      bool shifts) {
   const ListArrays a = arrays_of(fill_list(engine, half, distances, vectors, shifts), to_host);
   const std::size_t n = a.targets, pairs = a.pairs;
@@ -353,7 +390,7 @@ nb::tuple neighbours(raycut::Engine& engine, bool half, bool distances, bool vec
 
 // COO pairs (i int64 [P], j int64 [P], d [P] or None, D [P, 3] or None, S int32 [P, 3] or
 // None): ASE's "ijdDS", written as COO by the list pass itself (ListOptions::coo).
-nb::tuple pairs(raycut::Engine& engine, bool half, bool distances, bool vectors, bool to_host,
+nb::tuple pairs(PyEngine& engine, bool half, bool distances, bool vectors, bool to_host,
                 bool shifts) {
   const ListArrays a =
       arrays_of(fill_list(engine, half, distances, vectors, shifts, /*coo=*/true), to_host);
@@ -366,13 +403,19 @@ nb::tuple pairs(raycut::Engine& engine, bool half, bool distances, bool vectors,
 
 // Padded [N, K] (int32; N marks an empty slot), counts [N] (int32), report, and with `shifts`
 // S [N, K, 3] (int32; 0 in empty slots).
-nb::tuple padded(raycut::Engine& engine, std::uint32_t k, bool raise_on_overflow, bool to_host,
+nb::tuple padded(PyEngine& engine, std::uint64_t wide_k, bool raise_on_overflow, bool to_host,
                  bool shifts) {
+  if (wide_k < 1 || wide_k > std::numeric_limits<std::uint32_t>::max())
+    value_error(
+        "padded neighbour list: K must be a whole number in [1, 2^32 - 1 = 4294967295], "
+        "got " +
+        std::to_string(wide_k));
+  const auto k = static_cast<std::uint32_t>(wide_k);
   auto list = std::make_shared<raycut::PaddedNeighbourBuffer>();
   raycut::PaddedReport report;
   {
-    nb::gil_scoped_release release;
-    report = engine.padded_neighbours(*list, k, raise_on_overflow, shifts);
+    Exclusive hold(engine.mutex);
+    report = engine.engine.padded_neighbours(*list, k, raise_on_overflow, shifts);
   }
   const std::size_t n = list->size();
   nb::dict info;
@@ -391,18 +434,36 @@ nb::tuple padded(raycut::Engine& engine, std::uint32_t k, bool raise_on_overflow
       shifts ? wrap(list->shifts(), {n, k, 3}, dtype_of<std::int32_t>(), list, space) : nb::none());
 }
 
-// The results of the last run() of `kernel`, as new arrays (host copies, or device copies on
-// the device): the arrays `kernel` produces (raycut::produces), empty ones for N = 0.
-nb::dict results(raycut::Engine& engine, std::string_view kernel_name, bool to_host) {
-  const raycut::KernelProduces produces = raycut::produces(raycut::parse_kernel(kernel_name));
-  const std::size_t n = engine.size();
+// The results of the last run() of a kernel, taken out of the engine under its lock: host
+// copies of device results (`to_host`), or the engine's own arrays moved out (no copy: a later
+// run() sizes new ones, so these stay as they are).
+struct TakenResults {
+  std::size_t n = 0;
+  MemorySpace space = MemorySpace::host;
+  bool copied = false;
+  raycut::Results copies;
+  raycut::OwnedResults owned;
+};
+
+TakenResults take_results(raycut::Engine& engine, bool to_host) {  // the lock held
+  TakenResults taken;
+  taken.n = engine.size();
+  taken.space = engine.space();
+  taken.copied = taken.space == MemorySpace::device && to_host;
+  if (taken.copied)
+    taken.copies = engine.results();
+  else
+    taken.owned = engine.take_results();
+  return taken;
+}
+
+// The arrays `kernel` produces (raycut::produces), empty ones for N = 0; with the GIL.
+nb::dict results_dict(TakenResults& t, raycut::Kernel kernel) {
+  const raycut::KernelProduces produces = raycut::produces(kernel);
+  const std::size_t n = t.n;
   nb::dict out;
-  if (engine.space() == MemorySpace::device && to_host) {  // host copies of device results
-    raycut::Results r;
-    {
-      nb::gil_scoped_release release;
-      r = engine.results();
-    }
+  if (t.copied) {
+    raycut::Results& r = t.copies;
     if (produces.count) out["count"] = host_array(std::move(r.count), {n}, index_dtype(n));
     if (produces.energy) out["energy"] = host_array(std::move(r.energy), {n});
     if (produces.force) out["force"] = host_array(std::move(r.force), {n, 3});
@@ -410,18 +471,10 @@ nb::dict results(raycut::Engine& engine, std::string_view kernel_name, bool to_h
     if (produces.density) out["density"] = host_array(std::move(r.density), {n});
     return out;
   }
-  // Where the method works, the engine's own arrays moved out to the Python arrays (no copy):
-  // a later run() sizes new ones, so these stay as they are.
-  raycut::OwnedResults owned;
-  {
-    nb::gil_scoped_release release;
-    owned = engine.take_results();
-  }
-  const raycut::ResultsView& v = owned.view;
-  const MemorySpace space = engine.space();
+  const raycut::ResultsView& v = t.owned.view;
   auto put = [&](const char* name, const void* data, std::vector<std::size_t> shape,
                  nb::dlpack::dtype dtype) {
-    out[name] = wrap(data, std::move(shape), dtype, owned.owner, space);
+    out[name] = wrap(data, std::move(shape), dtype, t.owned.owner, t.space);
   };
   if (produces.count) put("count", v.count, {n}, index_dtype(n));
   if (produces.energy) put("energy", v.energy, {n}, dtype_of<float>());
@@ -431,36 +484,74 @@ nb::dict results(raycut::Engine& engine, std::string_view kernel_name, bool to_h
   return out;
 }
 
+nb::dict results(PyEngine& locked_engine, std::string_view kernel_name, bool to_host) {
+  const raycut::Kernel kernel = raycut::parse_kernel(kernel_name);
+  TakenResults taken;
+  {
+    Exclusive hold(locked_engine.mutex);
+    taken = take_results(locked_engine.engine, to_host);
+  }
+  return results_dict(taken, kernel);
+}
+
 // A per-particle float input of a kernel (sph_force's velocity, density, pressure) where the
 // method works: read in place there, copied to the device (raycut::DeviceArray) from the host.
+// `source` is read with the GIL held; the rest (checked against the engine's size) under the
+// engine's lock, since another thread may build it with another N in between.
 struct KernelInput {
   const float* data = nullptr;
   std::optional<raycut::DeviceArray> device_copy;
   FloatInput source;
+  const char* name = nullptr;
+  std::size_t components = 1;
+  bool given = false;
 };
 
-void kernel_input(KernelInput& out, nb::handle obj, const char* name, std::size_t components,
-                  const raycut::Engine& engine) {
+void read_kernel_input(KernelInput& out, nb::handle obj, const char* name, std::size_t components) {
+  out.name = name;
+  out.components = components;
   if (obj.is_none()) return;
   out.source = float_input(obj, name);
-  std::size_t elements = 1;
-  for (std::size_t s : out.source.shape) elements *= s;
-  if (elements != components * engine.size())
-    value_error(std::string(name) + " must have " + std::to_string(components * engine.size()) +
-                " values (" + std::to_string(components) + " per particle), got shape " +
-                describe_shape(out.source.shape));
+  out.given = true;
+}
+
+void check_kernel_input(KernelInput& out, const raycut::Engine& engine) {
+  if (!out.given) return;
+  const std::string name = out.name;
+  const std::size_t n = engine.size(), components = out.components;
+  const std::vector<std::size_t>& shape = out.source.shape;
+  const bool ok = components == 3 ? shape.size() == 2 && shape[0] == n && shape[1] == 3
+                                  : shape.size() == 1 && shape[0] == n;
+  if (!ok)
+    value_error(
+        name + " must have shape " +
+        (components == 3 ? "(" + std::to_string(n) + ", 3)" : "(" + std::to_string(n) + ",)") +
+        " (one " + (components == 3 ? "vector" : "value") + " per particle), got " +
+        describe_shape(shape));
   out.data = out.source.data;
+  if (out.source.space == MemorySpace::host) {
+    // Host values are checked here (device ones are read in place, unchecked): a zero or
+    // non-finite density or a non-finite pressure or velocity gives non-finite forces.
+    const bool density = name == "density";
+    for (std::size_t k = 0; k < n * components; ++k) {
+      const float value = out.data[k];
+      if (!std::isfinite(value) || (density && !(value > 0.0f)))
+        value_error(name + "[" + std::to_string(k / components) + "] = " + number(value) +
+                    (density ? ": densities must be finite and > 0" : ": must be finite"));
+    }
+  }
   if (out.source.space == engine.space()) return;
   if (engine.space() == MemorySpace::host)
-    value_error(std::string(name) + " is in device memory but method '" + engine.method() +
+    value_error(name + " is in device memory but method '" + engine.method() +
                 "' works on the host: pass it on the host");
-  out.device_copy.emplace(std::vector<float>(out.source.data, out.source.data + elements));
+  out.device_copy.emplace(std::vector<float>(out.data, out.data + n * components));
   out.data = out.device_copy->data();
 }
 
-void run(raycut::Engine& engine, std::string_view kernel_name, float lj_epsilon, float lj_sigma,
-         float sph_mass, float sph_viscosity, nb::handle velocity, nb::handle density,
-         nb::handle pressure) {
+// run() and its results in one locked call: another thread's run() in between would take them.
+nb::dict compute(PyEngine& locked_engine, std::string_view kernel_name, float lj_epsilon,
+                 float lj_sigma, float sph_mass, float sph_viscosity, nb::handle velocity,
+                 nb::handle density, nb::handle pressure, bool to_host) {
   const raycut::Kernel kernel = raycut::parse_kernel(kernel_name);
   raycut::KernelOptions options;
   options.lj_epsilon = lj_epsilon;
@@ -468,12 +559,21 @@ void run(raycut::Engine& engine, std::string_view kernel_name, float lj_epsilon,
   options.sph_mass = sph_mass;
   options.sph_viscosity = sph_viscosity;
   KernelInput v, d, p;
-  kernel_input(v, velocity, "velocity", 3, engine);
-  kernel_input(d, density, "density", 1, engine);
-  kernel_input(p, pressure, "pressure", 1, engine);
-  options.sph = {v.data, d.data, p.data};
-  nb::gil_scoped_release release;
-  engine.run(kernel, options);
+  read_kernel_input(v, velocity, "velocity", 3);
+  read_kernel_input(d, density, "density", 1);
+  read_kernel_input(p, pressure, "pressure", 1);
+  TakenResults taken;
+  {
+    Exclusive hold(locked_engine.mutex);
+    raycut::Engine& engine = locked_engine.engine;
+    check_kernel_input(v, engine);
+    check_kernel_input(d, engine);
+    check_kernel_input(p, engine);
+    options.sph = {v.data, d.data, p.data};
+    engine.run(kernel, options);
+    taken = take_results(engine, to_host);
+  }
+  return results_dict(taken, kernel);
 }
 
 // ---- Verlet list ------------------------------------------------------------------------------
@@ -501,12 +601,14 @@ struct Verlet {
   raycut::VerletList list;
   raycut::ListOptions options;
   std::optional<Snapshot> snapshot;
+  std::mutex mutex;  // serialises calls from Python threads (see Exclusive)
 
   Verlet(std::string_view method, float cutoff, float skin, raycut::ListOptions opts,
          const raycut::Systems& systems)
       : list(method, cutoff, skin, opts, systems), options(opts) {}
 };
 
+// Called with the Verlet's lock held and the GIL released: no Python here.
 Verlet::Snapshot take_snapshot(Verlet& v, bool to_host) {
   const raycut::NeighbourListBuffer& list = v.list.list();
   Verlet::Snapshot s;
@@ -515,11 +617,7 @@ Verlet::Snapshot take_snapshot(Verlet& v, bool to_host) {
   s.rebuild = v.list.rebuilds();
   s.to_host = to_host;
   if (list.space() == MemorySpace::host || to_host) {
-    std::shared_ptr<raycut::NeighbourList> host;
-    {
-      nb::gil_scoped_release release;
-      host = std::make_shared<raycut::NeighbourList>(list.to_host());
-    }
+    auto host = std::make_shared<raycut::NeighbourList>(list.to_host());
     s.offsets = host->offsets.data();
     s.indices = host->indices.data();
     s.distances = host->distances.empty() ? nullptr : host->distances.data();
@@ -543,7 +641,6 @@ Verlet::Snapshot take_snapshot(Verlet& v, bool to_host) {
     if (src == nullptr) return nullptr;
     void* dst = raycut_py::device_alloc(bytes);
     copies->blocks.push_back(dst);
-    nb::gil_scoped_release release;
     raycut_py::device_copy(dst, src, bytes, v.list.engine().stream());
     return dst;
   };
@@ -556,10 +653,7 @@ Verlet::Snapshot take_snapshot(Verlet& v, bool to_host) {
   if (v.options.shifts)
     s.shifts =
         static_cast<const std::int32_t*>(copy(list.shifts(), 3 * s.pairs * sizeof(std::int32_t)));
-  {
-    nb::gil_scoped_release release;
-    raycut_py::synchronize(v.list.engine().stream());
-  }
+  raycut_py::synchronize(v.list.engine().stream());
   s.space = MemorySpace::device;
   s.owner = copies;
   return s;
@@ -571,11 +665,15 @@ Verlet::Snapshot take_snapshot(Verlet& v, bool to_host) {
 // CSR of the last rebuild, as Engine.neighbours returns it: (offsets int64 [N+1], indices int32
 // [P], distances [P] or None, vectors [P, 3] or None, shifts int32 [P, 3] or None).
 nb::tuple verlet_neighbours(Verlet& v, bool to_host) {
-  if (v.list.rebuilds() == 0)
-    value_error("VerletList.neighbours(): no list yet, call update(positions) first");
-  if (!v.snapshot || v.snapshot->rebuild != v.list.rebuilds() || v.snapshot->to_host != to_host)
-    v.snapshot = take_snapshot(v, to_host);
-  const Verlet::Snapshot& s = *v.snapshot;
+  Verlet::Snapshot s;
+  {
+    Exclusive hold(v.mutex);
+    if (v.list.rebuilds() == 0)
+      value_error("VerletList.neighbours(): no list yet, call update(positions) first");
+    if (!v.snapshot || v.snapshot->rebuild != v.list.rebuilds() || v.snapshot->to_host != to_host)
+      v.snapshot = take_snapshot(v, to_host);
+    s = *v.snapshot;
+  }
   const std::size_t pairs = s.pairs;
   auto opt = [&](bool asked, const auto* data, std::vector<std::size_t> shape) -> nb::object {
     using T = std::remove_cv_t<std::remove_pointer_t<decltype(data)>>;
@@ -704,57 +802,63 @@ NB_MODULE(_raycut, m) {
       "[0, S).");
 #endif
 
-  nb::class_<raycut::Engine>(m, "Engine")
+  nb::class_<PyEngine>(m, "Engine")
       .def(nb::init<std::string_view>(), nb::arg("method") = "auto")
-      .def_prop_ro("method", &raycut::Engine::method)
-      .def_prop_ro("space", [](const raycut::Engine& e) { return space_name(e.space()); })
-      .def_prop_ro("size", &raycut::Engine::size)
-      .def_prop_ro("sources", &raycut::Engine::sources)
-      .def_prop_ro("cutoff", &raycut::Engine::cutoff)
+      .def_prop_ro("method", [](PyEngine& e) { return e.engine.method(); })            // fixed
+      .def_prop_ro("space", [](PyEngine& e) { return space_name(e.engine.space()); })  // fixed
+      .def_prop_ro("size", [](PyEngine& e) { return locked(e, [](auto& x) { return x.size(); }); })
+      .def_prop_ro("sources",
+                   [](PyEngine& e) { return locked(e, [](auto& x) { return x.sources(); }); })
+      .def_prop_ro("cutoff",
+                   [](PyEngine& e) { return locked(e, [](auto& x) { return x.cutoff(); }); })
       .def(
           "set_stream",
-          [](raycut::Engine& e, std::uintptr_t stream) {
-            e.set_stream(reinterpret_cast<void*>(stream));
+          [](PyEngine& e, std::uintptr_t stream) {
+            Exclusive hold(e.mutex);
+            e.engine.set_stream(reinterpret_cast<void*>(stream));
           },
           nb::arg("stream"))
       .def(
           "build",
-          [](raycut::Engine& e, nb::handle positions, double cutoff,
+          [](PyEngine& e, nb::handle positions, double cutoff,
              const std::optional<HostCells>& cells, const std::optional<HostFlags>& pbc,
              const std::optional<HostOffsets>& offsets, nb::handle queries,
              const std::optional<HostOffsets>& query_offsets) {
+            const float checked = raycut::checked_cutoff(cutoff);  // as given, then float
             const FloatInput in = float_input(positions, "positions");
             const raycut::PositionsView view = positions_view(in);
             FloatInput query_input;
             const raycut::Systems systems =
                 make_systems(cells, pbc, offsets, queries, query_offsets, query_input);
-            nb::gil_scoped_release release;
-            // Beyond float: inf, refused.
+            Exclusive hold(e.mutex);
             if (systems.plain())
-              e.build(view, static_cast<float>(cutoff));
+              e.engine.build(view, checked);
             else
-              e.build(view, static_cast<float>(cutoff), systems);
+              e.engine.build(view, checked, systems);
           },
           nb::arg("positions"), nb::arg("cutoff"), nb::arg("cells").none() = nb::none(),
           nb::arg("pbc").none() = nb::none(), nb::arg("offsets").none() = nb::none(),
           nb::arg("queries").none() = nb::none(), nb::arg("query_offsets").none() = nb::none())
       .def(
           "update",
-          [](raycut::Engine& e, nb::handle positions) {
+          [](PyEngine& e, nb::handle positions) {
             const FloatInput in = float_input(positions, "positions");
             const raycut::PositionsView view = positions_view(in);
-            nb::gil_scoped_release release;
-            e.update(view);
+            Exclusive hold(e.mutex);
+            e.engine.update(view);
           },
           nb::arg("positions"))
       .def(
           "set_skin",
-          [](raycut::Engine& e, float skin) { e.set_update_policy(raycut::UpdatePolicy{skin}); },
+          [](PyEngine& e, float skin) {
+            Exclusive hold(e.mutex);
+            e.engine.set_update_policy(raycut::UpdatePolicy{skin});
+          },
           nb::arg("skin"))
-      .def("run", &run, nb::arg("kernel"), nb::arg("lj_epsilon") = 1.0f, nb::arg("lj_sigma") = 1.0f,
-           nb::arg("sph_mass") = 0.0f, nb::arg("sph_viscosity") = 0.0f,
+      .def("compute", &compute, nb::arg("kernel"), nb::arg("lj_epsilon") = 1.0f,
+           nb::arg("lj_sigma") = 1.0f, nb::arg("sph_mass") = 0.0f, nb::arg("sph_viscosity") = 0.0f,
            nb::arg("velocity").none() = nb::none(), nb::arg("density").none() = nb::none(),
-           nb::arg("pressure").none() = nb::none())
+           nb::arg("pressure").none() = nb::none(), nb::arg("to_host") = true)
       .def("results", &results, nb::arg("kernel"), nb::arg("to_host"))
       .def("neighbours", &neighbours, nb::arg("half"), nb::arg("distances"), nb::arg("vectors"),
            nb::arg("to_host"), nb::arg("shifts") = false)
@@ -763,8 +867,8 @@ NB_MODULE(_raycut, m) {
       .def("padded", &padded, nb::arg("k"), nb::arg("raise_on_overflow"), nb::arg("to_host"),
            nb::arg("shifts") = false)
       .def("timings",
-           [](const raycut::Engine& e) {
-             const raycut::Timings& t = e.last_timings();
+           [](PyEngine& e) {
+             const raycut::Timings t = locked(e, [](auto& x) { return x.last_timings(); });
              nb::dict d;
              d["build_ms"] = t.build_ms;
              d["compute_ms"] = t.compute_ms;
@@ -775,7 +879,7 @@ NB_MODULE(_raycut, m) {
            })
       .def(
           "_cpp_loop_us",
-          [](raycut::Engine& e, nb::handle positions, double cutoff, std::string_view kernel,
+          [](PyEngine& locked_engine, nb::handle positions, double cutoff, std::string_view kernel,
              bool build, std::size_t calls) {
             // The C++ caller's loop (benchmarks: bench/python_overhead.py): `calls` times
             // [build] + run + results_view, each call timed on the host clock, no
@@ -783,11 +887,13 @@ NB_MODULE(_raycut, m) {
             const FloatInput in = float_input(positions, "positions");
             const raycut::PositionsView view = positions_view(in);
             const raycut::Kernel k = raycut::parse_kernel(kernel);
+            const float checked = raycut::checked_cutoff(cutoff);
             std::vector<double> us(calls);
-            nb::gil_scoped_release release;
+            Exclusive hold(locked_engine.mutex);
+            raycut::Engine& e = locked_engine.engine;
             for (double& t : us) {
               const auto start = std::chrono::steady_clock::now();
-              if (build) e.build(view, static_cast<float>(cutoff));
+              if (build) e.build(view, checked);
               e.run(k);
               (void)e.results_view();  // run() returns synchronised
               t = std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() -
@@ -805,10 +911,18 @@ NB_MODULE(_raycut, m) {
           [](Verlet* self, double cutoff, double skin, std::string_view method, bool half,
              bool distances, bool vectors, bool shifts, const std::optional<HostCells>& cells,
              const std::optional<HostFlags>& pbc, const std::optional<HostOffsets>& offsets) {
+            const float checked = raycut::checked_cutoff(cutoff);  // as given, then float
+            if (!std::isfinite(skin) || !(skin >= 0))
+              value_error("skin must be finite and >= 0, got " + number(skin));
+            try {
+              raycut::checked_cutoff(cutoff + skin);  // the list's reach, also as given
+            } catch (const raycut::Error& e) {
+              value_error(std::string("cutoff + skin (the list's reach): ") + e.what());
+            }
             FloatInput no_queries;
             const raycut::Systems systems =
                 make_systems(cells, pbc, offsets, nb::none(), std::nullopt, no_queries);
-            new (self) Verlet(method, static_cast<float>(cutoff), static_cast<float>(skin),
+            new (self) Verlet(method, checked, static_cast<float>(skin),
                               raycut::ListOptions{half, distances, vectors, shifts}, systems);
           },
           nb::arg("cutoff"), nb::arg("skin"), nb::arg("method") = "auto", nb::arg("half") = false,
@@ -817,10 +931,18 @@ NB_MODULE(_raycut, m) {
           nb::arg("offsets").none() = nb::none())
       .def_prop_ro("method", [](Verlet& v) { return v.list.engine().method(); })
       .def_prop_ro("space", [](Verlet& v) { return space_name(v.list.engine().space()); })
-      .def_prop_ro("size", [](Verlet& v) { return v.list.engine().size(); })
+      .def_prop_ro("size",
+                   [](Verlet& v) {
+                     Exclusive hold(v.mutex);
+                     return v.list.engine().size();
+                   })
       .def_prop_ro("cutoff", [](const Verlet& v) { return v.list.cutoff(); })
       .def_prop_ro("skin", [](const Verlet& v) { return v.list.skin(); })
-      .def_prop_ro("rebuilds", [](const Verlet& v) { return v.list.rebuilds(); })
+      .def_prop_ro("rebuilds",
+                   [](Verlet& v) {
+                     Exclusive hold(v.mutex);
+                     return v.list.rebuilds();
+                   })
       .def_prop_ro("half", [](const Verlet& v) { return v.options.half; })
       .def_prop_ro("distances", [](const Verlet& v) { return v.options.distances; })
       .def_prop_ro("vectors", [](const Verlet& v) { return v.options.vectors; })
@@ -828,6 +950,7 @@ NB_MODULE(_raycut, m) {
       .def(
           "set_stream",
           [](Verlet& v, std::uintptr_t stream) {
+            Exclusive hold(v.mutex);
             v.list.engine().set_stream(reinterpret_cast<void*>(stream));
           },
           nb::arg("stream"))
@@ -836,7 +959,7 @@ NB_MODULE(_raycut, m) {
           [](Verlet& v, nb::handle positions) {
             const FloatInput in = float_input(positions, "positions");
             const raycut::PositionsView view = positions_view(in);
-            nb::gil_scoped_release release;
+            Exclusive hold(v.mutex);
             return v.list.update(view);
           },
           nb::arg("positions"))

@@ -1,5 +1,6 @@
 #include "raycut/engine.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -12,6 +13,7 @@
 #include "core/list_storage.hpp"
 #include "core/method.hpp"
 #include "core/validation.hpp"
+#include "raycut/host_memory.hpp"
 #if defined(RAYCUT_HAVE_CUDA)
 #include "cuda/images.hpp"
 #include "cuda/runtime.hpp"
@@ -19,6 +21,19 @@
 
 namespace raycut {
 namespace {
+
+// What a CPU method allocates per point when it builds: the cell list's keys, order and cells
+// and its sort's scratch (~70 B), more than brute force's copy of the positions (12 B).
+constexpr double host_build_bytes_per_point = 80;
+
+// Refuses a CPU method's build over `points` points beyond the host memory budget, before it
+// allocates (device methods check the free device memory themselves).
+void require_build_memory(const detail::Method& m, const std::string& method, std::size_t points) {
+  if (m.space() != MemorySpace::host) return;
+  require_host_memory(host_build_bytes_per_point * static_cast<double>(points),
+                      "method '" + method + "' over " + std::to_string(points) + " points (~" +
+                          detail::number(host_build_bytes_per_point) + " B each)");
+}
 
 using Clock = std::chrono::steady_clock;
 
@@ -134,6 +149,7 @@ void Engine::build(PositionsView positions, float cutoff) {
   detail::Method& m = impl("build");
   detail::validate_cutoff(cutoff);
   validate_positions(positions, stream_);
+  require_build_memory(m, method_, positions.size);
   float64_ = false;
   built_ = false;
   has_run_ = false;
@@ -236,6 +252,8 @@ void Engine::build_points(PositionsView positions, float cutoff, const Systems& 
                                             "' does not take periodic boxes, batches or query "
                                             "points: " +
                                             why);
+  require_build_memory(m, method_,
+                       positions.size + (systems.has_queries() ? systems.queries.size : 0));
   // A step loop builds the same systems again: their plan (validation, frames) is kept.
   if (!plan_ || plan_queries_ != systems.has_queries() || !same_layout(systems, plan_key_) ||
       positions.size != plan_sources_ || cutoff != plan_cutoff_) {
@@ -452,7 +470,26 @@ PaddedReport Engine::padded_neighbours(PaddedNeighbourBuffer& list, std::uint32_
     return {};
   }
   list.storage_->padding = static_cast<std::uint32_t>(sources_);
-  m.padded_neighbours(*list.storage_, k, false, shifts);
+  // No row holds more entries than there are candidate points (each source once per image):
+  // a K above that only adds padding. A matrix that does not fit is refused before it is
+  // allocated, the message saying which K is enough.
+  const std::uint64_t candidates =
+      images_ ? images_->points().size - (queries_ ? images_->points().targets : 0) : sources_;
+  const double bytes =
+      4.0 * static_cast<double>(size_) * ((shifts ? 4.0 : 1.0) * static_cast<double>(k) + 1);
+  const std::string what = "the padded neighbour list [N = " + std::to_string(size_) +
+                           ", K = " + std::to_string(k) + "]" + (shifts ? " with shifts" : "");
+  const std::string bound =
+      "; no row can hold more than " + std::to_string(candidates) + " neighbours here (" +
+      std::to_string(sources_) + " particles" + (images_ ? " and their images" : "") +
+      "), so K = " + std::to_string(std::max<std::uint64_t>(candidates, 1)) + " is always enough";
+  try {
+    if (m.space() == MemorySpace::host) require_host_memory(bytes, what);
+    m.padded_neighbours(*list.storage_, k, false, shifts);
+  } catch (const Error& e) {
+    if (e.code() != ErrorCode::out_of_memory || k <= candidates) throw;
+    throw Error(ErrorCode::out_of_memory, e.what() + bound);
+  }
   m.synchronize();
   detail::report_padded(*list.storage_, throw_on_overflow);
   return list.storage_->report;

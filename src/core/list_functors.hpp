@@ -44,6 +44,19 @@ struct HalfListCount : HalfFilter {
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { counts[i] = acc; }
 };
 
+// |r| in float, equal to the length of the vector r itself to float precision: sqrtf of the
+// predicate's r2 where r2 is far from underflow (the usual case, no extra work), else from r
+// scaled by a power of two (exact) so that its squares are normal floats. Without the scaling a
+// pair 1e-22 apart had d off by 1% (r2 ~1e-44 is a subnormal float) while D was right.
+RAYCUT_HD float pair_distance(Vec3 r, float r2) {
+  if (r2 >= 0x1p-100f) return sqrtf(r2);
+  const float largest = fmaxf(fabsf(r.x), fmaxf(fabsf(r.y), fabsf(r.z)));
+  if (largest == 0.0f) return 0.0f;
+  const int e = ilogbf(largest);
+  const float x = ldexpf(r.x, -e), y = ldexpf(r.y, -e), z = ldexpf(r.z, -e);
+  return ldexpf(sqrtf(fmaf(z, z, fmaf(y, y, x * x))), e);
+}
+
 // Row i written from offsets[i]; distances, vectors and shifts where asked (null otherwise).
 struct ListFill : HalfFilter {
   using Accumulator = std::uint64_t;  // the next entry of the row
@@ -69,7 +82,7 @@ struct ListFill : HalfFilter {
       shifts[3 * slot + 1] = s.b;
       shifts[3 * slot + 2] = s.c;
     }
-    if (distances) distances[slot] = sqrtf(r2);
+    if (distances) distances[slot] = pair_distance(r, r2);
     if (vectors) {
       vectors[3 * slot] = r.x;
       vectors[3 * slot + 1] = r.y;

@@ -1,8 +1,10 @@
 #include "core/list_storage.hpp"
 
+#include <algorithm>
 #include <string>
 
 #include "core/validation.hpp"
+#include "raycut/host_memory.hpp"
 
 namespace raycut::detail {
 
@@ -38,6 +40,9 @@ std::uint64_t* HostListStorage::prepare_offsets(std::size_t targets,
                                                 const ListOptions& list_options) {
   n = targets;
   options = list_options;
+  if (offsets_.size() < targets + 1)
+    require_host_memory(8.0 * static_cast<double>(targets + 1 - offsets_.size()),
+                        "the offsets of a neighbour list of " + std::to_string(targets) + " rows");
   offsets_.resize(targets + 1);
   publish();
   return offsets_.data();
@@ -45,7 +50,22 @@ std::uint64_t* HostListStorage::prepare_offsets(std::size_t targets,
 
 ListFill HostListStorage::prepare_fill(std::uint64_t entries, bool half) {
   pairs = entries;
-  // Sized on demand (no shrinking: the buffers are reused by the next fill).
+  // Sized on demand (no shrinking: the buffers are reused by the next fill). What grows is
+  // checked against the memory budget first: with overcommit a resize that does not fit is
+  // rarely a std::bad_alloc, it is the OOM killer later.
+  const auto growth = [&](std::size_t held, double wanted, double bytes) {
+    return std::max(0.0, wanted - static_cast<double>(held)) * bytes;
+  };
+  const double count = static_cast<double>(entries);
+  const double more =
+      (options.coo ? growth(rows_.size(), count, 8) + growth(columns_.size(), count, 8)
+                   : growth(indices_.size(), count, 4)) +
+      (options.distances ? growth(distances_.size(), count, 4) : 0.0) +
+      (options.vectors ? growth(vectors_.size(), 3 * count, 4) : 0.0) +
+      (options.shifts ? growth(shifts_.size(), 3 * count, 4) : 0.0);
+  const std::string what = "a neighbour list of " + std::to_string(entries) + " pairs (" +
+                           format_bytes(bytes_per_entry(options)) + " each)";
+  require_host_memory(more, what);
   try {
     if (!options.coo && indices_.size() < entries) indices_.resize(entries);
     if (options.coo && rows_.size() < entries) rows_.resize(entries);
@@ -54,10 +74,8 @@ ListFill HostListStorage::prepare_fill(std::uint64_t entries, bool half) {
     if (options.vectors && vectors_.size() < 3 * entries) vectors_.resize(3 * entries);
     if (options.shifts && shifts_.size() < 3 * entries) shifts_.resize(3 * entries);
   } catch (const std::bad_alloc&) {
-    const double per_pair = bytes_per_entry(options);
     throw Error(ErrorCode::out_of_memory,
-                "not enough host memory for a neighbour list of " + std::to_string(entries) +
-                    " pairs (" + format_bytes(per_pair * static_cast<double>(entries)) + ")");
+                "not enough host memory for " + what + ": " + format_bytes(more) + " more");
   }
   publish();
   return {{half},
@@ -89,9 +107,17 @@ PaddedFill HostPaddedStorage::prepare(std::size_t targets, std::uint32_t width, 
                                       bool with_shifts, PaddedOverflow* overflow) {
   n = targets;
   k = width;
-  indices_.resize(targets * std::size_t{width});
-  counts_.resize(targets);
-  if (with_shifts) shifts_.resize(3 * targets * std::size_t{width});
+  // The engine checked the matrix against the memory budget (with the bound on K in its
+  // message); a failing resize is still a clear error.
+  try {
+    indices_.resize(targets * std::size_t{width});
+    counts_.resize(targets);
+    if (with_shifts) shifts_.resize(3 * targets * std::size_t{width});
+  } catch (const std::bad_alloc&) {
+    throw Error(ErrorCode::out_of_memory, "not enough host memory for a padded neighbour list [" +
+                                              std::to_string(targets) + ", " +
+                                              std::to_string(width) + "]");
+  }
   indices = data_or_null(indices_);
   counts = data_or_null(counts_);
   shifts = with_shifts ? data_or_null(shifts_) : nullptr;

@@ -1,6 +1,3 @@
-#include <unistd.h>
-
-#include <fstream>
 #include "core/validation.hpp"
 
 #include <cmath>
@@ -24,7 +21,11 @@ std::string number(double value) {
 }
 
 void validate_cutoff(float cutoff) {
-  if (!std::isfinite(cutoff) || !(cutoff > 0.0f))
+  validate_cutoff_value(cutoff);
+}
+
+void validate_cutoff_value(double cutoff) {
+  if (!std::isfinite(cutoff) || !(cutoff > 0.0))
     throw Error(ErrorCode::invalid_argument,
                 "cutoff must be finite and > 0, got " + number(cutoff));
   if (cutoff < min_cutoff || cutoff > max_cutoff)
@@ -60,6 +61,8 @@ void allocate_indices(NeighbourList& list, std::uint64_t pairs) {
                  "not enough host memory for the neighbour list: " + std::to_string(pairs) +
                      " pairs need " + format_bytes(static_cast<double>(pairs) * 4));
   };
+  require_host_memory(static_cast<double>(pairs) * 4,
+                      "a neighbour list of " + std::to_string(pairs) + " pairs");
   try {
     list.indices.resize(pairs);
   } catch (const std::bad_alloc&) {
@@ -87,25 +90,9 @@ namespace raycut {
 
 using detail::number;
 
-double available_host_memory() {
-  std::ifstream meminfo("/proc/meminfo");
-  std::string key, unit;
-  double kib = 0;
-  while (meminfo >> key >> kib >> unit)
-    if (key == "MemAvailable:") return kib * 1024.0;
-  const long page = ::sysconf(_SC_PAGESIZE);
-  const long available = ::sysconf(_SC_AVPHYS_PAGES);
-  if (page > 0 && available > 0) return static_cast<double>(available) * page;
-  const long physical = ::sysconf(_SC_PHYS_PAGES);
-  return page > 0 && physical > 0 ? static_cast<double>(physical) * page : 1e300;
-}
-
-void require_host_memory(double bytes, const std::string& what) {
-  const double available = available_host_memory();
-  if (bytes > available)
-    throw Error(ErrorCode::out_of_memory, what + " needs " + detail::format_bytes(bytes) +
-                                              " of host memory, " +
-                                              detail::format_bytes(available) + " is available");
+float checked_cutoff(double cutoff) {
+  detail::validate_cutoff_value(cutoff);
+  return static_cast<float>(cutoff);
 }
 
 void validate_kernel_range(Kernel kernel, const KernelOptions& options, float cutoff) {

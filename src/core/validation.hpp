@@ -19,6 +19,8 @@ inline constexpr float max_cutoff = 0x1p60f;
 // Throws Error(invalid_argument) unless the cutoff is finite and in [min_cutoff, max_cutoff];
 // the message names the supported range.
 void validate_cutoff(float cutoff);
+// The same check on a cutoff given in double, before it is rounded to float.
+void validate_cutoff_value(double cutoff);
 
 // Index of the first particle with a non-finite coordinate in host memory, or n if none.
 std::size_t first_non_finite_host(const float* xyz, std::size_t n);

@@ -7,6 +7,7 @@
 // and optionally target_order(): the targets in the order to visit them (else 0 .. n - 1).
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -17,6 +18,7 @@
 #include "core/method.hpp"
 #include "core/validation.hpp"
 #include "raycut/engine.hpp"
+#include "raycut/host_memory.hpp"
 #include "raycut/kernels.hpp"
 #include "raycut/pairs.hpp"
 
@@ -58,6 +60,8 @@ class HostMethod : public Method {
     auto& list = static_cast<HostListStorage&>(storage);
     std::uint64_t* offsets = list.prepare_offsets(n_, options);
     // The count pass writes counts[i] at offsets[i + 1], then a running sum makes the offsets.
+    require_host_memory(4.0 * static_cast<double>(n_),
+                        "the row counts of a neighbour list of " + std::to_string(n_) + " rows");
     std::vector<std::uint32_t> counts(n_);
     if (options.half)
       run(HalfListCount{{true}, counts.data()});
@@ -72,7 +76,11 @@ class HostMethod : public Method {
     auto& list = static_cast<HostPaddedStorage&>(storage);
     PaddedOverflow overflow{0, 0};
     run(list.prepare(n_, k, half, shifts, &overflow));
-    list.report = {overflow.rows, overflow.largest};
+    // The largest row, overflowed or not (the fill records only rows over K: on the GPU an
+    // atomic per row would cost more than the matrix).
+    std::uint32_t largest = 0;
+    for (std::size_t i = 0; i < n_; ++i) largest = std::max(largest, list.counts[i]);
+    list.report = {overflow.rows, largest};
   }
 
   PairPass pair_pass() const override {

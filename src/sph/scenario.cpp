@@ -12,6 +12,7 @@
 #include "raycut/error.hpp"
 #include "raycut/files.hpp"
 #include "raycut/host_memory.hpp"
+#include "raycut/sph/solver.hpp"
 
 namespace raycut::sph {
 namespace {
@@ -336,6 +337,64 @@ WcsphConfig read_wcsph_config(const std::string& path, WcsphConfig base) {
   return base;
 }
 
+namespace {
+
+// Why the sizes of `c` cannot be run in float (empty when they can): the particle mass
+// rest_density / sum W (about rest_density dx^3) must be a normal float, and the density and
+// force kernels at the support h must pass validate_kernel_range with the solver's options.
+std::string wcsph_unfit(const WcsphConfig& c) {
+  const double dx = c.dx();
+  const float h = c.h_over_dx * c.dx();
+  if (!positive_finite(static_cast<float>(dx)) || !positive_finite(h))
+    return "dx or h is not a finite float > 0";
+  const LatticeSums sums = lattice_sums(dx, h);
+  const double mass = c.rest_density / sums.poly6;
+  if (!(mass >= std::numeric_limits<float>::min() && mass <= std::numeric_limits<float>::max())) {
+    char text[120];
+    std::snprintf(text, sizeof text,
+                  "the particle mass (about rest_density x dx^3) = %g kg is "
+                  "not a normal float",
+                  mass);
+    return text;
+  }
+  SphParameters p;
+  p.particle_mass = static_cast<float>(mass);
+  p.gradient_correction = static_cast<float>(sums.poly6 / sums.gradient);
+  p.viscosity = c.viscosity();
+  p.weakly_compressible = true;
+  try {
+    validate_kernel_range(Kernel::sph_density, density_pass_options(p), h);
+    validate_kernel_range(Kernel::sph_force, force_pass_options(p), h);
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// The column widths (at c's other sizes) that wcsph_unfit accepts, [lo, hi], found in log
+// space (the quantities are powers of dx): {0, 0} when no decade from 1e-30 to 1e30 works.
+std::pair<double, double> wcsph_width_range(WcsphConfig c) {
+  const auto fits = [&c](double width) {
+    c.column_width = static_cast<float>(width);
+    return wcsph_unfit(c).empty();
+  };
+  double good = 0;
+  for (int e = -30; e <= 30 && good == 0; ++e)
+    if (fits(std::pow(10.0, e))) good = std::pow(10.0, e);
+  if (good == 0) return {0, 0};
+  const auto edge = [&](double bad) {  // the boundary between `good` and `bad`, bisected
+    double in = std::log(good), out = std::log(bad);
+    for (int k = 0; k < 40; ++k) {
+      const double mid = 0.5 * (in + out);
+      (fits(std::exp(mid)) ? in : out) = mid;
+    }
+    return std::exp(in);
+  };
+  return {edge(1e-40), edge(1e38)};
+}
+
+}  // namespace
+
 SphScenario wcsph_scenario(const WcsphConfig& c) {
   require(c.scenario == "dam-break" || c.scenario == "hydrostatic", ErrorCode::invalid_argument,
           "scenario must be dam-break or hydrostatic");
@@ -362,6 +421,22 @@ SphScenario wcsph_scenario(const WcsphConfig& c) {
   require(std::isfinite(c.end_time) && c.end_time >= 0.0f, ErrorCode::invalid_argument,
           "end_time must be finite and >= 0 (0: the default)");
 
+  if (const std::string why = wcsph_unfit(c); !why.empty()) {
+    // Name the scenario's own sizes (the caller never set particle_mass or a kernel's factor).
+    const auto [lo, hi] = wcsph_width_range(c);
+    char text[300];
+    std::snprintf(text, sizeof text,
+                  "scenario %s: column_width = %g m at resolution %d (particle spacing dx = %g m, "
+                  "support h = %g m) cannot be simulated in float: ",
+                  c.scenario.c_str(), static_cast<double>(c.column_width), c.resolution,
+                  static_cast<double>(c.dx()), static_cast<double>(c.h_over_dx * c.dx()));
+    char range[160];
+    std::snprintf(range, sizeof range,
+                  "; column_width must be in [%.3g, %.3g] m at this resolution and these sizes", lo,
+                  hi);
+    throw Error(ErrorCode::invalid_argument,
+                text + why + (hi > 0 ? std::string(range) : std::string()));
+  }
   const double dx = c.dx();
   const float h = c.h_over_dx * c.dx();
   const float c0 = c.c0();

@@ -1,0 +1,209 @@
+// Refusals that are clear and early: the host memory budget (RAYCUT_MAX_MEMORY, else the memory
+// available and the cgroup's headroom), checked before lists and padded matrices are allocated;
+// cutoffs checked as given in double; distances that agree with their vectors at every scale
+// of the supported cutoff range; the padded report's largest row.
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include "error_helpers.hpp"
+#include "raycut/engine.hpp"
+#include "raycut/host_memory.hpp"
+
+namespace {
+
+using raycut::Engine;
+using raycut::ErrorCode;
+using raycut::MemorySpace;
+using raycut_test::contains;
+using raycut_test::error_message;
+
+// RAYCUT_MAX_MEMORY set for one test, restored after.
+class Budget {
+ public:
+  explicit Budget(const char* value) {
+    if (const char* old = std::getenv("RAYCUT_MAX_MEMORY")) old_ = old, had_ = true;
+    ::setenv("RAYCUT_MAX_MEMORY", value, 1);
+  }
+  ~Budget() {
+    if (had_)
+      ::setenv("RAYCUT_MAX_MEMORY", old_.c_str(), 1);
+    else
+      ::unsetenv("RAYCUT_MAX_MEMORY");
+  }
+
+ private:
+  std::string old_;
+  bool had_ = false;
+};
+
+std::vector<std::string> cpu_methods() {
+  std::vector<std::string> out;
+  for (const auto& m : raycut::list_methods())
+    if (m.available && Engine(m.name).space() == MemorySpace::host) out.push_back(m.name);
+  return out;
+}
+
+TEST(MemoryBudget, EnvironmentValueWithSuffixes) {
+  {
+    Budget b("300M");
+    EXPECT_EQ(raycut::host_memory_budget().bytes, 300.0 * 1024 * 1024);
+    EXPECT_TRUE(raycut::host_memory_budget().from_environment);
+  }
+  {
+    Budget b("2.5G");
+    EXPECT_EQ(raycut::host_memory_budget().bytes, 2.5 * 1024 * 1024 * 1024);
+  }
+  {
+    Budget b("64KiB");
+    EXPECT_EQ(raycut::host_memory_budget().bytes, 64.0 * 1024);
+  }
+  {
+    Budget b("123456");
+    EXPECT_EQ(raycut::host_memory_budget().bytes, 123456.0);
+  }
+}
+
+TEST(MemoryBudget, MalformedValueNamesTheVariable) {
+  for (const char* bad : {"abc", "12Q", "-5M", "0", "1.2.3G", "M"}) {
+    Budget b(bad);
+    const std::string message =
+        error_message(ErrorCode::invalid_argument, [] { raycut::host_memory_budget(); });
+    EXPECT_TRUE(contains(message, "RAYCUT_MAX_MEMORY")) << message;
+    EXPECT_TRUE(contains(message, std::string("'") + bad + "'")) << message;
+    EXPECT_TRUE(contains(message, "K, M, G or T")) << message;
+  }
+}
+
+TEST(MemoryBudget, SystemBudgetIsPositiveAndSaysWhereItComesFrom) {
+  ::unsetenv("RAYCUT_MAX_MEMORY");
+  const raycut::MemoryBudget budget = raycut::host_memory_budget();
+  EXPECT_GT(budget.bytes, 0.0);
+  EXPECT_FALSE(budget.from_environment);
+  EXPECT_TRUE(contains(budget.source, "MemAvailable")) << budget.source;
+}
+
+TEST(MemoryBudget, RequestAboveBudgetNamesSizeBudgetAndKnob) {
+  Budget b("300M");
+  raycut::require_host_memory(299.0 * 1024 * 1024, "a small request");
+  const std::string message = error_message(
+      ErrorCode::out_of_memory, [] { raycut::require_host_memory(2.3e9, "a neighbour list"); });
+  EXPECT_TRUE(contains(message, "a neighbour list needs 2.14 GiB")) << message;
+  EXPECT_TRUE(contains(message, "300.00 MiB")) << message;
+  EXPECT_TRUE(contains(message, "RAYCUT_MAX_MEMORY=300M")) << message;
+}
+
+// 12,000 points in a cube of side 1 with cutoff 10: every pair, 1.44e8 entries (~0.54 GiB of
+// indices alone, 2.1 GiB as COO with distances): refused before the fill allocates, quickly.
+TEST(MemoryBudget, ListLargerThanTheBudgetIsRefusedBeforeAllocation) {
+  Budget b("300M");
+  const std::size_t n = 12000;
+  std::vector<float> xyz(3 * n);
+  for (std::size_t i = 0; i < xyz.size(); ++i)
+    xyz[i] = static_cast<float>((i * 7919) % 1000) / 1000;
+  for (const std::string& method : cpu_methods()) {
+    Engine engine(method);
+    engine.build({xyz.data(), n, MemorySpace::host}, 10.0f);
+    const auto start = std::chrono::steady_clock::now();
+    const std::string message = error_message(ErrorCode::out_of_memory, [&] {
+      engine.neighbours(raycut::ListOptions{.distances = true});
+    });
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    EXPECT_TRUE(contains(message, "143988000 pairs")) << method << ": " << message;
+    EXPECT_TRUE(contains(message, "RAYCUT_MAX_MEMORY=300M")) << message;
+    EXPECT_LT(seconds, 20.0) << method << ": the refusal comes after the count pass only";
+  }
+}
+
+TEST(MemoryBudget, PaddedKFarAboveNIsRefusedNamingTheKThatIsEnough) {
+  const std::size_t n = 50;
+  std::vector<float> xyz(3 * n);
+  for (std::size_t i = 0; i < xyz.size(); ++i) xyz[i] = static_cast<float>(i % 17) / 17;
+  for (const char* budget : {"300M", ""}) {  // "": the system's budget (400 GiB is above it)
+    Budget b(budget);
+    for (const std::string& method : cpu_methods()) {
+      Engine engine(method);
+      engine.build({xyz.data(), n, MemorySpace::host}, 0.3f);
+      raycut::PaddedNeighbourBuffer padded;
+      const std::string message = error_message(ErrorCode::out_of_memory, [&] {
+        engine.padded_neighbours(padded, std::uint32_t{1} << 31);
+      });
+      EXPECT_TRUE(contains(message, "K = 2147483648")) << message;
+      EXPECT_TRUE(contains(message, "K = 50 is always enough")) << message;
+      EXPECT_TRUE(contains(message, "RAYCUT_MAX_MEMORY")) << message;
+    }
+  }
+}
+
+TEST(MemoryBudget, BuildBeyondTheBudgetIsRefusedBeforeItAllocates) {
+  Budget b("1M");
+  const std::size_t n = 20000;  // ~1.5 MiB of structure at ~80 B a point
+  std::vector<float> xyz(3 * n, 0.5f);
+  for (const std::string& method : cpu_methods()) {
+    Engine engine(method);
+    const std::string message = error_message(ErrorCode::out_of_memory, [&] {
+      engine.build({xyz.data(), n, MemorySpace::host}, 0.1f);
+    });
+    EXPECT_TRUE(contains(message, "method '" + method + "' over 20000 points")) << message;
+    EXPECT_TRUE(contains(message, "RAYCUT_MAX_MEMORY=1M")) << message;
+  }
+}
+
+TEST(PaddedReport, LargestCountIsTheLargestRowWithoutOverflow) {
+  // Particle 0 has 3 neighbours, the others 1 each.
+  const std::vector<float> xyz = {0, 0, 0, 0.5f, 0, 0, 0, 0.5f, 0, 0, 0, 0.5f};
+  for (const std::string& method : cpu_methods()) {
+    Engine engine(method);
+    engine.build({xyz.data(), 4, MemorySpace::host}, 0.6f);
+    raycut::PaddedNeighbourBuffer padded;
+    const raycut::PaddedReport report = engine.padded_neighbours(padded, 8);
+    EXPECT_FALSE(report.overflowed());
+    EXPECT_EQ(report.largest_count, 3u) << method;
+    EXPECT_EQ(engine.padded_neighbours(padded, 2).largest_count, 3u) << method;
+  }
+}
+
+TEST(Cutoff, CheckedAsGivenInDouble) {
+  for (double bad : {1e-50, 1e39}) {
+    const std::string message =
+        error_message(ErrorCode::invalid_argument, [&] { raycut::checked_cutoff(bad); });
+    EXPECT_TRUE(contains(message, "[2^-60, 2^60]")) << message;
+    EXPECT_TRUE(contains(message, bad < 1 ? "1e-50" : "1e+39")) << message;
+  }
+  EXPECT_EQ(raycut::checked_cutoff(0.25), 0.25f);
+}
+
+// d is |D| to float precision at every scale the cutoff range allows, pairs 2^-149 to 2^60
+// apart (before: sqrtf of the predicate's r2, subnormal below ~1e-19, so a pair 1e-22 apart
+// had d off by 1 %).
+TEST(Distances, EqualTheLengthOfTheirVectorsAtEveryScale) {
+  for (const std::string& method : cpu_methods()) {
+    for (double separation : {1e-45, 3e-40, 1e-30, 1e-22, 1e-20, 1e-10, 1.0, 1e10, 2e17}) {
+      const double cutoff = std::max(separation * 4, 1e-18);
+      // Three components of different sizes, the largest `separation`.
+      const float dx = static_cast<float>(separation), dy = static_cast<float>(separation * 0.6),
+                  dz = static_cast<float>(separation * 0.3);
+      const std::vector<float> xyz = {0, 0, 0, dx, dy, dz};
+      Engine engine(method);
+      engine.build({xyz.data(), 2, MemorySpace::host}, static_cast<float>(cutoff));
+      const raycut::NeighbourList list =
+          engine.neighbours(raycut::ListOptions{.distances = true, .vectors = true});
+      ASSERT_EQ(list.indices.size(), 2u) << method << " at " << separation;
+      for (std::size_t e = 0; e < 2; ++e) {
+        const double x = list.vectors[3 * e], y = list.vectors[3 * e + 1],
+                     z = list.vectors[3 * e + 2];
+        const double length = std::sqrt(x * x + y * y + z * z);
+        const double ulp = std::max(std::ldexp(1.0, -149), length * std::ldexp(1.0, -22));
+        EXPECT_NEAR(list.distances[e], length, ulp) << method << " at separation " << separation;
+      }
+    }
+  }
+}
+
+}  // namespace
