@@ -460,11 +460,12 @@ void kernel_input(KernelInput& out, nb::handle obj, const char* name, std::size_
 
 void run(raycut::Engine& engine, std::string_view kernel_name, float lj_epsilon, float lj_sigma,
          float sph_mass, float sph_viscosity, nb::handle velocity, nb::handle density,
-         nb::handle pressure) {
+         nb::handle pressure, bool lj_shift) {
   const raycut::Kernel kernel = raycut::parse_kernel(kernel_name);
   raycut::KernelOptions options;
   options.lj_epsilon = lj_epsilon;
   options.lj_sigma = lj_sigma;
+  options.lj_shift = lj_shift;
   options.sph_mass = sph_mass;
   options.sph_viscosity = sph_viscosity;
   KernelInput v, d, p;
@@ -754,7 +755,7 @@ NB_MODULE(_raycut, m) {
       .def("run", &run, nb::arg("kernel"), nb::arg("lj_epsilon") = 1.0f, nb::arg("lj_sigma") = 1.0f,
            nb::arg("sph_mass") = 0.0f, nb::arg("sph_viscosity") = 0.0f,
            nb::arg("velocity").none() = nb::none(), nb::arg("density").none() = nb::none(),
-           nb::arg("pressure").none() = nb::none())
+           nb::arg("pressure").none() = nb::none(), nb::arg("lj_shift") = false)
       .def("results", &results, nb::arg("kernel"), nb::arg("to_host"))
       .def("neighbours", &neighbours, nb::arg("half"), nb::arg("distances"), nb::arg("vectors"),
            nb::arg("to_host"), nb::arg("shifts") = false)
