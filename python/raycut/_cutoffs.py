@@ -74,7 +74,8 @@ class PairCutoffs:
                     if ia < len(present) and ib < len(present) and present[ia] == a and \
                             present[ib] == b:
                         self._table[ia, ib] = self._table[ib, ia] = c
-                self.search = max(_value(v, "a pair cutoff") for v in cutoff.values())
+                # The largest cutoff among the species present (others cannot pair here).
+                self.search = float(self._table.max()) if self._table.size else 0.0
             elif not any(pairs):
                 radii = {_species(k): _value(v, f"the radius of species {k!r}")
                          for k, v in cutoff.items()}

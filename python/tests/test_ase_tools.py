@@ -314,3 +314,15 @@ def test_lj_forces_per_atom_sums_against_float64_brute_force():
     assert lj == pytest.approx(2 * energy, abs=2e-5 * magnitude)
     with pytest.raises(ValueError, match="lj_shift"):
         engine.compute("lj", lj_shift=True)
+
+
+def test_pair_cutoffs_of_absent_species_do_not_widen_the_search():
+    """A cutoff for species not in the system (U-U at 50 here) leaves the search at the largest
+    cutoff among the species present: the same pairs, found at 1.3, not at 50."""
+    atoms = MIXED["molecule"]()
+    cutoffs = raycut._cutoffs.PairCutoffs({(6, 6): 1.6, (1, 6): 1.2, (92, 92): 50.0}, len(atoms),
+                                          atoms.numbers)
+    assert cutoffs.search == 1.6
+    ours = raycut.ase.neighbor_list("ij", atoms, {(6, 6): 1.6, (1, 6): 1.2, (92, 92): 50.0})
+    theirs = ase_neighbor_list("ij", atoms, {(6, 6): 1.6, (1, 6): 1.2, (92, 92): 50.0})
+    assert sorted(zip(*ours)) == sorted(zip(*(a.tolist() for a in theirs))) != []
