@@ -172,6 +172,10 @@ class ZipWriter {
   std::uint64_t offset_ = 0;
 };
 
+// The progress line counts percent of the run, by stage: the file read (30), the build (45), the
+// list (60), then the output, in proportion to what is written.
+constexpr std::uint64_t percent_read = 30, percent_built = 45, percent_listed = 60;
+
 // ---- the list ----------------------------------------------------------------------------------
 
 // The pairs of a CSR list as ASE's arrays: i and j (int64), d and D (float32), S (int32).
@@ -218,7 +222,7 @@ void write_npz(const std::string& path, const Pairs& p, const std::string& lette
         break;
     }
     zip.add(std::string(1, letter) + ".npy", data);
-    progress.update(++done);
+    progress.update(percent_listed + (100 - percent_listed) * ++done / letters.size());
   }
   zip.finish();
   file.commit();
@@ -271,7 +275,7 @@ void write_csv_pairs(const std::string& path, const Pairs& p, const std::string&
     }
     row += '\n';
     file.write(row);
-    if ((k & 0xFFFF) == 0) progress.update(k);
+    if ((k & 0xFFFF) == 0) progress.update(percent_listed + (100 - percent_listed) * k / p.size());
   }
   file.commit();
 }
@@ -298,10 +302,13 @@ int run_neighbours(const NeighboursOptions& o) {
       throw Error(ErrorCode::invalid_argument,
                   "neighbours: --quantities '" + io::printable(o.quantities) +
                       "': each of the letters i, j, d, D, S at most once (ASE's letters)");
+  Progress progress("neighbours", 100, o.quiet);
   PointCloud cloud = read_positions(o.input);
+  progress.update(percent_read);
   cloud.box = resolve_box(o.box, cloud.box);
   Engine engine(o.method);
   engine.build({cloud.xyz.data(), cloud.size(), MemorySpace::host}, o.cutoff, cloud.box);
+  progress.update(percent_built);
   ListOptions options;
   options.half = o.half;
   options.distances = o.quantities.find('d') != std::string::npos;
@@ -309,8 +316,7 @@ int run_neighbours(const NeighboursOptions& o) {
   options.shifts = o.quantities.find('S') != std::string::npos;
   const NeighbourList list = engine.neighbours(options);
   const Pairs pairs = pairs_of(list);
-  Progress progress("neighbours: writing " + o.output, npz ? o.quantities.size() : pairs.size(),
-                    o.quiet);
+  progress.update(percent_listed);
   if (npz)
     write_npz(o.output, pairs, o.quantities, progress);
   else
