@@ -2,7 +2,7 @@
 # as it should, bench writes the CSV header of spec/BENCHMARKS.md.
 include(${CMAKE_CURRENT_LIST_DIR}/cli_helpers.cmake)
 
-foreach(sub "" methods check bench generate)
+foreach(sub "" methods check bench generate neighbours)
   expect_exit(0 ${sub} --help)
   expect_match("${last_out}" "Usage")
 endforeach()
@@ -178,4 +178,41 @@ if(last_out MATCHES "grid-paper +available")
   expect_exit(2 check -m grid-paper -f uniform -n 100 --cell 2 2 2)
   expect_match("${last_err}" "none of the methods")
 endif()
+
+# --version: the project's version.
+expect_exit(0 --version)
+expect_match("${last_out}" "^raycut [0-9]+\\.[0-9]+\\.[0-9]+")
+
+# neighbours: the list of a file, with ASE's letters. Two particles 0.6 apart in a periodic unit
+# cube at cutoff 0.5: one pair through the boundary each way (S = -1 and +1 along x).
+file(WRITE ${WORK}/two.xyz "2\nLattice=\"1 0 0 0 1 0 0 0 1\" Properties=species:S:1:pos:R:3 pbc=\"T T T\"\nH 0.2 0.5 0.5\nH 0.8 0.5 0.5\n")
+expect_exit(0 neighbours -m cell-list -i ${WORK}/two.xyz -c 0.5 -o ${WORK}/two.csv --quantities ijS)
+file(READ ${WORK}/two.csv csv)
+expect_match("${csv}" "^i,j,Sx,Sy,Sz\n0,1,-1,0,0\n1,0,1,0,0\n$")
+expect_exit(0 neighbours -m cell-list -i ${WORK}/two.xyz -c 0.5 -o ${WORK}/half.csv --quantities ijd --half)
+file(READ ${WORK}/half.csv csv)
+expect_match("${csv}" "^i,j,d\n0,1,0\\.(4|39999)[0-9]*\n$")  # 0.4 within a float32 ulp
+# Open along x (--pbc): no pair.
+expect_exit(0 neighbours -i ${WORK}/two.xyz -c 0.5 -o ${WORK}/open.csv --pbc F T T)
+file(READ ${WORK}/open.csv csv)
+expect_match("${csv}" "^i,j,d,Dx,Dy,Dz,Sx,Sy,Sz\n$")
+# An .npz is a zip of .npy files (the Python tests read it with NumPy).
+expect_exit(0 neighbours -i ${WORK}/two.xyz -c 0.5 -o ${WORK}/two.npz -q)
+file(READ ${WORK}/two.npz npz HEX LIMIT 4)
+expect_match("${npz}" "^504b0304$")
+# Bad letters, a bad extension, a missing cutoff: one line, exit 2, nothing written.
+expect_exit(2 neighbours -i ${WORK}/two.xyz -c 0.5 -o ${WORK}/bad.npz --quantities ijx)
+expect_match("${last_err}" "--quantities 'ijx'")
+expect_exit(2 neighbours -i ${WORK}/two.xyz -c 0.5 -o ${WORK}/bad.txt)
+expect_match("${last_err}" "must end in .npz or .csv")
+expect_exit(2 neighbours -i ${WORK}/two.xyz -o ${WORK}/bad.npz)
+if(EXISTS ${WORK}/bad.npz OR EXISTS ${WORK}/bad.txt)
+  message(FATAL_ERROR "neighbours left a file behind after an error")
+endif()
+# -q is accepted by check and bench; short runs print no progress line either way.
+expect_exit(0 check -q -m cell-list -f uniform -n 100)
+if(NOT last_err STREQUAL "")
+  message(FATAL_ERROR "check -q wrote to stderr: ${last_err}")
+endif()
+
 message(STATUS "cli: all checks passed")

@@ -232,11 +232,11 @@ TEST(Functors, LennardJonesForcesAndVirialAgainstDoublePrecision) {
     options.lj_sigma = static_cast<float>(sigma);
     const raycut::Results r = engine.compute(Kernel::lj_forces, options);
 
-    // Energy: every pair on both sides.
+    // Energy: each pair half on each atom, so the per-atom energies sum to the system's.
     double sum_energy = 0;
     for (float e : r.energy) sum_energy += e;
     const double e0 = total_energy(0, 0, 0.0);
-    EXPECT_NEAR(sum_energy, 2 * e0, 1e-4 * std::abs(e0) + 1e-3);
+    EXPECT_NEAR(sum_energy, e0, 1e-4 * std::abs(e0) + 1e-3);
 
     for (std::size_t k : {std::size_t{0}, std::size_t{37}, n / 2, n - 5, n - 1}) {
       for (int a = 0; a < 3; ++a) {
@@ -254,6 +254,55 @@ TEST(Functors, LennardJonesForcesAndVirialAgainstDoublePrecision) {
       for (int k = 0; k < 6; ++k) got_virial[k] += r.virial[6 * i + k];
     for (int k = 0; k < 6; ++k)
       EXPECT_NEAR(got_virial[k], virial[k], 1e-4 * virial_scale[k]) << "virial component " << k;
+  }
+}
+
+// (e') KernelOptions::lj_shift: every pair's energy shifted to 0 at the cutoff, so the per-atom
+// energies sum to E - P U(C) (P pairs, in double); forces and virial exactly as unshifted. `lj`
+// (the paper's unshifted kernel) refuses the option.
+TEST(Functors, LennardJonesShiftAtTheCutoff) {
+  const double eps = 0.7, sigma = 1.1;
+  const float cutoff = 2.5f;
+  const std::vector<float> xyz = jittered_lattice(5, 1.1, 0.1);
+  const auto pairs = pairs_in_range(xyz, cutoff);
+  ASSERT_GT(pairs.size(), 100u);
+  const double c2 = static_cast<double>(cutoff) * cutoff, uc = std::pow(sigma * sigma / c2, 3);
+  double want = 0, scale = 0;
+  for (const auto& [i, j] : pairs) {
+    double r2 = 0;
+    for (int c = 0; c < 3; ++c) {
+      const double d = static_cast<double>(xyz[3 * j + c]) - xyz[3 * i + c];
+      r2 += d * d;
+    }
+    const double u = std::pow(sigma * sigma / r2, 3);
+    want += 4 * eps * (u * (u - 1) - uc * (uc - 1));
+    scale += 4 * eps * (u * (u + 1));
+  }
+  for (const char* method : cpu_methods) {
+    SCOPED_TRACE(method);
+    Engine engine(method);
+    engine.build({xyz.data(), xyz.size() / 3, MemorySpace::host}, cutoff);
+    raycut::KernelOptions options;
+    options.lj_epsilon = static_cast<float>(eps);
+    options.lj_sigma = static_cast<float>(sigma);
+    const raycut::Results plain = engine.compute(Kernel::lj_forces, options);
+    options.lj_shift = true;
+    const raycut::Results shifted = engine.compute(Kernel::lj_forces, options);
+    double sum = 0, sum_plain = 0;
+    for (float e : shifted.energy) sum += e;
+    for (float e : plain.energy) sum_plain += e;
+    EXPECT_NEAR(sum, want, 1e-5 * scale);
+    // The shift alone: P U(C) (every pair is within the cutoff here, none shifted twice).
+    EXPECT_NEAR(sum_plain - sum, pairs.size() * 4 * eps * uc * (uc - 1), 1e-5 * scale);
+    EXPECT_EQ(shifted.force, plain.force);
+    EXPECT_EQ(shifted.virial, plain.virial);
+    try {
+      engine.compute(Kernel::lj, options);
+      ADD_FAILURE() << "lj accepted lj_shift";
+    } catch (const raycut::Error& e) {
+      EXPECT_EQ(e.code(), raycut::ErrorCode::invalid_argument);
+      EXPECT_NE(std::string(e.what()).find("lj_shift"), std::string::npos) << e.what();
+    }
   }
 }
 

@@ -190,7 +190,7 @@ TEST(KernelRange, LjForcesAcrossTheSigmaRange) {
       engine.build({xyz.data(), 2, MemorySpace::host}, 2.5f * sigma);
       const raycut::Results r = engine.compute(Kernel::lj_forces, options);
       const double rr = d, q = std::pow(static_cast<double>(sigma) / rr, 6);
-      const double energy = 4.0 * 0.5 * q * (q - 1.0);
+      const double energy = 0.5 * 4.0 * 0.5 * q * (q - 1.0);  // half the pair's, on each atom
       // Force on particle 0 along x: -dU/dx_0 = -24 eps u (2u - 1) / r^2 * (x_1 - x_0).
       const double force = -24.0 * 0.5 * q * (2.0 * q - 1.0) / (rr * rr) * rr;
       const double virial = 12.0 * 0.5 * q * (2.0 * q - 1.0) / (rr * rr) * rr * rr;

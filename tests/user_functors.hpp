@@ -64,7 +64,7 @@ struct LjForces {
     for (int k = 0; k < 6; ++k) a.v[k] += b.v[k];
   }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
-    energy[i] = acc.energy * four_epsilon;
+    energy[i] = acc.energy * (0.5f * four_epsilon);
     const float fs = -6.0f * four_epsilon, vs = 3.0f * four_epsilon;
     for (int k = 0; k < 3; ++k) force[3 * std::size_t{i} + k] = fs * acc.f[k];
     for (int k = 0; k < 6; ++k) virial[6 * std::size_t{i} + k] = vs * acc.v[k];

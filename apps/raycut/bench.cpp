@@ -40,6 +40,7 @@ struct BenchOptions {
   std::string out = "bench.csv";
   std::uint64_t seed = 1;
   std::string paper_binary;  // the paper's cudaLJ, run after ours, its rows merged
+  bool quiet = false;        // no per-configuration lines on stderr
   std::size_t large_n = 0;   // above this many particles (0: never) ...
   int large_reps = 2;        // ... time this many repetitions instead (the CSV says how many)
   BoxOptions box_options;
@@ -218,6 +219,7 @@ int run_bench(BenchOptions& o) {
   for (int param : params)
     for (int p : o.ps)
       if (o.max_n == 0 || suite_particles(param, p) <= o.max_n) ++configs;
+  const Progress progress("bench", configs, o.quiet);  // the ETA of each configuration's line
 
   for (int param : params) {
     for (int p : o.ps) {
@@ -231,14 +233,18 @@ int run_bench(BenchOptions& o) {
         try {
           rows = bench_method(o, method, kernel, cloud, param, p, on_device, environment);
         } catch (const Error& e) {  // e.g. a dense grid that does not fit: say so, go on
-          std::fprintf(stderr, "  [%zu/%zu] %s param=%d p=%d N=%zu %s: skipped: %s\n", done + 1,
-                       configs, o.suite.c_str(), param, p, cloud.size(), method.c_str(), e.what());
+          if (!o.quiet)
+            std::fprintf(stderr, "  [%zu/%zu] %s param=%d p=%d N=%zu %s: skipped: %s\n", done + 1,
+                         configs, o.suite.c_str(), param, p, cloud.size(), method.c_str(),
+                         e.what());
           continue;
         }
         csv.write(rows);
         csv.flush();  // into the temporary file: a run killed half-way keeps its rows there
-        std::fprintf(stderr, "  [%zu/%zu] %s param=%d p=%d N=%zu %s: done\n", done + 1, configs,
-                     o.suite.c_str(), param, p, cloud.size(), method.c_str());
+        if (!o.quiet)
+          std::fprintf(stderr, "  [%zu/%zu] %s param=%d p=%d N=%zu %s: done, %s\n", done + 1,
+                       configs, o.suite.c_str(), param, p, cloud.size(), method.c_str(),
+                       progress.eta(done + 1).c_str());
       }
       ++done;
     }
@@ -281,6 +287,7 @@ Command add_bench(CLI::App& app) {
       ->check(count_option());
   cmd->add_option("-o,--out", o->out, "CSV file to write");
   cmd->add_option("--seed", o->seed, "Random seed")->check(seed_option());
+  cmd->add_flag("-q,--quiet", o->quiet, "No progress lines (with their ETA) on stderr");
   cmd->add_option(
          "--large-n", o->large_n,
          "Above this many particles, time --large-reps repetitions instead of --reps (0, the "

@@ -26,6 +26,7 @@ struct CheckOptions {
   std::string input;
   std::string oracle = "auto";
   BoxOptions box;
+  bool quiet = false;
 };
 
 // Whether the smooth kernel can be evaluated in float at this cutoff (validate_kernel_range):
@@ -82,6 +83,8 @@ int run_check(const CheckOptions& o) {
   std::printf("%-18s %8s %7s  %-16s %12s %10s %10s  %s\n", "input", "N", "cutoff", "method",
               "pairs", "bad-tgts", "smooth-err", "status");
   int failures = 0, skipped = 0, refused = 0, compared = 0;
+  Progress progress("check", inputs.size() * methods.size(), o.quiet);
+  std::uint64_t steps = 0;
   for (const auto& cloud : inputs) {
     const bool periodic = cloud.box.periodic();
     if (periodic)
@@ -118,6 +121,7 @@ int run_check(const CheckOptions& o) {
         smooth ? smooth_reference(cloud.xyz.data(), cloud.cutoff, want_list, cloud.box)
                : SmoothReference{};
     for (const auto& method : methods) {
+      progress.update(steps++);
       Engine engine(method);
       NeighbourComparison diff, half_diff;
       bool counts_ok = false;
@@ -152,6 +156,7 @@ int run_check(const CheckOptions& o) {
       std::fflush(stdout);
     }
   }
+  progress.done();
   if (compared == 0 && skipped > 0)
     throw Error(ErrorCode::unsupported,
                 "check: none of the methods asked for supports periodic boxes (see `raycut "
@@ -204,6 +209,7 @@ Command add_check(CLI::App& app) {
       ->check(one_of({"auto", "brute-force", "brute-force-gpu"},
                      "the oracles; the methods under test are not references"));
   add_box_options(*cmd, o->box);
+  cmd->add_flag("-q,--quiet", o->quiet, "No progress line on stderr (runs longer than 3 s)");
   return [o] { return run_check(*o); };
 }
 

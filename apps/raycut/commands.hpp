@@ -4,6 +4,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -21,6 +22,7 @@ Command add_check(CLI::App& app);
 Command add_bench(CLI::App& app);
 Command add_update_bench(CLI::App& app);
 Command add_sph(CLI::App& app);
+Command add_neighbours(CLI::App& app);
 
 // Expands "all" / "default" and checks the names; throws raycut::Error for unknown ones.
 std::vector<std::string> resolve_methods(const std::vector<std::string>& names);
@@ -62,6 +64,27 @@ void add_box_options(CLI::App& cmd, BoxOptions& o);
 Box resolve_box(const BoxOptions& o, const Box& base = Box::open());
 // "4x4x4 (pbc T T F)" or "[[ax ay az] [bx by bz] [cx cy cz]] (pbc T T T)", for messages and rows.
 std::string describe_box(const Box& box);
+
+// A progress line on stderr for long runs: "what: 40% (4/10), 12 s, ETA 18 s". Nothing before
+// 3 s have passed (short runs stay silent), then at most twice a second, on one line rewritten
+// with '\r' on a terminal and a line every 10 s otherwise (logs); nothing at all when quiet.
+class Progress {
+ public:
+  Progress(std::string what, std::uint64_t total, bool quiet);
+  void update(std::uint64_t done);
+  // Ends the line, if one was printed.
+  void done();
+  // "ETA 18 s" after `done` of `total` steps, from the time elapsed since construction.
+  std::string eta(std::uint64_t done) const;
+
+ private:
+  double elapsed() const;
+  std::string what_;
+  std::uint64_t total_;
+  bool quiet_, terminal_, printed_ = false;
+  double last_ = -1e30;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+};
 
 // CPU seconds of this process, all its threads (CLOCK_PROCESS_CPUTIME_ID): the work, whatever the
 // cores are shared with.

@@ -1,7 +1,7 @@
 // raycut: particle interactions within a cutoff on CPU and GPU. Subcommands: methods, check,
-// bench, update-bench, sph, generate. Every error (bad usage, a bad input file, an output file
-// that cannot be written in full, not enough memory) is one line on stderr and exit code 2; a
-// check that finds a mismatch exits 1.
+// bench, update-bench, sph, generate, neighbours; --version. Every error (bad usage, a bad input
+// file, an output file that cannot be written in full, not enough memory) is one line on stderr and
+// exit code 2; a check that finds a mismatch exits 1.
 #include <algorithm>
 #include <cctype>
 #include <charconv>
@@ -11,6 +11,8 @@
 #include <limits>
 #include <map>
 #include <new>
+
+#include <unistd.h>
 
 #include "commands.hpp"
 #include "raycut/engine.hpp"
@@ -41,6 +43,39 @@ std::vector<std::string> resolve_methods(const std::vector<std::string>& names) 
     out.push_back(probe.method());
   }
   return out;
+}
+
+Progress::Progress(std::string what, std::uint64_t total, bool quiet)
+    : what_(std::move(what)), total_(total), quiet_(quiet), terminal_(isatty(2) != 0) {}
+
+double Progress::elapsed() const {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+}
+
+std::string Progress::eta(std::uint64_t done) const {
+  if (done == 0 || done > total_) return "ETA unknown";
+  const double left = elapsed() / static_cast<double>(done) * static_cast<double>(total_ - done);
+  char text[48];
+  std::snprintf(text, sizeof text, "ETA %.0f s", left);
+  return text;
+}
+
+void Progress::update(std::uint64_t done) {
+  const double t = elapsed();
+  if (quiet_ || t < 3.0 || t - last_ < (terminal_ ? 0.5 : 10.0)) return;
+  last_ = t;
+  const double percent = total_ ? 100.0 * static_cast<double>(done) / total_ : 100.0;
+  std::fprintf(stderr, "%s%s: %.0f%% (%llu/%llu), %.0f s, %s%s", terminal_ ? "\r" : "",
+               what_.c_str(), percent, static_cast<unsigned long long>(done),
+               static_cast<unsigned long long>(total_), t, eta(done).c_str(),
+               terminal_ ? "   " : "\n");
+  std::fflush(stderr);
+  printed_ = true;
+}
+
+void Progress::done() {
+  if (printed_ && terminal_) std::fputc('\n', stderr);
+  printed_ = false;
 }
 
 std::uint64_t suite_particles(int param, int p) {
@@ -350,10 +385,14 @@ int main(int argc, char** argv) {
       "raycut: particle interactions within a cutoff radius, on CPU, CUDA grids and OptiX ray "
       "tracing"};
   app.require_subcommand(1);
-  std::map<std::string, Command> commands = {
-      {"methods", add_methods(app)}, {"check", add_check(app)},
-      {"bench", add_bench(app)},     {"update-bench", add_update_bench(app)},
-      {"sph", add_sph(app)},         {"generate", add_generate(app)}};
+  app.set_version_flag("--version", std::string("raycut ") + RAYCUT_VERSION);
+  std::map<std::string, Command> commands = {{"methods", add_methods(app)},
+                                             {"check", add_check(app)},
+                                             {"bench", add_bench(app)},
+                                             {"update-bench", add_update_bench(app)},
+                                             {"sph", add_sph(app)},
+                                             {"generate", add_generate(app)},
+                                             {"neighbours", add_neighbours(app)}};
   // CLI11 says only "A subcommand is required" for a misspelt one: name it.
   if (argc > 1 && argv[1][0] != '-' && commands.count(argv[1]) == 0) {
     std::string known;
@@ -367,6 +406,8 @@ int main(int argc, char** argv) {
   } catch (const CLI::CallForHelp& e) {
     return app.exit(e);
   } catch (const CLI::CallForAllHelp& e) {
+    return app.exit(e);
+  } catch (const CLI::CallForVersion& e) {
     return app.exit(e);
   } catch (const CLI::ParseError& e) {
     std::cerr << "raycut: " << e.what() << " (see --help)\n";

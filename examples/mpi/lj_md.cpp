@@ -63,8 +63,8 @@ Options parse(int argc, char** argv) {
 
 constexpr float cutoff = 2.5f;
 
-// Kinetic and shifted potential energy summed over all ranks: U = 1/2 sum_i (e_i - n_i U(rc)),
-// each pair seen from both ends.
+// Kinetic and shifted potential energy summed over all ranks: U = sum_i (e_i - 1/2 n_i U(rc)),
+// e_i holding half of each of its n_i pairs' energy (lj_forces' convention).
 double total_energy(raycut::mpi::DistributedEngine& engine, const raycut::Results& lj,
                     const std::vector<float>& v, double& kinetic) {
   const raycut::Results count = engine.compute(raycut::Kernel::count);
@@ -72,7 +72,7 @@ double total_energy(raycut::mpi::DistributedEngine& engine, const raycut::Result
   const double at_cutoff = 4 * rc6 * (rc6 - 1);
   double mine[2] = {0, 0}, sum[2];
   for (std::size_t t = 0; t < engine.owned(); ++t)
-    mine[0] += 0.5 * (lj.energy[t] - count.count[t] * at_cutoff);
+    mine[0] += lj.energy[t] - 0.5 * count.count[t] * at_cutoff;
   for (float x : v) mine[1] += 0.5 * static_cast<double>(x) * x;
   MPI_Allreduce(mine, sum, 2, MPI_DOUBLE, MPI_SUM, MPI_COMM_WORLD);
   kinetic = sum[1];

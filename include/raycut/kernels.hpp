@@ -52,8 +52,10 @@ namespace raycut {
 
 enum class Kernel {
   count,        // number of in-range neighbours per target (exact integers)
-  lj,           // Lennard-Jones energy per target: sum_j 4 eps ((sigma/r)^12 - (sigma/r)^6)
-  lj_forces,    // Lennard-Jones energy, force and virial per target, in one pass
+  lj,           // Lennard-Jones energy per target: sum_j 4 eps ((sigma/r)^12 - (sigma/r)^6),
+                // every pair counted fully on both sides (the paper's kernel: sum = 2 E)
+  lj_forces,    // Lennard-Jones energy, force and virial per target, in one pass; energy and
+                // virial shared half and half between the pair's atoms (sum = the system's)
   smooth,       // w = C^2 - r^2; energy += w^2; force += w d (finite everywhere)
   sph_density,  // density = sum_{j != i} m W_poly6(r, h), h = the cutoff (self not included)
   sph_force,    // force = pressure + viscosity force of Mueller et al. 2003 (not divided by rho_i)
@@ -75,6 +77,10 @@ struct SphInputs {
 struct KernelOptions {
   float lj_epsilon = 1.0f;  // the paper's values
   float lj_sigma = 1.0f;
+  // lj_forces only: the pair energy shifted to 0 at the cutoff C, 4 eps [u(r) - u(C)] with
+  // u = (sigma/r)^12 - (sigma/r)^6, as ASE's LennardJones (smooth=False) and LAMMPS's
+  // pair_modify shift yes. Forces and virial do not change. `lj` (the paper's kernel) refuses it.
+  bool lj_shift = false;
   float sph_mass = 0.0f;       // particle mass m
   float sph_viscosity = 0.0f;  // mu
   SphInputs sph;
@@ -246,6 +252,8 @@ struct CountKernel {
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { count[i] = acc; }
 };
 
+// The paper's Lennard-Jones kernel: per target, the sum over its neighbours of the full pair energy
+// (every pair counted on both atoms: sum_i energy_i = 2 E; lj_forces shares it half and half).
 // 4 eps ((sigma/r)^12 - (sigma/r)^6) = 4 eps sigma^6 * w (sigma^6 w - 1) with w = r^-6: per pair
 // a reciprocal, two products and two fused operations; 4 eps sigma^6 once per target. Its terms
 // vanish at r2 = +inf (w = 0), so a pair out of range can be fed r2 = +inf instead of a branch.
@@ -269,14 +277,18 @@ struct LennardJonesKernel {
 
 // Energy, force and virial of Lennard-Jones in one pass, in reduced units: with t = 1/r^2 and
 // u = (sigma^2 t)^3 = (sigma/r)^6,
-//   energy_i = 4 eps sum_j u (u - 1)                          (as `lj`: every pair, both sides)
+//   energy_i = 1/2 4 eps sum_j [u (u - 1) - shift]             (each pair half on each atom)
 //   force_i  = -dU/dx_i = -24 eps sum_j t u (2 u - 1) r_ij      (r_ij = x_j - x_i)
 //   virial_i = -1/2 sum_j r_ij (x) force_i(j) = 12 eps sum_j t u (2 u - 1) r r
-// so that sum_i virial_i is the system's virial sum_{i<j} (x_i - x_j) (x) f_ij (LAMMPS's per-atom
-// convention; positive under compression). Components xx yy zz xy xz yz. Vanishes at r2 = +inf.
+// so that sum_i energy_i is the system's energy sum_{i<j} U(r_ij) and sum_i virial_i the system's
+// virial sum_{i<j} (x_i - x_j) (x) f_ij: LAMMPS's and ASE's per-atom convention (the stress is
+// -virial / volume; the virial is positive under compression). Components xx yy zz xy xz yz.
+// shift = u_C (u_C - 1) at the cutoff (KernelOptions::lj_shift), 0 otherwise. Vanishes at
+// r2 = +inf (u = 0 takes no shift). Unlike `lj`, whose per-target energy counts every pair fully
+// (the paper's definition, kept for its benchmark), sum_i energy_i = E here.
 // Reduced, because the raw force factor t w = r^-8 leaves float at every accepted sigma below
 // ~1e-5 or above ~3e5 (inf, or zero forces), where u stays near 1 around the minimum and t
-// scales as 1 / sigma^2 (session 11's adversarial tests; docs/limits.md).
+// scales as 1 / sigma^2 (docs/limits.md).
 struct LennardJonesForceKernel {
   struct Accumulator {
     float energy = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0};
@@ -288,12 +300,14 @@ struct LennardJonesForceKernel {
   float* energy;       // 1 per target
   float* force;        // 3 per target
   float* virial;       // 6 per target
+  float shift = 0.0f;  // u_C (u_C - 1), reduced (0: no shift)
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3 r,
                             float r2) const {
     const float t = fast_reciprocal(r2);
     const float s = sigma2 * t;
     const float u = s * s * s;
     acc.energy += u * (u - 1.0f);
+    acc.energy -= u > 0.0f ? shift : 0.0f;      // a separate step: without a shift, the same bits
     const float g = t * u * (2.0f * u - 1.0f);  // force factor, times -6 (4 eps)
     const float gx = g * r.x, gy = g * r.y, gz = g * r.z;
     acc.f[0] += gx;
@@ -312,7 +326,7 @@ struct LennardJonesForceKernel {
     for (int k = 0; k < 6; ++k) a.v[k] += b.v[k];
   }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
-    energy[i] = acc.energy * four_epsilon;
+    energy[i] = acc.energy * (0.5f * four_epsilon);  // half of each pair's energy
     const float fs = -6.0f * four_epsilon, vs = 3.0f * four_epsilon;
     for (int k = 0; k < 3; ++k) force[3 * std::size_t{i} + k] = fs * acc.f[k];
     for (int k = 0; k < 6; ++k) virial[6 * std::size_t{i} + k] = vs * acc.v[k];
@@ -417,12 +431,21 @@ void with_kernel(Kernel kernel, const KernelOptions& options, float cutoff_squar
       f(CountKernel{out.count});
       break;
     case Kernel::lj:
+      if (options.lj_shift)
+        throw Error(ErrorCode::invalid_argument,
+                    "kernel lj: lj_shift is not accepted (lj is the paper's per-target energy, "
+                    "unshifted); use lj_forces for a shifted energy");
       f(LennardJonesKernel{sigma6, 4.0f * options.lj_epsilon * sigma6, out.energy});
       break;
-    case Kernel::lj_forces:
+    case Kernel::lj_forces: {
+      // u_C (u_C - 1) in double, u_C = (sigma^2 / C^2)^3.
+      const double reduced = static_cast<double>(sigma2) / cutoff_squared;
+      const double u_cut = reduced * reduced * reduced;
+      const float shift = options.lj_shift ? static_cast<float>(u_cut * (u_cut - 1.0)) : 0.0f;
       f(LennardJonesForceKernel{sigma2, 4.0f * options.lj_epsilon, out.energy, out.force,
-                                out.virial});
+                                out.virial, shift});
       break;
+    }
     case Kernel::smooth:
       f(SmoothKernel{cutoff_squared, out.energy, out.force});
       break;

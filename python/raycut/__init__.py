@@ -48,6 +48,7 @@ from typing import Any, Optional
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from . import _arrays  # noqa: E402
+from . import _cutoffs  # noqa: E402
 from . import _raycut  # noqa: E402
 from . import _systems  # noqa: E402
 from ._raycut import CapacityError  # noqa: E402
@@ -103,8 +104,8 @@ def _cutoff(cutoff: Any) -> float:
         _arrays._refuse_complex("cutoff", dtype, "complex" in str(dtype))
         return float(cutoff)  # a 0-d array or tensor: one number (the library checks its range)
     if isinstance(cutoff, (dict, list, tuple)) or hasattr(cutoff, "__len__"):
-        raise ValueError("cutoff must be one number: per-atom or per-pair cutoffs are not "
-                         "supported")
+        raise ValueError("cutoff must be one number here: per-atom or per-pair cutoffs are "
+                         "taken by neighbor_list")
     if not isinstance(cutoff, numbers.Real):
         raise ValueError(f"cutoff must be a real number, got {type(cutoff).__name__}")
     return float(cutoff)
@@ -234,7 +235,7 @@ class Engine:
 
     def compute(self, kernel: str = "count", *, lj_epsilon: float = 1.0, lj_sigma: float = 1.0,
                 sph_mass: float = 0.0, sph_viscosity: float = 0.0, velocity: Any = None,
-                density: Any = None, pressure: Any = None) -> dict:
+                density: Any = None, pressure: Any = None, lj_shift: bool = False) -> dict:
         """Runs a built-in kernel over every in-range pair, fused in the method's traversal, and
         returns its per-particle results as a dict of new arrays (``KERNELS`` says which):
 
@@ -243,6 +244,15 @@ class Engine:
         - ``force`` (N, 3) float32 (``lj_forces``, ``smooth``, ``sph_force``);
         - ``virial`` (N, 6) float32, xx yy zz xy xz yz (``lj_forces``);
         - ``density`` (N,) float32 (``sph_density``).
+
+        Lennard-Jones conventions: ``lj_forces`` shares each pair's energy and virial half and
+        half between its two atoms (LAMMPS's and ASE's per-atom convention), so
+        ``energy.sum()`` is the system's energy and ``virial.sum(0)`` its virial
+        ``sum_{i<j} (x_i - x_j) (x) f_ij`` (stress = -virial / volume). ``lj_shift=True``
+        shifts every pair's energy to 0 at the cutoff (as ASE's ``LennardJones``; forces
+        unchanged). ``lj`` is the paper's kernel: each pair counted fully on both atoms
+        (``energy.sum()`` is twice the system's), never shifted (``lj_shift`` raises
+        ValueError).
 
         ``sph_force`` reads per-particle ``velocity`` (N, 3), ``density`` and ``pressure`` (N,)
         float32 arrays. The results are the engine's own arrays handed over without a copy (on
@@ -256,7 +266,7 @@ class Engine:
 
         out = self._call(like, engine.compute, kernel, float(lj_epsilon), float(lj_sigma),
                          float(sph_mass), float(sph_viscosity), velocity, density, pressure,
-                         like.host)
+                         like.host, bool(lj_shift))
         return {name: _arrays.output(array, like) for name, array in out.items()}
 
     def neighbours(self, half: bool = False, distances: bool = False, vectors: bool = False,
@@ -545,9 +555,9 @@ def _pair_quantities(letters: str, engine: Engine, half: bool, grad: bool, sourc
     return out[0] if len(out) == 1 else out
 
 
-def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = None,
+def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None,
                   pbc: Any = None, batch: Any = None, half: bool = False,
-                  method: str = "auto") -> Any:
+                  method: str = "auto", numbers: Any = None) -> Any:
     """ASE-style neighbour list (``ase.neighborlist.neighbor_list``): every pair of particles
     within ``cutoff``, in open or periodic boxes, of one system or a batch of them.
 
@@ -564,6 +574,13 @@ def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = No
     - ``"d"``: distances ``|r_ij|`` (float32);
     - ``"D"``: vectors ``r_ij = x_j - x_i + S @ cell`` (P, 3) float32;
     - ``"S"``: image shifts S (P, 3) int32 (zeros on open axes and without a cell).
+
+    ``cutoff``: one number, or per atom or per pair as ASE takes them: a sequence of N radii
+    (pair (i, j) within ``r_i + r_j``), ``{(Z1, Z2): rc}`` (pair cutoffs by species; pairs of
+    species not listed have none) or ``{Z: r}`` (a radius per species), the species given by
+    ``numbers`` (N,) integers. Those search at the largest pair cutoff and keep the pairs with
+    ``d < cutoff(i, j)`` (``d`` the float32 distance), filtered with NumPy on the host (NumPy
+    positions only for now: NotImplementedError otherwise).
 
     ``positions``: (N, 3) float32 (NumPy: any float, converted), wrapped into the cell or not
     (S refers to the positions as given). ``cell``: the box, rows the lattice vectors a, b, c
@@ -591,6 +608,13 @@ def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = No
     >>> i, j = raycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
     """
     letters = _letters(quantities)
+    if _cutoffs.is_varying(cutoff):
+        if _arrays.framework_of(positions) != "numpy":
+            raise NotImplementedError("per-atom and per-pair cutoffs take NumPy positions (the "
+                                      "filter runs on the host for now)")
+        n = _points(_arrays.to_host(positions))
+        return _cutoffs.filtered(letters, cutoff, n, numbers, lambda asked, search: neighbor_list(
+            asked, positions, search, cell, pbc, batch, half, method))
     grad = _requires_grad(positions) or (_arrays.framework_of(positions) == "torch"
                                          and _requires_grad(cell))
     x, like = _arrays.prepare(_search_input(positions, grad))

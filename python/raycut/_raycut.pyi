@@ -44,7 +44,8 @@ class Engine:
     def compute(self, kernel: str, lj_epsilon: float = 1.0, lj_sigma: float = 1.0,
                 sph_mass: float = 0.0, sph_viscosity: float = 0.0,
                 velocity: Optional[Any] = None, density: Optional[Any] = None,
-                pressure: Optional[Any] = None, to_host: bool = True) -> dict[str, Any]:
+                pressure: Optional[Any] = None, to_host: bool = True,
+                lj_shift: bool = False) -> dict[str, Any]:
         """run() and results() in one call under the engine's lock (a run of another thread in
         between would take the results)."""
     def results(self, kernel: str, to_host: bool) -> dict[str, Any]:

@@ -20,7 +20,15 @@ float64 answer; a float32 ulp here is that of half the system's extent (of the c
 periodic axes), so a system spanning 1e6 decides pairs to ~0.03. ASE itself is not imported: anything
 with ``positions``, ``cell`` and ``pbc`` works (``cell`` may be absent for open systems).
 
-Per-atom or per-pair cutoffs (ASE's list and dict cutoffs) are not supported (``ValueError``).
+Per-atom and per-pair cutoffs are taken as ASE takes them: a list of radii (``natural_cutoffs``:
+pair (i, j) within ``r_i + r_j``), ``{(Z1, Z2): rc}`` (species pairs not listed have no
+neighbours) or ``{Z: r}`` (a radius per species), Z from ``atoms.numbers``. The search runs at
+the largest pair cutoff, then the pairs are filtered on their float64 distance with NumPy on the
+host (not yet inside the device pass).
+
+Also here: ``NeighborList``, a drop-in for ``ase.neighborlist.NeighborList``, and
+``LennardJones``, an ASE calculator equal to ``ase.calculators.lj.LennardJones`` (imported on
+first use: only it needs ASE).
 """
 from __future__ import annotations
 
@@ -31,7 +39,17 @@ import numpy as np
 from . import _letters
 from . import neighbor_list as _neighbor_list
 
-__all__ = ["neighbor_list"]
+from . import _cutoffs
+
+__all__ = ["LennardJones", "NeighborList", "neighbor_list"]
+
+
+def __getattr__(name: str) -> Any:
+    if name == "LennardJones":  # an ase Calculator: imports ASE, so only when asked for
+        from ._ase_lj import LennardJones
+
+        return LennardJones
+    raise AttributeError(f"module 'raycut.ase' has no attribute {name!r}")
 
 
 def _effective_cell(cell: np.ndarray, pbc: np.ndarray) -> np.ndarray:
@@ -81,17 +99,8 @@ def _centred_float32(positions: np.ndarray) -> np.ndarray:
     return (positions - centre).astype(np.float32)
 
 
-def neighbor_list(quantities: str, atoms: Any, cutoff: float, self_interaction: bool = False,
-                  method: str = "auto") -> Any:
-    """``ase.neighborlist.neighbor_list(quantities, atoms, cutoff, self_interaction)``, computed
-    by raycut (``method``: a name from ``raycut.methods()`` or ``"auto"``).
-
-    ``quantities``: letters of ``"ijdDS"``, returned in that order (one letter: the array
-    alone). ``self_interaction``: also the pairs (i, i, 0), at distance 0, as ASE adds them.
-    Raises ValueError for a singular cell or a periodic axis with a zero cell row (the library's
-    message), and for per-atom cutoffs.
-    """
-    _letters(quantities)
+def _system(atoms: Any) -> tuple:
+    """(positions (N, 3) float64, cell (3, 3) float64, pbc (3,) bool) of an Atoms."""
     try:
         pbc = np.broadcast_to(np.asarray(atoms.pbc, dtype=bool), (3,)).copy()
         positions = np.asarray(atoms.positions, dtype=np.float64).reshape(-1, 3)
@@ -100,7 +109,28 @@ def neighbor_list(quantities: str, atoms: Any, cutoff: float, self_interaction: 
                         f"{type(atoms).__name__}") from None
     cell = getattr(atoms, "cell", None)
     cell = np.zeros((3, 3)) if cell is None else np.asarray(cell, dtype=np.float64).reshape(3, 3)
+    return positions, cell, pbc
 
+
+def neighbor_list(quantities: str, atoms: Any, cutoff: Any, self_interaction: bool = False,
+                  method: str = "auto") -> Any:
+    """``ase.neighborlist.neighbor_list(quantities, atoms, cutoff, self_interaction)``, computed
+    by raycut (``method``: a name from ``raycut.methods()`` or ``"auto"``).
+
+    ``quantities``: letters of ``"ijdDS"``, returned in that order (one letter: the array
+    alone). ``cutoff``: one number, a list of per-atom radii, ``{(Z1, Z2): rc}`` or
+    ``{Z: r}`` (see the module's doc). ``self_interaction``: also the pairs (i, i, 0), at
+    distance 0, as ASE adds them (kept where 0 < the pair's cutoff, as ASE does). Raises
+    ValueError for a singular cell or a periodic axis with a zero cell row (the library's
+    message), and for bad cutoffs (naming them).
+    """
+    _letters(quantities)
+    if _cutoffs.is_varying(cutoff):
+        n = len(_system(atoms)[0])
+        numbers = getattr(atoms, "numbers", None)
+        return _cutoffs.filtered(quantities, cutoff, n, numbers, lambda asked, search:
+                                 neighbor_list(asked, atoms, search, self_interaction, method))
+    positions, cell, pbc = _system(atoms)
     if pbc.any():
         wrapped, n = _wrap(positions, cell, pbc)
         i, j, S = _neighbor_list("ijS", _centred_float32(wrapped), cutoff, cell=cell, pbc=pbc,
@@ -136,3 +166,107 @@ def neighbor_list(quantities: str, atoms: Any, cutoff: float, self_interaction: 
         else:
             out.append(S)
     return out[0] if len(out) == 1 else tuple(out)
+
+
+class _Atoms:
+    """What ``neighbor_list`` reads of an Atoms (positions, cell, pbc), for NeighborList."""
+
+    def __init__(self, positions: np.ndarray, cell: np.ndarray, pbc: np.ndarray) -> None:
+        self.positions, self.cell, self.pbc = positions, cell, pbc
+
+
+class NeighborList:
+    """A drop-in for ``ase.neighborlist.NeighborList``, built by raycut.
+
+    >>> nl = NeighborList(natural_cutoffs(atoms), self_interaction=False, bothways=True)
+    >>> nl.update(atoms)                     # True: built
+    >>> indices, offsets = nl.get_neighbors(0)
+    >>> atoms.positions[indices] + offsets @ atoms.cell   # the neighbours' positions
+
+    ``cutoffs``: one radius per atom; atoms a and b are neighbours when their spheres, grown by
+    ``skin``, overlap: ``d < r_a + r_b + 2 skin`` (ASE's rule). ``update(atoms)`` rebuilds the
+    list (and returns True) on the first call, when pbc or the cell changed, or when an atom
+    moved more than ``skin`` since the last build; otherwise the list stays and extra neighbours
+    beyond the cutoffs may be returned, as in ASE. ``self_interaction``: atom a is its own
+    neighbour (a, offset 0) (ASE's default: True). ``bothways``: every pair from both ends;
+    otherwise each pair once, in the row of the lower index (a pair of an atom with its own
+    image: in the row, with the offset lexicographically positive). ASE's half list may store
+    an image pair in the other row: the set of pairs is the same. ``sorted``: each row sorted by
+    neighbour index, then offset (x, y, z) as ASE sorts it; otherwise the order within a row is
+    unspecified. ``primitive`` is accepted and ignored (ASE's choice of implementation).
+    ``method``: a name from ``raycut.methods()`` or ``"auto"``.
+
+    Offsets (int64) and indices (intp) refer to the positions as given (wrapped or not).
+    """
+
+    def __init__(self, cutoffs: Any, skin: float = 0.3, sorted: bool = False,
+                 self_interaction: bool = True, bothways: bool = False, primitive: Any = None,
+                 method: str = "auto") -> None:
+        radii = np.asarray(cutoffs, dtype=np.float64).reshape(-1)
+        if not np.all(np.isfinite(radii)) or np.any(radii < 0):
+            raise ValueError("cutoffs: per-atom radii must be finite and >= 0")
+        if not np.isfinite(skin) or skin < 0:
+            raise ValueError(f"skin must be a finite number >= 0, got {skin!r}")
+        self.cutoffs = radii
+        self.skin = float(skin)
+        self.sorted = bool(sorted)
+        self.self_interaction = bool(self_interaction)
+        self.bothways = bool(bothways)
+        self.method = method
+        self.nupdates = 0
+        self._built = None  # (positions, cell, pbc) of the last build
+
+    def update(self, atoms: Any) -> bool:
+        """Rebuilds the list if needed (see the class); returns True when it did."""
+        positions, cell, pbc = _system(atoms)
+        if len(positions) != len(self.cutoffs):
+            raise ValueError(f"Wrong number of cutoff radii: {len(self.cutoffs)} != "
+                             f"{len(positions)}")
+        if self._built is not None:
+            old_positions, old_cell, old_pbc = self._built
+            moved = ((positions - old_positions) ** 2).sum(1).max() if len(positions) else 0.0
+            if (old_pbc == pbc).all() and (old_cell == cell).all() and moved <= self.skin ** 2:
+                return False
+        self.build(_Atoms(positions, cell, pbc))
+        return True
+
+    def build(self, atoms: Any) -> None:
+        """Builds the list for these atoms, whatever they moved."""
+        positions, cell, pbc = _system(atoms)
+        i, j, S = neighbor_list("ijS", _Atoms(positions, cell, pbc), self.cutoffs + self.skin,
+                                self.self_interaction, self.method)
+        if not self.bothways:
+            positive = (S[:, 0] > 0) | ((S[:, 0] == 0) & ((S[:, 1] > 0) | ((S[:, 1] == 0) &
+                                                                          (S[:, 2] >= 0))))
+            keep = (i < j) | ((i == j) & positive)
+            i, j, S = i[keep], j[keep], S[keep]
+        order = (np.lexsort((S[:, 2], S[:, 1], S[:, 0], j, i)) if self.sorted else
+                 np.argsort(i, kind="stable"))
+        self._j, self._S = j[order], S[order]
+        self._first = np.searchsorted(i[order], np.arange(len(positions) + 1))
+        self._built = (positions.copy(), cell.copy(), pbc.copy())
+        self.nupdates += 1
+
+    def get_neighbors(self, a: int) -> tuple:
+        """``(indices, offsets)`` of atom a's neighbours: their positions are
+        ``positions[indices] + offsets @ cell``."""
+        if self.nupdates <= 0:
+            raise RuntimeError("Must call update(atoms) on your neighborlist first!")
+        lo, hi = self._first[a], self._first[a + 1]
+        return self._j[lo:hi], self._S[lo:hi]
+
+    def get_connectivity_matrix(self, sparse: bool = True) -> Any:
+        """The (N, N) count of neighbour entries of each pair of atoms, as ASE's: a SciPy
+        ``dok_matrix`` (``sparse``) or a NumPy array."""
+        if self.nupdates <= 0:
+            raise RuntimeError("Must call update(atoms) on your neighborlist first!")
+        n = len(self._first) - 1
+        rows = np.repeat(np.arange(n), np.diff(self._first))
+        if not sparse:
+            dense = np.zeros((n, n), dtype=np.int64)
+            np.add.at(dense, (rows, self._j), 1)
+            return dense
+        from scipy import sparse as sp
+
+        ones = np.ones(len(rows), dtype=np.int64)
+        return sp.coo_matrix((ones, (rows, self._j)), shape=(n, n)).todok()

@@ -551,11 +551,12 @@ void check_kernel_input(KernelInput& out, const raycut::Engine& engine) {
 // run() and its results in one locked call: another thread's run() in between would take them.
 nb::dict compute(PyEngine& locked_engine, std::string_view kernel_name, float lj_epsilon,
                  float lj_sigma, float sph_mass, float sph_viscosity, nb::handle velocity,
-                 nb::handle density, nb::handle pressure, bool to_host) {
+                 nb::handle density, nb::handle pressure, bool to_host, bool lj_shift) {
   const raycut::Kernel kernel = raycut::parse_kernel(kernel_name);
   raycut::KernelOptions options;
   options.lj_epsilon = lj_epsilon;
   options.lj_sigma = lj_sigma;
+  options.lj_shift = lj_shift;
   options.sph_mass = sph_mass;
   options.sph_viscosity = sph_viscosity;
   KernelInput v, d, p;
@@ -858,7 +859,8 @@ NB_MODULE(_raycut, m) {
       .def("compute", &compute, nb::arg("kernel"), nb::arg("lj_epsilon") = 1.0f,
            nb::arg("lj_sigma") = 1.0f, nb::arg("sph_mass") = 0.0f, nb::arg("sph_viscosity") = 0.0f,
            nb::arg("velocity").none() = nb::none(), nb::arg("density").none() = nb::none(),
-           nb::arg("pressure").none() = nb::none(), nb::arg("to_host") = true)
+           nb::arg("pressure").none() = nb::none(), nb::arg("to_host") = true,
+           nb::arg("lj_shift") = false)
       .def("results", &results, nb::arg("kernel"), nb::arg("to_host"))
       .def("neighbours", &neighbours, nb::arg("half"), nb::arg("distances"), nb::arg("vectors"),
            nb::arg("to_host"), nb::arg("shifts") = false)

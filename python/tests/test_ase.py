@@ -100,7 +100,7 @@ def test_drop_in_bad_input():
     with pytest.raises(ValueError):
         raycut.ase.neighbor_list("ijx", atoms, 1.0)
     with pytest.raises(ValueError):
-        raycut.ase.neighbor_list("ij", atoms, [1.0] * len(atoms))  # per-atom cutoffs
+        raycut.ase.neighbor_list("ij", atoms, [1.0] * (len(atoms) + 1))  # one per atom
     with pytest.raises(ValueError):
         raycut.ase.neighbor_list("ij", atoms, -1.0)
     with pytest.raises(TypeError):

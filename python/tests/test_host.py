@@ -177,8 +177,10 @@ def test_errors():
     for cutoff in (0.0, -1.0, float("nan"), float("inf"), 1e40):
         with pytest.raises(ValueError, match="cutoff"):
             raycut.neighbor_list("ij", x, cutoff)
-    with pytest.raises(ValueError, match="one number"):
-        raycut.neighbor_list("ij", x, [0.1] * 10)
+    with pytest.raises(ValueError, match=f"9 per-atom cutoffs for {len(x)} particles"):
+        raycut.neighbor_list("ij", x, [0.1] * (len(x) - 1))
+    with pytest.raises(ValueError, match="one number here"):
+        raycut.Engine("cell-list").build(x, [0.1] * len(x))
     with pytest.raises(ValueError, match="pbc without a cell"):
         raycut.neighbor_list("ij", x, CUTOFF, pbc=True)
     i, S = raycut.neighbor_list("iS", x, CUTOFF, pbc=[False, False, False])  # open: zero shifts
