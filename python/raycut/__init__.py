@@ -32,6 +32,7 @@ raise ``NotImplementedError``.
 from __future__ import annotations
 
 import numbers
+import sys
 from typing import Any, Optional
 
 from . import _arrays
@@ -526,7 +527,7 @@ def _pair_quantities(letters: str, engine: Engine, half: bool, grad: bool, sourc
 
 def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = None,
                   pbc: Any = None, batch: Any = None, half: bool = False,
-                  method: str = "auto") -> Any:
+                  method: str = "auto", max_pairs: Optional[int] = None) -> Any:
     """ASE-style neighbour list (``ase.neighborlist.neighbor_list``): every pair of particles
     within ``cutoff``, in open or periodic boxes, of one system or a batch of them.
 
@@ -566,10 +567,20 @@ def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = No
     NotImplementedError for them. CUDA positions are never copied to the host, nor are the pairs.
     The engine is reused from call to call (see ``clear_engine_cache``).
 
+    PyTorch CPU tensors (float32 or float64; ``method`` "auto" or "cell-list") go through the
+    operator ``torch.ops.raycut.neighbor_list``, so the same call works under
+    ``torch.compile(fullgraph=True)``, ``torch.export`` and AOTInductor; ``d`` and ``D`` are then
+    always computed in PyTorch, in the positions' dtype (docs/python.md). ``max_pairs`` (those
+    tensors only): outputs of that static size, the pairs first, then padding (i = j = N, S = 0,
+    d = 0); a list that does not fit raises ``CapacityError`` in eager mode.
+
     >>> i, j, S = raycut.neighbor_list("ijS", x, 3.0, cell=[10.0, 10.0, 10.0], pbc=True)
     >>> i, j = raycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
     """
     letters = _letters(quantities)
+    if _torch_ops_route(positions, method, max_pairs):
+        return _torch_ops().neighbor_list(letters, positions, cutoff, cell, pbc, batch, half,
+                                          max_pairs)
     grad = _requires_grad(positions) or (_arrays.framework_of(positions) == "torch"
                                          and _requires_grad(cell))
     x, like = _arrays.prepare(_search_input(positions, grad))
@@ -582,7 +593,7 @@ def neighbor_list(quantities: str, positions: Any, cutoff: float, cell: Any = No
 
 def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any = None,
            batch_points: Any = None, batch_queries: Any = None, method: str = "auto",
-           quantities: str = "ij") -> Any:
+           quantities: str = "ij", max_pairs: Optional[int] = None) -> Any:
     """Radius search between two point sets: for every query q, the points p within ``cutoff``
     (``torch_cluster.radius(x=points, y=queries, r=cutoff, batch_x, batch_y)``, scipy's
     ``cKDTree(points).query_ball_point(queries, cutoff)``, periodic and batched).
@@ -602,9 +613,15 @@ def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any 
     Gradients flow to points, queries and cell for PyTorch inputs that require grad.
 
     >>> i, j = raycut.radius(points, queries, 0.05)           # query i, point j
+    PyTorch CPU tensors go through ``torch.ops.raycut.radius`` as ``neighbor_list``'s do
+    through its operator (``max_pairs`` too; padding: i = M, j = N).
+
     >>> i, j, S = raycut.radius(points, queries, 0.05, cell=[1, 1, 1], quantities="ijS")
     """
     letters = _letters(quantities)
+    if _torch_ops_route(points, method, max_pairs):
+        return _torch_ops().radius(letters, points, queries, cutoff, cell, pbc, batch_points,
+                                   batch_queries, max_pairs)
     torch_in = _arrays.framework_of(points) == "torch"
     grad = torch_in and (_requires_grad(points) or _requires_grad(queries) or
                          _requires_grad(cell))
@@ -617,6 +634,34 @@ def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any 
     return out
 
 
+_TORCH_OPS: list = []  # [raycut._torch, or None when the operators are not built] once tried
+
+
+def _torch_ops() -> Any:
+    """raycut._torch (it imports torch and loads the operators), or None where they are not
+    built: PyTorch tensors then go through the extension as other arrays do."""
+    if not _TORCH_OPS:
+        try:
+            from . import _torch as module
+        except ImportError:
+            module = None
+        _TORCH_OPS.append(module)
+    return _TORCH_OPS[0]
+
+
+def _torch_ops_route(x: Any, method: str, max_pairs: Optional[int]) -> bool:
+    """Whether a call goes through the PyTorch operators (raycut._torch.routes)."""
+    if _arrays.framework_of(x) == "torch":
+        ops = _torch_ops()
+        if ops is not None and ops.routes(x, method):
+            return True
+    if max_pairs is not None:
+        raise ValueError(f"max_pairs is for PyTorch CPU tensors with method 'auto' or "
+                         f"'cell-list' (the operators, built with torch), got "
+                         f"{_arrays.framework_of(x)} input with method={method!r}")
+    return False
+
+
 def _host_cell(cell: Any) -> Any:
     """The cell as the extension takes it (host numbers; a PyTorch cell that requires grad is
     read detached: the gradient path uses the caller's tensor)."""
@@ -626,3 +671,6 @@ def _host_cell(cell: Any) -> Any:
 
 
 from . import ase  # noqa: E402  raycut.ase.neighbor_list: ASE Atoms in, ASE's types out
+
+if "torch" in sys.modules:  # torch already imported: its operators now, before any tracing
+    _torch_ops()

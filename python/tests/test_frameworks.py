@@ -17,8 +17,12 @@ def test_torch_cpu_tensors_stay_on_cpu():
     engine.build(torch.from_numpy(x), CUTOFF)
     count = engine.compute("count")["count"]
     assert isinstance(count, torch.Tensor) and count.dtype == torch.int32
+    # float64 tensors are searched as float32 (the PyTorch operators; ValueError without them).
+    if raycut._torch_ops() is not None:
+        wide = raycut.neighbor_list("ij", torch.from_numpy(x).double(), CUTOFF)
+        assert pair_set(*wide) == pair_set(i.numpy(), j.numpy())
     with pytest.raises(ValueError, match="float32"):
-        raycut.neighbor_list("ij", torch.from_numpy(x).double(), CUTOFF)
+        raycut.neighbor_list("ij", torch.from_numpy(x).half(), CUTOFF)
 
 
 def test_jax_cpu_arrays_stay_on_cpu():

@@ -1,0 +1,304 @@
+// PyTorch operators over the raycut engine: torch.ops.raycut.neighbor_list and
+// torch.ops.raycut.radius, registered with the dispatcher (TORCH_LIBRARY) so that the same call
+// runs in eager mode, TorchScript, torch.compile, torch.export and AOTInductor packages. Their
+// fake (meta) implementations, which give torch.compile and torch.export the output shapes, are
+// registered in Python (python/raycut/_torch.py).
+//
+// The ops return integer pairs only, (i, j, S, count): distances and vectors are computed in
+// PyTorch from them and the caller's positions and cell, so that autograd (to any order) never
+// reaches the op. With max_pairs the outputs have that static size (padding: i = j = the number
+// of points, S = 0), otherwise the exact pair count.
+//
+// Built as its own shared library (raycut/_torch_ops.so), against the classic C++ API of the
+// torch it is built with: docs/python.md says why.
+#include <ATen/ATen.h>
+#include <torch/library.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <cstring>
+#include <optional>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "raycut/engine.hpp"
+#include "raycut/error.hpp"
+
+namespace {
+
+using Pairs = std::tuple<at::Tensor, at::Tensor, at::Tensor, at::Tensor>;
+
+// The library's errors as PyTorch's: ValueError for bad input, NotImplementedError for what this
+// build cannot do, torch.OutOfMemoryError when it does not fit, RuntimeError otherwise.
+[[noreturn]] void rethrow(const raycut::Error& e) {
+  switch (e.code()) {
+    case raycut::ErrorCode::invalid_argument:
+    case raycut::ErrorCode::invalid_input:
+      TORCH_CHECK_VALUE(false, e.what());
+    case raycut::ErrorCode::unsupported:
+      TORCH_CHECK_NOT_IMPLEMENTED(false, e.what());
+    case raycut::ErrorCode::out_of_memory:
+      TORCH_CHECK_WITH(OutOfMemoryError, false, e.what());
+    default:
+      TORCH_CHECK(false, e.what());
+  }
+}
+
+// (N, 3) float32 or float64 points as the engine reads them: float32, C-contiguous, on the host.
+// The pair decision is the library's float32 predicate on these values (docs/python.md).
+at::Tensor search_points(const at::Tensor& x, const char* name) {
+  TORCH_CHECK_VALUE(x.dim() == 2 && x.size(1) == 3, name, " must have shape (N, 3), got ",
+                    x.sizes());
+  TORCH_CHECK_VALUE(x.scalar_type() == at::kFloat || x.scalar_type() == at::kDouble, name,
+                    " must be float32 or float64, got ", x.scalar_type());
+  return x.to(at::kFloat).contiguous();
+}
+
+// cell (3, 3) or (B, 3, 3) and pbc (3,) or (B, 3) as raycut boxes: one for every system, or
+// one per system. None: open. A cell without pbc repeats along all three rows.
+std::vector<raycut::Box> boxes_of(const std::optional<at::Tensor>& cell,
+                                  const std::optional<at::Tensor>& pbc) {
+  if (!cell) {
+    if (pbc) {
+      TORCH_CHECK_VALUE(pbc->scalar_type() == at::kBool, "pbc must be bool, got ",
+                        pbc->scalar_type());
+      TORCH_CHECK_VALUE(!pbc->any().item<bool>(),
+                        "pbc without a cell: periodic axes need their lattice vectors (pass "
+                        "cell, rows a, b, c)");
+    }
+    return {};
+  }
+  const at::Tensor& c = *cell;
+  TORCH_CHECK_VALUE(c.is_floating_point(), "cell must be float32 or float64, got ",
+                    c.scalar_type());
+  TORCH_CHECK_VALUE((c.dim() == 2 || c.dim() == 3) && c.size(-1) == 3 && c.size(-2) == 3,
+                    "cell must have shape (3, 3) (rows: lattice vectors a, b, c) or (B, 3, 3) "
+                    "(one per system of a batch), got ",
+                    c.sizes());
+  const at::Tensor cells = c.reshape({-1, 3, 3}).to(at::kDouble).contiguous();
+  at::Tensor flags = at::ones({1, 3}, at::kBool);
+  if (pbc) {
+    TORCH_CHECK_VALUE(pbc->scalar_type() == at::kBool, "pbc must be bool, got ",
+                      pbc->scalar_type());
+    TORCH_CHECK_VALUE((pbc->dim() == 1 || pbc->dim() == 2) && pbc->size(-1) == 3,
+                      "pbc must have shape (3,) or (B, 3) (one row per system), got ",
+                      pbc->sizes());
+    flags = pbc->reshape({-1, 3}).contiguous();
+  }
+  const std::int64_t count = std::max(cells.size(0), flags.size(0));
+  TORCH_CHECK_VALUE((cells.size(0) == count || cells.size(0) == 1) &&
+                        (flags.size(0) == count || flags.size(0) == 1),
+                    "cell gives ", cells.size(0), " systems but pbc ", flags.size(0));
+  const double* cell_data = cells.data_ptr<double>();
+  const bool* flag_data = flags.data_ptr<bool>();
+  std::vector<raycut::Box> boxes(static_cast<std::size_t>(count));
+  for (std::int64_t b = 0; b < count; ++b) {
+    const double* rows = cell_data + (cells.size(0) == 1 ? 0 : 9 * b);
+    const bool* repeat = flag_data + (flags.size(0) == 1 ? 0 : 3 * b);
+    for (int r = 0; r < 3; ++r) {
+      boxes[b].pbc[r] = repeat[r];
+      for (int k = 0; k < 3; ++k) boxes[b].cell[r][k] = rows[3 * r + k];
+    }
+  }
+  return boxes;
+}
+
+// A system index (torch_cluster's batch): (n,) integers, sorted, non-negative. int64 on the
+// host, validated; an empty tensor for None.
+at::Tensor system_index(const std::optional<at::Tensor>& batch, std::int64_t n, const char* name) {
+  if (!batch) return at::Tensor();
+  const at::Tensor& b = *batch;
+  TORCH_CHECK_VALUE(!b.is_floating_point() && !b.is_complex() && b.scalar_type() != at::kBool, name,
+                    " must be integers (the system of each particle), got ", b.scalar_type());
+  TORCH_CHECK_VALUE(b.dim() == 1 && b.size(0) == n, name,
+                    " must have one system index per particle, shape (", n, ",), got shape ",
+                    b.sizes());
+  at::Tensor index = b.to(at::kLong).contiguous();
+  const std::int64_t* v = index.data_ptr<std::int64_t>();
+  for (std::int64_t k = 0; k < n; ++k) {
+    TORCH_CHECK_VALUE(v[k] >= 0, name, " holds a negative system index (", v[k], " at ", k, ")");
+    TORCH_CHECK_VALUE(k + 1 == n || v[k] <= v[k + 1], name,
+                      " must be sorted (each system's particles contiguous, systems in order): ",
+                      name, "[", k, "] = ", v[k], " > ", name, "[", k + 1, "] = ", v[k + 1]);
+  }
+  return index;
+}
+
+// offsets[s] = the number of entries of `index` below system s (systems + 1 of them); all in
+// system 0 when `index` is empty (None).
+std::vector<std::uint64_t> offsets_of(const at::Tensor& index, std::int64_t n,
+                                      const std::vector<std::int64_t>& systems_of_value) {
+  std::vector<std::uint64_t> offsets(systems_of_value.size() + 1, 0);
+  if (!index.defined()) {
+    std::fill(offsets.begin() + 1, offsets.end(), static_cast<std::uint64_t>(n));
+    return offsets;
+  }
+  const std::int64_t* v = index.data_ptr<std::int64_t>();
+  // systems_of_value: the sorted system numbers in use; entries count towards theirs.
+  std::size_t s = 0;
+  for (std::int64_t k = 0; k < n; ++k) {
+    while (systems_of_value[s] < v[k]) ++s;
+    ++offsets[s + 1];
+  }
+  for (std::size_t t = 1; t < offsets.size(); ++t) offsets[t] += offsets[t - 1];
+  return offsets;
+}
+
+// raycut::Systems of boxes and up to two system indices (sources, and queries when `queries`
+// holds points). Per-system boxes: the indices number the boxes. One box for every system: the
+// numbers only group, so the systems in use are renumbered densely (a sparse index such as
+// [0, 10**9] costs no empty systems).
+raycut::Systems systems_of(std::vector<raycut::Box> boxes, const at::Tensor& index, std::int64_t n,
+                           const at::Tensor& query_index, std::int64_t m, bool with_queries,
+                           const char* index_name) {
+  raycut::Systems systems;
+  const bool per_system = boxes.size() > 1;
+  if (!index.defined() && !query_index.defined()) {
+    TORCH_CHECK_VALUE(!per_system, "cell/pbc give ", boxes.size(),
+                      " systems (shape (B, 3, 3) / (B, 3)) but no ", index_name,
+                      " says which particles belong to which");
+    if (!boxes.empty()) systems.box = boxes[0];
+    return systems;
+  }
+  std::vector<std::int64_t> used;  // the system numbers, sorted
+  if (per_system) {
+    const auto b = static_cast<std::int64_t>(boxes.size());
+    for (const at::Tensor* t : {&index, &query_index})
+      if (t->defined() && t->numel() > 0) {
+        const std::int64_t last = t->data_ptr<std::int64_t>()[t->numel() - 1];
+        TORCH_CHECK_VALUE(last < b, "the batch has system index ", last, " but cell/pbc give ", b,
+                          " systems");
+      }
+    used.resize(boxes.size());
+    for (std::int64_t s = 0; s < b; ++s) used[s] = s;
+    systems.boxes = std::move(boxes);
+  } else {
+    for (const at::Tensor* t : {&index, &query_index})
+      if (t->defined()) {
+        const std::int64_t* v = t->data_ptr<std::int64_t>();
+        for (std::int64_t k = 0; k < t->numel(); ++k)
+          if (k == 0 || v[k] != v[k - 1]) used.push_back(v[k]);
+      }
+    // An index left out: every point of that set is in system 0 (torch_cluster's convention).
+    if (!index.defined() || (with_queries && !query_index.defined())) used.push_back(0);
+    std::sort(used.begin(), used.end());
+    used.erase(std::unique(used.begin(), used.end()), used.end());
+    if (used.empty()) used.push_back(0);
+    if (!boxes.empty()) systems.box = boxes[0];
+  }
+  systems.offsets = offsets_of(index, n, used);
+  if (with_queries) systems.query_offsets = offsets_of(query_index, m, used);
+  return systems;
+}
+
+// One engine per thread, reused from call to call (its cell-list and image buffers only grow),
+// and the list buffer it fills.
+struct HostWork {
+  raycut::Engine engine{"cell-list"};
+  raycut::NeighbourListBuffer list;
+};
+HostWork& host_work() {
+  thread_local HostWork work;
+  return work;
+}
+
+// The list's pairs as (i, j, S, count) tensors: exactly its pairs, or `max_pairs` entries with
+// padding (i = pad_i, j = pad_j, S = 0) after the pairs (truncated past max_pairs: count says).
+Pairs pair_tensors(const raycut::NeighbourListBuffer& list, std::optional<std::int64_t> max_pairs,
+                   std::int64_t pad_i, std::int64_t pad_j) {
+  const auto found = static_cast<std::int64_t>(list.pairs());
+  std::int64_t size = found;
+  if (max_pairs) {
+    TORCH_CHECK_VALUE(*max_pairs >= 0, "max_pairs must be >= 0 (the static number of pairs), got ",
+                      *max_pairs);
+    size = *max_pairs;
+  }
+  const std::int64_t kept = std::min(found, size);
+  at::Tensor i = at::empty({size}, at::kLong);
+  at::Tensor j = at::empty({size}, at::kLong);
+  at::Tensor shifts = at::empty({size, 3}, at::kInt);
+  if (kept > 0) {
+    std::memcpy(i.data_ptr<std::int64_t>(), list.rows(), kept * sizeof(std::int64_t));
+    std::memcpy(j.data_ptr<std::int64_t>(), list.columns(), kept * sizeof(std::int64_t));
+    std::memcpy(shifts.data_ptr<std::int32_t>(), list.shifts(), 3 * kept * sizeof(std::int32_t));
+  }
+  if (size > kept) {
+    i.narrow(0, kept, size - kept).fill_(pad_i);
+    j.narrow(0, kept, size - kept).fill_(pad_j);
+    shifts.narrow(0, kept, size - kept).zero_();
+  }
+  return {i, j, shifts, at::scalar_tensor(found, at::kLong)};
+}
+
+Pairs neighbor_list_cpu(const at::Tensor& positions, double cutoff,
+                        const std::optional<at::Tensor>& cell, const std::optional<at::Tensor>& pbc,
+                        const std::optional<at::Tensor>& batch, bool half,
+                        std::optional<std::int64_t> max_pairs) {
+  const at::Tensor x = search_points(positions, "positions");
+  const std::int64_t n = x.size(0);
+  const raycut::Systems systems =
+      systems_of(boxes_of(cell, pbc), system_index(batch, n, "batch"), n, at::Tensor(), 0,
+                 /*with_queries=*/false, "batch");
+  HostWork& work = host_work();
+  try {
+    work.engine.build({x.data_ptr<float>(), static_cast<std::size_t>(n), raycut::MemorySpace::host},
+                      static_cast<float>(cutoff), systems);
+    raycut::ListOptions options;
+    options.half = half;
+    options.shifts = true;
+    options.coo = true;
+    work.engine.neighbours(work.list, options);
+  } catch (const raycut::Error& e) {
+    rethrow(e);
+  }
+  return pair_tensors(work.list, max_pairs, n, n);
+}
+
+Pairs radius_cpu(const at::Tensor& points, const at::Tensor& queries, double cutoff,
+                 const std::optional<at::Tensor>& cell, const std::optional<at::Tensor>& pbc,
+                 const std::optional<at::Tensor>& batch_points,
+                 const std::optional<at::Tensor>& batch_queries,
+                 std::optional<std::int64_t> max_pairs) {
+  const at::Tensor x = search_points(points, "points");
+  const at::Tensor q = search_points(queries, "queries");
+  const std::int64_t n = x.size(0), m = q.size(0);
+  raycut::Systems systems = systems_of(
+      boxes_of(cell, pbc), system_index(batch_points, n, "batch_points"), n,
+      system_index(batch_queries, m, "batch_queries"), m, /*with_queries=*/true, "batch_points");
+  // No query points is still a query build (the targets are the M = 0 queries, not the points).
+  systems.queries = {q.data_ptr<float>(), static_cast<std::size_t>(m), raycut::MemorySpace::host};
+  static const float no_point[3] = {0, 0, 0};
+  if (m == 0) systems.queries.xyz = no_point;
+  HostWork& work = host_work();
+  try {
+    work.engine.build({x.data_ptr<float>(), static_cast<std::size_t>(n), raycut::MemorySpace::host},
+                      static_cast<float>(cutoff), systems);
+    raycut::ListOptions options;
+    options.shifts = true;
+    options.coo = true;
+    work.engine.neighbours(work.list, options);
+  } catch (const raycut::Error& e) {
+    rethrow(e);
+  }
+  // Padding: i = M (no query), j = N (no point).
+  return pair_tensors(work.list, max_pairs, m, n);
+}
+
+}  // namespace
+
+TORCH_LIBRARY(raycut, m) {
+  m.def(
+      "neighbor_list(Tensor positions, float cutoff, Tensor? cell=None, Tensor? pbc=None, "
+      "Tensor? batch=None, bool half=False, int? max_pairs=None) -> (Tensor i, Tensor j, "
+      "Tensor S, Tensor count)");
+  m.def(
+      "radius(Tensor points, Tensor queries, float cutoff, Tensor? cell=None, Tensor? pbc=None, "
+      "Tensor? batch_points=None, Tensor? batch_queries=None, int? max_pairs=None) -> (Tensor i, "
+      "Tensor j, Tensor S, Tensor count)");
+}
+
+TORCH_LIBRARY_IMPL(raycut, CPU, m) {
+  m.impl("neighbor_list", &neighbor_list_cpu);
+  m.impl("radius", &radius_cpu);
+}
