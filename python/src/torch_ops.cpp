@@ -16,12 +16,12 @@
 
 #include <algorithm>
 #include <cstdint>
-#include <cstring>
 #include <optional>
 #include <string>
 #include <tuple>
 #include <vector>
 
+#include "pair_outputs.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/error.hpp"
 
@@ -204,31 +204,22 @@ HostWork& host_work() {
 }
 
 // The list's pairs as (i, j, S, count) tensors: exactly its pairs, or `max_pairs` entries with
-// padding (i = pad_i, j = pad_j, S = 0) after the pairs (truncated past max_pairs: count says).
+// padding (i = pad_i, j = pad_j, S = 0) after the pairs (cut past max_pairs: count says so).
 Pairs pair_tensors(const raycut::NeighbourListBuffer& list, std::optional<std::int64_t> max_pairs,
                    std::int64_t pad_i, std::int64_t pad_j) {
-  const auto found = static_cast<std::int64_t>(list.pairs());
-  std::int64_t size = found;
+  auto size = static_cast<std::int64_t>(list.pairs());
   if (max_pairs) {
     TORCH_CHECK_VALUE(*max_pairs >= 0, "max_pairs must be >= 0 (the static number of pairs), got ",
                       *max_pairs);
     size = *max_pairs;
   }
-  const std::int64_t kept = std::min(found, size);
   at::Tensor i = at::empty({size}, at::kLong);
   at::Tensor j = at::empty({size}, at::kLong);
   at::Tensor shifts = at::empty({size, 3}, at::kInt);
-  if (kept > 0) {
-    std::memcpy(i.data_ptr<std::int64_t>(), list.rows(), kept * sizeof(std::int64_t));
-    std::memcpy(j.data_ptr<std::int64_t>(), list.columns(), kept * sizeof(std::int64_t));
-    std::memcpy(shifts.data_ptr<std::int32_t>(), list.shifts(), 3 * kept * sizeof(std::int32_t));
-  }
-  if (size > kept) {
-    i.narrow(0, kept, size - kept).fill_(pad_i);
-    j.narrow(0, kept, size - kept).fill_(pad_j);
-    shifts.narrow(0, kept, size - kept).zero_();
-  }
-  return {i, j, shifts, at::scalar_tensor(found, at::kLong)};
+  const std::uint64_t found = raycut_py::write_pairs<std::int64_t>(
+      list, static_cast<std::uint64_t>(size), i.data_ptr<std::int64_t>(),
+      j.data_ptr<std::int64_t>(), shifts.data_ptr<std::int32_t>(), pad_i, pad_j);
+  return {i, j, shifts, at::scalar_tensor(static_cast<std::int64_t>(found), at::kLong)};
 }
 
 Pairs neighbor_list_cpu(const at::Tensor& positions, double cutoff,
