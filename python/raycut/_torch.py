@@ -64,11 +64,20 @@ def _fake_pairs(like: torch.Tensor, max_pairs: Optional[int]) -> tuple:
             like.new_empty((size, 3), dtype=torch.int32), like.new_empty((), dtype=torch.int64))
 
 
+# The CUDA kernel is built on request only (RAYCUT_TORCH_CUDA): without it CUDA tensors take the
+# extension's path.
+_CUDA_KERNEL = torch._C._dispatch_has_kernel_for_dispatch_key("raycut::neighbor_list", "CUDA")
+
+
 def routes(x: Any, method: str) -> bool:
-    """Whether a call on ``x`` goes through the operators: PyTorch tensors on the CPU (the
-    operators' kernels), with the method they run (the CPU cell list) or ``"auto"``."""
-    return (isinstance(x, torch.Tensor) and x.device.type == "cpu"
-            and method in ("auto", "cell-list"))
+    """Whether a call on ``x`` goes through the operators: PyTorch tensors on a device they have
+    a kernel for, with the method that kernel runs (the CPU cell list, the CUDA grid) or
+    ``"auto"``."""
+    if not isinstance(x, torch.Tensor):
+        return False
+    if x.device.type == "cpu":
+        return method in ("auto", "cell-list")
+    return x.device.type == "cuda" and _CUDA_KERNEL and method in ("auto", "grid")
 
 
 def _cell(cell: Any, like: torch.Tensor) -> Optional[torch.Tensor]:
@@ -87,7 +96,7 @@ def _cell(cell: Any, like: torch.Tensor) -> Optional[torch.Tensor]:
     return c
 
 
-def _pbc(pbc: Any, cell: Optional[torch.Tensor]) -> Optional[torch.Tensor]:
+def _pbc(pbc: Any) -> Optional[torch.Tensor]:
     if pbc is None:
         return None
     if isinstance(pbc, torch.Tensor):
@@ -165,7 +174,7 @@ def neighbor_list(letters: str, positions: torch.Tensor, cutoff: float, cell: An
     c = _cell(cell, positions)
     b = _index(batch, "batch")
     i, j, shifts, count = torch.ops.raycut.neighbor_list(
-        positions.detach(), float(cutoff), None if c is None else c.detach(), _pbc(pbc, c), b,
+        positions.detach(), float(cutoff), None if c is None else c.detach(), _pbc(pbc), b,
         bool(half), max_pairs)
     _check_capacity(count, max_pairs)
     return _quantities(
@@ -184,7 +193,7 @@ def radius(letters: str, points: torch.Tensor, queries: Any, cutoff: float, cell
     bq = _index(batch_queries, "batch_queries")
     i, j, shifts, count = torch.ops.raycut.radius(
         points.detach(), queries.detach().to(points.dtype), float(cutoff),
-        None if c is None else c.detach(), _pbc(pbc, c), _index(batch_points, "batch_points"), bq,
+        None if c is None else c.detach(), _pbc(pbc), _index(batch_points, "batch_points"), bq,
         max_pairs)
     _check_capacity(count, max_pairs)
     return _quantities(

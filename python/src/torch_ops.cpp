@@ -9,13 +9,23 @@
 // reaches the op. With max_pairs the outputs have that static size (padding: i = j = the number
 // of points, S = 0), otherwise the exact pair count.
 //
+// Kernels: the CPU cell list; with RAYCUT_TORCH_CUDA (raycut built with CUDA, torch with CUDA)
+// also the CUDA grid on the tensors' device and current stream.
+//
 // Built as its own shared library (raycut/_torch_ops.so), against the classic C++ API of the
 // torch it is built with: docs/python.md says why.
 #include <ATen/ATen.h>
 #include <torch/library.h>
 
+#ifdef RAYCUT_TORCH_CUDA
+#include <c10/cuda/CUDAGuard.h>
+#include <c10/cuda/CUDAStream.h>
+#endif
+
 #include <algorithm>
 #include <cstdint>
+#include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <tuple>
@@ -76,7 +86,7 @@ std::vector<raycut::Box> boxes_of(const std::optional<at::Tensor>& cell,
                     "cell must have shape (3, 3) (rows: lattice vectors a, b, c) or (B, 3, 3) "
                     "(one per system of a batch), got ",
                     c.sizes());
-  const at::Tensor cells = c.reshape({-1, 3, 3}).to(at::kDouble).contiguous();
+  const at::Tensor cells = c.reshape({-1, 3, 3}).to(at::kDouble).cpu().contiguous();
   at::Tensor flags = at::ones({1, 3}, at::kBool);
   if (pbc) {
     TORCH_CHECK_VALUE(pbc->scalar_type() == at::kBool, "pbc must be bool, got ",
@@ -84,7 +94,7 @@ std::vector<raycut::Box> boxes_of(const std::optional<at::Tensor>& cell,
     TORCH_CHECK_VALUE((pbc->dim() == 1 || pbc->dim() == 2) && pbc->size(-1) == 3,
                       "pbc must have shape (3,) or (B, 3) (one row per system), got ",
                       pbc->sizes());
-    flags = pbc->reshape({-1, 3}).contiguous();
+    flags = pbc->reshape({-1, 3}).cpu().contiguous();
   }
   const std::int64_t count = std::max(cells.size(0), flags.size(0));
   TORCH_CHECK_VALUE((cells.size(0) == count || cells.size(0) == 1) &&
@@ -114,7 +124,7 @@ at::Tensor system_index(const std::optional<at::Tensor>& batch, std::int64_t n, 
   TORCH_CHECK_VALUE(b.dim() == 1 && b.size(0) == n, name,
                     " must have one system index per particle, shape (", n, ",), got shape ",
                     b.sizes());
-  at::Tensor index = b.to(at::kLong).contiguous();
+  at::Tensor index = b.to(at::kLong).cpu().contiguous();
   const std::int64_t* v = index.data_ptr<std::int64_t>();
   for (std::int64_t k = 0; k < n; ++k) {
     TORCH_CHECK_VALUE(v[k] >= 0, name, " holds a negative system index (", v[k], " at ", k, ")");
@@ -192,88 +202,133 @@ raycut::Systems systems_of(std::vector<raycut::Box> boxes, const at::Tensor& ind
   return systems;
 }
 
-// One engine per thread, reused from call to call (its cell-list and image buffers only grow),
-// and the list buffer it fills.
-struct HostWork {
-  raycut::Engine engine{"cell-list"};
+// One engine per thread and device, reused from call to call (its structure buffers only grow):
+// the CPU cell list, or the CUDA grid on each CUDA device. The host list buffer is reused too;
+// a CUDA list is a fresh buffer per call (from raycut's stream-ordered pool), so that a copy of
+// the last call's pairs still queued on another stream never reads a refilled buffer.
+struct Work {
+  explicit Work(const char* method) : engine(method) {}
+  raycut::Engine engine;
   raycut::NeighbourListBuffer list;
 };
-HostWork& host_work() {
-  thread_local HostWork work;
-  return work;
+Work& work_for(const at::Device& device) {
+  if (device.is_cpu()) {
+    thread_local Work host("cell-list");
+    return host;
+  }
+  TORCH_CHECK_NOT_IMPLEMENTED(device.is_cuda(), "raycut's operators run on the CPU and CUDA, not ",
+                              device);
+  thread_local std::map<int, std::unique_ptr<Work>> per_device;
+  std::unique_ptr<Work>& work = per_device[device.index()];
+  if (!work) {
+    try {
+      work = std::make_unique<Work>("grid");
+    } catch (const raycut::Error& e) {
+      rethrow(e);
+    }
+  }
+  return *work;
 }
 
-// The list's pairs as (i, j, S, count) tensors: exactly its pairs, or `max_pairs` entries with
-// padding (i = pad_i, j = pad_j, S = 0) after the pairs (cut past max_pairs: count says so).
+// The list's pairs as (i, j, S, count) tensors on `device`: exactly its pairs, or `max_pairs`
+// entries with padding (i = pad_i, j = pad_j, S = 0) after the pairs (cut past max_pairs: count
+// says so). Device lists are copied on the current stream, the one the engine worked on.
 Pairs pair_tensors(const raycut::NeighbourListBuffer& list, std::optional<std::int64_t> max_pairs,
-                   std::int64_t pad_i, std::int64_t pad_j) {
-  auto size = static_cast<std::int64_t>(list.pairs());
+                   std::int64_t pad_i, std::int64_t pad_j, const at::Device& device) {
+  const auto found = static_cast<std::int64_t>(list.pairs());
+  std::int64_t size = found;
   if (max_pairs) {
     TORCH_CHECK_VALUE(*max_pairs >= 0, "max_pairs must be >= 0 (the static number of pairs), got ",
                       *max_pairs);
     size = *max_pairs;
   }
-  at::Tensor i = at::empty({size}, at::kLong);
-  at::Tensor j = at::empty({size}, at::kLong);
-  at::Tensor shifts = at::empty({size, 3}, at::kInt);
-  const std::uint64_t found = raycut_py::write_pairs<std::int64_t>(
-      list, static_cast<std::uint64_t>(size), i.data_ptr<std::int64_t>(),
-      j.data_ptr<std::int64_t>(), shifts.data_ptr<std::int32_t>(), pad_i, pad_j);
-  return {i, j, shifts, at::scalar_tensor(static_cast<std::int64_t>(found), at::kLong)};
+  const at::Tensor count = at::scalar_tensor(found, at::kLong);
+  if (device.is_cpu()) {
+    at::Tensor i = at::empty({size}, at::kLong);
+    at::Tensor j = at::empty({size}, at::kLong);
+    at::Tensor shifts = at::empty({size, 3}, at::kInt);
+    raycut_py::write_pairs<std::int64_t>(list, static_cast<std::uint64_t>(size),
+                                         i.data_ptr<std::int64_t>(), j.data_ptr<std::int64_t>(),
+                                         shifts.data_ptr<std::int32_t>(), pad_i, pad_j);
+    return {i, j, shifts, count};
+  }
+  const auto on_device = at::TensorOptions().device(device);
+  at::Tensor i = at::full({size}, pad_i, on_device.dtype(at::kLong));
+  at::Tensor j = at::full({size}, pad_j, on_device.dtype(at::kLong));
+  at::Tensor shifts = at::zeros({size, 3}, on_device.dtype(at::kInt));
+  const std::int64_t kept = std::min(found, size);
+  if (kept > 0) {
+    auto wrap = [&](const void* data, at::IntArrayRef shape, at::ScalarType type) {
+      return at::from_blob(const_cast<void*>(data), shape, on_device.dtype(type));
+    };
+    i.narrow(0, 0, kept).copy_(wrap(list.rows(), {kept}, at::kLong));
+    j.narrow(0, 0, kept).copy_(wrap(list.columns(), {kept}, at::kLong));
+    shifts.narrow(0, 0, kept).copy_(wrap(list.shifts(), {kept, 3}, at::kInt));
+  }
+  return {i, j, shifts, count.to(device)};
 }
 
-Pairs neighbor_list_cpu(const at::Tensor& positions, double cutoff,
-                        const std::optional<at::Tensor>& cell, const std::optional<at::Tensor>& pbc,
-                        const std::optional<at::Tensor>& batch, bool half,
-                        std::optional<std::int64_t> max_pairs) {
-  const at::Tensor x = search_points(positions, "positions");
-  const std::int64_t n = x.size(0);
-  const raycut::Systems systems =
-      systems_of(boxes_of(cell, pbc), system_index(batch, n, "batch"), n, at::Tensor(), 0,
-                 /*with_queries=*/false, "batch");
-  HostWork& work = host_work();
+// Builds the engine of `x`'s device over x (and `systems`) and fills a COO list with shifts:
+// on the CPU in place, on CUDA on the current device and stream.
+Pairs run(const at::Tensor& x, double cutoff, const raycut::Systems& systems, bool half,
+          std::optional<std::int64_t> max_pairs, std::int64_t pad_i, std::int64_t pad_j) {
+  const at::Device device = x.device();
+  Work& work = work_for(device);
+  raycut::NeighbourListBuffer fresh;
+  raycut::NeighbourListBuffer& list = device.is_cpu() ? work.list : fresh;
+  const auto space = device.is_cpu() ? raycut::MemorySpace::host : raycut::MemorySpace::device;
+#ifdef RAYCUT_TORCH_CUDA
+  std::optional<c10::cuda::CUDAGuard> guard;
+  if (device.is_cuda()) {
+    guard.emplace(device);
+    work.engine.set_stream(c10::cuda::getCurrentCUDAStream(device.index()).stream());
+  }
+#endif
   try {
-    work.engine.build({x.data_ptr<float>(), static_cast<std::size_t>(n), raycut::MemorySpace::host},
+    work.engine.build({x.data_ptr<float>(), static_cast<std::size_t>(x.size(0)), space},
                       static_cast<float>(cutoff), systems);
     raycut::ListOptions options;
     options.half = half;
     options.shifts = true;
     options.coo = true;
-    work.engine.neighbours(work.list, options);
+    work.engine.neighbours(list, options);
   } catch (const raycut::Error& e) {
     rethrow(e);
   }
-  return pair_tensors(work.list, max_pairs, n, n);
+  return pair_tensors(list, max_pairs, pad_i, pad_j, device);
 }
 
-Pairs radius_cpu(const at::Tensor& points, const at::Tensor& queries, double cutoff,
-                 const std::optional<at::Tensor>& cell, const std::optional<at::Tensor>& pbc,
-                 const std::optional<at::Tensor>& batch_points,
-                 const std::optional<at::Tensor>& batch_queries,
-                 std::optional<std::int64_t> max_pairs) {
+Pairs neighbor_list(const at::Tensor& positions, double cutoff,
+                    const std::optional<at::Tensor>& cell, const std::optional<at::Tensor>& pbc,
+                    const std::optional<at::Tensor>& batch, bool half,
+                    std::optional<std::int64_t> max_pairs) {
+  const at::Tensor x = search_points(positions, "positions");
+  const std::int64_t n = x.size(0);
+  const raycut::Systems systems =
+      systems_of(boxes_of(cell, pbc), system_index(batch, n, "batch"), n, at::Tensor(), 0,
+                 /*with_queries=*/false, "batch");
+  return run(x, cutoff, systems, half, max_pairs, n, n);
+}
+
+Pairs radius(const at::Tensor& points, const at::Tensor& queries, double cutoff,
+             const std::optional<at::Tensor>& cell, const std::optional<at::Tensor>& pbc,
+             const std::optional<at::Tensor>& batch_points,
+             const std::optional<at::Tensor>& batch_queries,
+             std::optional<std::int64_t> max_pairs) {
   const at::Tensor x = search_points(points, "points");
   const at::Tensor q = search_points(queries, "queries");
+  TORCH_CHECK_VALUE(q.device() == x.device(), "queries must be on the device of points (",
+                    x.device(), "), got ", q.device());
   const std::int64_t n = x.size(0), m = q.size(0);
   raycut::Systems systems = systems_of(
       boxes_of(cell, pbc), system_index(batch_points, n, "batch_points"), n,
       system_index(batch_queries, m, "batch_queries"), m, /*with_queries=*/true, "batch_points");
+  const auto space = x.is_cpu() ? raycut::MemorySpace::host : raycut::MemorySpace::device;
+  systems.queries = {q.data_ptr<float>(), static_cast<std::size_t>(m), space};
   // No query points is still a query build (the targets are the M = 0 queries, not the points).
-  systems.queries = {q.data_ptr<float>(), static_cast<std::size_t>(m), raycut::MemorySpace::host};
-  static const float no_point[3] = {0, 0, 0};
-  if (m == 0) systems.queries.xyz = no_point;
-  HostWork& work = host_work();
-  try {
-    work.engine.build({x.data_ptr<float>(), static_cast<std::size_t>(n), raycut::MemorySpace::host},
-                      static_cast<float>(cutoff), systems);
-    raycut::ListOptions options;
-    options.shifts = true;
-    options.coo = true;
-    work.engine.neighbours(work.list, options);
-  } catch (const raycut::Error& e) {
-    rethrow(e);
-  }
+  if (m == 0) systems.queries.xyz = x.data_ptr<float>();
   // Padding: i = M (no query), j = N (no point).
-  return pair_tensors(work.list, max_pairs, m, n);
+  return run(x, cutoff, systems, /*half=*/false, max_pairs, m, n);
 }
 
 }  // namespace
@@ -290,6 +345,15 @@ TORCH_LIBRARY(raycut, m) {
 }
 
 TORCH_LIBRARY_IMPL(raycut, CPU, m) {
-  m.impl("neighbor_list", &neighbor_list_cpu);
-  m.impl("radius", &radius_cpu);
+  m.impl("neighbor_list", &neighbor_list);
+  m.impl("radius", &radius);
 }
+
+#ifdef RAYCUT_TORCH_CUDA
+// The same kernels on CUDA tensors: the grid on the tensors' device and current stream (the
+// boxes and batch offsets are read on the host).
+TORCH_LIBRARY_IMPL(raycut, CUDA, m) {
+  m.impl("neighbor_list", &neighbor_list);
+  m.impl("radius", &radius);
+}
+#endif
