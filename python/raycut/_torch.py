@@ -55,6 +55,24 @@ def _radius_fake(points, queries, cutoff, cell=None, pbc=None, batch_points=None
     return _fake_pairs(points, max_pairs)
 
 
+@torch.library.register_fake("raycut::lj_forces")
+def _lj_forces_fake(positions, cutoff, epsilon=1.0, sigma=1.0, cell=None, pbc=None, batch=None):
+    torch._check(positions.dim() == 2 and positions.shape[1] == 3,
+                 lambda: f"positions must have shape (N, 3), got {tuple(positions.shape)}")
+    n = positions.shape[0]
+    return tuple(positions.new_empty(shape, dtype=torch.float32)
+                 for shape in ((n,), (n, 3), (n, 6)))
+
+
+def _lj_forces_backward(ctx, *grads):
+    raise RuntimeError("torch.ops.raycut.lj_forces is not differentiable (it returns the forces "
+                       "themselves): for gradients, compute the energy from "
+                       "raycut.neighbor_list's d, or pass positions.detach()")
+
+
+torch.library.register_autograd("raycut::lj_forces", _lj_forces_backward)
+
+
 def _fake_pairs(like: torch.Tensor, max_pairs: Optional[int]) -> tuple:
     if max_pairs is None:
         size = torch.library.get_ctx().new_dynamic_size()  # the pair count: known after the op

@@ -331,6 +331,52 @@ Pairs radius(const at::Tensor& points, const at::Tensor& queries, double cutoff,
   return run(x, cutoff, systems, /*half=*/false, max_pairs, m, n);
 }
 
+// A copy of `count` values at `data` (where the engine keeps its results: host or `device`) as a
+// new float32 tensor of `shape` on `device` (on the current stream for CUDA).
+at::Tensor copied(const float* data, at::IntArrayRef shape, const at::Device& device) {
+  return at::from_blob(const_cast<float*>(data), shape, at::TensorOptions().device(device)).clone();
+}
+
+// The fused Lennard-Jones pass (Kernel::lj_forces, as Engine.compute("lj_forces")): per-particle
+// energy (N,), force (N, 3) and virial (N, 6) float32, in one pass over the pairs, no list.
+std::tuple<at::Tensor, at::Tensor, at::Tensor> lj_forces(const at::Tensor& positions, double cutoff,
+                                                         double epsilon, double sigma,
+                                                         const std::optional<at::Tensor>& cell,
+                                                         const std::optional<at::Tensor>& pbc,
+                                                         const std::optional<at::Tensor>& batch) {
+  const at::Tensor x = search_points(positions, "positions");
+  const std::int64_t n = x.size(0);
+  const raycut::Systems systems =
+      systems_of(boxes_of(cell, pbc), system_index(batch, n, "batch"), n, at::Tensor(), 0,
+                 /*with_queries=*/false, "batch");
+  const at::Device device = x.device();
+  Work& work = work_for(device);
+#ifdef RAYCUT_TORCH_CUDA
+  std::optional<c10::cuda::CUDAGuard> guard;
+  if (device.is_cuda()) {
+    guard.emplace(device);
+    work.engine.set_stream(c10::cuda::getCurrentCUDAStream(device.index()).stream());
+  }
+#endif
+  const auto space = device.is_cpu() ? raycut::MemorySpace::host : raycut::MemorySpace::device;
+  raycut::KernelOptions options;
+  options.lj_epsilon = static_cast<float>(epsilon);
+  options.lj_sigma = static_cast<float>(sigma);
+  try {
+    work.engine.build({x.data_ptr<float>(), static_cast<std::size_t>(n), space},
+                      static_cast<float>(cutoff), systems);
+    work.engine.run(raycut::Kernel::lj_forces, options);
+  } catch (const raycut::Error& e) {
+    rethrow(e);
+  }
+  if (n == 0)
+    return {at::empty({0}, x.options()), at::empty({0, 3}, x.options()),
+            at::empty({0, 6}, x.options())};
+  const raycut::ResultsView results = work.engine.results_view();
+  return {copied(results.energy, {n}, device), copied(results.force, {n, 3}, device),
+          copied(results.virial, {n, 6}, device)};
+}
+
 }  // namespace
 
 TORCH_LIBRARY(raycut, m) {
@@ -342,11 +388,16 @@ TORCH_LIBRARY(raycut, m) {
       "radius(Tensor points, Tensor queries, float cutoff, Tensor? cell=None, Tensor? pbc=None, "
       "Tensor? batch_points=None, Tensor? batch_queries=None, int? max_pairs=None) -> (Tensor i, "
       "Tensor j, Tensor S, Tensor count)");
+  m.def(
+      "lj_forces(Tensor positions, float cutoff, float epsilon=1.0, float sigma=1.0, "
+      "Tensor? cell=None, Tensor? pbc=None, Tensor? batch=None) -> (Tensor energy, Tensor force, "
+      "Tensor virial)");
 }
 
 TORCH_LIBRARY_IMPL(raycut, CPU, m) {
   m.impl("neighbor_list", &neighbor_list);
   m.impl("radius", &radius);
+  m.impl("lj_forces", &lj_forces);
 }
 
 #ifdef RAYCUT_TORCH_CUDA
@@ -355,5 +406,6 @@ TORCH_LIBRARY_IMPL(raycut, CPU, m) {
 TORCH_LIBRARY_IMPL(raycut, CUDA, m) {
   m.impl("neighbor_list", &neighbor_list);
   m.impl("radius", &radius);
+  m.impl("lj_forces", &lj_forces);
 }
 #endif

@@ -240,3 +240,47 @@ def test_gradcheck_and_gradgradcheck_positions_and_cell():
     c.requires_grad_()
     assert torch.autograd.gradcheck(smooth_energy, (x, c), eps=1e-6, atol=1e-6)
     assert torch.autograd.gradgradcheck(smooth_energy, (x, c), eps=1e-6, atol=1e-5)
+
+
+# ---- the fused Lennard-Jones operator -----------------------------------------------------------
+
+
+def test_lj_forces_op_matches_the_engine_and_autograd():
+    x, c = periodic_system(80, 4.0 * TRICLINIC, (True,) * 3, seed=11, dtype=torch.float32)
+    energy, force, virial = OPS.lj_forces(x, 1.6, 0.5, 0.4, c)
+    assert energy.shape == (80,) and force.shape == (80, 3) and virial.shape == (80, 6)
+    engine = raycut.Engine("cell-list")
+    engine.build(x.numpy(), 1.6, cell=c.numpy())
+    want = engine.compute("lj_forces", lj_epsilon=0.5, lj_sigma=0.4)
+    for name, got in (("energy", energy), ("force", force), ("virial", virial)):
+        assert torch.equal(got, torch.as_tensor(want[name])), name
+    # The forces are -dU/dx of the pair energy summed over the list (float64 in torch).
+    xd = x.double().requires_grad_()
+    d = raycut.neighbor_list("d", xd, 1.6, cell=c.double())
+    u = (0.4 / d) ** 6
+    total = 0.5 * (4 * 0.5 * (u * u - u)).sum()
+    (grad,) = torch.autograd.grad(total, xd)
+    torch.testing.assert_close(force.double(), -grad, rtol=1e-3, atol=1e-3 * grad.abs().max())
+    torch.testing.assert_close(energy.double().sum(), 2 * total.detach(), rtol=1e-4, atol=1e-4)
+    with pytest.raises(RuntimeError, match="not differentiable"):
+        OPS.lj_forces(x.clone().requires_grad_(), 1.6)[0].sum().backward()
+
+
+def test_lj_forces_op_under_compile_with_dynamic_n():
+    from torch._dynamo.testing import CompileCounterWithBackend
+
+    torch._dynamo.reset()
+    counter = CompileCounterWithBackend("aot_eager")
+
+    def step(x, cell):
+        energy, force, _ = torch.ops.raycut.lj_forces(x, 0.45, 1.0, 0.2, cell)
+        return x + 1e-4 * force, energy.sum()
+
+    compiled = torch.compile(step, backend=counter, fullgraph=True)
+    for n in (30, 50):
+        x, c = periodic_system(n, np.eye(3), (True,) * 3, seed=n, dtype=torch.float32)
+        torch._dynamo.mark_dynamic(x, 0)
+        got, want = compiled(x, c), step(x, c)
+        torch.testing.assert_close(got[0], want[0])
+        torch.testing.assert_close(got[1], want[1])
+    assert counter.frame_count == 1
