@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import numbers
 import sys
+import warnings
 from typing import Any, Optional
 
 from . import _arrays
@@ -612,10 +613,10 @@ def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any 
     of them None: all of that set in system 0); queries meet only the points of their system.
     Gradients flow to points, queries and cell for PyTorch inputs that require grad.
 
-    >>> i, j = raycut.radius(points, queries, 0.05)           # query i, point j
     PyTorch CPU tensors go through ``torch.ops.raycut.radius`` as ``neighbor_list``'s do
     through its operator (``max_pairs`` too; padding: i = M, j = N).
 
+    >>> i, j = raycut.radius(points, queries, 0.05)           # query i, point j
     >>> i, j, S = raycut.radius(points, queries, 0.05, cell=[1, 1, 1], quantities="ijS")
     """
     letters = _letters(quantities)
@@ -643,7 +644,9 @@ def _torch_ops() -> Any:
     if not _TORCH_OPS:
         try:
             from . import _torch as module
-        except ImportError:
+        except ImportError as e:
+            if e.path is not None:  # built, but not loadable (another torch): say so, once
+                warnings.warn(str(e), RuntimeWarning, stacklevel=2)
             module = None
         _TORCH_OPS.append(module)
     return _TORCH_OPS[0]

@@ -35,7 +35,12 @@ def _library() -> str:
 
 
 LIBRARY = _library()
-torch.ops.load_library(LIBRARY)
+try:
+    torch.ops.load_library(LIBRARY)
+except OSError as e:  # built against another torch (the classic C++ API binds to one version)
+    raise ImportError(f"raycut's PyTorch operators ({LIBRARY}) do not load with torch "
+                      f"{torch.__version__}: rebuild raycut against it ({e}); PyTorch tensors "
+                      "go through the extension meanwhile", path=LIBRARY) from e
 
 
 @torch.library.register_fake("raycut::neighbor_list")
