@@ -14,7 +14,8 @@ positions and cell.
 
 The pair search reads the positions as float32 (the library's predicate decides each pair) and
 takes no gradient: ``vectors`` computes ``x[j] - x[i] + S @ cell`` from the caller's own arrays.
-``jax.vmap`` is not supported yet.
+Under ``jax.vmap`` (positions (B, N, 3), and a cell per system or one for all) the B systems
+are searched in one call as a batch of the library's, each with its own K slots and count.
 """
 from __future__ import annotations
 
@@ -57,7 +58,8 @@ def neighbor_list(positions: Any, cutoff: float, cell: Any = None, pbc: Any = No
       not valid; call again with a larger ``max_pairs`` (outside ``jit``, or check ``count``).
 
     ``positions`` (N, 3); ``cell`` (3, 3) (rows: lattice vectors) or 3 edge lengths, None: open;
-    ``pbc`` 3 bools (default: all, with a cell). ``half``: each pair once.
+    ``pbc`` 3 bools (default: all, with a cell). ``half``: each pair once. ``jax.vmap`` over
+    positions (and cells) gives every system its own K slots and count, in one search.
     """
     if max_pairs is None or int(max_pairs) != max_pairs or max_pairs < 0:
         raise ValueError(f"raycut.jax.neighbor_list needs max_pairs, a whole number >= 0 (the "
@@ -74,8 +76,10 @@ def neighbor_list(positions: Any, cutoff: float, cell: Any = None, pbc: Any = No
     k = int(max_pairs)
     shapes = (jax.ShapeDtypeStruct((k,), jnp.int32), jax.ShapeDtypeStruct((k,), jnp.int32),
               jax.ShapeDtypeStruct((k, 3), jnp.int32), jax.ShapeDtypeStruct((), jnp.int32))
-    return tuple(jax.ffi.ffi_call(_TARGET, shapes)(x, c, flags, cutoff=np.float32(cutoff),
-                                                   half=np.int64(bool(half))))
+    # Under jax.vmap every input gets the batch axes and the custom call searches the B systems
+    # in one build (the library's batches), not in a loop.
+    call = jax.ffi.ffi_call(_TARGET, shapes, vmap_method="broadcast_all")
+    return tuple(call(x, c, flags, cutoff=np.float32(cutoff), half=np.int64(bool(half))))
 
 
 def _cell(cell: Any) -> Any:

@@ -1,5 +1,5 @@
 // The pairs of a host neighbour list written into a caller's fixed-size outputs (the PyTorch
-// operators' and the JAX custom call's static-capacity mode): the first min(pairs, capacity)
+// operators' static-capacity mode): the first min(pairs, capacity)
 // entries, then padding (i = pad_i, j = pad_j, S = 0) up to the capacity. Returns the number of
 // pairs found, which exceeds the capacity when the list was cut.
 #pragma once

@@ -68,3 +68,28 @@ def test_errors():
         rjax.neighbor_list(jnp.zeros((4, 2)), 0.5, max_pairs=10)
     with pytest.raises(Exception, match="cutoff"):
         rjax.neighbor_list(jnp.zeros((4, 3)), -1.0, max_pairs=10)[3].block_until_ready()
+
+
+def test_vmap_is_one_batched_search_with_per_system_outputs():
+    xs = np.stack([inside_cell(20, CELL, seed=s) for s in (30, 31, 32)])
+    cells = np.stack([CELL, 1.1 * CELL, 0.9 * CELL]).astype(np.float32)
+    batched = jax.jit(jax.vmap(lambda x, c: rjax.neighbor_list(x, CUTOFF, cell=c, max_pairs=900)))
+    i, j, S, count = (np.asarray(a) for a in batched(xs, cells))
+    assert i.shape == (3, 900) and S.shape == (3, 900, 3) and count.shape == (3,)
+    for b in range(3):
+        one = [np.asarray(a) for a in rjax.neighbor_list(xs[b], CUTOFF, cell=cells[b],
+                                                         max_pairs=900)]
+        n = int(count[b])
+        assert n == int(one[3]) > 0
+        assert triples(i[b, :n], j[b, :n], S[b, :n]) == triples(one[0][:n], one[1][:n],
+                                                                one[2][:n])
+        assert np.all(i[b, n:] == 20) and np.all(j[b, n:] == 20)
+    # One cell for every system (not mapped), and gradients through vmap.
+    shared = jax.vmap(lambda x: rjax.neighbor_list(x, CUTOFF, cell=CELL, max_pairs=900)[3])(xs)
+    assert [int(c) for c in shared] == [
+        int(rjax.neighbor_list(x, CUTOFF, cell=CELL, max_pairs=900)[3]) for x in xs]
+    grads = jax.vmap(jax.grad(energy))(jnp.asarray(xs), jnp.asarray(cells))
+    for b in range(3):
+        np.testing.assert_allclose(grads[b], jax.grad(energy)(jnp.asarray(xs[b]),
+                                                               jnp.asarray(cells[b])),
+                                   rtol=1e-5, atol=1e-5)
