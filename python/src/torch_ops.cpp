@@ -55,7 +55,8 @@ using Pairs = std::tuple<at::Tensor, at::Tensor, at::Tensor, at::Tensor>;
   }
 }
 
-// (N, 3) float32 or float64 points as the engine reads them: float32, C-contiguous, on the host.
+// (N, 3) float32 or float64 points as the engine reads them: float32, C-contiguous, on their
+// device.
 // The pair decision is the library's float32 predicate on these values (docs/python.md).
 at::Tensor search_points(const at::Tensor& x, const char* name) {
   TORCH_CHECK_VALUE(x.dim() == 2 && x.size(1) == 3, name, " must have shape (N, 3), got ",
