@@ -196,6 +196,26 @@ def test_compile_fullgraph_dynamic_no_recompilation():
     assert counter.frame_count == 1, "recompiled when N or the pair count changed"
 
 
+def test_compile_radius_fullgraph_with_gradients():
+    from torch._dynamo.testing import CompileCounterWithBackend
+
+    def pooled(points, queries, cell):
+        return raycut.radius(points, queries, 0.3, cell=cell, quantities="d").sum()
+
+    torch._dynamo.reset()
+    counter = CompileCounterWithBackend("aot_eager")
+    compiled = torch.compile(pooled, backend=counter, fullgraph=True)
+    for n in (50, 70):
+        p, c = periodic_system(n, np.eye(3), (True,) * 3, seed=n)
+        q = periodic_system(10, np.eye(3), (True,) * 3, seed=100 + n)[0]
+        p.requires_grad_()
+        torch._dynamo.mark_dynamic(p, 0)
+        got, want = compiled(p, q, c), pooled(p, q, c)
+        torch.testing.assert_close(got, want)
+        torch.testing.assert_close(torch.autograd.grad(got, p)[0], torch.autograd.grad(want, p)[0])
+    assert counter.frame_count == 1
+
+
 def test_compile_inductor_static_capacity():
     torch._dynamo.reset()
 
