@@ -20,6 +20,7 @@ from typing import Any, Optional
 
 import torch
 
+from . import _systems
 from ._raycut import CapacityError
 
 
@@ -166,15 +167,15 @@ def _vectors(sources: torch.Tensor, targets: torch.Tensor, i: torch.Tensor, j: t
     vectors = sources.index_select(0, j) - targets.index_select(0, i)
     if cell is None:
         return vectors
-    s = shifts.to(vectors.dtype)
-    if cell.dim() == 2:
-        return vectors + s @ cell
-    systems = target_batch if target_batch is not None else torch.zeros(
-        targets.shape[0] - int(padded), dtype=torch.int64, device=targets.device)
-    if padded:
-        systems = torch.cat([systems, systems.new_zeros(1)])
-    per_pair = cell.index_select(0, systems.index_select(0, i))  # (P, 3, 3)
-    return vectors + torch.bmm(s.unsqueeze(1), per_pair).squeeze(1)
+
+    def pair_systems() -> torch.Tensor:  # the system of each pair: that of its target
+        systems = target_batch if target_batch is not None else torch.zeros(
+            targets.shape[0] - int(padded), dtype=torch.int64, device=targets.device)
+        if padded:
+            systems = torch.cat([systems, systems.new_zeros(1)])
+        return systems.index_select(0, i)
+
+    return _systems.add_shifts(torch, vectors, shifts, cell, pair_systems)
 
 
 def _quantities(letters: str, i, j, shifts, vectors_of) -> Any:
