@@ -34,4 +34,4 @@ def package(path: str) -> str:
 
 if __name__ == "__main__":
     print(package(sys.argv[1] if len(sys.argv) > 1 else "energy.pt2"))
-    print(f"operators: {raycut._torch.LIBRARY}")
+    print(f"operators: {raycut.load_torch_ops()}")

@@ -50,6 +50,7 @@ __all__ = [
     "auto_method",
     "clear_engine_cache",
     "cuda_available",
+    "load_torch_ops",
     "methods",
     "neighbor_list",
     "radius",
@@ -650,6 +651,16 @@ def _torch_ops() -> Any:
             module = None
         _TORCH_OPS.append(module)
     return _TORCH_OPS[0]
+
+
+def load_torch_ops() -> str:
+    """Loads raycut's PyTorch operators (``torch.ops.raycut.neighbor_list``, ``.radius``,
+    ``.lj_forces``) and returns their library's path: what a TorchScript module or an
+    AOTInductor package needs loaded first (``import raycut`` after ``import torch`` does it).
+    Raises ImportError when they are not built or do not load with this torch."""
+    if _torch_ops() is None:
+        from . import _torch  # noqa: F401  raises the ImportError that says why
+    return _torch_ops().LIBRARY
 
 
 def _torch_ops_route(x: Any, method: str, max_pairs: Optional[int]) -> bool:

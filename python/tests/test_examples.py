@@ -122,7 +122,7 @@ def test_torch_aoti_runner_without_python(tmp_path):
                     ["cmake", "--build", str(build), "-j2"]):
         subprocess.run(command, check=True, capture_output=True)
     for side in ("5", "7"):  # two N through one package
-        out = subprocess.run([str(build / "torch_aoti_runner"), package, raycut._torch.LIBRARY,
+        out = subprocess.run([str(build / "torch_aoti_runner"), package, raycut.load_torch_ops(),
                               side], capture_output=True, text=True)
         assert out.returncode == 0, out.stdout + out.stderr
         words = out.stdout.split()

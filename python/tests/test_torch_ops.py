@@ -172,6 +172,7 @@ def test_torchscript_module_calls_the_op():
         x, c = periodic_system(n, np.eye(3), (True,) * 3, seed=n)
         torch.testing.assert_close(scripted(x, c), PairCount()(x, c))
     assert "raycut::neighbor_list" in str(scripted.graph)
+    assert raycut.load_torch_ops().endswith(".so") and "_torch_ops" in raycut.load_torch_ops()
 
 
 def test_compile_fullgraph_dynamic_no_recompilation():
