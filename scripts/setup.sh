@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Installs everything raycut needs on a fresh Debian 12 machine, from Debian's packages, then the
-# Python package's build and test requirements (python/requirements.txt, from PyPI) into a
-# virtual environment in the repository, .venv (ignored by git; Debian's own Python refuses
-# `pip install` outside one, PEP 668). scripts/test.sh uses it.
+# Python package's build and test requirements (python/requirements.txt, from PyPI: PyTorch and
+# JAX included, a few GB, for the operators and the custom call) into a virtual environment in
+# the repository, .venv (ignored by git; Debian's own Python refuses `pip install` outside one,
+# PEP 668). scripts/test.sh uses it.
 # Open MPI builds raycut::mpi, the distributed engine, and its tests (mpirun, 1 to 4 ranks).
 # The CUDA toolkit is optional and not a Debian package here: when nvcc is on the machine
 # (/usr/local/cuda), the CUDA methods are built; otherwise the CPU methods only.

@@ -8,6 +8,8 @@
 # .venv is created as scripts/setup.sh does. RAYCUT_PYTHON_TESTS=OFF skips the
 # Python package. RAYCUT_TEST_WHEEL=1 also runs `pip install --no-build-isolation .` into that
 # Python (a second, full build of the library) and the tests on the installed package.
+# With torch and jax importable by that Python, the PyTorch operators and raycut.jax's custom
+# call are built and tested too; without them their tests are skipped, saying why.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build="${BUILD_DIR:-build}"

@@ -40,6 +40,8 @@ from __future__ import annotations
 
 import numbers
 import os
+import sys
+import warnings
 from typing import Any, Optional
 
 # OpenMP threads sleep between parallel regions instead of spinning on cores that the caller's
@@ -62,6 +64,7 @@ __all__ = [
     "auto_method",
     "clear_engine_cache",
     "cuda_available",
+    "load_torch_ops",
     "methods",
     "neighbor_list",
     "radius",
@@ -557,7 +560,8 @@ def _pair_quantities(letters: str, engine: Engine, half: bool, grad: bool, sourc
 
 def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None,
                   pbc: Any = None, batch: Any = None, half: bool = False,
-                  method: str = "auto", numbers: Any = None) -> Any:
+                  method: str = "auto", numbers: Any = None,
+                  max_pairs: Optional[int] = None) -> Any:
     """ASE-style neighbour list (``ase.neighborlist.neighbor_list``): every pair of particles
     within ``cutoff``, in open or periodic boxes, of one system or a batch of them.
 
@@ -604,6 +608,13 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     NotImplementedError for them. CUDA positions are never copied to the host, nor are the pairs.
     The engine is reused from call to call (see ``clear_engine_cache``).
 
+    PyTorch CPU tensors (float32 or float64; ``method`` "auto" or "cell-list") go through the
+    operator ``torch.ops.raycut.neighbor_list``, so the same call works under
+    ``torch.compile(fullgraph=True)``, ``torch.export`` and AOTInductor; ``d`` and ``D`` are then
+    always computed in PyTorch, in the positions' dtype (docs/python.md). ``max_pairs`` (those
+    tensors only): outputs of that static size, the pairs first, then padding (i = j = N, S = 0,
+    d = 0); a list that does not fit raises ``CapacityError`` in eager mode.
+
     >>> i, j, S = raycut.neighbor_list("ijS", x, 3.0, cell=[10.0, 10.0, 10.0], pbc=True)
     >>> i, j = raycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
     """
@@ -615,6 +626,9 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
         n = _points(_arrays.to_host(positions))
         return _cutoffs.filtered(letters, cutoff, n, numbers, lambda asked, search: neighbor_list(
             asked, positions, search, cell, pbc, batch, half, method))
+    if _torch_ops_route(positions, method, max_pairs):
+        return _torch_ops().neighbor_list(letters, positions, cutoff, cell, pbc, batch, half,
+                                          max_pairs)
     grad = _requires_grad(positions) or (_arrays.framework_of(positions) == "torch"
                                          and _requires_grad(cell))
     x, like = _arrays.prepare(_search_input(positions, grad))
@@ -628,7 +642,7 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
 
 def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any = None,
            batch_points: Any = None, batch_queries: Any = None, method: str = "auto",
-           quantities: str = "ij") -> Any:
+           quantities: str = "ij", max_pairs: Optional[int] = None) -> Any:
     """Radius search between two point sets: for every query q, the points p within ``cutoff``
     (``torch_cluster.radius(x=points, y=queries, r=cutoff, batch_x, batch_y)``, scipy's
     ``cKDTree(points).query_ball_point(queries, cutoff)``, periodic and batched).
@@ -647,10 +661,16 @@ def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any 
     of them None: all of that set in system 0); queries meet only the points of their system.
     Gradients flow to points, queries and cell for PyTorch inputs that require grad.
 
+    PyTorch CPU tensors go through ``torch.ops.raycut.radius`` as ``neighbor_list``'s do
+    through its operator (``max_pairs`` too; padding: i = M, j = N).
+
     >>> i, j = raycut.radius(points, queries, 0.05)           # query i, point j
     >>> i, j, S = raycut.radius(points, queries, 0.05, cell=[1, 1, 1], quantities="ijS")
     """
     letters = _letters(quantities)
+    if _torch_ops_route(points, method, max_pairs):
+        return _torch_ops().radius(letters, points, queries, cutoff, cell, pbc, batch_points,
+                                   batch_queries, max_pairs)
     torch_in = _arrays.framework_of(points) == "torch"
     grad = torch_in and (_requires_grad(points) or _requires_grad(queries) or
                          _requires_grad(cell))
@@ -664,6 +684,46 @@ def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any 
     return out
 
 
+_TORCH_OPS: list = []  # [raycut._torch, or None when the operators are not built] once tried
+
+
+def _torch_ops() -> Any:
+    """raycut._torch (it imports torch and loads the operators), or None where they are not
+    built: PyTorch tensors then go through the extension as other arrays do."""
+    if not _TORCH_OPS:
+        try:
+            from . import _torch as module
+        except ImportError as e:
+            if e.path is not None:  # built, but not loadable (another torch): say so, once
+                warnings.warn(str(e), RuntimeWarning, stacklevel=2)
+            module = None
+        _TORCH_OPS.append(module)
+    return _TORCH_OPS[0]
+
+
+def load_torch_ops() -> str:
+    """Loads raycut's PyTorch operators (``torch.ops.raycut.neighbor_list``, ``.radius``,
+    ``.lj_forces``) and returns their library's path: what a TorchScript module or an
+    AOTInductor package needs loaded first (``import raycut`` after ``import torch`` does it).
+    Raises ImportError when they are not built or do not load with this torch."""
+    if _torch_ops() is None:
+        from . import _torch  # noqa: F401  raises the ImportError that says why
+    return _torch_ops().LIBRARY
+
+
+def _torch_ops_route(x: Any, method: str, max_pairs: Optional[int]) -> bool:
+    """Whether a call goes through the PyTorch operators (raycut._torch.routes)."""
+    if _arrays.framework_of(x) == "torch":
+        ops = _torch_ops()
+        if ops is not None and ops.routes(x, method):
+            return True
+    if max_pairs is not None:
+        raise ValueError(f"max_pairs is for PyTorch CPU tensors with method 'auto' or "
+                         f"'cell-list' (the operators, built with torch), got "
+                         f"{_arrays.framework_of(x)} input with method={method!r}")
+    return False
+
+
 def _host_cell(cell: Any) -> Any:
     """The cell as the extension takes it (host numbers; a PyTorch cell that requires grad is
     read detached: the gradient path uses the caller's tensor)."""
@@ -673,3 +733,6 @@ def _host_cell(cell: Any) -> Any:
 
 
 from . import ase  # noqa: E402  raycut.ase.neighbor_list: ASE Atoms in, ASE's types out
+
+if "torch" in sys.modules:  # torch already imported: its operators now, before any tracing
+    _torch_ops()

@@ -254,10 +254,17 @@ def torch_vectors(torch: Any, sources: Any, targets: Any, i: Any, j: Any, shifts
         c = torch.diag(c)
     if c.dim() == 3 and (c.shape[0] == 1 or boxes_.count == 1):
         c = c[0]  # one box for every system
-    s = shifts.to(device=device, dtype=dtype)
-    if c.dim() == 2:
-        return vectors + s @ c
-    # One cell per system: the system of each pair is that of its target row.
-    rows = torch.as_tensor(np.asarray(target_offsets, np.int64), device=device)
-    system = torch.searchsorted(rows, i, right=True) - 1
-    return vectors + torch.bmm(s.unsqueeze(1), c.index_select(0, system)).squeeze(1)
+    def pair_systems() -> Any:  # one cell per system: the system of each pair's target row
+        rows = torch.as_tensor(np.asarray(target_offsets, np.int64), device=device)
+        return torch.searchsorted(rows, i, right=True) - 1
+
+    return add_shifts(torch, vectors, shifts, c, pair_systems)
+
+
+def add_shifts(torch: Any, vectors: Any, shifts: Any, cell: Any, pair_systems: Any) -> Any:
+    """vectors + S @ cell, differentiable: ``cell`` (3, 3), or (B, 3, 3) with
+    ``pair_systems()`` the system of each pair (called only then)."""
+    s = shifts.to(device=vectors.device, dtype=vectors.dtype)
+    if cell.dim() == 2:
+        return vectors + s @ cell
+    return vectors + torch.bmm(s.unsqueeze(1), cell.index_select(0, pair_systems())).squeeze(1)

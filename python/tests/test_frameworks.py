@@ -17,11 +17,13 @@ def test_torch_cpu_tensors_stay_on_cpu():
     engine.build(torch.from_numpy(x), CUTOFF)
     count = engine.compute("count")["count"]
     assert isinstance(count, torch.Tensor) and count.dtype == torch.int32
-    # float64 is converted (issue 29: it was refused); integers are not positions.
+    # float64 is accepted (it was refused); integers and float16 are not positions.
     i64, j64 = raycut.neighbor_list("ij", torch.from_numpy(x).double(), CUTOFF)
     assert pair_set(i64.numpy(), j64.numpy()) == pair_set(i.numpy(), j.numpy())
     with pytest.raises(ValueError, match="float32"):
         raycut.neighbor_list("ij", torch.zeros((3, 3), dtype=torch.int32), CUTOFF)
+    with pytest.raises(ValueError, match="float32"):
+        raycut.neighbor_list("ij", torch.from_numpy(x).half(), CUTOFF)
 
 
 def test_jax_cpu_arrays_stay_on_cpu():

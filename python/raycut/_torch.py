@@ -1,0 +1,226 @@
+"""PyTorch tensors through the raycut operators (torch.ops.raycut.neighbor_list and .radius), so
+that the same ``raycut.neighbor_list`` / ``raycut.radius`` call works in eager mode, under
+``torch.compile(fullgraph=True)``, ``torch.export`` and in AOTInductor packages.
+
+The operators (C++, raycut/_torch_ops.so) return integer pairs only: (i, j, S, count). Distances
+and vectors are computed here in PyTorch from them and the caller's own positions and cell
+(``r = x[j] - x[i] + S @ cell``), in the positions' dtype, so autograd flows to positions and
+cell to any order and never reaches the operator. Importing this module imports torch, loads the
+operators and registers their fake implementations (the output shapes that torch.compile and
+torch.export trace with: an unbacked size for the exact pair count, ``max_pairs`` otherwise).
+
+Everything below runs under Dynamo's tracing too: torch operations and Python only, no NumPy
+and no reads of tensor values except in eager mode (the capacity check).
+"""
+from __future__ import annotations
+
+import glob
+import os
+from typing import Any, Optional
+
+import torch
+
+from . import _systems
+from ._raycut import CapacityError
+
+
+def _library() -> str:
+    here = os.path.dirname(os.path.abspath(__file__))
+    found = sorted(glob.glob(os.path.join(here, "_torch_ops*.so")))
+    if not found:
+        raise ImportError(
+            f"raycut's PyTorch operators are not built in {here}: they are built when the "
+            "Python that configures raycut imports torch (pip install --no-build-isolation ., "
+            "or the CMake build with RAYCUT_BUILD_TORCH=ON)")
+    return found[0]
+
+
+LIBRARY = _library()
+try:
+    torch.ops.load_library(LIBRARY)
+except OSError as e:  # built against another torch (the classic C++ API binds to one version)
+    raise ImportError(f"raycut's PyTorch operators ({LIBRARY}) do not load with torch "
+                      f"{torch.__version__}: rebuild raycut against it ({e}); PyTorch tensors "
+                      "go through the extension meanwhile", path=LIBRARY) from e
+
+
+@torch.library.register_fake("raycut::neighbor_list")
+def _neighbor_list_fake(positions, cutoff, cell=None, pbc=None, batch=None, half=False,
+                        max_pairs=None):
+    torch._check(positions.dim() == 2 and positions.shape[1] == 3,
+                 lambda: f"positions must have shape (N, 3), got {tuple(positions.shape)}")
+    return _fake_pairs(positions, max_pairs)
+
+
+@torch.library.register_fake("raycut::radius")
+def _radius_fake(points, queries, cutoff, cell=None, pbc=None, batch_points=None,
+                 batch_queries=None, max_pairs=None):
+    for name, x in (("points", points), ("queries", queries)):
+        torch._check(x.dim() == 2 and x.shape[1] == 3,
+                     lambda: f"{name} must have shape (N, 3), got {tuple(x.shape)}")
+    return _fake_pairs(points, max_pairs)
+
+
+@torch.library.register_fake("raycut::lj_forces")
+def _lj_forces_fake(positions, cutoff, epsilon=1.0, sigma=1.0, cell=None, pbc=None, batch=None):
+    torch._check(positions.dim() == 2 and positions.shape[1] == 3,
+                 lambda: f"positions must have shape (N, 3), got {tuple(positions.shape)}")
+    n = positions.shape[0]
+    return tuple(positions.new_empty(shape, dtype=torch.float32)
+                 for shape in ((n,), (n, 3), (n, 6)))
+
+
+def _lj_forces_backward(ctx, *grads):
+    raise RuntimeError("torch.ops.raycut.lj_forces is not differentiable (it returns the forces "
+                       "themselves): for gradients, compute the energy from "
+                       "raycut.neighbor_list's d, or pass positions.detach()")
+
+
+torch.library.register_autograd("raycut::lj_forces", _lj_forces_backward)
+
+
+def _fake_pairs(like: torch.Tensor, max_pairs: Optional[int]) -> tuple:
+    if max_pairs is None:
+        size = torch.library.get_ctx().new_dynamic_size()  # the pair count: known after the op
+    else:
+        size = max_pairs
+    return (like.new_empty((size,), dtype=torch.int64), like.new_empty((size,), dtype=torch.int64),
+            like.new_empty((size, 3), dtype=torch.int32), like.new_empty((), dtype=torch.int64))
+
+
+# The CUDA kernel is built on request only (RAYCUT_TORCH_CUDA): without it CUDA tensors take the
+# extension's path.
+_CUDA_KERNEL = torch._C._dispatch_has_kernel_for_dispatch_key("raycut::neighbor_list", "CUDA")
+
+
+def routes(x: Any, method: str) -> bool:
+    """Whether a call on ``x`` goes through the operators: PyTorch tensors on a device they have
+    a kernel for, with the method that kernel runs (the CPU cell list, the CUDA grid) or
+    ``"auto"``."""
+    if not isinstance(x, torch.Tensor):
+        return False
+    if x.device.type == "cpu":
+        return method in ("auto", "cell-list")
+    return x.device.type == "cuda" and _CUDA_KERNEL and method in ("auto", "grid")
+
+
+def _cell(cell: Any, like: torch.Tensor) -> Optional[torch.Tensor]:
+    """The cell as a (3, 3) or (B, 3, 3) tensor of the positions' dtype, the caller's tensor
+    itself where it is one (so gradients reach it); 3 numbers: an orthorhombic box."""
+    if cell is None:
+        return None
+    c = cell if isinstance(cell, torch.Tensor) else torch.as_tensor(cell, dtype=torch.float64)
+    c = c.to(dtype=like.dtype, device=like.device)
+    if c.dim() == 1 and c.shape[0] == 3:
+        c = torch.diag_embed(c)
+    if not (c.dim() in (2, 3) and c.shape[-2:] == (3, 3)):
+        raise ValueError(f"cell must have shape (3,) (orthorhombic edges), (3, 3) (rows: lattice "
+                         f"vectors a, b, c) or (B, 3, 3) (one per system of a batch), got "
+                         f"{tuple(c.shape)}")
+    return c
+
+
+def _pbc(pbc: Any) -> Optional[torch.Tensor]:
+    if pbc is None:
+        return None
+    if isinstance(pbc, torch.Tensor):
+        flags = pbc.to(torch.bool)
+    elif isinstance(pbc, bool):
+        flags = torch.full((3,), pbc, dtype=torch.bool)
+    else:
+        flags = torch.as_tensor(pbc).to(torch.bool)
+    if flags.dim() == 0:
+        flags = flags.expand(3)
+    return flags.cpu()
+
+
+def _index(batch: Any, name: str) -> Optional[torch.Tensor]:
+    if batch is None:
+        return None
+    b = batch if isinstance(batch, torch.Tensor) else torch.as_tensor(batch)
+    if b.is_floating_point() or b.dtype == torch.bool:
+        raise ValueError(f"{name} must be integers (the system of each particle), got {b.dtype}")
+    return b.to(torch.int64)
+
+
+def _check_capacity(count: torch.Tensor, max_pairs: Optional[int]) -> None:
+    """In eager mode, a list cut short by max_pairs raises (compiled code reads ``count``)."""
+    if max_pairs is None or torch.compiler.is_compiling():
+        return
+    found = int(count)
+    if found > max_pairs:
+        raise CapacityError(f"max_pairs = {max_pairs} is too small: {found} pairs were found "
+                            f"(grow max_pairs to at least {found})")
+
+
+def _padded(x: torch.Tensor) -> torch.Tensor:
+    """x with one zero row more: padding entries index it (i = j = N) and get a zero vector."""
+    return torch.cat([x, x.new_zeros((1,) + tuple(x.shape[1:]))])
+
+
+def _vectors(sources: torch.Tensor, targets: torch.Tensor, i: torch.Tensor, j: torch.Tensor,
+             shifts: torch.Tensor, cell: Optional[torch.Tensor], target_batch: Any,
+             padded: bool) -> torch.Tensor:
+    """r = sources[j] - targets[i] + S @ cell (the cell of target i's system), differentiable."""
+    if padded:
+        sources, targets = _padded(sources), _padded(targets)
+    vectors = sources.index_select(0, j) - targets.index_select(0, i)
+    if cell is None:
+        return vectors
+
+    def pair_systems() -> torch.Tensor:  # the system of each pair: that of its target
+        systems = target_batch if target_batch is not None else torch.zeros(
+            targets.shape[0] - int(padded), dtype=torch.int64, device=targets.device)
+        if padded:
+            systems = torch.cat([systems, systems.new_zeros(1)])
+        return systems.index_select(0, i)
+
+    return _systems.add_shifts(torch, vectors, shifts, cell, pair_systems)
+
+
+def _quantities(letters: str, i, j, shifts, vectors_of) -> Any:
+    vectors = vectors_of() if ("d" in letters or "D" in letters) else None
+    found = {"i": i, "j": j, "S": shifts, "D": vectors}
+    if "d" in letters:
+        found["d"] = torch.linalg.vector_norm(vectors, dim=1)
+    out = tuple(found[letter] for letter in letters)
+    return out[0] if len(out) == 1 else out
+
+
+def _floating(x: torch.Tensor, name: str) -> None:
+    if x.dtype not in (torch.float32, torch.float64):
+        raise ValueError(f"{name} must be float32 or float64, got {x.dtype}")
+
+
+def neighbor_list(letters: str, positions: torch.Tensor, cutoff: float, cell: Any, pbc: Any,
+                  batch: Any, half: bool, max_pairs: Optional[int]) -> Any:
+    _floating(positions, "positions")
+    c = _cell(cell, positions)
+    b = _index(batch, "batch")
+    i, j, shifts, count = torch.ops.raycut.neighbor_list(
+        positions.detach(), float(cutoff), None if c is None else c.detach(), _pbc(pbc), b,
+        bool(half), max_pairs)
+    _check_capacity(count, max_pairs)
+    return _quantities(
+        letters, i, j, shifts,
+        lambda: _vectors(positions, positions, i, j, shifts, c, b, max_pairs is not None))
+
+
+def radius(letters: str, points: torch.Tensor, queries: Any, cutoff: float, cell: Any, pbc: Any,
+           batch_points: Any, batch_queries: Any, max_pairs: Optional[int]) -> Any:
+    _floating(points, "points")
+    if not isinstance(queries, torch.Tensor):
+        raise ValueError(f"queries must be a PyTorch tensor like points, got "
+                         f"{type(queries).__name__}")
+    _floating(queries, "queries")
+    c = _cell(cell, points)
+    bq = _index(batch_queries, "batch_queries")
+    i, j, shifts, count = torch.ops.raycut.radius(
+        points.detach(), queries.detach().to(points.dtype), float(cutoff),
+        None if c is None else c.detach(), _pbc(pbc), _index(batch_points, "batch_points"), bq,
+        max_pairs)
+    _check_capacity(count, max_pairs)
+    return _quantities(
+        letters, i, j, shifts,
+        lambda: _vectors(points, queries.to(points.dtype), i, j, shifts, c, bq,
+                         max_pairs is not None))

@@ -1,0 +1,138 @@
+// raycut's neighbour list as an XLA FFI custom call on the CPU (raycut.jax, python/raycut/jax.py):
+// static-capacity outputs, so that it runs inside jax.jit. Built as its own shared library,
+// raycut/_jax_ffi.so, against the FFI headers jaxlib ships (jax.ffi.include_dir()); the Python
+// side registers the handler symbol with jax.ffi.register_ffi_target.
+//
+// Inputs: positions (N, 3) float32; cell (3, 3) float32 or float64; pbc (3,) bool; or the same
+// with leading batch axes (jax.vmap). Attributes: cutoff (float32), half (int64, 0 or 1).
+// Results: i, j (K,) int32, S (K, 3) int32, count () int32 (per system under vmap): the first
+// min(count, K) pairs, then padding (i = j = N, S = 0). count > K: the list was cut (the caller
+// grows K).
+#include <algorithm>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "raycut/engine.hpp"
+#include "raycut/error.hpp"
+#include "xla/ffi/api/ffi.h"
+
+namespace ffi = xla::ffi;
+
+namespace {
+
+// One cell-list engine per thread, reused from call to call, and the list buffer it fills.
+struct HostWork {
+  raycut::Engine engine{"cell-list"};
+  raycut::NeighbourListBuffer list;
+};
+HostWork& host_work() {
+  thread_local HostWork work;
+  return work;
+}
+
+template <class T>
+void read_cells(const ffi::AnyBuffer& cell, std::vector<raycut::Box>& boxes) {
+  const T* c = cell.typed_data<T>();
+  for (std::size_t b = 0; b < boxes.size(); ++b)
+    for (int r = 0; r < 3; ++r)
+      for (int k = 0; k < 3; ++k) boxes[b].cell[r][k] = static_cast<double>(c[9 * b + 3 * r + k]);
+}
+
+// Splits the batch's list (sorted by i, global indices) into each system's K slots: local
+// indices, the first K pairs of each system, then padding (i = j = N, S = 0); counts[b] is the
+// number of pairs of system b (over K: cut).
+void write_systems(const raycut::NeighbourListBuffer& list, std::size_t systems, std::size_t n,
+                   std::size_t k, std::int32_t* i, std::int32_t* j, std::int32_t* shifts,
+                   std::int32_t* counts) {
+  std::vector<std::uint64_t> found(systems, 0);
+  const std::int64_t* rows = list.rows();
+  const std::int64_t* columns = list.columns();
+  const std::int32_t* s = list.shifts();
+  for (std::uint64_t p = 0; p < list.pairs(); ++p) {
+    const auto b = static_cast<std::size_t>(rows[p]) / n;
+    const std::uint64_t slot = found[b]++;
+    if (slot >= k) continue;
+    const std::size_t at = b * k + slot;
+    i[at] = static_cast<std::int32_t>(rows[p] - static_cast<std::int64_t>(b * n));
+    j[at] = static_cast<std::int32_t>(columns[p] - static_cast<std::int64_t>(b * n));
+    for (int a = 0; a < 3; ++a) shifts[3 * at + a] = s[3 * p + a];
+  }
+  for (std::size_t b = 0; b < systems; ++b) {
+    for (std::size_t slot = std::min<std::uint64_t>(found[b], k); slot < k; ++slot) {
+      i[b * k + slot] = j[b * k + slot] = static_cast<std::int32_t>(n);
+      for (int a = 0; a < 3; ++a) shifts[3 * (b * k + slot) + a] = 0;
+    }
+    counts[b] = static_cast<std::int32_t>(std::min<std::uint64_t>(found[b], INT32_MAX));
+  }
+}
+
+// Leading axes (jax.vmap with vmap_method="broadcast_all") are a batch of B systems of N points
+// each, searched in one engine build (raycut::Systems offsets and one box per system), not a
+// loop.
+ffi::Error neighbor_list(ffi::Buffer<ffi::F32> positions, ffi::AnyBuffer cell,
+                         ffi::Buffer<ffi::PRED> pbc, float cutoff, std::int64_t half,
+                         ffi::ResultBuffer<ffi::S32> i, ffi::ResultBuffer<ffi::S32> j,
+                         ffi::ResultBuffer<ffi::S32> shifts, ffi::ResultBuffer<ffi::S32> count) {
+  const auto dims = positions.dimensions();
+  if (dims.size() < 2 || dims[dims.size() - 1] != 3)
+    return ffi::Error::InvalidArgument(
+        "raycut.jax.neighbor_list: positions must have shape (..., N, 3)");
+  const auto n = static_cast<std::size_t>(dims[dims.size() - 2]);
+  std::size_t systems = 1;
+  for (std::size_t a = 0; a + 2 < dims.size(); ++a) systems *= static_cast<std::size_t>(dims[a]);
+  if (cell.element_count() != 9 * systems || pbc.element_count() != 3 * systems ||
+      count->element_count() != systems || i->element_count() % std::max<std::size_t>(systems, 1))
+    return ffi::Error::InvalidArgument(
+        "raycut.jax.neighbor_list: cell must be (..., 3, 3) and pbc (..., 3), with the "
+        "positions' leading axes");
+  std::vector<raycut::Box> boxes(systems);
+  if (cell.element_type() == ffi::F64) {
+    read_cells<double>(cell, boxes);
+  } else if (cell.element_type() == ffi::F32) {
+    read_cells<float>(cell, boxes);
+  } else {
+    return ffi::Error::InvalidArgument("raycut.jax.neighbor_list: cell must be float32 or float64");
+  }
+  for (std::size_t b = 0; b < systems; ++b)
+    for (int r = 0; r < 3; ++r) boxes[b].pbc[r] = pbc.typed_data()[3 * b + r];
+  raycut::Systems batch;
+  if (systems == 1) {
+    batch.box = boxes[0];
+  } else {
+    batch.boxes = std::move(boxes);
+    batch.offsets.resize(systems + 1);
+    for (std::size_t b = 0; b <= systems; ++b) batch.offsets[b] = b * n;
+  }
+  HostWork& work = host_work();
+  try {
+    work.engine.build({positions.typed_data(), systems * n, raycut::MemorySpace::host}, cutoff,
+                      batch);
+    raycut::ListOptions options;
+    options.half = half != 0;
+    options.shifts = true;
+    options.coo = true;
+    work.engine.neighbours(work.list, options);
+  } catch (const raycut::Error& e) {
+    return ffi::Error::InvalidArgument(std::string("raycut.jax.neighbor_list: ") + e.what());
+  }
+  if (systems > 0)
+    write_systems(work.list, systems, n, i->element_count() / systems, i->typed_data(),
+                  j->typed_data(), shifts->typed_data(), count->typed_data());
+  return ffi::Error::Success();
+}
+
+}  // namespace
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(RaycutNeighborList, neighbor_list,
+                              ffi::Ffi::Bind()
+                                  .Arg<ffi::Buffer<ffi::F32>>()   // positions (N, 3)
+                                  .Arg<ffi::AnyBuffer>()          // cell (3, 3)
+                                  .Arg<ffi::Buffer<ffi::PRED>>()  // pbc (3,)
+                                  .Attr<float>("cutoff")
+                                  .Attr<std::int64_t>("half")
+                                  .Ret<ffi::Buffer<ffi::S32>>()  // i (K,)
+                                  .Ret<ffi::Buffer<ffi::S32>>()  // j (K,)
+                                  .Ret<ffi::Buffer<ffi::S32>>()  // S (K, 3)
+                                  .Ret<ffi::Buffer<ffi::S32>>()  // count ()
+);

@@ -1,0 +1,412 @@
+// PyTorch operators over the raycut engine: torch.ops.raycut.neighbor_list and
+// torch.ops.raycut.radius, registered with the dispatcher (TORCH_LIBRARY) so that the same call
+// runs in eager mode, TorchScript, torch.compile, torch.export and AOTInductor packages. Their
+// fake (meta) implementations, which give torch.compile and torch.export the output shapes, are
+// registered in Python (python/raycut/_torch.py).
+//
+// The ops return integer pairs only, (i, j, S, count): distances and vectors are computed in
+// PyTorch from them and the caller's positions and cell, so that autograd (to any order) never
+// reaches the op. With max_pairs the outputs have that static size (padding: i = j = the number
+// of points, S = 0), otherwise the exact pair count.
+//
+// Kernels: the CPU cell list; with RAYCUT_TORCH_CUDA (raycut built with CUDA, torch with CUDA)
+// also the CUDA grid on the tensors' device and current stream.
+//
+// Built as its own shared library (raycut/_torch_ops.so), against the classic C++ API of the
+// torch it is built with: docs/python.md says why.
+#include <ATen/ATen.h>
+#include <torch/library.h>
+
+#ifdef RAYCUT_TORCH_CUDA
+#include <c10/cuda/CUDAGuard.h>
+#include <c10/cuda/CUDAStream.h>
+#endif
+
+#include <algorithm>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "pair_outputs.hpp"
+#include "raycut/engine.hpp"
+#include "raycut/error.hpp"
+
+namespace {
+
+using Pairs = std::tuple<at::Tensor, at::Tensor, at::Tensor, at::Tensor>;
+
+// The library's errors as PyTorch's: ValueError for bad input, NotImplementedError for what this
+// build cannot do, torch.OutOfMemoryError when it does not fit, RuntimeError otherwise.
+[[noreturn]] void rethrow(const raycut::Error& e) {
+  switch (e.code()) {
+    case raycut::ErrorCode::invalid_argument:
+    case raycut::ErrorCode::invalid_input:
+      TORCH_CHECK_VALUE(false, e.what());
+    case raycut::ErrorCode::unsupported:
+      TORCH_CHECK_NOT_IMPLEMENTED(false, e.what());
+    case raycut::ErrorCode::out_of_memory:
+      TORCH_CHECK_WITH(OutOfMemoryError, false, e.what());
+    default:
+      TORCH_CHECK(false, e.what());
+  }
+}
+
+// (N, 3) float32 or float64 points as the engine reads them: float32, C-contiguous, on their
+// device.
+// The pair decision is the library's float32 predicate on these values (docs/python.md).
+at::Tensor search_points(const at::Tensor& x, const char* name) {
+  TORCH_CHECK_VALUE(x.dim() == 2 && x.size(1) == 3, name, " must have shape (N, 3), got ",
+                    x.sizes());
+  TORCH_CHECK_VALUE(x.scalar_type() == at::kFloat || x.scalar_type() == at::kDouble, name,
+                    " must be float32 or float64, got ", x.scalar_type());
+  return x.to(at::kFloat).contiguous();
+}
+
+// cell (3, 3) or (B, 3, 3) and pbc (3,) or (B, 3) as raycut boxes: one for every system, or
+// one per system. None: open. A cell without pbc repeats along all three rows.
+std::vector<raycut::Box> boxes_of(const std::optional<at::Tensor>& cell,
+                                  const std::optional<at::Tensor>& pbc) {
+  if (!cell) {
+    if (pbc) {
+      TORCH_CHECK_VALUE(pbc->scalar_type() == at::kBool, "pbc must be bool, got ",
+                        pbc->scalar_type());
+      TORCH_CHECK_VALUE(!pbc->any().item<bool>(),
+                        "pbc without a cell: periodic axes need their lattice vectors (pass "
+                        "cell, rows a, b, c)");
+    }
+    return {};
+  }
+  const at::Tensor& c = *cell;
+  TORCH_CHECK_VALUE(c.is_floating_point(), "cell must be float32 or float64, got ",
+                    c.scalar_type());
+  TORCH_CHECK_VALUE((c.dim() == 2 || c.dim() == 3) && c.size(-1) == 3 && c.size(-2) == 3,
+                    "cell must have shape (3, 3) (rows: lattice vectors a, b, c) or (B, 3, 3) "
+                    "(one per system of a batch), got ",
+                    c.sizes());
+  const at::Tensor cells = c.reshape({-1, 3, 3}).to(at::kDouble).cpu().contiguous();
+  at::Tensor flags = at::ones({1, 3}, at::kBool);
+  if (pbc) {
+    TORCH_CHECK_VALUE(pbc->scalar_type() == at::kBool, "pbc must be bool, got ",
+                      pbc->scalar_type());
+    TORCH_CHECK_VALUE((pbc->dim() == 1 || pbc->dim() == 2) && pbc->size(-1) == 3,
+                      "pbc must have shape (3,) or (B, 3) (one row per system), got ",
+                      pbc->sizes());
+    flags = pbc->reshape({-1, 3}).cpu().contiguous();
+  }
+  const std::int64_t count = std::max(cells.size(0), flags.size(0));
+  TORCH_CHECK_VALUE((cells.size(0) == count || cells.size(0) == 1) &&
+                        (flags.size(0) == count || flags.size(0) == 1),
+                    "cell gives ", cells.size(0), " systems but pbc ", flags.size(0));
+  const double* cell_data = cells.data_ptr<double>();
+  const bool* flag_data = flags.data_ptr<bool>();
+  std::vector<raycut::Box> boxes(static_cast<std::size_t>(count));
+  for (std::int64_t b = 0; b < count; ++b) {
+    const double* rows = cell_data + (cells.size(0) == 1 ? 0 : 9 * b);
+    const bool* repeat = flag_data + (flags.size(0) == 1 ? 0 : 3 * b);
+    for (int r = 0; r < 3; ++r) {
+      boxes[b].pbc[r] = repeat[r];
+      for (int k = 0; k < 3; ++k) boxes[b].cell[r][k] = rows[3 * r + k];
+    }
+  }
+  return boxes;
+}
+
+// A system index (torch_cluster's batch): (n,) integers, sorted, non-negative. int64 on the
+// host, validated; an empty tensor for None.
+at::Tensor system_index(const std::optional<at::Tensor>& batch, std::int64_t n, const char* name) {
+  if (!batch) return at::Tensor();
+  const at::Tensor& b = *batch;
+  TORCH_CHECK_VALUE(!b.is_floating_point() && !b.is_complex() && b.scalar_type() != at::kBool, name,
+                    " must be integers (the system of each particle), got ", b.scalar_type());
+  TORCH_CHECK_VALUE(b.dim() == 1 && b.size(0) == n, name,
+                    " must have one system index per particle, shape (", n, ",), got shape ",
+                    b.sizes());
+  at::Tensor index = b.to(at::kLong).cpu().contiguous();
+  const std::int64_t* v = index.data_ptr<std::int64_t>();
+  for (std::int64_t k = 0; k < n; ++k) {
+    TORCH_CHECK_VALUE(v[k] >= 0, name, " holds a negative system index (", v[k], " at ", k, ")");
+    TORCH_CHECK_VALUE(k + 1 == n || v[k] <= v[k + 1], name,
+                      " must be sorted (each system's particles contiguous, systems in order): ",
+                      name, "[", k, "] = ", v[k], " > ", name, "[", k + 1, "] = ", v[k + 1]);
+  }
+  return index;
+}
+
+// offsets[s] = the number of entries of `index` below system s (systems + 1 of them); all in
+// system 0 when `index` is empty (None).
+std::vector<std::uint64_t> offsets_of(const at::Tensor& index, std::int64_t n,
+                                      const std::vector<std::int64_t>& systems_of_value) {
+  std::vector<std::uint64_t> offsets(systems_of_value.size() + 1, 0);
+  if (!index.defined()) {
+    std::fill(offsets.begin() + 1, offsets.end(), static_cast<std::uint64_t>(n));
+    return offsets;
+  }
+  const std::int64_t* v = index.data_ptr<std::int64_t>();
+  // systems_of_value: the sorted system numbers in use; entries count towards theirs.
+  std::size_t s = 0;
+  for (std::int64_t k = 0; k < n; ++k) {
+    while (systems_of_value[s] < v[k]) ++s;
+    ++offsets[s + 1];
+  }
+  for (std::size_t t = 1; t < offsets.size(); ++t) offsets[t] += offsets[t - 1];
+  return offsets;
+}
+
+// raycut::Systems of boxes and up to two system indices (sources, and queries when `queries`
+// holds points). Per-system boxes: the indices number the boxes. One box for every system: the
+// numbers only group, so the systems in use are renumbered densely (a sparse index such as
+// [0, 10**9] costs no empty systems).
+raycut::Systems systems_of(std::vector<raycut::Box> boxes, const at::Tensor& index, std::int64_t n,
+                           const at::Tensor& query_index, std::int64_t m, bool with_queries,
+                           const char* index_name) {
+  raycut::Systems systems;
+  const bool per_system = boxes.size() > 1;
+  if (!index.defined() && !query_index.defined()) {
+    TORCH_CHECK_VALUE(!per_system, "cell/pbc give ", boxes.size(),
+                      " systems (shape (B, 3, 3) / (B, 3)) but no ", index_name,
+                      " says which particles belong to which");
+    if (!boxes.empty()) systems.box = boxes[0];
+    return systems;
+  }
+  std::vector<std::int64_t> used;  // the system numbers, sorted
+  if (per_system) {
+    const auto b = static_cast<std::int64_t>(boxes.size());
+    for (const at::Tensor* t : {&index, &query_index})
+      if (t->defined() && t->numel() > 0) {
+        const std::int64_t last = t->data_ptr<std::int64_t>()[t->numel() - 1];
+        TORCH_CHECK_VALUE(last < b, "the batch has system index ", last, " but cell/pbc give ", b,
+                          " systems");
+      }
+    used.resize(boxes.size());
+    for (std::int64_t s = 0; s < b; ++s) used[s] = s;
+    systems.boxes = std::move(boxes);
+  } else {
+    for (const at::Tensor* t : {&index, &query_index})
+      if (t->defined()) {
+        const std::int64_t* v = t->data_ptr<std::int64_t>();
+        for (std::int64_t k = 0; k < t->numel(); ++k)
+          if (k == 0 || v[k] != v[k - 1]) used.push_back(v[k]);
+      }
+    // An index left out: every point of that set is in system 0 (torch_cluster's convention).
+    if (!index.defined() || (with_queries && !query_index.defined())) used.push_back(0);
+    std::sort(used.begin(), used.end());
+    used.erase(std::unique(used.begin(), used.end()), used.end());
+    if (used.empty()) used.push_back(0);
+    if (!boxes.empty()) systems.box = boxes[0];
+  }
+  systems.offsets = offsets_of(index, n, used);
+  if (with_queries) systems.query_offsets = offsets_of(query_index, m, used);
+  return systems;
+}
+
+// One engine per thread and device, reused from call to call (its structure buffers only grow):
+// the CPU cell list, or the CUDA grid on each CUDA device. The host list buffer is reused too;
+// a CUDA list is a fresh buffer per call (from raycut's stream-ordered pool), so that a copy of
+// the last call's pairs still queued on another stream never reads a refilled buffer.
+struct Work {
+  explicit Work(const char* method) : engine(method) {}
+  raycut::Engine engine;
+  raycut::NeighbourListBuffer list;
+};
+Work& work_for(const at::Device& device) {
+  if (device.is_cpu()) {
+    thread_local Work host("cell-list");
+    return host;
+  }
+  TORCH_CHECK_NOT_IMPLEMENTED(device.is_cuda(), "raycut's operators run on the CPU and CUDA, not ",
+                              device);
+  thread_local std::map<int, std::unique_ptr<Work>> per_device;
+  std::unique_ptr<Work>& work = per_device[device.index()];
+  if (!work) {
+    try {
+      work = std::make_unique<Work>("grid");
+    } catch (const raycut::Error& e) {
+      rethrow(e);
+    }
+  }
+  return *work;
+}
+
+// The list's pairs as (i, j, S, count) tensors on `device`: exactly its pairs, or `max_pairs`
+// entries with padding (i = pad_i, j = pad_j, S = 0) after the pairs (cut past max_pairs: count
+// says so). Device lists are copied on the current stream, the one the engine worked on.
+Pairs pair_tensors(const raycut::NeighbourListBuffer& list, std::optional<std::int64_t> max_pairs,
+                   std::int64_t pad_i, std::int64_t pad_j, const at::Device& device) {
+  const auto found = static_cast<std::int64_t>(list.pairs());
+  std::int64_t size = found;
+  if (max_pairs) {
+    TORCH_CHECK_VALUE(*max_pairs >= 0, "max_pairs must be >= 0 (the static number of pairs), got ",
+                      *max_pairs);
+    size = *max_pairs;
+  }
+  const at::Tensor count = at::scalar_tensor(found, at::kLong);
+  if (device.is_cpu()) {
+    at::Tensor i = at::empty({size}, at::kLong);
+    at::Tensor j = at::empty({size}, at::kLong);
+    at::Tensor shifts = at::empty({size, 3}, at::kInt);
+    raycut_py::write_pairs<std::int64_t>(list, static_cast<std::uint64_t>(size),
+                                         i.data_ptr<std::int64_t>(), j.data_ptr<std::int64_t>(),
+                                         shifts.data_ptr<std::int32_t>(), pad_i, pad_j);
+    return {i, j, shifts, count};
+  }
+  const auto on_device = at::TensorOptions().device(device);
+  at::Tensor i = at::full({size}, pad_i, on_device.dtype(at::kLong));
+  at::Tensor j = at::full({size}, pad_j, on_device.dtype(at::kLong));
+  at::Tensor shifts = at::zeros({size, 3}, on_device.dtype(at::kInt));
+  const std::int64_t kept = std::min(found, size);
+  if (kept > 0) {
+    auto wrap = [&](const void* data, at::IntArrayRef shape, at::ScalarType type) {
+      return at::from_blob(const_cast<void*>(data), shape, on_device.dtype(type));
+    };
+    i.narrow(0, 0, kept).copy_(wrap(list.rows(), {kept}, at::kLong));
+    j.narrow(0, 0, kept).copy_(wrap(list.columns(), {kept}, at::kLong));
+    shifts.narrow(0, 0, kept).copy_(wrap(list.shifts(), {kept, 3}, at::kInt));
+  }
+  return {i, j, shifts, count.to(device)};
+}
+
+// Builds the engine of `x`'s device over x (and `systems`) and fills a COO list with shifts:
+// on the CPU in place, on CUDA on the current device and stream.
+Pairs run(const at::Tensor& x, double cutoff, const raycut::Systems& systems, bool half,
+          std::optional<std::int64_t> max_pairs, std::int64_t pad_i, std::int64_t pad_j) {
+  const at::Device device = x.device();
+  Work& work = work_for(device);
+  raycut::NeighbourListBuffer fresh;
+  raycut::NeighbourListBuffer& list = device.is_cpu() ? work.list : fresh;
+  const auto space = device.is_cpu() ? raycut::MemorySpace::host : raycut::MemorySpace::device;
+#ifdef RAYCUT_TORCH_CUDA
+  std::optional<c10::cuda::CUDAGuard> guard;
+  if (device.is_cuda()) {
+    guard.emplace(device);
+    work.engine.set_stream(c10::cuda::getCurrentCUDAStream(device.index()).stream());
+  }
+#endif
+  try {
+    work.engine.build({x.data_ptr<float>(), static_cast<std::size_t>(x.size(0)), space},
+                      static_cast<float>(cutoff), systems);
+    raycut::ListOptions options;
+    options.half = half;
+    options.shifts = true;
+    options.coo = true;
+    work.engine.neighbours(list, options);
+  } catch (const raycut::Error& e) {
+    rethrow(e);
+  }
+  return pair_tensors(list, max_pairs, pad_i, pad_j, device);
+}
+
+Pairs neighbor_list(const at::Tensor& positions, double cutoff,
+                    const std::optional<at::Tensor>& cell, const std::optional<at::Tensor>& pbc,
+                    const std::optional<at::Tensor>& batch, bool half,
+                    std::optional<std::int64_t> max_pairs) {
+  const at::Tensor x = search_points(positions, "positions");
+  const std::int64_t n = x.size(0);
+  const raycut::Systems systems =
+      systems_of(boxes_of(cell, pbc), system_index(batch, n, "batch"), n, at::Tensor(), 0,
+                 /*with_queries=*/false, "batch");
+  return run(x, cutoff, systems, half, max_pairs, n, n);
+}
+
+Pairs radius(const at::Tensor& points, const at::Tensor& queries, double cutoff,
+             const std::optional<at::Tensor>& cell, const std::optional<at::Tensor>& pbc,
+             const std::optional<at::Tensor>& batch_points,
+             const std::optional<at::Tensor>& batch_queries,
+             std::optional<std::int64_t> max_pairs) {
+  const at::Tensor x = search_points(points, "points");
+  const at::Tensor q = search_points(queries, "queries");
+  TORCH_CHECK_VALUE(q.device() == x.device(), "queries must be on the device of points (",
+                    x.device(), "), got ", q.device());
+  const std::int64_t n = x.size(0), m = q.size(0);
+  raycut::Systems systems = systems_of(
+      boxes_of(cell, pbc), system_index(batch_points, n, "batch_points"), n,
+      system_index(batch_queries, m, "batch_queries"), m, /*with_queries=*/true, "batch_points");
+  const auto space = x.is_cpu() ? raycut::MemorySpace::host : raycut::MemorySpace::device;
+  systems.queries = {q.data_ptr<float>(), static_cast<std::size_t>(m), space};
+  // No query points is still a query build (the targets are the M = 0 queries, not the points).
+  if (m == 0) systems.queries.xyz = x.data_ptr<float>();
+  // Padding: i = M (no query), j = N (no point).
+  return run(x, cutoff, systems, /*half=*/false, max_pairs, m, n);
+}
+
+// A copy of `count` values at `data` (where the engine keeps its results: host or `device`) as a
+// new float32 tensor of `shape` on `device` (on the current stream for CUDA).
+at::Tensor copied(const float* data, at::IntArrayRef shape, const at::Device& device) {
+  return at::from_blob(const_cast<float*>(data), shape, at::TensorOptions().device(device)).clone();
+}
+
+// The fused Lennard-Jones pass (Kernel::lj_forces, as Engine.compute("lj_forces")): per-particle
+// energy (N,), force (N, 3) and virial (N, 6) float32, in one pass over the pairs, no list.
+std::tuple<at::Tensor, at::Tensor, at::Tensor> lj_forces(const at::Tensor& positions, double cutoff,
+                                                         double epsilon, double sigma,
+                                                         const std::optional<at::Tensor>& cell,
+                                                         const std::optional<at::Tensor>& pbc,
+                                                         const std::optional<at::Tensor>& batch) {
+  const at::Tensor x = search_points(positions, "positions");
+  const std::int64_t n = x.size(0);
+  const raycut::Systems systems =
+      systems_of(boxes_of(cell, pbc), system_index(batch, n, "batch"), n, at::Tensor(), 0,
+                 /*with_queries=*/false, "batch");
+  const at::Device device = x.device();
+  Work& work = work_for(device);
+#ifdef RAYCUT_TORCH_CUDA
+  std::optional<c10::cuda::CUDAGuard> guard;
+  if (device.is_cuda()) {
+    guard.emplace(device);
+    work.engine.set_stream(c10::cuda::getCurrentCUDAStream(device.index()).stream());
+  }
+#endif
+  const auto space = device.is_cpu() ? raycut::MemorySpace::host : raycut::MemorySpace::device;
+  raycut::KernelOptions options;
+  options.lj_epsilon = static_cast<float>(epsilon);
+  options.lj_sigma = static_cast<float>(sigma);
+  try {
+    work.engine.build({x.data_ptr<float>(), static_cast<std::size_t>(n), space},
+                      static_cast<float>(cutoff), systems);
+    work.engine.run(raycut::Kernel::lj_forces, options);
+  } catch (const raycut::Error& e) {
+    rethrow(e);
+  }
+  if (n == 0)
+    return {at::empty({0}, x.options()), at::empty({0, 3}, x.options()),
+            at::empty({0, 6}, x.options())};
+  const raycut::ResultsView results = work.engine.results_view();
+  return {copied(results.energy, {n}, device), copied(results.force, {n, 3}, device),
+          copied(results.virial, {n, 6}, device)};
+}
+
+}  // namespace
+
+TORCH_LIBRARY(raycut, m) {
+  m.def(
+      "neighbor_list(Tensor positions, float cutoff, Tensor? cell=None, Tensor? pbc=None, "
+      "Tensor? batch=None, bool half=False, int? max_pairs=None) -> (Tensor i, Tensor j, "
+      "Tensor S, Tensor count)");
+  m.def(
+      "radius(Tensor points, Tensor queries, float cutoff, Tensor? cell=None, Tensor? pbc=None, "
+      "Tensor? batch_points=None, Tensor? batch_queries=None, int? max_pairs=None) -> (Tensor i, "
+      "Tensor j, Tensor S, Tensor count)");
+  m.def(
+      "lj_forces(Tensor positions, float cutoff, float epsilon=1.0, float sigma=1.0, "
+      "Tensor? cell=None, Tensor? pbc=None, Tensor? batch=None) -> (Tensor energy, Tensor force, "
+      "Tensor virial)");
+}
+
+TORCH_LIBRARY_IMPL(raycut, CPU, m) {
+  m.impl("neighbor_list", &neighbor_list);
+  m.impl("radius", &radius);
+  m.impl("lj_forces", &lj_forces);
+}
+
+#ifdef RAYCUT_TORCH_CUDA
+// The same kernels on CUDA tensors: the grid on the tensors' device and current stream (the
+// boxes and batch offsets are read on the host).
+TORCH_LIBRARY_IMPL(raycut, CUDA, m) {
+  m.impl("neighbor_list", &neighbor_list);
+  m.impl("radius", &radius);
+  m.impl("lj_forces", &lj_forces);
+}
+#endif
