@@ -425,7 +425,7 @@ Measurement measure(Op op, bool cold, int reps, const Context& c,
           // With images the two orientations are two different float differences (the target
           // minus another point's image), so a pair within float rounding of the cutoff may be
           // in one and out of the other: the spec's band, either answer exact. At 2^22 such
-          // pairs exist (1 in 231,729,614 in session 10): a half list may differ from half the
+          // pairs exist (1 in 231,729,614 in a run on the H200, 2026-12-02): a half list may differ from half the
           // pairs by at most the pairs within a few ulps of the cutoff, 1e-6 of them here.
           const bool half = op == Op::list_half || op == Op::list_half_s;
           const std::uint64_t want = half ? pairs / 2 : pairs;
