@@ -25,7 +25,7 @@ list(FILTER files EXCLUDE REGEX "^bench/results/")
 list(FILTER files EXCLUDE REGEX "\\.(png|jpg|jpeg|gif|pdf|ico|gz|zip|npz|npy|bin)$")
 
 # CMake regexes have no \b or case folding: spell both out.
-set(session_label "(^|[^A-Za-z0-9_])[Ss][Ee][Ss][Ss][Ii][Oo][Nn][Ss]? ?[0-9]+")
+set(session_label "(^|[^A-Za-z0-9_])[Ss][Ee][Ss][Ss][Ii][Oo][Nn][Ss]?[ -]?[0-9]+")
 set(spec_file "spec[/ ][A-Z]+[.]md|spec sections? [0-9]")
 
 list(LENGTH files file_count)
