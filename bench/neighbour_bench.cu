@@ -1,4 +1,4 @@
-// Neighbour lists against fused kernels, timed as spec/NEIGHBOURS.md section 8 asks: CUDA events
+// Neighbour lists against fused kernels, timed as docs/benchmarks.md says: CUDA events
 // on the engine's stream around the whole operation, from device positions to a complete device
 // result; one warm-up, then the median (and min/max) of --reps repetitions; each operation
 // "cold" (a fresh Engine and fresh result buffers constructed inside the timing: every
@@ -11,7 +11,7 @@
 // --lj-liquid an LJ liquid: N = 2^20 uniform random in a cube at density 0.8442, rc = 2.5,
 // not periodic (the rows measured before the engine had boxes).
 //
-// With --periodic, the periodic workloads of spec/NEIGHBOURS.md section 8 (density 0.8442,
+// With --periodic, the periodic workloads of docs/benchmarks.md (density 0.8442,
 // rc 2.5, cube sides from the density, uniform random positions in [0, side)^3 of each system):
 //   lj-liquid-pbc  one periodic cube of 2^20 particles (side ~107.5; --periodic-n: other sizes)
 //   batch-pbc      512 periodic cubes of 128 particles (side ~5.33) as one batch
@@ -193,7 +193,7 @@ struct Input {
   raycut::Systems systems;  // plain for the open inputs
 };
 
-// The LJ liquid of spec/NEIGHBOURS.md section 8 without periodicity: 2^20 particles uniform in a
+// The LJ liquid of docs/benchmarks.md without periodicity: 2^20 particles uniform in a
 // cube of side (N / 0.8442)^(1/3), rc = 2.5 (the suite's generator, scaled: deterministic).
 Input lj_liquid(std::uint64_t seed) {
   const int n = 1 << 20;
@@ -424,9 +424,10 @@ Measurement measure(Op op, bool cold, int reps, const Context& c,
           // A half list holds one of (i, j, S) and (j, i, -S), self-images (i, i, +-S) included.
           // With images the two orientations are two different float differences (the target
           // minus another point's image), so a pair within float rounding of the cutoff may be
-          // in one and out of the other: the spec's band, either answer exact. At 2^22 such
-          // pairs exist (1 in 231,729,614 in session 10): a half list may differ from half the
-          // pairs by at most the pairs within a few ulps of the cutoff, 1e-6 of them here.
+          // in one and out of the other: the band of docs/limits.md, either answer exact. At 2^22
+          // such pairs exist (1 in 231,729,614 in a run on the H200, 2026-12-02): a half list may
+          // differ from half the pairs by at most the pairs within a few ulps of the cutoff, 1e-6
+          // of them here.
           const bool half = op == Op::list_half || op == Op::list_half_s;
           const std::uint64_t want = half ? pairs / 2 : pairs;
           const std::uint64_t off =
@@ -652,7 +653,7 @@ int main(int argc, char** argv) {
   Options o;
   CLI::App app{
       "Neighbour lists vs fused kernels: CUDA-event medians, cold and prepared "
-      "(spec/NEIGHBOURS.md section 8)"};
+      "(docs/benchmarks.md)"};
   app.add_option("--methods", o.methods, "Engine methods (default grid,grid-paper)")
       ->delimiter(',');
   app.add_option("--betas", o.betas, "Uniform suite beta values (default 16,32)")
@@ -667,7 +668,7 @@ int main(int argc, char** argv) {
                  "also list_full_s,list_half_s,lj_forces_only)")
       ->delimiter(',');
   app.add_option("--modes", o.modes, "cold and/or prepared (default both)")->delimiter(',');
-  app.add_option("--reps", o.reps, "Timed repetitions after one warm-up (>= 5 for the spec)")
+  app.add_option("--reps", o.reps, "Timed repetitions after one warm-up (>= 5 for the protocol)")
       ->check(CLI::Range(1, 1000));
   app.add_flag("--lj-liquid", o.lj_liquid,
                "Also the LJ liquid: N = 2^20, density 0.8442, rc 2.5, not periodic");

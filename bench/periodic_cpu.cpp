@@ -1,5 +1,5 @@
 // What a periodic pair costs on the CPU against an open one (docs/periodic.md, "CPU cost of a
-// periodic pair"): the LJ liquid of spec section 8 (density 0.8442, rc 2.5, uniform random in a
+// periodic pair"): the LJ liquid of docs/benchmarks.md (density 0.8442, rc 2.5, uniform random in a
 // cube) built twice per round and method:
 //   periodic  Engine::build(x, C, box) then run(lj_forces): the engine makes the images;
 //   open      the same particles plus explicit copies of every image within the cutoff shell

@@ -26,7 +26,7 @@ def read_rows(paths):
 
 
 def key(row):
-    # "images" since session 9: local (single-domain periodic axes imaged by the local engine) or
+    # "images" (in CSVs that have the column): local (single-domain periodic axes imaged by the local engine) or
     # halos (--halo-images: every periodic axis by halos).
     return (row["method"], row["rows"], row.get("images", "local"), row.get("positions", "host"),
             row.get("transport", "mpi-host"))
@@ -87,7 +87,7 @@ def plain_table(rows):
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in sorted(chosen, key=lambda r: (r["method"], int(r["N"]), int(r.get("steps") or 1))):
         ratio = float(r["step_ms"]) / float(r["plain_step_ms"])
-        parts = ("update_ms", "halo_refresh_ms", "local_build_ms")  # CSVs since session 8
+        parts = ("update_ms", "halo_refresh_ms", "local_build_ms")  # in CSVs from 2026-12-02 on
         breakdown = (" / ".join(f"{float(r[p]):.3f}" for p in parts)
                      if all(r.get(p) for p in parts) else "")
         lines.append(f"| {r['method']} | {r.get('images', 'local')} | {r.get('positions', 'host')} | "

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Neighbour lists from Python against the same C++ call, on the workloads of spec/NEIGHBOURS.md
-section 8 (issue 15's goal: Python within 10 % of C++).
+"""Neighbour lists from Python against the same C++ call, on the workloads of docs/benchmarks.md,
+"Neighbour lists" (issue 15's goal: Python within 10 % of C++).
 
 Workloads (``--tiny``: the same shapes, small enough for the CPU in a few seconds):
 
@@ -36,7 +36,7 @@ workload, operation and method) beside them.
 Writes a CSV (``--out``; default bench/results/local/python_lists-<gpu or cpu>.csv, the GPU named
 on every row) and a markdown table (``--md``; default: the CSV's name with .md), and prints it.
 
-    python bench/python_lists.py                      # the spec's sizes (GPU)
+    python bench/python_lists.py                      # the full sizes (GPU)
     python bench/python_lists.py --tiny               # a few seconds on the CPU
     python bench/python_lists.py --native nb.csv      # with neighbour_bench's figures
 """

@@ -3,7 +3,7 @@
 
 Dam break: the surge front Z = x_front / a against T = t sqrt(2 g / a) of
 `raycut sph --scenario dam-break --result-csv F` with Martin & Moyce's (1952) digitised points
-(spec/SPH.md), |Z_sim - Z_exp| / Z_exp at every point (the target: <= 10 % for T <= 2.5).
+(docs/sph-validation.md), |Z_sim - Z_exp| / Z_exp at every point (the target: <= 10 % for T <= 2.5).
 Hydrostatic: p(y) of `raycut sph --scenario hydrostatic --result-csv F` against rho0 g (H - y)
 (the targets: within 2 % below the top two particle layers; density within 1 %), with a
 least-squares fit of p against y over those layers.
@@ -27,7 +27,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-# Martin & Moyce (1952), digitised (spec/SPH.md).
+# Martin & Moyce (1952), digitised.
 T_EXP = [0, 0.41, 0.84, 1.19, 1.43, 1.63, 1.82, 1.97, 2.20, 2.32, 2.50, 2.64, 2.82, 2.96, 3.11,
          3.33]
 Z_EXP = [1.00, 1.11, 1.23, 1.44, 1.67, 1.89, 2.11, 2.33, 2.56, 2.78, 3.00, 3.22, 3.44, 3.67, 3.89,

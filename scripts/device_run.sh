@@ -8,7 +8,7 @@
 #
 #   tests REGEX  ctest -R REGEX (e.g. "GridVariants|grid_|Sph"; "." for everything, ~6 min)
 #   bench        both suites, every GPU method, plus the paper's grid when its source is in
-#                .deps/paper/Cuda-version/cudaLJ.cu (spec/BENCHMARKS.md; never committed)
+#                .deps/paper/Cuda-version/cudaLJ.cu (docs/benchmarks.md; never committed)
 #   lists        neighbour lists vs fused kernels (bench/neighbour_bench: uniform beta 16 and 32,
 #                and the LJ liquid; cold and prepared), lists.csv/.md/.png (docs/benchmarks.md)
 #   periodic     bench/neighbour_bench --periodic (issue 14): the LJ liquid in a periodic cube

@@ -1,4 +1,4 @@
-// A double-precision oracle that does NOT share raycut's predicate (spec NEIGHBOURS.md, 1):
+// A double-precision oracle that does NOT share raycut's predicate (docs/limits.md):
 // for float positions, |x_j - x_i|^2 is computed in double (each difference and square within
 // 2^-52 relative of the real value, no underflow or overflow for any pair of finite floats) and
 // every pair is classified as

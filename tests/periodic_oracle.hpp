@@ -1,5 +1,5 @@
-// A double-precision oracle for periodic pairs (spec/NEIGHBOURS.md, 2), independent of src/ (it
-// uses no raycut function, only the fields of a box: cell[3][3] and pbc[3]).
+// A double-precision oracle for periodic pairs (docs/periodic.md, "Semantics"), independent of src/
+// (it uses no raycut function, only the fields of a box: cell[3][3] and pbc[3]).
 //
 // For float positions x (the caller's, possibly unwrapped), a cell (rows a, b, c) and pbc, it
 // enumerates every triple (i, j, S), S an integer vector (0 on non-periodic axes), with
@@ -19,9 +19,9 @@
 // however far unwrapped, and any cell thickness. The g_k come from the inverse Gram matrix of
 // the periodic rows (not the cross products box.cpp uses).
 //
-// Two point sets (spec section 4): make_query_oracle gives the triples (q, p, S) of queries q and
-// sources p, r = p - q + S . cell, with no self-exclusion (the sets differ, even where a query
-// coincides with a source).
+// Two point sets (query points, docs/periodic.md): make_query_oracle gives the triples (q, p, S) of
+// queries q and sources p, r = p - q + S . cell, with no self-exclusion (the sets differ, even
+// where a query coincides with a source).
 //
 // Brute force over all (i, j): for the tests' small systems (up to a few hundred particles).
 // Header-only, for the tests.
@@ -82,7 +82,7 @@ struct PeriodicOracle {
   }
 };
 
-// The half-list orientation of spec section 2: i < j, or i == j and S lexicographically positive.
+// The half-list orientation of docs/periodic.md: i < j, or i == j and S lexicographically positive.
 inline bool half_orientation(const PeriodicTriple& t) {
   if (t[0] != t[1]) return t[0] < t[1];
   for (int k = 2; k < 5; ++k)

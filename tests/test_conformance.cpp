@@ -1,5 +1,5 @@
-// Every method x every input family of spec/METHODS.md against the brute-force oracle:
-// identical per-target neighbour sets, identical counts, kernel sums equal to round-off.
+// Every method x every input family (docs/methods.md, "Test inputs") against the brute-force
+// oracle: identical per-target neighbour sets, identical counts, kernel sums equal to round-off.
 // Methods not available here (no GPU, no OptiX) are listed and skipped, never silently absent.
 #include <gtest/gtest.h>
 
@@ -93,7 +93,7 @@ TEST_P(Conformance, MatchesBruteForce) {
   try {
     engine.build({cloud.xyz.data(), n, MemorySpace::host}, c.cutoff);
   } catch (const raycut::Error& e) {
-    // The paper's dense grid cannot hold a box 1e5 cutoffs wide (spec/METHODS.md, method 1):
+    // The paper's dense grid cannot hold a box 1e5 cutoffs wide (docs/methods.md):
     // refusing it with a clear out-of-memory error is its correct behaviour.
     if (method == "grid-paper" && e.code() == raycut::ErrorCode::out_of_memory)
       GTEST_SKIP() << e.what();

@@ -186,7 +186,7 @@ TEST_P(EngineEdges, UpdateNeedsTheSameParticleCount) {
 // With query points (M targets over N sources): update() refuses (open builds too: it used to
 // treat the first M new positions as one set and answer wrongly), sph_force refuses (its fields
 // are read at both ends of a pair from one array), and the padded matrix pads with N, the
-// invalid source index (it padded with M, a valid one when M < N). Session 11's adversarial
+// invalid source index (it padded with M, a valid one when M < N). Found by adversarial
 // tests.
 TEST_P(EngineEdges, QueryPointsRefuseUpdateAndSphForceAndPadWithTheSourceCount) {
   std::vector<float> sources, queries;

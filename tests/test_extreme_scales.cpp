@@ -1,6 +1,6 @@
 // Every method (CPU and, where available, GPU) on the extreme-scale families and at the edges of
 // the supported cutoff range, against the double-precision oracle of tests/oracle.hpp, which does
-// not share raycut's predicate (spec NEIGHBOURS.md, 1). Just outside the range, and on the
+// not share raycut's predicate (docs/limits.md). Just outside the range, and on the
 // inputs of issue 12 that used to give silently wrong answers, build() must refuse with a clear
 // Error naming the supported range.
 #include <gtest/gtest.h>

@@ -177,7 +177,7 @@ TEST(KernelRange, TheReportedCases) {
 
 // lj_forces at the edges of the accepted sigma range (4 eps sigma^6 a normal float): two particles
 // at 1.05 sigma, cutoff 2.5 sigma, against the double-precision force and virial. The raw factor
-// r^-8 gave inf below sigma ~1e-5 and zero above ~3e5 (session 11's adversarial tests).
+// r^-8 gave inf below sigma ~1e-5 and zero above ~3e5 (found by adversarial tests).
 TEST(KernelRange, LjForcesAcrossTheSigmaRange) {
   for (const char* method : {"brute-force", "cell-list"})
     for (float sigma : {5e-7f, 1e-6f, 1e-5f, 1.0f, 3e5f, 1e6f, 2e6f}) {

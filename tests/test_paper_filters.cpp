@@ -1,8 +1,8 @@
 // The paper's published ray-tracing filters (Algis & Bramas; github berenger-eu/
 // particle-interaction-with-optix, SDK/optixMulti{Sphere,Triangle,Custom,SphereAABB}), emulated
-// on the CPU from their description in spec/METHODS.md and a reading of the published device
+// on the CPU from their description in the paper and a reading of the published device
 // code (no code copied), next to OUR geometry (src/geometry/ray_geometry.hpp) on the same inputs.
-// Each test shows a published filter missing or double counting pairs on an input where the spec
+// Each test shows a published filter missing or double counting pairs on an input where the probes
 // measured it failing on the H100, and ours keeping every in-range pair exactly once.
 // The counts are printed (std::cout) and recorded as test properties for docs/methods.md.
 //
@@ -56,7 +56,7 @@ PointCloud cloud_of(std::string name, std::vector<float> xyz, float cutoff) {
   return c;
 }
 
-// The spec's probe input: 3,000 uniform random points in [0, 4)^3, C = 1 (our own draw).
+// The probes' input: 3,000 uniform random points in [0, 4)^3, C = 1 (our own draw).
 PointCloud uniform_box4() {
   raycut::detail::SplitMix64 rng(2024);
   std::vector<float> xyz(3 * 3000);
@@ -317,7 +317,7 @@ Tally run_ours(Method method, const PointCloud& cloud) {
   return t;
 }
 
-// The spec's failing inputs (spec/METHODS.md, methods 2 and 3).
+// The inputs on which the paper's filters fail (docs/methods.md, methods 2 and 3).
 PointCloud lattice_034() {
   return lattice("lattice 8^3 spacing 0.34C, C=1", 8, 0.34f, 1.0f);
 }
@@ -483,7 +483,7 @@ TEST(PaperTriangles, DoubleCountOnTheSharedDiagonal) {
 
 TEST(PaperAabb, TheGeometryIsExactOnEveryInput) {
   // One box per source, visited once by the target's zero-length ray; with THE predicate and self
-  // excluded by index (as spec/METHODS.md describes it) the count is exact everywhere.
+  // excluded by index (as the paper describes it) the count is exact everywhere.
   std::vector<PointCloud> clouds = {uniform_box4(),
                                     lattice_034(),
                                     lattice_half(),

@@ -1,4 +1,4 @@
-// Periodic boxes, batches of systems and query sets (spec/NEIGHBOURS.md, 1-5) on every method
+// Periodic boxes, batches of systems and query sets (docs/periodic.md, "Semantics") on every method
 // that takes them (brute-force, cell-list, brute-force-gpu, grid), against the double-precision
 // image oracle of tests/periodic_oracle.hpp, which enumerates images per pair and shares nothing
 // with src/. Lists (with shifts, distances, vectors; full and half), the count and Lennard-Jones
@@ -145,7 +145,7 @@ Box scaled(Box box, double s) {
   return box;
 }
 
-// The spec's families (issue 14): cubic, orthorhombic, triclinic (60 degrees, very skewed,
+// The box families of issue 14: cubic, orthorhombic, triclinic (60 degrees, very skewed,
 // left-handed), 0.3 C to 10 C wide, slabs and wires, faces, unwrapped by up to 1000 cells.
 std::vector<Family> families() {
   std::vector<Family> out;
@@ -176,7 +176,8 @@ std::vector<Family> families() {
   wire.open_rows[0] = {3, 0, 0};
   wire.open_rows[1] = {0, 3, 0};
   out.push_back(wire);
-  // A non-periodic row that is not zero (the spec lets it be anything finite): no images along it.
+  // A non-periodic row that is not zero (the contract lets it be anything finite): no images along
+  // it.
   Family mixed = family("mixed_open_row",
                         make_box({1.5, 0, 0, 1, 1, 0, 0, 0.5, 1.25}, {true, false, true}), 50);
   mixed.open_rows[1] = {0, 3, 0};
@@ -310,7 +311,7 @@ void for_each_entry(const NeighbourList& l, const Batch& b, F&& f) {
   EXPECT_EQ(crossing, 0u);
 }
 
-// Every system's entries against its oracle: full, or half in the spec's orientation.
+// Every system's entries against its oracle: full, or half in the contract's orientation.
 void expect_list(const NeighbourList& l, const Batch& b, bool half, const std::string& what) {
   std::vector<std::vector<std::uint64_t>> is(b.systems.size()), js(b.systems.size());
   std::vector<std::vector<std::int32_t>> ss(b.systems.size());

@@ -1,4 +1,4 @@
-// The SPH solver's invariants (spec/SPH.md): particles and mass conserved, nobody leaves the pool
+// The SPH solver's invariants (docs/sph.md): particles and mass conserved, nobody leaves the pool
 // by more than h, pressure pushes two particles apart symmetrically, momentum conserved with
 // gravity and walls off, every method gives the cell list's first 20 frames, a block resting on
 // the floor settles. Fast on the CPU methods (CI); the GPU methods join where they run.

@@ -1,4 +1,4 @@
-// The solver-independent parts of the SPH module: the article's scenario exactly as spec/SPH.md
+// The solver-independent parts of the SPH module: the article's scenario exactly as docs/sph.md
 // states it, the small CI scenario, ParaView output read back by a minimal parser, and PNG files
 // read back by libpng.
 #include <gtest/gtest.h>

@@ -1,4 +1,4 @@
-// raycut bench: the timing protocol of spec/BENCHMARKS.md. Positions start where the method
+// raycut bench: the timing protocol of docs/benchmarks.md. Positions start where the method
 // works (device for GPU methods, uploaded untimed); one warm-up, then `reps` timed build+compute;
 // medians (min/max of total) per phase, one CSV row per timer (host clock, CUDA events). With
 // --cell/--pbc every build is in that periodic box, and the suite column says "-periodic".
@@ -263,7 +263,7 @@ int run_bench(BenchOptions& o) {
 
 Command add_bench(CLI::App& app) {
   auto* cmd = app.add_subcommand(
-      "bench", "Run a benchmark suite of the paper (spec/BENCHMARKS.md) and write CSV");
+      "bench", "Run a benchmark suite of the paper (docs/benchmarks.md) and write CSV");
   auto o = std::make_shared<BenchOptions>();
   cmd->add_option("-s,--suite", o->suite, "uniform or surface")
       ->check(CLI::IsMember({"uniform", "surface"}));

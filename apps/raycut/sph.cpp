@@ -1,4 +1,4 @@
-// raycut sph: the SPH fluid solver of spec/SPH.md on any method. Runs a scenario (the HIP RT
+// raycut sph: the SPH fluid solver of docs/sph.md on any method. Runs a scenario (the HIP RT
 // article's drop, or a small one for CI, in the article's model; or the weakly compressible
 // validation scenarios hydrostatic and dam-break, docs/sph-validation.md), writes every k-th frame
 // as VTK XML PolyData plus a .pvd series (and PNG renders with --png), prints progress on stderr
@@ -538,7 +538,7 @@ double cpu_seconds() {
 
 Command add_sph(CLI::App& app) {
   auto* cmd = app.add_subcommand(
-      "sph", "SPH fluid (spec/SPH.md): the HIP RT article's falling water on any method");
+      "sph", "SPH fluid (docs/sph.md): the HIP RT article's falling water on any method");
   auto o = std::make_shared<SphOptions>();
   auto* scenario_option =
       cmd->add_option(

@@ -1,8 +1,8 @@
-// A periodic box (spec/NEIGHBOURS.md, 2): the cell's rows are the lattice vectors a, b, c (ASE's
-// convention, any handedness), and pbc says which of them repeat. Host-only helpers: validation,
-// face widths, how many images a cutoff needs, and wrapping positions into the cell.
+// A periodic box (docs/periodic.md, "Semantics"): the cell's rows are the lattice vectors a, b, c
+// (ASE's convention, any handedness), and pbc says which of them repeat. Host-only helpers:
+// validation, face widths, how many images a cutoff needs, and wrapping positions into the cell.
 //
-// Non-periodic rows take no part in any of it (particles lie anywhere along them, and the spec
+// Non-periodic rows take no part in any of it (particles lie anywhere along them, and the contract
 // lets those rows be zero or even parallel to a periodic one). Where a computation needs a full
 // basis, the periodic rows are completed by unit vectors orthogonal to them (the "effective
 // cell"): this gives each periodic axis the largest face width any completion could, and is the
@@ -107,7 +107,7 @@ struct Wrapped {
 // the caller's positions is S = S_w + n_i - n_j (r_ij = x_j - x_i + S . cell is the same vector).
 //
 // Error(invalid_argument) for a non-finite x, or a shift outside the int32 range (a position
-// more than 2^31 boxes away; spec NEIGHBOURS.md, 5, gives shifts as int32), and the errors of
+// more than 2^31 boxes away; lists give shifts as int32), and the errors of
 // validate().
 Wrapped wrap(const Box& box, const std::array<double, 3>& x);
 

@@ -38,8 +38,8 @@ struct Float64Positions {
   std::size_t size = 0;
 };
 
-// What build() takes beyond positions and a cutoff (spec/NEIGHBOURS.md, 2-4): periodic boxes,
-// batches of independent systems, and a second point set. The default is one open system.
+// What build() takes beyond positions and a cutoff (docs/periodic.md, "Semantics"): periodic
+// boxes, batches of independent systems, and a second point set. The default is one open system.
 //
 // A pair is a triple (i, j, S), S an integer vector (0 on non-periodic axes), with
 // r_ij = x_j - x_i + S . cell; in range iff |r_ij| < C. Boxes thinner than 2C give a pair once
@@ -111,7 +111,7 @@ struct NeighbourList {
   std::vector<std::int64_t> rows, columns;
 };
 
-// What a neighbour list holds (spec/NEIGHBOURS.md section 5).
+// What a neighbour list holds (docs/periodic.md, "Semantics", for shifts and half lists).
 struct ListOptions {
   // Each pair once: of (i, j, S) and (j, i, -S), the one with i < j, or i == j and S
   // lexicographically positive, in row i. Not with query sets (their pairs are not symmetric).

@@ -1,5 +1,5 @@
-// Deterministic, seeded inputs: the two benchmark suites of spec/BENCHMARKS.md and the test
-// families of spec/METHODS.md. The same (name, n, cutoff, seed) gives the same bits on every
+// Deterministic, seeded inputs: the two benchmark suites of docs/benchmarks.md and the test
+// families of docs/methods.md. The same (name, n, cutoff, seed) gives the same bits on every
 // platform (own RNG, no std:: distributions).
 #pragma once
 
@@ -33,7 +33,7 @@ PointCloud surface_suite(int alpha, int p, std::uint64_t seed = 1);
 // Particle count of a suite configuration, without generating it.
 std::size_t suite_size(int param, int p);
 
-// The test families of spec/METHODS.md, by name, in a stable order.
+// The test families (docs/methods.md, "Test inputs"), by name, in a stable order.
 std::vector<std::string> family_names();
 // About n points of family `name` for cutoff `cutoff` (C below); name = the family name, cutoff =
 // C. Exactly n points except for lattices, which have m^3 points, m = max(1, round(cbrt(n)))
@@ -58,7 +58,7 @@ std::vector<std::string> family_names();
 //                       not depend on n) and, last, one point 1e5 C away on a diagonal.
 //   offset-1e3/-1e5     the uniform cloud (same seed) plus 1e3 / 1e5 on every coordinate.
 //   large-cutoff        uniform in a cube of side C/4: every pair is in range.
-// Extreme scales (spec NEIGHBOURS.md, 1; docs/limits.md), all exactly n points:
+// Extreme scales (docs/limits.md), all exactly n points:
 //   tiny-scale          the uniform cloud times 2^-50 (~8.9e-16), and the cloud's cutoff too
 //                       (PointCloud::cutoff = C 2^-50): exactly uniform's pairs, tiny numbers.
 //   huge-scale          the same times 2^50 (~1.1e15). With C = 1 both lie well inside the

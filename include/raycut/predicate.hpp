@@ -1,4 +1,4 @@
-// THE in-range predicate (spec/METHODS.md, contract 1). Every method, on host and device, decides
+// THE in-range predicate (docs/methods.md, the contract). Every method, on host and device, decides
 // "is source j a neighbour of target i" with these two functions and nothing else, so that all
 // methods agree bit for bit, even for pairs exactly at the cutoff.
 #pragma once

@@ -1,7 +1,7 @@
 """Periodic boxes, batches and query sets as the extension takes them (raycut::Systems): cells
 (B, 3, 3) float64 and pbc (B, 3) bool, B = 1 for a box shared by every system; per-system index
 arrays (torch_cluster's ``batch``) turned into offsets (on the device for CUDA PyTorch indices);
-and the differentiable vectors of the PyTorch path (spec/NEIGHBOURS.md, 7).
+and the differentiable vectors of the PyTorch path (D = x_j - x_i + S . cell in PyTorch).
 """
 from __future__ import annotations
 

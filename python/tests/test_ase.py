@@ -232,7 +232,7 @@ def test_drop_in_periodic_self_interaction_and_bulk():
 
 def test_drop_in_far_along_an_open_axis():
     # 1e6 away: float32 rounds to multiples of 0.0625, and a pair 1.0624 apart came out within
-    # 1.01 (session 11's adversarial tests). The positions are centred in float64 first.
+    # 1.01 (found by adversarial tests). The positions are centred in float64 first.
     for pbc in (False, (False, True, True)):
         atoms = Atoms("H3", positions=[[1e6 + 0.0313, 0, 0], [1e6 + 1.0937, 0, 0],
                                        [1e6 + 2.0, 0.5, 0]], cell=[10.0, 10.0, 10.0], pbc=pbc)

@@ -25,7 +25,7 @@ from conftest import torch_cuda
 
 import raycut
 
-DENSITY, CUTOFF = 0.8442, 2.5  # the LJ liquid of spec/NEIGHBOURS.md, 8: ~55 neighbours each
+DENSITY, CUTOFF = 0.8442, 2.5  # the LJ liquid of the benchmarks: ~55 neighbours each
 
 
 def liquid(torch, n, seed=0):

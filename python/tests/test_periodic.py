@@ -1,4 +1,4 @@
-"""Periodic boxes, batches and query sets (spec/NEIGHBOURS.md, 2-5) through raycut.neighbor_list,
+"""Periodic boxes, batches and query sets (docs/periodic.md, "Semantics") through raycut.neighbor_list,
 raycut.radius and Engine, on every method that has them, against a NumPy brute force over
 explicit images written here (independent of raycut): cubic, triclinic, cells thinner than twice
 the cutoff (self-images), slabs and wires, unwrapped positions, batches with empty systems, query

@@ -10,7 +10,7 @@ from conftest import AVAILABLE, SYSTEM_METHODS, torch_cuda
 import raycut
 
 CUTOFF, SKIN = 2.5, 0.4
-DENSITY = 0.8442  # the LJ liquid of spec/NEIGHBOURS.md, 8
+DENSITY = 0.8442  # the LJ liquid of the benchmarks (docs/benchmarks.md)
 REL = 1e-5  # pairs this close (relative) to the cutoff may go either way in float32
 TRICLINIC = np.array([[1.0, 0.0, 0.0], [0.3, 0.95, 0.0], [0.2, -0.15, 0.9]])
 

@@ -1,5 +1,5 @@
-// The benchmark suites (spec/BENCHMARKS.md) and the test families (spec/METHODS.md, "Test inputs
-// every method must pass"). Everything is drawn from detail::SplitMix64, so a (name, n, cutoff,
+// The benchmark suites (docs/benchmarks.md, "Protocol") and the test families (docs/methods.md,
+// "Test inputs"). Everything is drawn from detail::SplitMix64, so a (name, n, cutoff,
 // seed) gives the same bits on every platform and for every thread count.
 #include "raycut/generators.hpp"
 
@@ -313,7 +313,7 @@ std::vector<float> large_cutoff(std::size_t n, double cutoff, std::uint64_t seed
   return xyz;
 }
 
-// ---- extreme scales (spec NEIGHBOURS.md, 1) ----------------------------------------------------
+// ---- extreme scales (docs/limits.md) -----------------------------------------------------------
 
 // The uniform cloud times a power of two (exact: the same float mantissas, so the same pairs).
 std::vector<float> scaled(std::vector<float> xyz, int exponent) {

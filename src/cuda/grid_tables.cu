@@ -241,7 +241,7 @@ void GridTables::build(const float* xyz, std::uint32_t n, const GridPlan& plan,
 
 namespace {
 // Reads the 4-byte order, not the slot's 16-byte float4 (the selection ran 39 us at 2^22
-// points with it, session 11's ncu).
+// points with it; ncu on the H200, 2026-12-02).
 struct IsTarget {
   const Slot* order;
   std::uint32_t targets;

@@ -108,7 +108,8 @@ __device__ bool wrap_one(const Plan& plan, const float* sources, bool with_queri
 // counts places their images). The engine's finiteness check is fused here (one kernel and one
 // read-back less per build). Only ~5 % of a liquid's particles have images, spread over every
 // warp: images_kernel over the list keeps its warps full (docs/periodic.md). One list atomic
-// per block: one per warp contended enough to double this kernel's time (session 11, ncu).
+// per block: one per warp contended enough to double this kernel's time (ncu on the H200,
+// 2026-12-02).
 __global__ void wrap_kernel(Plan plan, const float* sources, bool with_queries, Out out,
                             std::uint32_t* counts, std::uint32_t* with_images, Findings* found) {
   __shared__ std::uint32_t listed;

@@ -207,7 +207,7 @@ struct DistributedEngine::HaloPlan {
 namespace {
 
 // The options every rank must share (a rank with other dims or another skin decomposes, or
-// exchanges, differently: wrong answers or a hang, session 11's adversarial tests), as numbers
+// exchanges, differently: wrong answers or a hang, as adversarial tests found), as numbers
 // that must be the same on every rank.
 std::vector<std::uint64_t> shared_options(const DistributedOptions& o) {
   std::uint64_t method = 14695981039346656037ull;  // FNV-1a of the method's name

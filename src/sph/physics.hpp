@@ -1,4 +1,4 @@
-// The per-particle arithmetic of the SPH step (spec/SPH.md, Mueller et al. 2003): density with
+// The per-particle arithmetic of the SPH step (docs/sph.md, Mueller et al. 2003): density with
 // the self contribution, the equation of state (the article's clamped cubic one, or Tait's of the
 // weakly compressible mode, docs/sph-validation.md), and the wall + gravity acceleration with
 // the semi-implicit Euler update (fixed boundary particles of the weakly compressible mode never
@@ -13,7 +13,7 @@ namespace raycut::sph {
 
 // Equation of state (StepConstants::equation_of_state).
 enum : int {
-  eos_article = 0,  // p = k ((rho / rho0)^3 - 1), clamped at >= 0 (spec/SPH.md, the sample)
+  eos_article = 0,  // p = k ((rho / rho0)^3 - 1), clamped at >= 0 (the article's sample)
   eos_tait = 1,     // p = B ((rho / rho0)^7 - 1), B = c0^2 rho0 / 7; clamped at >= 0 if asked
 };
 

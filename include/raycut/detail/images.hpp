@@ -1,7 +1,7 @@
 // How every traversal (host and device) turns a candidate point into the pair a functor sees:
-// the caller's source index j and the image shift S (spec/NEIGHBOURS.md, 2). The one place where
-// periodic images, batches and query points meet the functors. A traversal is instantiated with
-// NoImages (the points are the caller's particles: j = k, S = 0, nothing to look up) or
+// the caller's source index j and the image shift S (docs/periodic.md, "Semantics"). The one place
+// where periodic images, batches and query points meet the functors. A traversal is instantiated
+// with NoImages (the points are the caller's particles: j = k, S = 0, nothing to look up) or
 // WithImages (tables of src/core/images.hpp), so plain runs pay nothing for images. with_images
 // picks the policy per functor: one that reads neither j nor S (uses_source = false) and filters
 // nothing runs as on an open cloud when every point is some particle's image.

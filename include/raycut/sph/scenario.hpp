@@ -1,4 +1,4 @@
-// The SPH scenarios of spec/SPH.md: the HIP RT article's falling block of water in a 1 m^3 pool,
+// The SPH scenarios of docs/sph.md: the HIP RT article's falling block of water in a 1 m^3 pool,
 // a small version of it for CI on the CPU methods, and the weakly compressible validation
 // scenarios (hydrostatic column, Martin & Moyce dam break; docs/sph-validation.md).
 // Solver-independent: plain data in, no engine.
@@ -17,7 +17,8 @@ struct WallPlane {
   float d;
 };
 
-// The model constants of spec/SPH.md, in SI units. Floats, as the sample and the GPU solver use.
+// The model constants of the article's sample (docs/sph.md), in SI units. Floats, as the sample and
+// the GPU solver use.
 struct SphParameters {
   float rest_density;      // rho0 [kg/m^3]
   float particle_mass;     // m [kg], the same for every particle
@@ -125,7 +126,7 @@ WcsphConfig read_wcsph_config(const std::string& path, WcsphConfig base = {});
 // One `key = value` assignment (the file's and the CLI's shared parser).
 void set_wcsph_key(WcsphConfig& config, const std::string& key, const std::string& value);
 
-// The article's run, exactly (spec/SPH.md): 131,072 particles, the first 131,072 points of a
+// The article's run, exactly: 131,072 particles, the first 131,072 points of a
 // 51^3 lattice with spacing 0.6/51 m whose corner point is the corner of the 0.6 m cube centred at
 // (-0.18, 0.70, 0.18); x varies fastest, then y, then z (the last z slice is partial). 200 frames,
 // dt = 1/320 s, image of frame 165.

@@ -1,4 +1,4 @@
-// The SPH fluid solver of spec/SPH.md on the public interaction engine: any method that computes
+// The SPH fluid solver of docs/sph.md on the public interaction engine: any method that computes
 // Kernel::sph_density and Kernel::sph_force runs it, with no method-specific code. Per step:
 //   1. structure: Engine::build(x, h) once in the constructor, Engine::update(x) at the start of
 //      every later step (the OptiX methods refit while no particle has moved more than skin / 2
