@@ -1,5 +1,5 @@
 # CLI contract: --help everywhere, one-line errors with exit code 2, check passes and fails
-# as it should, bench writes the CSV header of spec/BENCHMARKS.md.
+# as it should, bench writes the CSV header of docs/benchmarks.md, "Protocol".
 include(${CMAKE_CURRENT_LIST_DIR}/cli_helpers.cmake)
 
 foreach(sub "" methods check bench generate neighbours)

@@ -26,7 +26,7 @@ cutoff <= 0; unknown method or kernel), ``MemoryError`` when it does not fit,
 
 Periodic boxes (``cell``: rows are the lattice vectors, ASE's convention; ``pbc`` per axis),
 batches of independent systems (``batch``: the system of each particle, sorted, as
-torch_cluster's) and query sets (``radius``) follow spec/NEIGHBOURS.md: a pair is (i, j, S) with
+torch_cluster's) and query sets (``radius``) follow docs/periodic.md, "Semantics": a pair is (i, j, S) with
 ``r_ij = x_j - x_i + S @ cell``, S the integer image shift (``"S"``), every image within the
 cutoff (boxes thinner than twice the cutoff give a pair once per image, and a particle its own
 images). The CPU methods and the CUDA ``grid`` and ``brute-force-gpu`` support them; the others
@@ -537,7 +537,7 @@ def _search_input(x: Any, grad: bool) -> Any:
 def _pair_quantities(letters: str, engine: Engine, half: bool, grad: bool, sources: Any,
                      targets: Any, cell: Any) -> Any:
     """The letters of the built engine's pairs, in the order asked. On the autograd path ``d``
-    and ``D`` are computed in PyTorch from i, j and S (spec/NEIGHBOURS.md, 7)."""
+    and ``D`` are computed in PyTorch from i, j and S (docs/python.md)."""
     batch = engine._batch
     periodic = batch.boxes is not None and batch.boxes.periodic
     metric = "d" in letters or "D" in letters

@@ -1,4 +1,4 @@
-// Periodic boxes, batches and query points at the engine level (spec/NEIGHBOURS.md, 2-4): the
+// Periodic boxes, batches and query points at the engine level (docs/periodic.md): the
 // caller's particles become one set of points that any method with a pair pass builds over as
 // if it were an open cloud, with tables that map each point back to the caller's source and
 // image shift (detail/images.hpp applies them in every traversal). So every such method gets

@@ -1,4 +1,4 @@
-// Input checks done before any device work (spec/METHODS.md, contract 4).
+// Input checks done before any device work (docs/limits.md).
 #pragma once
 
 #include <cstddef>

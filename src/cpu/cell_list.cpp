@@ -69,7 +69,7 @@ struct Entry {
 // Sorts entries (entries[i].index == i) by (query, key, index). When every label is near and
 // the box of cells the entries span, (query, system, z, y, x), has at most one cell per entry
 // (a liquid, a batch of boxes), by a counting sort over that box: two passes over the entries
-// (session 10, the 252,732 points of the 200,000-particle periodic liquid, one thread on a
+// (2026-12-02, the 252,732 points of the 200,000-particle periodic liquid, one thread on a
 // shared 2-core machine: 4.5-11 ms, where std::sort of the 40-byte entries took 18-52); else by
 // std::sort, as a far outlier or a sparse surface needs. The same order either way: the
 // counting sort is stable.
@@ -128,7 +128,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   }
 
   // The targets in slot order: consecutive targets then read the same neighbour cells, cached
-  // (session 10, lj_forces over the 200,000-particle periodic liquid in random order, one
+  // (2026-12-02, lj_forces over the 200,000-particle periodic liquid in random order, one
   // thread on a shared 2-core machine: 372-393 -> 303-316 ms; docs/periodic.md).
   const std::uint32_t* target_order() const { return target_order_.data(); }
 
@@ -207,7 +207,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   // the first key at or after (system, z + dz, y + dy, x - 1) only moves forward from cell to
   // cell (keys ascend, and adding one offset keeps their order), so a cursor per row finds it
   // in amortised O(1) where a binary search per neighbour cost 15 comparisons of 32-byte keys
-  // (session 10, the 200,000-particle periodic liquid's cells, one thread: 27-34 -> 3.2-5 ms).
+  // (2026-12-02, the 200,000-particle periodic liquid's cells, one thread: 27-34 -> 3.2-5 ms).
   // Two walks, one to count and one to fill, each over chunks of cells in parallel.
   void find_neighbour_cells() {
     const std::size_t cells = cell_keys_.size();
