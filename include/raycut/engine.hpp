@@ -358,6 +358,8 @@ class Engine {
   // positions they checked), so a plain update skips its finiteness pass (one with systems
   // rebuilds, and checks as build() does).
   void update(PositionsView positions, bool checked);
+  // Throws unless update() with n particles can follow the last build().
+  void require_updatable(std::size_t n) const;
   // build(positions, cutoff, systems) over the points path; `float64`: the caller's positions
   // in double when `positions` are their float rounding (Float64Positions).
   void build_points(PositionsView positions, float cutoff, const Systems& systems,

@@ -20,6 +20,7 @@ from typing import Any, Optional
 
 import torch
 
+from . import _arrays
 from . import _systems
 from ._raycut import CapacityError
 
@@ -188,6 +189,7 @@ def _quantities(letters: str, i, j, shifts, vectors_of) -> Any:
 
 
 def _floating(x: torch.Tensor, name: str) -> None:
+    _arrays._refuse_complex(name, x.dtype, x.is_complex())  # the same words as every interface
     if x.dtype not in (torch.float32, torch.float64):
         raise ValueError(f"{name} must be float32 or float64, got {x.dtype}")
 

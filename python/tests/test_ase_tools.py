@@ -98,7 +98,7 @@ def test_raycut_neighbor_list_takes_varying_cutoffs(form):
     for half in (False, True):
         i, j, d, S = raycut.neighbor_list("ijdS", atoms.positions, cutoff, cell=atoms.cell[:],
                                           pbc=True, numbers=atoms.numbers, half=half)
-        assert d.dtype == np.float32 and i.dtype == np.int64
+        assert d.dtype == np.float64 and i.dtype == np.int64  # float64 positions: float64 d
         full = raycut.neighbor_list("ijdS", atoms.positions, 4.0, cell=atoms.cell[:], pbc=True,
                                     half=half)
         pair_cutoff = raycut._cutoffs.PairCutoffs(cutoff, len(atoms), atoms.numbers)

@@ -217,17 +217,10 @@ void Engine::build(Float64Positions positions, float cutoff, const Systems& syst
 }
 
 void Engine::update(Float64Positions positions) {
-  if (!built_) throw Error(ErrorCode::invalid_argument, "Engine::update() called before build()");
+  require_updatable(positions.size);
   if (!float64_)
     throw Error(ErrorCode::invalid_argument,
                 "Engine::update() with float64 positions after a float32 build: build() again");
-  if (positions.size != sources_)
-    throw Error(ErrorCode::invalid_argument,
-                "Engine::update() needs the " + std::to_string(sources_) +
-                    " particles of build(), got " + std::to_string(positions.size));
-  if (queries_)
-    throw Error(ErrorCode::unsupported,
-                "Engine::update() with query points: call build() with the new positions");
   const Systems systems = systems_;
   build(positions, cutoff_, systems);
 }
@@ -308,18 +301,22 @@ void Engine::update(PositionsView positions) {
   update(positions, false);
 }
 
-void Engine::update(PositionsView positions, bool checked) {
-  detail::Method& m = impl("update");
+void Engine::require_updatable(std::size_t n) const {
   if (!built_) throw Error(ErrorCode::invalid_argument, "Engine::update() called before build()");
-  if (positions.size != sources_)
-    throw Error(ErrorCode::invalid_argument,
-                "Engine::update() needs the " + std::to_string(sources_) +
-                    " particles of build(), got " + std::to_string(positions.size));
+  if (n != sources_)
+    throw Error(ErrorCode::invalid_argument, "Engine::update() needs the " +
+                                                 std::to_string(sources_) +
+                                                 " particles of build(), got " + std::to_string(n));
   // Query points are not kept beyond build(): there is nothing to rebuild them from. Checked
-  // first: systems_ has dropped them, so an open build with queries looks plain.
+  // before the systems: systems_ has dropped them, so an open build with queries looks plain.
   if (queries_)
     throw Error(ErrorCode::unsupported,
                 "Engine::update() with query points: call build() with the new positions");
+}
+
+void Engine::update(PositionsView positions, bool checked) {
+  detail::Method& m = impl("update");
+  require_updatable(positions.size);
   if (!systems_.plain()) {
     const Systems systems = systems_;
     build(positions, cutoff_, systems);
