@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Draw the paper's Figures 9 (uniform) and 10 (surface) from raycut bench CSVs.
+"""Draw the paper's Figures 9 (uniform) and 10 (surface) from pyraycut bench CSVs.
 
 One panel per beta (or alpha); in each, one group of bars per N (one bar per method), every bar
 stacked build (light) + compute (dark), log scale, and above each bar its speedup over the

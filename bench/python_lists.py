@@ -16,14 +16,14 @@ Workloads (``--tiny``: the same shapes, small enough for the CPU in a few second
 For each, these variants take turns call by call (so that a busy machine slows them alike):
 
 - ``cpp_list``: the C++ call of neighbour_bench's list_full_s / list_half_s / list_full,
-  through the bound engine (``raycut._raycut.Engine``, no Python layer): ``build`` +
+  through the bound engine (``pyraycut._raycut.Engine``, no Python layer): ``build`` +
   ``neighbours`` into a fresh CSR buffer, one engine reused from call to call;
 - ``cpp_pairs``: the same engine's ``build`` + ``pairs``: the CSR expanded to the COO
   ``i, j (, S)`` that ``neighbor_list`` returns, still without the Python layer;
-- ``python``: ``raycut.neighbor_list`` as a user calls it (engine cache on, the default);
-- ``python_csr``: ``raycut.Engine.build`` + ``Engine.neighbours`` (CSR, with shifts where the
+- ``python``: ``pyraycut.neighbor_list`` as a user calls it (engine cache on, the default);
+- ``python_csr``: ``pyraycut.Engine.build`` + ``Engine.neighbours`` (CSR, with shifts where the
   workload has them): the C++ call's own output through the Python API, against ``cpp_list``;
-- ``python_nocache``: the same with ``raycut.set_engine_cache(False)``: a fresh engine per call,
+- ``python_nocache``: the same with ``pyraycut.set_engine_cache(False)``: a fresh engine per call,
   its structure buffers allocated and freed every call.
 
 Timing: CUDA events on the current stream around each call for CUDA input (the library
@@ -52,8 +52,8 @@ import time
 
 import numpy as np
 
-import raycut
-from raycut import _arrays, _systems
+import pyraycut
+from pyraycut import _arrays, _systems
 
 DENSITY, RC = 0.8442, 2.5
 GOAL = 1.10  # Python within 10 % of C++
@@ -113,7 +113,7 @@ def make_variants(inp: Input, method: str) -> tuple:
     one entry per pair); the bound engine; where the outputs live."""
     like = _arrays.prepare(inp.x)[1]
     stream = _arrays.stream_of(like)
-    engine = raycut._raycut.Engine(method)
+    engine = pyraycut._raycut.Engine(method)
     shifts = "S" in inp.quantities
 
     def cpp_list():
@@ -127,11 +127,11 @@ def make_variants(inp: Input, method: str) -> tuple:
         return engine.pairs(inp.half, False, False, False, shifts), 0
 
     def python():
-        return raycut.neighbor_list(inp.quantities, inp.x, inp.cutoff, cell=inp.cell,
+        return pyraycut.neighbor_list(inp.quantities, inp.x, inp.cutoff, cell=inp.cell,
                                     pbc=inp.pbc, batch=inp.batch, half=inp.half,
                                     method=method), 0
 
-    py_engine = raycut.Engine(method)
+    py_engine = pyraycut.Engine(method)
 
     def python_csr():  # the C++ call's own format (CSR) through the Python API
         py_engine.build(inp.x, inp.cutoff, cell=inp.cell, pbc=inp.pbc, batch=inp.batch)
@@ -154,7 +154,7 @@ def time_variants(variants: dict, engine, like, torch, reps: int, warmup: int,
                   cache: bool = True) -> dict:
     """name -> (times ms, wall ms, engine build ms, pair counts), with neighbor_list's engine
     cache on or off. Outputs are counted and freed outside the timing."""
-    raycut.set_engine_cache(cache)
+    pyraycut.set_engine_cache(cache)
     out = {name: ([], [], [], []) for name in variants}
     for rep in range(warmup + reps):
         for name, fn in variants.items():
@@ -186,7 +186,7 @@ def time_variants(variants: dict, engine, like, torch, reps: int, warmup: int,
                 t = engine.timings()
                 build_ms.append(t["device_build_ms"] if t["device_build_ms"] >= 0 else
                                 t["build_ms"])
-    raycut.set_engine_cache(True)
+    pyraycut.set_engine_cache(True)
     return out
 
 
@@ -223,7 +223,7 @@ def cuda_torch():
         import torch
     except ImportError:
         return None
-    if torch.cuda.is_available() and raycut.cuda_available():
+    if torch.cuda.is_available() and pyraycut.cuda_available():
         return torch
     return None
 
@@ -315,7 +315,7 @@ def main(argv=None) -> list:
                                                           float("nan"))
             rows.append(row)
         del inp, variants, engine
-        raycut.clear_engine_cache()
+        pyraycut.clear_engine_cache()
 
     slug = "".join(c if c.isalnum() else "-" for c in gpu).lower() if torch else "cpu"
     out = args.out or os.path.join(os.path.dirname(os.path.abspath(__file__)), "results",

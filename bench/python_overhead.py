@@ -7,11 +7,11 @@ each API call it times many calls, one at a time (median and minimum of the per-
 a CUDA input is synchronised after each call, and the library synchronises each phase anyway):
 
 - ``count``: ``Engine.compute("count")`` on a built engine, against the extension's own calls
-  (``run`` + ``results`` of ``raycut._raycut.Engine``, no Python wrapper) and against the C++
+  (``run`` + ``results`` of ``pyraycut._raycut.Engine``, no Python wrapper) and against the C++
   phase time the engine reports (``Engine.timings["compute_ms"]``, wall, synchronised);
 - ``build+count``: ``Engine.build`` + ``Engine.compute("count")``, against the extension's
   ``build`` + ``run`` + ``results`` and ``build_ms + compute_ms``;
-- ``neighbor_list``: ``raycut.neighbor_list("ij", x, cutoff)`` (a new engine, a build, the COO
+- ``neighbor_list``: ``pyraycut.neighbor_list("ij", x, cutoff)`` (a new engine, a build, the COO
   pairs), against the extension's ``Engine`` + ``build`` + ``pairs`` (the C++ phases time only
   the build: the pair extraction is not in ``timings``).
 
@@ -37,8 +37,8 @@ import time
 
 import numpy as np
 
-import raycut
-from raycut import _arrays
+import pyraycut
+from pyraycut import _arrays
 
 TARGET_US = 30.0
 
@@ -72,7 +72,7 @@ def gpu_name() -> str:
             return torch.cuda.get_device_name(0)
     except ImportError:
         pass
-    if raycut.cuda_available():
+    if pyraycut.cuda_available():
         return "CUDA GPU"
     return ""
 
@@ -85,14 +85,14 @@ def inputs(n: int, seed: int) -> list:
         import torch
     except ImportError:
         return out
-    if torch.cuda.is_available() and raycut.cuda_available():
+    if torch.cuda.is_available() and pyraycut.cuda_available():
         out.append(("torch-cuda", torch.from_numpy(x).cuda(), torch.cuda.synchronize))
     return out
 
 
 def bench_input(label, x, sync, method: str, cutoff: float, calls: int, warmup: int) -> list:
     rows = []
-    engine = raycut.Engine(method)
+    engine = pyraycut.Engine(method)
     engine.build(x, cutoff)
     like = engine._like
     raw = engine._engine
@@ -125,10 +125,10 @@ def bench_input(label, x, sync, method: str, cutoff: float, calls: int, warmup: 
             return raw.compute("count", to_host=host)
 
         def api_list():
-            return raycut.neighbor_list("ij", x, cutoff, method=method)
+            return pyraycut.neighbor_list("ij", x, cutoff, method=method)
 
         def ext_list():
-            e = raycut._raycut.Engine(method)
+            e = pyraycut._raycut.Engine(method)
             e.set_stream(_arrays.stream_of(like))
             e.build(x_ext, cutoff)
             return e.pairs(False, False, False, host)
@@ -145,7 +145,7 @@ def bench_input(label, x, sync, method: str, cutoff: float, calls: int, warmup: 
                     t = raw.timings()
                     cpp_t.append(sum(t[p] for p in phases) * 1e3)
             else:
-                e = raycut._raycut.Engine(method)
+                e = pyraycut._raycut.Engine(method)
 
                 def timed(e=e):  # the build of neighbor_list, timed by an engine of its own
                     e.set_stream(_arrays.stream_of(like))
@@ -197,7 +197,7 @@ def main(argv=None) -> list:
     rows = []
     for label, x, sync in inputs(args.n, args.seed):
         methods = args.method or ["auto"]
-        if not args.method and label == "numpy" and raycut.auto_method() != "cell-list":
+        if not args.method and label == "numpy" and pyraycut.auto_method() != "cell-list":
             methods = ["auto", "cell-list"]  # NumPy on the GPU (copies) and on the CPU
         for method in methods:
             try:

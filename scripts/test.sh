@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Builds raycut and runs every test: ctest, then pytest on the Python package (python/tests),
-# whose extension is built in the same tree (build/python/raycut: no second build of the
+# whose extension is built in the same tree (build/python/pyraycut: no second build of the
 # library). GPU and OptiX tests skip (and say why) where there is no GPU or no OptiX headers.
 #
 # The Python used: $RAYCUT_PYTHON, else .venv/bin/python (scripts/setup.sh), else python3; it
@@ -8,7 +8,7 @@
 # .venv is created as scripts/setup.sh does. RAYCUT_PYTHON_TESTS=OFF skips the
 # Python package. RAYCUT_TEST_WHEEL=1 also runs `pip install --no-build-isolation .` into that
 # Python (a second, full build of the library) and the tests on the installed package.
-# With torch and jax importable by that Python, the PyTorch operators and raycut.jax's custom
+# With torch and jax importable by that Python, the PyTorch operators and pyraycut.jax's custom
 # call are built and tested too; without them their tests are skipped, saying why.
 set -euo pipefail
 cd "$(dirname "$0")/.."

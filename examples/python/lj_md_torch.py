@@ -1,7 +1,7 @@
 """Lennard-Jones molecular dynamics with PyTorch autograd forces and raycut neighbour lists.
 
 An open cluster of a few hundred LJ atoms (reduced units: sigma = epsilon = mass = 1), velocity
-Verlet. The half neighbour list (each pair once, i < j) comes from raycut.neighbor_list("ijD")
+Verlet. The half neighbour list (each pair once, i < j) comes from pyraycut.neighbor_list("ijD")
 with the cutoff plus a skin, rebuilt every `rebuild_every` steps (sooner when an atom has moved
 more than skin / 2 since the last build); between builds the pair vectors are x[j] - x[i] of the
 same pairs, in PyTorch. Pairs beyond the cutoff are masked in PyTorch; the energy is the sum of the
@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-import raycut
+import pyraycut
 
 try:
     import torch
@@ -72,7 +72,7 @@ class NeighbourList:
         if self.built_at is not None:
             moved = float((x.detach() - self.built_at).norm(dim=1).max()) if len(x) else 0.0
         if self.i is None or self.age + 1 >= self.rebuild_every or moved > self.skin / 2:
-            self.i, self.j, D = raycut.neighbor_list("ijD", x, self.cutoff + self.skin,
+            self.i, self.j, D = pyraycut.neighbor_list("ijD", x, self.cutoff + self.skin,
                                                      half=True, method=self.method)
             self.built_at = x.detach().clone()
             self.age = 0
@@ -89,7 +89,7 @@ def main(size: int = 256, steps: int = 200, dt: float = 0.002, temperature: floa
         print("lj_md_torch: PyTorch is not installed, skipping")
         return {"skipped": True, "ok": True}
     if device is None:
-        device = "cuda" if torch.cuda.is_available() and raycut.cuda_available() else "cpu"
+        device = "cuda" if torch.cuda.is_available() and pyraycut.cuda_available() else "cpu"
     method = "auto" if device != "cpu" else "cell-list"
     torch.manual_seed(seed)
 

@@ -1,5 +1,5 @@
 """Radius search on a random point cloud with NumPy: every neighbour within a radius of every
-point, as raycut.neighbor_list returns it on the host, checked against a brute force on a subset
+point, as pyraycut.neighbor_list returns it on the host, checked against a brute force on a subset
 of the points.
 
     python examples/python/point_cloud_radius.py [N]
@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-import raycut
+import pyraycut
 
 
 def brute_force_rows(x: np.ndarray, queries: np.ndarray, radius: float, band: float) -> tuple:
@@ -41,7 +41,7 @@ def main(size: int = 20_000, radius: float | None = None, subset: int = 200, see
         radius = 1.0 / size ** (1 / 3)  # a few tens of neighbours on the shell
 
     start = time.perf_counter()
-    i, j, d = raycut.neighbor_list("ijd", x, radius, method=method)
+    i, j, d = pyraycut.neighbor_list("ijd", x, radius, method=method)
     elapsed = time.perf_counter() - start
     counts = np.bincount(i, minlength=size)
     offsets = np.concatenate([[0], np.cumsum(counts)])  # i is sorted: rows are contiguous
@@ -66,7 +66,7 @@ def main(size: int = 20_000, radius: float | None = None, subset: int = 200, see
               "max_distance_error": max_d_error, "ok": ok}
     print(f"point cloud: {size} points, radius {radius:.4g}, {len(i)} ordered pairs "
           f"(mean {result['mean_neighbours']:.1f}, max {result['max_neighbours']} neighbours) "
-          f"in {elapsed * 1e3:.2f} ms ({raycut.auto_method() if method == 'auto' else method})")
+          f"in {elapsed * 1e3:.2f} ms ({pyraycut.auto_method() if method == 'auto' else method})")
     print(f"brute force on {len(queries)} points: {mismatches} mismatching rows, "
           f"largest distance error {max_d_error:.2e}: {'OK' if ok else 'FAILED'}")
     return result

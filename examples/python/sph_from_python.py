@@ -1,4 +1,4 @@
-"""SPH density from Python: raycut.Engine.compute("sph_density", sph_mass=m) on a block of
+"""SPH density from Python: pyraycut.Engine.compute("sph_density", sph_mass=m) on a block of
 particles, checked against a NumPy evaluation of the poly6 kernel,
 
     density_i = sum_{j != i, |r_ij| < h} m 315 / (64 pi h^9) (h^2 - |r_ij|^2)^3,   h = cutoff
@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-import raycut
+import pyraycut
 
 
 def block(size: int, spacing: float, seed: int) -> np.ndarray:
@@ -45,7 +45,7 @@ def main(size: int = 8_000, spacing: float = 0.01, smoothing: float = 2.0,
     h = smoothing * spacing
     mass = rest_density * spacing ** 3  # one lattice cell of fluid per particle
 
-    engine = raycut.Engine(method)
+    engine = pyraycut.Engine(method)
     start = time.perf_counter()
     engine.build(x, cutoff=h)
     rho = engine.compute("sph_density", sph_mass=mass)["density"]

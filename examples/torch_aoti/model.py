@@ -1,4 +1,4 @@
-"""A Lennard-Jones energy whose forward pass calls raycut.neighbor_list (the PyTorch operator
+"""A Lennard-Jones energy whose forward pass calls pyraycut.neighbor_list (the PyTorch operator
 underneath), exported with a dynamic number of atoms and compiled into an AOTInductor package
 that runner.cpp loads and runs without Python.
 
@@ -8,7 +8,7 @@ import sys
 
 import torch
 
-import raycut
+import pyraycut
 
 CUTOFF = 2.5
 SIGMA = 1.0
@@ -18,7 +18,7 @@ class Energy(torch.nn.Module):
     """The LJ energy of every pair within CUTOFF (periodic box ``cell``), float64."""
 
     def forward(self, x: torch.Tensor, cell: torch.Tensor) -> torch.Tensor:
-        d = raycut.neighbor_list("d", x, CUTOFF, cell=cell)
+        d = pyraycut.neighbor_list("d", x, CUTOFF, cell=cell)
         inv6 = (SIGMA / d) ** 6
         return 2.0 * (inv6 * inv6 - inv6).sum()
 
@@ -34,4 +34,4 @@ def package(path: str) -> str:
 
 if __name__ == "__main__":
     print(package(sys.argv[1] if len(sys.argv) > 1 else "energy.pt2"))
-    print(f"operators: {raycut.load_torch_ops()}")
+    print(f"operators: {pyraycut.load_torch_ops()}")

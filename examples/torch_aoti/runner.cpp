@@ -2,7 +2,7 @@
 // operator) from C++, without Python, and checks it against the same energy computed here by
 // calling torch.ops.raycut.neighbor_list through the dispatcher.
 //
-//   torch_aoti_runner energy.pt2 path/to/raycut/_torch_ops.so [atoms per side]
+//   torch_aoti_runner energy.pt2 path/to/pyraycut/_torch_ops.so [atoms per side]
 //
 // Loading _torch_ops.so registers the operators with the dispatcher, where the package's code
 // finds them. Prints the energies and pair count; exits 1 when they disagree.

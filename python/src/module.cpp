@@ -1,4 +1,4 @@
-// raycut._raycut: the nanobind extension under the raycut Python package (python/raycut). It
+// pyraycut._raycut: the nanobind extension under the pyraycut Python package (python/pyraycut). It
 // reads positions from anything with DLPack (NumPy, PyTorch, CuPy, JAX) or
 // __cuda_array_interface__, without a copy, and returns arrays that wrap the library's own
 // buffers (a capsule keeps them alive): NumPy arrays on the host, DLPack-capable arrays on the
@@ -770,7 +770,7 @@ NB_MODULE(_raycut, m) {
 #endif
 
 #if defined(RAYCUT_PY_CUDA)
-  // batch= as a CUDA tensor: checked and turned into offsets on the device (python/raycut/
+  // batch= as a CUDA tensor: checked and turned into offsets on the device (python/pyraycut/
   // _systems.py), only a summary and the offsets read back.
   m.def(
       "device_index_summary",

@@ -2,7 +2,7 @@
 // torch.ops.raycut.radius, registered with the dispatcher (TORCH_LIBRARY) so that the same call
 // runs in eager mode, TorchScript, torch.compile, torch.export and AOTInductor packages. Their
 // fake (meta) implementations, which give torch.compile and torch.export the output shapes, are
-// registered in Python (python/raycut/_torch.py).
+// registered in Python (python/pyraycut/_torch.py).
 //
 // The ops return integer pairs only, (i, j, S, count): distances and vectors are computed in
 // PyTorch from them and the caller's positions and cell, so that autograd (to any order) never
@@ -12,7 +12,7 @@
 // Kernels: the CPU cell list; with RAYCUT_TORCH_CUDA (raycut built with CUDA, torch with CUDA)
 // also the CUDA grid on the tensors' device and current stream.
 //
-// Built as its own shared library (raycut/_torch_ops.so), against the classic C++ API of the
+// Built as its own shared library (pyraycut/_torch_ops.so), against the classic C++ API of the
 // torch it is built with: docs/python.md says why.
 #include <ATen/ATen.h>
 #include <torch/library.h>

@@ -6,9 +6,9 @@ os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")  # JAX: leave th
 import numpy as np
 import pytest
 
-import raycut
+import pyraycut
 
-AVAILABLE = [m["name"] for m in raycut.methods() if m["available"]]
+AVAILABLE = [m["name"] for m in pyraycut.methods() if m["available"]]
 DEVICE_METHODS = [m for m in AVAILABLE if m not in ("brute-force", "cell-list")]
 # Methods with periodic boxes, batches and query sets (the others raise NotImplementedError).
 SYSTEM_METHODS = [m for m in AVAILABLE
@@ -72,7 +72,7 @@ def assert_same_pairs(i, j, x, cutoff, half=False):
 
 def torch_cuda():
     """PyTorch on CUDA with raycut's CUDA methods, or skip saying which is missing."""
-    if not raycut.cuda_available():
+    if not pyraycut.cuda_available():
         pytest.skip("raycut was built without CUDA or no CUDA device is usable here")
     torch = pytest.importorskip("torch", reason="PyTorch is not installed")
     if not torch.cuda.is_available():
@@ -82,7 +82,7 @@ def torch_cuda():
 
 def cupy_cuda():
     """CuPy on CUDA with raycut's CUDA methods, or skip saying which is missing."""
-    if not raycut.cuda_available():
+    if not pyraycut.cuda_available():
         pytest.skip("raycut was built without CUDA or no CUDA device is usable here")
     cupy = pytest.importorskip("cupy", reason="CuPy is not installed")
     try:
@@ -94,7 +94,7 @@ def cupy_cuda():
 
 
 def pytest_report_header(config):
-    return [f"raycut: {raycut.__file__}", f"raycut methods here: {', '.join(AVAILABLE)}"]
+    return [f"raycut: {pyraycut.__file__}", f"raycut methods here: {', '.join(AVAILABLE)}"]
 
 
 @pytest.fixture(params=AVAILABLE)

@@ -1,12 +1,12 @@
-"""Agreement with ASE: raycut.neighbor_list and the drop-in raycut.ase.neighbor_list against
+"""Agreement with ASE: pyraycut.neighbor_list and the drop-in pyraycut.ase.neighbor_list against
 ase.neighborlist.neighbor_list, for open and periodic Atoms (triclinic, cells smaller than twice
 the cutoff, mixed pbc, unwrapped positions). The order of pairs may differ: compared sorted."""
 import numpy as np
 import pytest
 from conftest import AVAILABLE, SYSTEM_METHODS
 
-import raycut
-import raycut.ase
+import pyraycut
+import pyraycut.ase
 
 ase = pytest.importorskip("ase", reason="ase is not installed (python/requirements.txt has it)")
 from ase import Atoms  # noqa: E402
@@ -60,7 +60,7 @@ def compare(ours, theirs, cutoff):
 @pytest.mark.parametrize("n,edge,cutoff", CASES)
 def test_raycut_matches_ase(method, n, edge, cutoff):
     atoms, x32 = open_atoms(n, edge, seed=n)
-    ours = raycut.neighbor_list("ijdD", x32, cutoff, method=method)
+    ours = pyraycut.neighbor_list("ijdD", x32, cutoff, method=method)
     theirs = ase_neighbor_list("ijdD", atoms, cutoff)
     compare(ours, theirs, cutoff)
 
@@ -68,7 +68,7 @@ def test_raycut_matches_ase(method, n, edge, cutoff):
 @pytest.mark.parametrize("n,edge,cutoff", CASES)
 def test_drop_in_matches_ase(n, edge, cutoff):
     atoms, _ = open_atoms(n, edge, seed=n + 1)
-    ours = raycut.ase.neighbor_list("ijdDS", atoms, cutoff)
+    ours = pyraycut.ase.neighbor_list("ijdDS", atoms, cutoff)
     theirs = ase_neighbor_list("ijdDS", atoms, cutoff)
     for a, b in zip(ours, theirs):
         assert a.dtype == b.dtype and a.shape[1:] == b.shape[1:], (a.dtype, b.dtype)
@@ -79,37 +79,37 @@ def test_drop_in_matches_ase(n, edge, cutoff):
 
 def test_drop_in_self_interaction_and_letters():
     atoms, _ = open_atoms(200, 8.0, seed=3)
-    ours = raycut.ase.neighbor_list("ijdD", atoms, 2.0, self_interaction=True)
+    ours = pyraycut.ase.neighbor_list("ijdD", atoms, 2.0, self_interaction=True)
     theirs = ase_neighbor_list("ijdD", atoms, 2.0, self_interaction=True)
     compare(ours, theirs, 2.0)
     i, j = ours[:2]
     assert np.count_nonzero(i == j) == len(atoms)
     assert np.all(np.diff(i) >= 0)
     # One letter: the array alone; letters in the order asked.
-    d = raycut.ase.neighbor_list("d", atoms, 2.0)
+    d = pyraycut.ase.neighbor_list("d", atoms, 2.0)
     assert isinstance(d, np.ndarray) and d.dtype == np.float64
-    j2, i2 = raycut.ase.neighbor_list("ji", atoms, 2.0)
+    j2, i2 = pyraycut.ase.neighbor_list("ji", atoms, 2.0)
     assert np.array_equal(i2, ours[0][ours[0] != ours[1]])
 
 
 def test_drop_in_bad_input():
     atoms, _ = open_atoms(10, 5.0, seed=4)
     atoms.set_cell([5.0, 5.0, 5.0])
-    assert len(raycut.ase.neighbor_list("i", atoms, 1.0)) == len(ase_neighbor_list("i", atoms,
+    assert len(pyraycut.ase.neighbor_list("i", atoms, 1.0)) == len(ase_neighbor_list("i", atoms,
                                                                                    1.0))
     with pytest.raises(ValueError):
-        raycut.ase.neighbor_list("ijx", atoms, 1.0)
+        pyraycut.ase.neighbor_list("ijx", atoms, 1.0)
     with pytest.raises(ValueError):
-        raycut.ase.neighbor_list("ij", atoms, [1.0] * (len(atoms) + 1))  # one per atom
+        pyraycut.ase.neighbor_list("ij", atoms, [1.0] * (len(atoms) + 1))  # one per atom
     with pytest.raises(ValueError):
-        raycut.ase.neighbor_list("ij", atoms, -1.0)
+        pyraycut.ase.neighbor_list("ij", atoms, -1.0)
     with pytest.raises(TypeError):
-        raycut.ase.neighbor_list("ij", np.zeros((3, 3)), 1.0)
+        pyraycut.ase.neighbor_list("ij", np.zeros((3, 3)), 1.0)
     # A singular cell: the library's message.
     atoms.set_cell([[5.0, 0, 0], [10.0, 0, 0], [0, 0, 5.0]])
     atoms.pbc = True
     with pytest.raises(ValueError, match="linearly dependent"):
-        raycut.ase.neighbor_list("ij", atoms, 1.0)
+        pyraycut.ase.neighbor_list("ij", atoms, 1.0)
 
 
 # ---- periodic ----------------------------------------------------------------------------------
@@ -169,7 +169,7 @@ def test_drop_in_matches_ase_periodic(name, seed):
     n, edge, skew, pbc, cutoff, unwrap = PERIODIC[name]
     rng = np.random.default_rng(100 + seed)
     atoms = periodic_atoms(n, random_cell(rng, edge, skew), pbc, seed, unwrap, spread=2.0)
-    ours = raycut.ase.neighbor_list("ijdDS", atoms, cutoff)
+    ours = pyraycut.ase.neighbor_list("ijdDS", atoms, cutoff)
     theirs = ase_neighbor_list("ijdDS", atoms, cutoff)
     for a, b in zip(ours, theirs):
         assert a.dtype == b.dtype and a.shape[1:] == b.shape[1:], (a.dtype, b.dtype)
@@ -189,7 +189,7 @@ def test_drop_in_zero_rows_on_open_axes(cell, pbc):
     rng = np.random.default_rng(5)
     x = rng.random((30, 3)) * 6 + rng.integers(-3, 4, (30, 3)) * np.diag(cell)
     atoms = Atoms(symbols=["Ar"] * 30, positions=x, cell=cell, pbc=pbc)
-    ours = raycut.ase.neighbor_list("ijdDS", atoms, 3.0)
+    ours = pyraycut.ase.neighbor_list("ijdDS", atoms, 3.0)
     theirs = ase_neighbor_list("ijdDS", atoms, 3.0)
     compare_periodic(ours, theirs, 3.0, atol=1e-9)
 
@@ -202,7 +202,7 @@ def test_raycut_matches_ase_periodic(method, name):
     atoms = periodic_atoms(n, random_cell(rng, edge, skew), pbc, 3, unwrap)
     x32 = atoms.positions.astype(np.float32)
     atoms.positions = x32.astype(np.float64)  # what raycut reads
-    ours = raycut.neighbor_list("ijdDS", x32, cutoff, cell=atoms.cell[:], pbc=atoms.pbc,
+    ours = pyraycut.neighbor_list("ijdDS", x32, cutoff, cell=atoms.cell[:], pbc=atoms.pbc,
                                 method=method)
     theirs = ase_neighbor_list("ijdDS", atoms, cutoff)
     compare_periodic([np.asarray(a, np.float64) if k in (2, 3) else np.asarray(a, np.int64)
@@ -216,7 +216,7 @@ def test_drop_in_periodic_self_interaction_and_bulk():
                           (bulk("Si", "diamond", a=5.43, cubic=True), 4.0),
                           (bulk("Fe", "bcc", a=2.87).repeat((1, 2, 3)), 3.0)):
         for self_interaction in (False, True):
-            ours = raycut.ase.neighbor_list("ijdDS", atoms, cutoff,
+            ours = pyraycut.ase.neighbor_list("ijdDS", atoms, cutoff,
                                             self_interaction=self_interaction)
             theirs = ase_neighbor_list("ijdDS", atoms, cutoff, self_interaction=self_interaction)
             compare_periodic(ours, theirs, cutoff, atol=1e-9)
@@ -224,9 +224,9 @@ def test_drop_in_periodic_self_interaction_and_bulk():
             assert np.count_nonzero(own) == (len(atoms) if self_interaction else 0)
     # Letters in the order asked, one letter alone, on periodic Atoms too.
     atoms = bulk("Cu", "fcc", a=3.6)
-    S = raycut.ase.neighbor_list("S", atoms, 5.0)
+    S = pyraycut.ase.neighbor_list("S", atoms, 5.0)
     assert isinstance(S, np.ndarray) and S.dtype == np.int64 and S.shape[1] == 3
-    S2, i2 = raycut.ase.neighbor_list("Si", atoms, 5.0)
+    S2, i2 = pyraycut.ase.neighbor_list("Si", atoms, 5.0)
     assert np.array_equal(S2, S) and len(i2) == len(S)
 
 
@@ -237,7 +237,7 @@ def test_drop_in_far_along_an_open_axis():
         atoms = Atoms("H3", positions=[[1e6 + 0.0313, 0, 0], [1e6 + 1.0937, 0, 0],
                                        [1e6 + 2.0, 0.5, 0]], cell=[10.0, 10.0, 10.0], pbc=pbc)
         for cutoff in (1.01, 1.07):
-            got = raycut.ase.neighbor_list("ijS", atoms, cutoff)
+            got = pyraycut.ase.neighbor_list("ijS", atoms, cutoff)
             want = ase_neighbor_list("ijS", atoms, cutoff)
             assert sorted(zip(*[a.tolist() if a.ndim == 1 else map(tuple, a) for a in got])) == \
                 sorted(zip(*[a.tolist() if a.ndim == 1 else map(tuple, a) for a in want]))

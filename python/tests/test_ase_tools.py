@@ -1,12 +1,12 @@
-"""raycut.ase's ASE tools against ASE's own: per-atom and per-species cutoffs
-(raycut.ase.neighbor_list, raycut.neighbor_list), NeighborList, and the LennardJones calculator
+"""pyraycut.ase's ASE tools against ASE's own: per-atom and per-species cutoffs
+(pyraycut.ase.neighbor_list, pyraycut.neighbor_list), NeighborList, and the LennardJones calculator
 (energy, per-atom energies, forces, stress, per-atom stresses) on periodic, triclinic, slab and
 molecular systems."""
 import numpy as np
 import pytest
 
-import raycut
-import raycut.ase
+import pyraycut
+import pyraycut.ase
 
 ase = pytest.importorskip("ase", reason="ase is not installed (python/requirements.txt has it)")
 from ase import Atoms  # noqa: E402
@@ -80,7 +80,7 @@ MIXED = {
 def test_varying_cutoffs_match_ase(system, form, self_interaction):
     atoms = MIXED[system]()
     cutoff = cutoff_forms(atoms)[form]
-    ours = raycut.ase.neighbor_list("ijdS", atoms, cutoff, self_interaction=self_interaction)
+    ours = pyraycut.ase.neighbor_list("ijdS", atoms, cutoff, self_interaction=self_interaction)
     theirs = ase_neighbor_list("ijdS", atoms, cutoff if form != "species-radii" else
                                [cutoff[int(z)] for z in atoms.numbers],
                                self_interaction=self_interaction)
@@ -96,12 +96,12 @@ def test_raycut_neighbor_list_takes_varying_cutoffs(form):
     atoms = MIXED["periodic"]()
     cutoff = cutoff_forms(atoms)[form]
     for half in (False, True):
-        i, j, d, S = raycut.neighbor_list("ijdS", atoms.positions, cutoff, cell=atoms.cell[:],
+        i, j, d, S = pyraycut.neighbor_list("ijdS", atoms.positions, cutoff, cell=atoms.cell[:],
                                           pbc=True, numbers=atoms.numbers, half=half)
         assert d.dtype == np.float64 and i.dtype == np.int64  # float64 positions: float64 d
-        full = raycut.neighbor_list("ijdS", atoms.positions, 4.0, cell=atoms.cell[:], pbc=True,
+        full = pyraycut.neighbor_list("ijdS", atoms.positions, 4.0, cell=atoms.cell[:], pbc=True,
                                     half=half)
-        pair_cutoff = raycut._cutoffs.PairCutoffs(cutoff, len(atoms), atoms.numbers)
+        pair_cutoff = pyraycut._cutoffs.PairCutoffs(cutoff, len(atoms), atoms.numbers)
         keep = full[2] < pair_cutoff.of(full[0], full[1])
         np.testing.assert_array_equal(triples(i, j, S),
                                       triples(full[0][keep], full[1][keep], full[3][keep]))
@@ -112,20 +112,20 @@ def test_varying_cutoffs_bad_input():
     atoms = MIXED["molecule"]()
     x = atoms.positions
     with pytest.raises(ValueError, match="per-atom cutoffs for"):
-        raycut.neighbor_list("ij", x, [1.0] * (len(x) - 1))
+        pyraycut.neighbor_list("ij", x, [1.0] * (len(x) - 1))
     with pytest.raises(ValueError, match="needs the atomic numbers"):
-        raycut.neighbor_list("ij", x, {(1, 6): 1.2})
+        pyraycut.neighbor_list("ij", x, {(1, 6): 1.2})
     with pytest.raises(ValueError, match="no radius for species"):
-        raycut.ase.neighbor_list("ij", atoms, {6: 0.8})
+        pyraycut.ase.neighbor_list("ij", atoms, {6: 0.8})
     with pytest.raises(ValueError, match="not both"):
-        raycut.ase.neighbor_list("ij", atoms, {6: 0.8, (1, 1): 1.0})
+        pyraycut.ase.neighbor_list("ij", atoms, {6: 0.8, (1, 1): 1.0})
     with pytest.raises(ValueError, match="finite and >= 0"):
-        raycut.ase.neighbor_list("ij", atoms, [-1.0] * len(atoms))
+        pyraycut.ase.neighbor_list("ij", atoms, [-1.0] * len(atoms))
     with pytest.raises(ValueError, match="unknown chemical symbol"):
-        raycut.ase.neighbor_list("ij", atoms, {("C", "Xx"): 1.0})
+        pyraycut.ase.neighbor_list("ij", atoms, {("C", "Xx"): 1.0})
     # Symbols as ASE takes them.
-    by_symbol = raycut.ase.neighbor_list("ij", atoms, {("C", "H"): 1.2})
-    by_number = raycut.ase.neighbor_list("ij", atoms, {(6, 1): 1.2})
+    by_symbol = pyraycut.ase.neighbor_list("ij", atoms, {("C", "H"): 1.2})
+    by_number = pyraycut.ase.neighbor_list("ij", atoms, {(6, 1): 1.2})
     np.testing.assert_array_equal(by_symbol[0], by_number[0])
     np.testing.assert_array_equal(by_symbol[1], by_number[1])
 
@@ -157,7 +157,7 @@ def test_neighborlist_drop_in(system, bothways, self_interaction):
     atoms = MIXED[system]()
     cutoffs = natural_cutoffs(atoms)
     kw = dict(skin=0.2, self_interaction=self_interaction, bothways=bothways)
-    ours, theirs = raycut.ase.NeighborList(cutoffs, **kw), AseNeighborList(cutoffs, **kw)
+    ours, theirs = pyraycut.ase.NeighborList(cutoffs, **kw), AseNeighborList(cutoffs, **kw)
     assert ours.update(atoms) and theirs.update(atoms)
     mine, ref = neighbour_rows(ours, len(atoms)), neighbour_rows(theirs, len(atoms))
     assert len(mine) == len(ref) > 0
@@ -192,7 +192,7 @@ def test_neighborlist_drop_in(system, bothways, self_interaction):
 def test_neighborlist_sorted_and_errors():
     atoms = MIXED["periodic"]()
     cutoffs = natural_cutoffs(atoms)
-    ours = raycut.ase.NeighborList(cutoffs, sorted=True, bothways=True, self_interaction=False)
+    ours = pyraycut.ase.NeighborList(cutoffs, sorted=True, bothways=True, self_interaction=False)
     theirs = AseNeighborList(cutoffs, sorted=True, bothways=True, self_interaction=False)
     with pytest.raises(RuntimeError, match="update"):
         ours.get_neighbors(0)
@@ -202,9 +202,9 @@ def test_neighborlist_sorted_and_errors():
         for x, y in zip(ours.get_neighbors(a), theirs.get_neighbors(a)):
             np.testing.assert_array_equal(x, y)
     with pytest.raises(ValueError, match="Wrong number of cutoff radii"):
-        raycut.ase.NeighborList(cutoffs[:-1]).update(atoms)
+        pyraycut.ase.NeighborList(cutoffs[:-1]).update(atoms)
     with pytest.raises(ValueError, match="skin"):
-        raycut.ase.NeighborList(cutoffs, skin=-1.0)
+        pyraycut.ase.NeighborList(cutoffs, skin=-1.0)
 
 
 # ---- LennardJones ------------------------------------------------------------------------------
@@ -242,7 +242,7 @@ def test_lennard_jones_matches_ase(system, k):
     atoms.rattle(0.02, seed=k)
     ours_atoms = atoms.copy()
     atoms.calc = AseLennardJones(**params)
-    ours_atoms.calc = raycut.ase.LennardJones(**params)
+    ours_atoms.calc = pyraycut.ase.LennardJones(**params)
     rel = 1e-10 if params.get("smooth") else 2e-6
     scale = 24 * params["epsilon"] * 12  # ~ the sum of term magnitudes per atom (12 neighbours)
     e, e_ours = atoms.get_potential_energy(), ours_atoms.get_potential_energy()
@@ -266,14 +266,14 @@ def test_lennard_jones_matches_ase(system, k):
 
 
 def test_lennard_jones_defaults_and_bad_parameters():
-    calc = raycut.ase.LennardJones(sigma=2.0)
+    calc = pyraycut.ase.LennardJones(sigma=2.0)
     assert calc.parameters.rc == 6.0 and calc.parameters.ro == pytest.approx(0.66 * 6.0)
     with pytest.raises(ValueError, match="rc"):
-        raycut.ase.LennardJones(rc=0.0)
+        pyraycut.ase.LennardJones(rc=0.0)
     with pytest.raises(ValueError, match="ro"):
-        raycut.ase.LennardJones(rc=2.0, ro=2.5, smooth=True)
+        pyraycut.ase.LennardJones(rc=2.0, ro=2.5, smooth=True)
     with pytest.raises(ValueError, match="sigma"):
-        raycut.ase.LennardJones(sigma=float("nan"))
+        pyraycut.ase.LennardJones(sigma=float("nan"))
 
 
 # ---- per-atom sums of the fused pass (lj_forces) ------------------------------------------------
@@ -301,7 +301,7 @@ def test_lj_forces_per_atom_sums_against_float64_brute_force():
     pa, pb = [0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]
     virial = np.array([(-D[:, :, pa[k]] * f[:, :, pb[k]])[upper].sum() for k in range(6)])
     magnitude = (4 * eps * u * (u + 1))[upper].sum()
-    engine = raycut.Engine("cell-list")
+    engine = pyraycut.Engine("cell-list")
     engine.build(x, rc)
     for shifted in (False, True):
         out = engine.compute("lj_forces", lj_epsilon=eps, lj_sigma=sigma, lj_shift=shifted)
@@ -320,9 +320,9 @@ def test_pair_cutoffs_of_absent_species_do_not_widen_the_search():
     """A cutoff for species not in the system (U-U at 50 here) leaves the search at the largest
     cutoff among the species present: the same pairs, found at 1.3, not at 50."""
     atoms = MIXED["molecule"]()
-    cutoffs = raycut._cutoffs.PairCutoffs({(6, 6): 1.6, (1, 6): 1.2, (92, 92): 50.0}, len(atoms),
+    cutoffs = pyraycut._cutoffs.PairCutoffs({(6, 6): 1.6, (1, 6): 1.2, (92, 92): 50.0}, len(atoms),
                                           atoms.numbers)
     assert cutoffs.search == 1.6
-    ours = raycut.ase.neighbor_list("ij", atoms, {(6, 6): 1.6, (1, 6): 1.2, (92, 92): 50.0})
+    ours = pyraycut.ase.neighbor_list("ij", atoms, {(6, 6): 1.6, (1, 6): 1.2, (92, 92): 50.0})
     theirs = ase_neighbor_list("ij", atoms, {(6, 6): 1.6, (1, 6): 1.2, (92, 92): 50.0})
     assert sorted(zip(*ours)) == sorted(zip(*(a.tolist() for a in theirs))) != []

@@ -1,4 +1,4 @@
-"""`raycut neighbours` (the command-line tool) against raycut.neighbor_list: its .npz, read by
+"""`raycut neighbours` (the command-line tool) against pyraycut.neighbor_list: its .npz, read by
 NumPy, and its .csv hold the same pairs, dtypes and values. The tool is found through
 $RAYCUT_CLI, next to the build's Python package (build/apps/raycut), or on PATH."""
 import os
@@ -9,12 +9,12 @@ import subprocess
 import numpy as np
 import pytest
 
-import raycut
+import pyraycut
 
 
 def find_cli():
     candidates = [os.environ.get("RAYCUT_CLI"),
-                  pathlib.Path(raycut.__file__).resolve().parents[2] / "apps" / "raycut",
+                  pathlib.Path(pyraycut.__file__).resolve().parents[2] / "apps" / "raycut",
                   shutil.which("raycut")]
     for c in candidates:
         if c and pathlib.Path(c).is_file() and os.access(c, os.X_OK):
@@ -55,7 +55,7 @@ def test_npz_equals_neighbor_list(tmp_path, half, periodic):
     got = np.load(tmp_path / "pairs.npz")
     assert sorted(got.files) == ["D", "S", "d", "i", "j"]
     kw = dict(cell=cell, pbc=[True, True, False]) if periodic else {}
-    want = raycut.neighbor_list("ijdDS", x, 1.7, half=half, method="cell-list", **kw)
+    want = pyraycut.neighbor_list("ijdDS", x, 1.7, half=half, method="cell-list", **kw)
     assert len(want[0]) > 300
     for letter, w in zip("ijdDS", want):
         assert got[letter].dtype == w.dtype and got[letter].shape == w.shape, letter
@@ -75,7 +75,7 @@ def test_csv_and_letters(tmp_path):
     text = (tmp_path / "pairs.csv").read_text().splitlines()
     assert text[0] == "j,i,d"
     table = np.loadtxt(tmp_path / "pairs.csv", delimiter=",", skiprows=1, ndmin=2)
-    j, i, d = raycut.neighbor_list("jid", x, 1.2, method="cell-list")
+    j, i, d = pyraycut.neighbor_list("jid", x, 1.2, method="cell-list")
     assert len(table) == len(i) > 0
     order = np.lexsort((table[:, 0], table[:, 1]))
     want = np.lexsort((j, i))
@@ -94,4 +94,4 @@ def test_csv_and_letters(tmp_path):
 
 def test_version():
     code, out, _ = run("--version")
-    assert code == 0 and out.strip() == f"raycut {raycut.__version__}"
+    assert code == 0 and out.strip() == f"raycut {pyraycut.__version__}"

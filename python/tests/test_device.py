@@ -6,9 +6,9 @@ import pytest
 from conftest import (AVAILABLE, CUTOFF, DEVICE_METHODS, INPUTS, SYSTEM_METHODS, cupy_cuda, pair_set,
                       torch_cuda, uniform)
 
-import raycut
+import pyraycut
 
-if not raycut.cuda_available():
+if not pyraycut.cuda_available():
     pytest.skip("raycut was built without CUDA or no CUDA device is usable here",
                 allow_module_level=True)
 
@@ -26,8 +26,8 @@ def sorted_rows(i, j, *rest):
 def test_torch_equals_host(method, family):
     torch = torch_cuda()
     x = INPUTS[family]()
-    host = raycut.neighbor_list("ijdD", x, CUTOFF, method=method)
-    out = raycut.neighbor_list("ijdD", torch.from_numpy(x).cuda(), CUTOFF, method=method)
+    host = pyraycut.neighbor_list("ijdD", x, CUTOFF, method=method)
+    out = pyraycut.neighbor_list("ijdD", torch.from_numpy(x).cuda(), CUTOFF, method=method)
     for t, dtype in zip(out, (torch.int64, torch.int64, torch.float32, torch.float32)):
         assert isinstance(t, torch.Tensor) and t.device.type == "cuda" and t.dtype == dtype
     got = sorted_rows(*(t.cpu().numpy() for t in out))
@@ -44,10 +44,10 @@ def test_torch_zero_copy(method):
     x = torch.from_numpy(uniform(2000)).cuda()
     torch.cuda.synchronize()
     before = torch.cuda.memory_allocated()
-    engine = raycut.Engine(method)
+    engine = pyraycut.Engine(method)
     engine.build(x, CUTOFF)
     offsets, indices, d = engine.neighbours(distances=True)
-    i, j, D = raycut.neighbor_list("ijD", x, CUTOFF, method=method)
+    i, j, D = pyraycut.neighbor_list("ijD", x, CUTOFF, method=method)
     # The outputs are the library's device memory, wrapped: torch's allocator holds none of it,
     # and nothing went through the host.
     assert torch.cuda.memory_allocated() == before
@@ -57,9 +57,9 @@ def test_torch_zero_copy(method):
     assert offsets.dtype == torch.int64 and indices.dtype == torch.int32
     # The tensors are views of the extension's arrays (which wrap the list's own buffer), whose
     # DLPack device is CUDA.
-    with raycut._arrays.device_context(engine._like):
+    with pyraycut._arrays.device_context(engine._like):
         raw = engine._engine.neighbours(False, True, False, False)
-    raw = [raycut._arrays.dlpack_object(a, engine._like) for a in raw]
+    raw = [pyraycut._arrays.dlpack_object(a, engine._like) for a in raw]
     assert raw[0].__dlpack_device__()[0] == 2  # kDLCUDA
     first = torch.from_dlpack(raw[1])
     assert first.data_ptr() != 0
@@ -79,9 +79,9 @@ def test_torch_zero_copy(method):
 def test_torch_engine_equals_host(method):
     torch = torch_cuda()
     x = uniform(1500)
-    host = raycut.Engine(method)
+    host = pyraycut.Engine(method)
     host.build(x, 0.12)
-    dev = raycut.Engine(method)
+    dev = pyraycut.Engine(method)
     dev.build(torch.from_numpy(x).cuda().requires_grad_(), 0.12)  # grad: detached, still fine
     def close(got, want):  # float sums in another order: errors relative to the largest term
         want = np.asarray(want, np.float64)
@@ -117,23 +117,23 @@ def test_torch_input_errors():
     torch = torch_cuda()
     x = torch.from_numpy(uniform(100)).cuda()
     with pytest.raises(ValueError, match="float32"):
-        raycut.neighbor_list("ij", x.double(), CUTOFF)
+        pyraycut.neighbor_list("ij", x.double(), CUTOFF)
     with pytest.raises(ValueError, match="C-contiguous"):
-        raycut.neighbor_list("ij", x.t().contiguous().t(), CUTOFF)
+        pyraycut.neighbor_list("ij", x.t().contiguous().t(), CUTOFF)
     with pytest.raises(ValueError, match="shape"):
-        raycut.neighbor_list("ij", x[:, :2].contiguous(), CUTOFF)
+        pyraycut.neighbor_list("ij", x[:, :2].contiguous(), CUTOFF)
     bad = x.clone()
     bad[7, 2] = float("nan")
     with pytest.raises(ValueError, match="index 7"):
-        raycut.neighbor_list("ij", bad, CUTOFF)
+        pyraycut.neighbor_list("ij", bad, CUTOFF)
 
 
 @pytest.mark.parametrize("method", METHODS)
 def test_cupy_equals_host(method):
     cupy = cupy_cuda()
     x = INPUTS["clustered"]()
-    host = raycut.neighbor_list("ijd", x, CUTOFF, method=method)
-    out = raycut.neighbor_list("ijd", cupy.asarray(x), CUTOFF, method=method)
+    host = pyraycut.neighbor_list("ijd", x, CUTOFF, method=method)
+    out = pyraycut.neighbor_list("ijd", cupy.asarray(x), CUTOFF, method=method)
     for a in out:
         assert isinstance(a, cupy.ndarray)
     got = sorted_rows(*(a.get() for a in out))
@@ -141,7 +141,7 @@ def test_cupy_equals_host(method):
     np.testing.assert_array_equal(got[0], want[0])
     np.testing.assert_array_equal(got[1], want[1])
     np.testing.assert_allclose(got[2], want[2], rtol=1e-6)
-    engine = raycut.Engine(method)
+    engine = pyraycut.Engine(method)
     engine.build(cupy.asarray(x), CUTOFF)
     count = engine.compute("count")["count"]
     assert isinstance(count, cupy.ndarray)
@@ -157,9 +157,9 @@ def test_cuda_array_interface_only():
             self.a = a
             self.__cuda_array_interface__ = a.__cuda_array_interface__
 
-    i, j = raycut.neighbor_list("ij", Foreign(x), CUTOFF)
+    i, j = pyraycut.neighbor_list("ij", Foreign(x), CUTOFF)
     i, j = cupy.from_dlpack(i), cupy.from_dlpack(j)  # DLPack-capable device arrays
-    assert pair_set(i.get(), j.get()) == pair_set(*raycut.neighbor_list("ij", x.get(), CUTOFF))
+    assert pair_set(i.get(), j.get()) == pair_set(*pyraycut.neighbor_list("ij", x.get(), CUTOFF))
 
 
 def test_jax_equals_host():
@@ -171,10 +171,10 @@ def test_jax_equals_host():
     if not gpus:
         pytest.skip("JAX sees no GPU")
     x = uniform(800)
-    i, j, d = raycut.neighbor_list("ijd", jax.device_put(x, gpus[0]), CUTOFF)
+    i, j, d = pyraycut.neighbor_list("ijd", jax.device_put(x, gpus[0]), CUTOFF)
     assert isinstance(i, jax.Array) and next(iter(i.devices())).platform == "gpu"
     got = sorted_rows(np.asarray(i), np.asarray(j), np.asarray(d))
-    want = sorted_rows(*raycut.neighbor_list("ijd", x, CUTOFF))
+    want = sorted_rows(*pyraycut.neighbor_list("ijd", x, CUTOFF))
     np.testing.assert_array_equal(got[0], want[0])
     np.testing.assert_array_equal(got[1], want[1])
 
@@ -184,7 +184,7 @@ def test_all_methods_agree_on_device():
     x = torch.from_numpy(INPUTS["coincident"]()).cuda()
     ref = None
     for method in AVAILABLE:
-        pairs = pair_set(*(t.cpu().numpy() for t in raycut.neighbor_list("ij", x, CUTOFF,
+        pairs = pair_set(*(t.cpu().numpy() for t in pyraycut.neighbor_list("ij", x, CUTOFF,
                                                                          method=method)))
         ref = pairs if ref is None else ref
         assert pairs == ref, method
@@ -235,12 +235,12 @@ def same_triples(got, want):
 def test_torch_periodic_batch_equals_host(method):
     torch = torch_cuda()
     x, batch, cells, pbc, cutoff = periodic_batch()
-    host = raycut.neighbor_list("ijSdD", x, cutoff, cell=cells, pbc=pbc, batch=batch,
+    host = pyraycut.neighbor_list("ijSdD", x, cutoff, cell=cells, pbc=pbc, batch=batch,
                                 method=method)
     xd = torch.from_numpy(x).cuda()
     torch.cuda.synchronize()
     before = torch.cuda.memory_allocated()
-    out = raycut.neighbor_list("ijSdD", xd, cutoff, cell=torch.from_numpy(cells).cuda(),
+    out = pyraycut.neighbor_list("ijSdD", xd, cutoff, cell=torch.from_numpy(cells).cuda(),
                                pbc=torch.from_numpy(pbc), batch=torch.from_numpy(batch).cuda(),
                                method=method)
     for t, dtype in zip(out, (torch.int64, torch.int64, torch.int32, torch.float32,
@@ -251,10 +251,10 @@ def test_torch_periodic_batch_equals_host(method):
         assert torch.cuda.memory_allocated() == before
     same_triples([t.cpu().numpy() for t in out], host)
     assert any(a == b for a, b in zip(host[0].tolist(), host[1].tolist())), "self-images"
-    half = raycut.neighbor_list("ijS", xd, cutoff, cell=cells, pbc=pbc, batch=batch, half=True,
+    half = pyraycut.neighbor_list("ijS", xd, cutoff, cell=cells, pbc=pbc, batch=batch, half=True,
                                 method=method)
     same_triples([t.cpu().numpy() for t in half],
-                 raycut.neighbor_list("ijS", x, cutoff, cell=cells, pbc=pbc, batch=batch,
+                 pyraycut.neighbor_list("ijS", x, cutoff, cell=cells, pbc=pbc, batch=batch,
                                       half=True, method=method))
 
 
@@ -263,7 +263,7 @@ def test_torch_cuda_batch_index(dtype):
     """A CUDA batch index is checked and turned into offsets on the device: the same offsets and
     errors as the host path, empty systems (leading, inner, trailing) included."""
     torch = torch_cuda()
-    from raycut import _systems
+    from pyraycut import _systems
 
     host = np.array([1, 1, 3, 3, 3, 4, 6], np.int64)
     b = torch.from_numpy(host.astype(dtype)).cuda()
@@ -294,7 +294,7 @@ def test_torch_padded_shifts_equal_host(method):
     torch = torch_cuda()
     x, batch, cells, pbc, cutoff = periodic_batch()
     x, cell = x[batch == 2], cells[2]
-    host, dev = raycut.Engine(method), raycut.Engine(method)
+    host, dev = pyraycut.Engine(method), pyraycut.Engine(method)
     host.build(x, cutoff, cell=cell, pbc=pbc[2])
     dev.build(torch.from_numpy(x).cuda(), cutoff, cell=cell, pbc=pbc[2])
     k = int(host.compute("count")["count"].max()) + 2
@@ -319,9 +319,9 @@ def test_torch_radius_equals_host(method):
     torch = torch_cuda()
     x, batch, cells, pbc, cutoff = periodic_batch(1)
     q, bq, _, _, _ = periodic_batch(2)
-    host = raycut.radius(x, q, cutoff, cell=cells, pbc=pbc, batch_points=batch,
+    host = pyraycut.radius(x, q, cutoff, cell=cells, pbc=pbc, batch_points=batch,
                          batch_queries=bq, method=method, quantities="ijSD")
-    out = raycut.radius(torch.from_numpy(x).cuda(), torch.from_numpy(q).cuda(), cutoff,
+    out = pyraycut.radius(torch.from_numpy(x).cuda(), torch.from_numpy(q).cuda(), cutoff,
                         cell=cells, pbc=pbc, batch_points=torch.from_numpy(batch).cuda(),
                         batch_queries=torch.from_numpy(bq).cuda(), method=method,
                         quantities="ijSD")
@@ -333,9 +333,9 @@ def test_torch_radius_equals_host(method):
 def test_cupy_periodic_equals_host(method):
     cupy = cupy_cuda()
     x, batch, cells, pbc, cutoff = periodic_batch(3)
-    host = raycut.neighbor_list("ijSd", x, cutoff, cell=cells, pbc=pbc, batch=batch,
+    host = pyraycut.neighbor_list("ijSd", x, cutoff, cell=cells, pbc=pbc, batch=batch,
                                 method=method)
-    out = raycut.neighbor_list("ijSd", cupy.asarray(x), cutoff, cell=cupy.asarray(cells),
+    out = pyraycut.neighbor_list("ijSd", cupy.asarray(x), cutoff, cell=cupy.asarray(cells),
                                pbc=pbc, batch=cupy.asarray(batch), method=method)
     assert all(isinstance(a, cupy.ndarray) for a in out)
     same_triples([a.get() for a in out], host)
@@ -350,7 +350,7 @@ def test_torch_cuda_periodic_gradcheck(method):
     cd = torch.tensor(cells[2], dtype=torch.float64, device="cuda", requires_grad=True)
 
     def f(x, c):
-        i, d, D = raycut.neighbor_list("idD", x, cutoff, cell=c, pbc=pbc[2], method=method)
+        i, d, D = pyraycut.neighbor_list("idD", x, cutoff, cell=c, pbc=pbc[2], method=method)
         energy = torch.zeros(len(x), dtype=d.dtype, device=d.device).index_add(0, i, d.cos())
         field = torch.zeros(len(x), 3, dtype=D.dtype, device=D.device).index_add(0, i, D.sin())
         return energy, field

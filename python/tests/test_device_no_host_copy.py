@@ -1,4 +1,4 @@
-"""No host round trip for device inputs: with CUDA PyTorch positions, raycut.neighbor_list returns
+"""No host round trip for device inputs: with CUDA PyTorch positions, pyraycut.neighbor_list returns
 CUDA tensors over the library's own device memory, and the PyTorch profiler (CUPTI, which records
 every memcpy of the process, the library's included) shows no device-to-host copy of positions,
 pairs or per-particle arrays during the call.
@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from conftest import torch_cuda
 
-import raycut
+import pyraycut
 
 DENSITY, CUTOFF = 0.8442, 2.5  # the LJ liquid of the benchmarks: ~55 neighbours each
 
@@ -79,9 +79,9 @@ def test_neighbor_list_keeps_device_data_on_the_device(tmp_path, batched, cache)
     cell = [side] * 3
 
     def call():
-        return raycut.neighbor_list("ijS", x, CUTOFF, cell=cell, pbc=True, batch=batch)
+        return pyraycut.neighbor_list("ijS", x, CUTOFF, cell=cell, pbc=True, batch=batch)
 
-    raycut.set_engine_cache(cache)
+    pyraycut.set_engine_cache(cache)
     try:
         call()  # warm-up: CUDA context, modules, the cached engine
         torch.cuda.synchronize()
@@ -89,7 +89,7 @@ def test_neighbor_list_keeps_device_data_on_the_device(tmp_path, batched, cache)
         (i, j, S), copies, kernels = profiled(torch, tmp_path, call)
         after = torch.cuda.memory_allocated()
     finally:
-        raycut.set_engine_cache(True)
+        pyraycut.set_engine_cache(True)
     pairs = len(i)
     print(f"\nN = {n}, P = {pairs}, batched = {batched}, cache = {cache}: DtoH copies during "
           f"the call (bytes, name): {copies}; {kernels} kernels")
@@ -112,7 +112,7 @@ def test_device_batch_index_matches_the_host_one():
     """The CUDA batch index path (validated and turned into offsets on the device) gives the host
     path's offsets and raises its errors, word for word."""
     torch = torch_cuda()
-    from raycut import _systems
+    from pyraycut import _systems
 
     rng = np.random.default_rng(7)
     index = np.sort(rng.choice([0, 2, 3, 3, 6], 300))  # systems 1, 4 and 5 empty

@@ -7,18 +7,18 @@ import numpy as np
 import pytest
 from conftest import CUTOFF, SYSTEM_METHODS, assert_same_pairs, uniform
 
-import raycut
+import pyraycut
 
 
 @pytest.fixture(autouse=True)
 def fresh_cache():
-    raycut.set_engine_cache(True)
+    pyraycut.set_engine_cache(True)
     yield
-    raycut.set_engine_cache(True)
+    pyraycut.set_engine_cache(True)
 
 
 def cached():
-    return dict(raycut._ENGINES)
+    return dict(pyraycut._ENGINES)
 
 
 def rows(out):
@@ -29,12 +29,12 @@ def rows(out):
 
 def test_outputs_survive_later_calls(method):
     x, y = uniform(500, seed=1), uniform(700, seed=2)
-    i, j, d = raycut.neighbor_list("ijd", x, CUTOFF, method=method)
+    i, j, d = pyraycut.neighbor_list("ijd", x, CUTOFF, method=method)
     kept = [a.copy() for a in (i, j, d)]
-    assert list(cached()) == [(method, raycut._raycut.current_device())]
-    engine = cached()[(method, raycut._raycut.current_device())]
-    i2, j2 = raycut.neighbor_list("ij", y, CUTOFF, method=method)
-    assert cached()[(method, raycut._raycut.current_device())] is engine  # reused
+    assert list(cached()) == [(method, pyraycut._raycut.current_device())]
+    engine = cached()[(method, pyraycut._raycut.current_device())]
+    i2, j2 = pyraycut.neighbor_list("ij", y, CUTOFF, method=method)
+    assert cached()[(method, pyraycut._raycut.current_device())] is engine  # reused
     for a, b in zip((i, j, d), kept):
         np.testing.assert_array_equal(a, b)
     assert_same_pairs(i, j, x, CUTOFF)
@@ -42,24 +42,24 @@ def test_outputs_survive_later_calls(method):
     if method not in SYSTEM_METHODS:  # grid-paper, optix-*: no query points (docs/methods.md)
         return
     # radius shares it: a query build after a plain one, and a plain one after that.
-    qi, qj = raycut.radius(x, y[:50], CUTOFF, method=method)
+    qi, qj = pyraycut.radius(x, y[:50], CUTOFF, method=method)
     assert len(qi) > 0 and np.all(np.diff(qi) >= 0)
-    i3, j3 = raycut.neighbor_list("ij", x, CUTOFF, method=method)
+    i3, j3 = pyraycut.neighbor_list("ij", x, CUTOFF, method=method)
     assert_same_pairs(i3, j3, x, CUTOFF)
 
 
 def test_periodic_then_open_then_batch_on_one_engine(system_method):
     x = uniform(300, seed=3)
     cell = np.eye(3)
-    a = raycut.neighbor_list("ijS", x, 0.3, cell=cell, pbc=True, method=system_method)
-    b = raycut.neighbor_list("ij", x, 0.3, method=system_method)
+    a = pyraycut.neighbor_list("ijS", x, 0.3, cell=cell, pbc=True, method=system_method)
+    b = pyraycut.neighbor_list("ij", x, 0.3, method=system_method)
     batch = np.repeat([0, 1, 2], 100)
-    c = raycut.neighbor_list("ij", x, 0.3, batch=batch, method=system_method)
+    c = pyraycut.neighbor_list("ij", x, 0.3, batch=batch, method=system_method)
     assert len(cached()) == 1
-    raycut.set_engine_cache(False)
-    a0 = raycut.neighbor_list("ijS", x, 0.3, cell=cell, pbc=True, method=system_method)
-    b0 = raycut.neighbor_list("ij", x, 0.3, method=system_method)
-    c0 = raycut.neighbor_list("ij", x, 0.3, batch=batch, method=system_method)
+    pyraycut.set_engine_cache(False)
+    a0 = pyraycut.neighbor_list("ijS", x, 0.3, cell=cell, pbc=True, method=system_method)
+    b0 = pyraycut.neighbor_list("ij", x, 0.3, method=system_method)
+    c0 = pyraycut.neighbor_list("ij", x, 0.3, batch=batch, method=system_method)
     assert not cached()
     for got, want in ((a, a0), (b, b0), (c, c0)):
         assert rows(got) == rows(want)
@@ -68,40 +68,40 @@ def test_periodic_then_open_then_batch_on_one_engine(system_method):
 
 def test_a_failed_call_leaves_no_engine():
     x = uniform(100)
-    raycut.neighbor_list("ij", x, CUTOFF, method="cell-list")
+    pyraycut.neighbor_list("ij", x, CUTOFF, method="cell-list")
     assert len(cached()) == 1
     bad = x.copy()
     bad[3, 0] = np.nan
     with pytest.raises(ValueError, match="3"):
-        raycut.neighbor_list("ij", bad, CUTOFF, method="cell-list")
+        pyraycut.neighbor_list("ij", bad, CUTOFF, method="cell-list")
     assert not cached()  # taken out for the call, dropped when it raised
-    i, j = raycut.neighbor_list("ij", x, CUTOFF, method="cell-list")
+    i, j = pyraycut.neighbor_list("ij", x, CUTOFF, method="cell-list")
     assert_same_pairs(i, j, x, CUTOFF)
     assert len(cached()) == 1
 
 
 def test_clear_and_turn_off():
     x = uniform(100)
-    raycut.neighbor_list("ij", x, CUTOFF, method="cell-list")
-    raycut.neighbor_list("ij", x, CUTOFF, method="brute-force")
+    pyraycut.neighbor_list("ij", x, CUTOFF, method="cell-list")
+    pyraycut.neighbor_list("ij", x, CUTOFF, method="brute-force")
     assert {k[0] for k in cached()} == {"cell-list", "brute-force"}
-    raycut.clear_engine_cache()
+    pyraycut.clear_engine_cache()
     assert not cached()
-    raycut.set_engine_cache(False)
-    raycut.neighbor_list("ij", x, CUTOFF, method="cell-list")
-    raycut.radius(x, x[:10], CUTOFF, method="cell-list")
+    pyraycut.set_engine_cache(False)
+    pyraycut.neighbor_list("ij", x, CUTOFF, method="cell-list")
+    pyraycut.radius(x, x[:10], CUTOFF, method="cell-list")
     assert not cached()
 
 
 def test_threads_get_engines_of_their_own():
     inputs = [uniform(400 + 50 * k, seed=10 + k) for k in range(4)]
-    want = [raycut.neighbor_list("ij", x, CUTOFF, method="cell-list") for x in inputs]
+    want = [pyraycut.neighbor_list("ij", x, CUTOFF, method="cell-list") for x in inputs]
     errors, results = [], {}
 
     def work(k):
         try:
             for _ in range(5):
-                results[k] = raycut.neighbor_list("ij", inputs[k], CUTOFF, method="cell-list")
+                results[k] = pyraycut.neighbor_list("ij", inputs[k], CUTOFF, method="cell-list")
                 got = results[k]
                 assert len(got[0]) == len(want[k][0])
         except Exception as e:  # noqa: BLE001  reported below

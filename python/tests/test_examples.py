@@ -107,9 +107,9 @@ def test_torch_aoti_runner_without_python(tmp_path):
     import sys
 
     torch = pytest.importorskip("torch", reason="PyTorch is not installed")
-    import raycut
+    import pyraycut
 
-    if raycut._torch_ops() is None:
+    if pyraycut._torch_ops() is None:
         pytest.skip("raycut's PyTorch operators are not built (the build's Python had no torch)")
     if shutil.which("cmake") is None or shutil.which("c++") is None:
         pytest.skip("cmake or a C++ compiler is missing")
@@ -122,7 +122,7 @@ def test_torch_aoti_runner_without_python(tmp_path):
                     ["cmake", "--build", str(build), "-j2"]):
         subprocess.run(command, check=True, capture_output=True)
     for side in ("5", "7"):  # two N through one package
-        out = subprocess.run([str(build / "torch_aoti_runner"), package, raycut.load_torch_ops(),
+        out = subprocess.run([str(build / "torch_aoti_runner"), package, pyraycut.load_torch_ops(),
                               side], capture_output=True, text=True)
         assert out.returncode == 0, out.stdout + out.stderr
         words = out.stdout.split()

@@ -4,23 +4,23 @@ import numpy as np
 import pytest
 from conftest import AVAILABLE, CUTOFF, INPUTS, assert_same_pairs, brute_force, pair_set, uniform
 
-import raycut
+import pyraycut
 
 
 def test_methods():
-    rows = raycut.methods()
+    rows = pyraycut.methods()
     assert [set(r) for r in rows] == [{"name", "summary", "available", "why"}] * len(rows)
     names = [r["name"] for r in rows]
     assert "brute-force" in names and "cell-list" in names
     for r in rows:
         assert r["available"] == (r["why"] == ""), r
-    assert raycut.auto_method() in AVAILABLE
+    assert pyraycut.auto_method() in AVAILABLE
 
 
 @pytest.mark.parametrize("family", sorted(INPUTS))
 def test_neighbor_list_vs_brute_force(method, family):
     x = INPUTS[family]()
-    i, j = raycut.neighbor_list("ij", x, CUTOFF, method=method)
+    i, j = pyraycut.neighbor_list("ij", x, CUTOFF, method=method)
     assert isinstance(i, np.ndarray) and i.dtype == np.int64 and j.dtype == np.int64
     assert np.all(np.diff(i) >= 0), "i is sorted"
     assert_same_pairs(i, j, x, CUTOFF)
@@ -29,8 +29,8 @@ def test_neighbor_list_vs_brute_force(method, family):
 @pytest.mark.parametrize("family", ["uniform", "coincident", "empty", "single"])
 def test_half_is_full_halved(method, family):
     x = INPUTS[family]()
-    full = pair_set(*raycut.neighbor_list("ij", x, CUTOFF, method=method))
-    i, j = raycut.neighbor_list("ij", x, CUTOFF, half=True, method=method)
+    full = pair_set(*pyraycut.neighbor_list("ij", x, CUTOFF, method=method))
+    i, j = pyraycut.neighbor_list("ij", x, CUTOFF, half=True, method=method)
     assert np.all(i < j)
     assert pair_set(i, j) == {(a, b) for a, b in full if a < b}
     assert 2 * len(i) == len(full)
@@ -39,8 +39,8 @@ def test_half_is_full_halved(method, family):
 
 def test_quantities_order_and_single_letter(method):
     x = uniform(300)
-    i, j, d, D = raycut.neighbor_list("ijdD", x, CUTOFF, method=method)
-    D2, j2, i2, d2 = raycut.neighbor_list("Djid", x, CUTOFF, method=method)
+    i, j, d, D = pyraycut.neighbor_list("ijdD", x, CUTOFF, method=method)
+    D2, j2, i2, d2 = pyraycut.neighbor_list("Djid", x, CUTOFF, method=method)
     # Row order within a row is unspecified: compare as sorted (i, j) records.
     a = np.lexsort((j, i))
     b = np.lexsort((j2, i2))
@@ -48,14 +48,14 @@ def test_quantities_order_and_single_letter(method):
     np.testing.assert_array_equal(j[a], j2[b])
     np.testing.assert_array_equal(d[a], d2[b])
     np.testing.assert_array_equal(D[a], D2[b])
-    only = raycut.neighbor_list("d", x, CUTOFF, method=method)
+    only = pyraycut.neighbor_list("d", x, CUTOFF, method=method)
     assert isinstance(only, np.ndarray) and only.shape == d.shape
 
 
 @pytest.mark.parametrize("half", [False, True])
 def test_distances_and_vectors_match_positions(method, half):
     x = INPUTS["clustered"]()
-    i, j, d, D = raycut.neighbor_list("ijdD", x, CUTOFF, half=half, method=method)
+    i, j, d, D = pyraycut.neighbor_list("ijdD", x, CUTOFF, half=half, method=method)
     assert d.dtype == np.float32 and D.dtype == np.float32 and D.shape == (len(i), 3)
     np.testing.assert_allclose(D, x[j] - x[i], rtol=0, atol=1e-6)
     np.testing.assert_allclose(d, np.linalg.norm(D.astype(np.float64), axis=1), rtol=1e-5,
@@ -65,16 +65,16 @@ def test_distances_and_vectors_match_positions(method, half):
 
 def test_float64_and_lists_are_converted(method):
     x = uniform(200)
-    ref = pair_set(*raycut.neighbor_list("ij", x, CUTOFF, method=method))
-    assert pair_set(*raycut.neighbor_list("ij", x.astype(np.float64), CUTOFF, method=method)) == ref
-    assert pair_set(*raycut.neighbor_list("ij", x.tolist(), CUTOFF, method=method)) == ref
+    ref = pair_set(*pyraycut.neighbor_list("ij", x, CUTOFF, method=method))
+    assert pair_set(*pyraycut.neighbor_list("ij", x.astype(np.float64), CUTOFF, method=method)) == ref
+    assert pair_set(*pyraycut.neighbor_list("ij", x.tolist(), CUTOFF, method=method)) == ref
     fortran = np.asfortranarray(x)
-    assert pair_set(*raycut.neighbor_list("ij", fortran, CUTOFF, method=method)) == ref
+    assert pair_set(*pyraycut.neighbor_list("ij", fortran, CUTOFF, method=method)) == ref
 
 
 def test_engine_count_matches_list_rows(method):
     x = INPUTS["clustered"]()
-    engine = raycut.Engine(method)
+    engine = pyraycut.Engine(method)
     engine.build(x, CUTOFF)
     assert engine.method == method and engine.size == len(x)
     count = engine.compute("count")["count"]
@@ -90,7 +90,7 @@ def test_engine_count_matches_list_rows(method):
 
 def test_engine_neighbours_options(method):
     x = uniform(300)
-    engine = raycut.Engine(method)
+    engine = pyraycut.Engine(method)
     engine.build(x, CUTOFF)
     offsets, indices, d, D = engine.neighbours(half=True, distances=True, vectors=True)
     rows = np.repeat(np.arange(len(x)), np.diff(offsets))
@@ -106,7 +106,7 @@ def test_engine_neighbours_options(method):
 
 def test_engine_kernels(method):
     x = uniform(400)
-    engine = raycut.Engine(method)
+    engine = pyraycut.Engine(method)
     engine.build(x, 0.15)
     out = engine.compute("smooth")
     assert set(out) == {"energy", "force"}
@@ -129,7 +129,7 @@ def test_engine_kernels(method):
 
 def test_engine_empty_and_single(method):
     for x in (INPUTS["empty"](), INPUTS["single"]()):
-        engine = raycut.Engine(method)
+        engine = pyraycut.Engine(method)
         engine.build(x, CUTOFF)
         n = len(x)
         out = engine.compute("lj_forces")
@@ -143,7 +143,7 @@ def test_engine_empty_and_single(method):
 
 def test_padded_overflow_report(method):
     x = INPUTS["clustered"]()
-    engine = raycut.Engine(method)
+    engine = pyraycut.Engine(method)
     engine.build(x, CUTOFF)
     count = engine.compute("count")["count"]
     k = max(1, int(np.median(count)))
@@ -152,9 +152,9 @@ def test_padded_overflow_report(method):
     np.testing.assert_array_equal(counts, count)
     assert report["overflowed"] and report["overflowed_rows"] == int(np.sum(count > k))
     assert report["largest_count"] == int(count.max())
-    with pytest.raises(raycut.CapacityError, match="grow K"):
+    with pytest.raises(pyraycut.CapacityError, match="grow K"):
         engine.padded_neighbours(k, raise_on_overflow=True)
-    assert issubclass(raycut.CapacityError, RuntimeError)
+    assert issubclass(pyraycut.CapacityError, RuntimeError)
     # Grown to the largest count: every row whole, padded with N.
     idx, counts, report = engine.padded_neighbours(report["largest_count"], True)
     assert not report["overflowed"]
@@ -170,29 +170,29 @@ def test_errors():
     bad = x.copy()
     bad[3, 1] = np.nan
     with pytest.raises(ValueError, match="index 3"):
-        raycut.neighbor_list("ij", bad, CUTOFF)
+        pyraycut.neighbor_list("ij", bad, CUTOFF)
     bad[3, 1] = np.inf
     with pytest.raises(ValueError, match="index 3"):
-        raycut.Engine("cell-list").build(bad, CUTOFF)
+        pyraycut.Engine("cell-list").build(bad, CUTOFF)
     for cutoff in (0.0, -1.0, float("nan"), float("inf"), 1e40):
         with pytest.raises(ValueError, match="cutoff"):
-            raycut.neighbor_list("ij", x, cutoff)
+            pyraycut.neighbor_list("ij", x, cutoff)
     with pytest.raises(ValueError, match=f"9 per-atom cutoffs for {len(x)} particles"):
-        raycut.neighbor_list("ij", x, [0.1] * (len(x) - 1))
+        pyraycut.neighbor_list("ij", x, [0.1] * (len(x) - 1))
     with pytest.raises(ValueError, match="one number here"):
-        raycut.Engine("cell-list").build(x, [0.1] * len(x))
+        pyraycut.Engine("cell-list").build(x, [0.1] * len(x))
     with pytest.raises(ValueError, match="pbc without a cell"):
-        raycut.neighbor_list("ij", x, CUTOFF, pbc=True)
-    i, S = raycut.neighbor_list("iS", x, CUTOFF, pbc=[False, False, False])  # open: zero shifts
+        pyraycut.neighbor_list("ij", x, CUTOFF, pbc=True)
+    i, S = pyraycut.neighbor_list("iS", x, CUTOFF, pbc=[False, False, False])  # open: zero shifts
     assert i.dtype == np.int64 and S.dtype == np.int32 and S.shape == (len(i), 3)
     assert not S.any()
     with pytest.raises(ValueError, match="unknown quantity"):
-        raycut.neighbor_list("ijx", x, CUTOFF)
+        pyraycut.neighbor_list("ijx", x, CUTOFF)
     with pytest.raises(ValueError, match="shape"):
-        raycut.neighbor_list("ij", np.zeros((4, 2), np.float32), CUTOFF)
+        pyraycut.neighbor_list("ij", np.zeros((4, 2), np.float32), CUTOFF)
     with pytest.raises(ValueError, match="unknown method"):
-        raycut.Engine("no-such-method")
-    engine = raycut.Engine("cell-list")
+        pyraycut.Engine("no-such-method")
+    engine = pyraycut.Engine("cell-list")
     with pytest.raises(ValueError, match="before build"):
         engine.neighbours()
     engine.build(x, CUTOFF)
@@ -200,10 +200,10 @@ def test_errors():
         engine.compute("no-such-kernel")
     with pytest.raises(ValueError, match="same N|particles|10"):
         engine.update(uniform(11))
-    unavailable = [m["name"] for m in raycut.methods() if not m["available"]]
+    unavailable = [m["name"] for m in pyraycut.methods() if not m["available"]]
     if unavailable:
         with pytest.raises(NotImplementedError, match="not available"):
-            raycut.Engine(unavailable[0])
+            pyraycut.Engine(unavailable[0])
 
 
 def test_other_framework_host_dlpack():
@@ -219,19 +219,19 @@ def test_other_framework_host_dlpack():
         def __dlpack_device__(self):
             return self.a.__dlpack_device__()
 
-    i, j = raycut.neighbor_list("ij", Foreign(x), CUTOFF)
+    i, j = pyraycut.neighbor_list("ij", Foreign(x), CUTOFF)
     assert isinstance(i, np.ndarray)
-    assert pair_set(i, j) == pair_set(*raycut.neighbor_list("ij", x, CUTOFF))
+    assert pair_set(i, j) == pair_set(*pyraycut.neighbor_list("ij", x, CUTOFF))
     with pytest.raises(ValueError, match="float32"):
-        raycut.neighbor_list("ij", Foreign(x.astype(np.float64)), CUTOFF)
+        pyraycut.neighbor_list("ij", Foreign(x.astype(np.float64)), CUTOFF)
     with pytest.raises(TypeError, match="__dlpack__"):
-        raycut.Engine().build(object(), CUTOFF)
+        pyraycut.Engine().build(object(), CUTOFF)
 
 
 def test_sparse_batch_indices_cost_nothing():
     # [0, 10**9] with one box for all asked for gigabytes (a frame and offsets per empty system).
     x = np.array([[0, 0, 0], [0.5, 0, 0], [0.6, 0, 0]], np.float32)
-    i, j = raycut.neighbor_list("ij", x, 0.7, batch=[0, 10**9, 10**9])
+    i, j = pyraycut.neighbor_list("ij", x, 0.7, batch=[0, 10**9, 10**9])
     assert sorted(zip(i.tolist(), j.tolist())) == [(1, 2), (2, 1)]
 
 
@@ -239,7 +239,7 @@ def test_query_points_refuse_update_and_sph_force_and_pad_with_the_source_count(
     rng = np.random.default_rng(0)
     x = rng.random((50, 3)).astype(np.float32)
     q = x[:7] + 0.01
-    e = raycut.Engine("cell-list")
+    e = pyraycut.Engine("cell-list")
     e.build(x, 0.3, queries=q)
     with pytest.raises(NotImplementedError, match="query points"):
         e.update(x + 0.1)

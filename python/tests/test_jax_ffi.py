@@ -1,4 +1,4 @@
-"""raycut.jax: the neighbour list as an XLA FFI custom call on the CPU, under jax.jit, with
+"""pyraycut.jax: the neighbour list as an XLA FFI custom call on the CPU, under jax.jit, with
 jax.grad of an energy against finite differences. Skipped (with the reason) without JAX or where
 the custom call was not built."""
 import numpy as np
@@ -7,9 +7,9 @@ from test_periodic import TRICLINIC, inside_cell, reference, triples
 
 jax = pytest.importorskip("jax", reason="JAX is not installed")
 try:
-    import raycut.jax as rjax
+    import pyraycut.jax as rjax
 except ImportError as e:
-    pytest.skip(f"raycut.jax's custom call is not built ({e})", allow_module_level=True)
+    pytest.skip(f"pyraycut.jax's custom call is not built ({e})", allow_module_level=True)
 import jax.numpy as jnp  # noqa: E402
 
 CELL = 0.9 * TRICLINIC

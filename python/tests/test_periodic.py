@@ -1,5 +1,5 @@
-"""Periodic boxes, batches and query sets (docs/periodic.md, "Semantics") through raycut.neighbor_list,
-raycut.radius and Engine, on every method that has them, against a NumPy brute force over
+"""Periodic boxes, batches and query sets (docs/periodic.md, "Semantics") through pyraycut.neighbor_list,
+pyraycut.radius and Engine, on every method that has them, against a NumPy brute force over
 explicit images written here (independent of raycut): cubic, triclinic, cells thinner than twice
 the cutoff (self-images), slabs and wires, unwrapped positions, batches with empty systems, query
 sets; and the errors."""
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import AVAILABLE, SYSTEM_METHODS
 
-import raycut
+import pyraycut
 
 REL = 1e-5  # pairs this close (relative) to the cutoff may go either way in float32
 
@@ -152,7 +152,7 @@ def case(name, seed=0):
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_periodic_vs_brute_force(system_method, name):
     x, cell, pbc, cutoff = case(name)
-    out = raycut.neighbor_list("ijdDS", x, cutoff, cell=cell, pbc=pbc, method=system_method)
+    out = pyraycut.neighbor_list("ijdDS", x, cutoff, cell=cell, pbc=pbc, method=system_method)
     found = check(out, x, x, cutoff, cell, pbc)
     if name.startswith("small") or name == "tiny":
         assert any(a == b for a, b, *_ in found), "self-images expected in a small cell"
@@ -164,11 +164,11 @@ def test_periodic_vs_brute_force(system_method, name):
 def test_unwrapped_positions(system_method, name, boxes):
     x, cell, pbc, cutoff = case(name, seed=5)
     xu = unwrapped(x, cell, pbc, boxes, seed=6)
-    out = raycut.neighbor_list("ijdDS", xu, cutoff, cell=cell, pbc=pbc, method=system_method)
+    out = pyraycut.neighbor_list("ijdDS", xu, cutoff, cell=cell, pbc=pbc, method=system_method)
     check(out, xu, xu, cutoff, cell, pbc)
     # The same vectors as for the wrapped positions (up to the rounding of the moved
     # positions): only S changes.
-    i, d = raycut.neighbor_list("id", x, cutoff, cell=cell, pbc=pbc, method=system_method)
+    i, d = pyraycut.neighbor_list("id", x, cutoff, cell=cell, pbc=pbc, method=system_method)
     assert len(i) == len(out[0])
     np.testing.assert_array_equal(np.bincount(i, minlength=len(x)),
                                   np.bincount(out[0], minlength=len(x)))
@@ -178,9 +178,9 @@ def test_unwrapped_positions(system_method, name, boxes):
 @pytest.mark.parametrize("name", ["cubic", "triclinic", "small-cubic", "tiny", "wire"])
 def test_half_orientation(system_method, name):
     x, cell, pbc, cutoff = case(name, seed=2)
-    full = triples(*raycut.neighbor_list("ijS", x, cutoff, cell=cell, pbc=pbc,
+    full = triples(*pyraycut.neighbor_list("ijS", x, cutoff, cell=cell, pbc=pbc,
                                          method=system_method))
-    out = raycut.neighbor_list("ijdDS", x, cutoff, cell=cell, pbc=pbc, half=True,
+    out = pyraycut.neighbor_list("ijdDS", x, cutoff, cell=cell, pbc=pbc, half=True,
                                method=system_method)
     inside, edge = reference(x, x, cutoff, cell, pbc)
 
@@ -199,18 +199,18 @@ def test_half_orientation(system_method, name):
 def test_cell_and_pbc_forms(system_method):
     x, _, _, cutoff = case("cubic", seed=3)
     cell = np.diag([1.0, 0.8, 1.2])
-    ref = triples(*raycut.neighbor_list("ijS", x, cutoff, cell=cell, pbc=[True] * 3,
+    ref = triples(*pyraycut.neighbor_list("ijS", x, cutoff, cell=cell, pbc=[True] * 3,
                                         method=system_method))
     for c, p in (([1.0, 0.8, 1.2], True), (cell, None), (cell.tolist(), np.ones(3, bool)),
                  ((1, 0.8, 1.2), [1, 1, 1])):
-        got = triples(*raycut.neighbor_list("ijS", x, cutoff, cell=c, pbc=p,
+        got = triples(*pyraycut.neighbor_list("ijS", x, cutoff, cell=c, pbc=p,
                                             method=system_method))
         assert got == ref, (c, p)
     # A cell with no periodic axis is an open system; so is pbc without any True.
-    open_ = triples(*raycut.neighbor_list("ijS", x, cutoff, method=system_method))
-    assert triples(*raycut.neighbor_list("ijS", x, cutoff, cell=cell, pbc=False,
+    open_ = triples(*pyraycut.neighbor_list("ijS", x, cutoff, method=system_method))
+    assert triples(*pyraycut.neighbor_list("ijS", x, cutoff, cell=cell, pbc=False,
                                          method=system_method)) == open_
-    assert triples(*raycut.neighbor_list("ijS", x, cutoff, pbc=[False] * 3,
+    assert triples(*pyraycut.neighbor_list("ijS", x, cutoff, pbc=[False] * 3,
                                          method=system_method)) == open_
     assert all(t[2:] == (0, 0, 0) for t in open_)
 
@@ -250,7 +250,7 @@ def batch_reference(x, batch, cutoff, cells, pbcs, queries=None, batch_queries=N
 def test_batch_per_system_boxes(system_method):
     cutoff = 0.45
     x, batch = batched(SIZES, BATCH_CELLS, BATCH_PBC)
-    out = raycut.neighbor_list("ijdDS", x, cutoff, cell=np.stack(BATCH_CELLS),
+    out = pyraycut.neighbor_list("ijdDS", x, cutoff, cell=np.stack(BATCH_CELLS),
                                pbc=np.array(BATCH_PBC), batch=batch, method=system_method)
     i, j, S = out[0], out[1], out[4]
     assert np.array_equal(batch[i], batch[j]), "pairs never cross systems"
@@ -267,7 +267,7 @@ def test_batch_per_system_boxes(system_method):
     # Each system alone gives its own pairs.
     for s in (0, 3, 5):
         lo = int(np.searchsorted(batch, s))
-        alone = raycut.neighbor_list("ijS", x[batch == s], cutoff, cell=BATCH_CELLS[s],
+        alone = pyraycut.neighbor_list("ijS", x[batch == s], cutoff, cell=BATCH_CELLS[s],
                                      pbc=BATCH_PBC[s], method=system_method)
         mine = {(t[0] - lo, t[1] - lo) + t[2:] for t in found if batch[t[0]] == s}
         assert mine == triples(*alone)
@@ -278,7 +278,7 @@ def test_batch_shared_box_and_open(system_method):
     sizes = [0, 40, 1, 25]
     x, batch = batched(sizes, [np.eye(3)] * 4, [(True,) * 3] * 4, seed=7)
     for cell, pbc in ((np.eye(3), True), (None, None)):
-        out = raycut.neighbor_list("ijdDS", x, cutoff, cell=cell, pbc=pbc, batch=batch,
+        out = pyraycut.neighbor_list("ijdDS", x, cutoff, cell=cell, pbc=pbc, batch=batch,
                                    method=system_method)
         cells = [np.eye(3) if cell is not None else np.zeros((3, 3))] * 4
         pbcs = [(cell is not None,) * 3] * 4
@@ -287,7 +287,7 @@ def test_batch_shared_box_and_open(system_method):
         assert np.array_equal(batch[out[0]], batch[out[1]])
     # Shared cell, per-system pbc.
     pbcs = [(True,) * 3, (False,) * 3, (True, True, False), (True, False, True)]
-    out = raycut.neighbor_list("ijdDS", x, cutoff, cell=np.eye(3), pbc=pbcs, batch=batch,
+    out = pyraycut.neighbor_list("ijdDS", x, cutoff, cell=np.eye(3), pbc=pbcs, batch=batch,
                                method=system_method)
     inside, edge = batch_reference(x, batch, cutoff, [np.eye(3)] * 4, pbcs)
     found = triples(out[0], out[1], out[4])
@@ -297,15 +297,15 @@ def test_batch_shared_box_and_open(system_method):
 def test_batch_torch_cluster_style_index_and_empty_input(system_method):
     # Only the index says which system: any integer dtype, and batches of nothing.
     x, batch = batched([10, 10], [np.eye(3)] * 2, [(True,) * 3] * 2, seed=9)
-    ref = triples(*raycut.neighbor_list("ijS", x, 0.4, cell=np.eye(3), batch=batch,
+    ref = triples(*pyraycut.neighbor_list("ijS", x, 0.4, cell=np.eye(3), batch=batch,
                                         method=system_method))
     for b in (batch.astype(np.int32), batch.astype(np.uint8), batch.tolist()):
-        assert triples(*raycut.neighbor_list("ijS", x, 0.4, cell=np.eye(3), batch=b,
+        assert triples(*pyraycut.neighbor_list("ijS", x, 0.4, cell=np.eye(3), batch=b,
                                              method=system_method)) == ref
-    i, j = raycut.neighbor_list("ij", np.zeros((0, 3), np.float32), 0.4, cell=np.eye(3),
+    i, j = pyraycut.neighbor_list("ij", np.zeros((0, 3), np.float32), 0.4, cell=np.eye(3),
                                 batch=np.zeros(0, np.int64), method=system_method)
     assert len(i) == 0 and len(j) == 0
-    i = raycut.neighbor_list("i", np.zeros((0, 3), np.float32), 0.4, cell=np.stack([np.eye(3)] * 3),
+    i = pyraycut.neighbor_list("i", np.zeros((0, 3), np.float32), 0.4, cell=np.stack([np.eye(3)] * 3),
                              batch=np.zeros(0, np.int64), method=system_method)
     assert len(i) == 0
 
@@ -318,10 +318,10 @@ def test_radius_open(system_method):
     points = rng.random((120, 3)).astype(np.float32)
     queries = np.concatenate([rng.random((40, 3)), points[:5]]).astype(np.float32)
     cutoff = 0.2
-    out = raycut.radius(points, queries, cutoff, method=system_method, quantities="ijdDS")
+    out = pyraycut.radius(points, queries, cutoff, method=system_method, quantities="ijdDS")
     found = check(out, queries, points, cutoff, None, (False,) * 3, exclude_self=False)
     assert all((40 + k, k, 0, 0, 0) in found for k in range(5)), "no self-exclusion"
-    i, j = raycut.radius(points, queries, cutoff, method=system_method)
+    i, j = pyraycut.radius(points, queries, cutoff, method=system_method)
     assert triples(i, j, np.zeros((len(i), 3), np.int32)) == {t[:2] + (0, 0, 0) for t in found}
 
 
@@ -331,7 +331,7 @@ def test_radius_matches_scipy(system_method):
     points = rng.random((300, 3)).astype(np.float32)
     queries = rng.random((50, 3)).astype(np.float32)
     cutoff = 0.15
-    i, j = raycut.radius(points, queries, cutoff, method=system_method)
+    i, j = pyraycut.radius(points, queries, cutoff, method=system_method)
     rows = spatial.cKDTree(points.astype(np.float64)).query_ball_point(queries, cutoff)
     ours = {}
     for a, b in zip(i.tolist(), j.tolist()):
@@ -347,7 +347,7 @@ def test_radius_matches_scipy(system_method):
 def test_radius_periodic(system_method, name):
     points, cell, pbc, cutoff = case(name, seed=12)
     queries = unwrapped(inside_cell(25, cell, pbc, seed=13), cell, pbc, 2, seed=14)
-    out = raycut.radius(points, queries, cutoff, cell=cell, pbc=pbc, method=system_method,
+    out = pyraycut.radius(points, queries, cutoff, cell=cell, pbc=pbc, method=system_method,
                         quantities="ijdDS")
     check(out, queries, points, cutoff, cell, pbc, exclude_self=False)
 
@@ -358,7 +358,7 @@ def test_radius_batched(system_method):
     sizes_q = [0, 4, 12, 10, 0, 6, 2]  # queries without points and points without queries
     points, bp = batched(sizes_p, BATCH_CELLS, BATCH_PBC, seed=20)
     queries, bq = batched(sizes_q, BATCH_CELLS, BATCH_PBC, seed=40)
-    out = raycut.radius(points, queries, cutoff, cell=np.stack(BATCH_CELLS), pbc=BATCH_PBC,
+    out = pyraycut.radius(points, queries, cutoff, cell=np.stack(BATCH_CELLS), pbc=BATCH_PBC,
                         batch_points=bp, batch_queries=bq, method=system_method,
                         quantities="ijdDS")
     i, j, d, D, S = out
@@ -369,7 +369,7 @@ def test_radius_batched(system_method):
     assert found - edge == inside - edge
     # One index left out: that whole set is in system 0 (torch_cluster's convention).
     p0 = points[bp == 0]
-    got = raycut.radius(p0, queries, cutoff, cell=np.eye(3), batch_queries=bq,
+    got = pyraycut.radius(p0, queries, cutoff, cell=np.eye(3), batch_queries=bq,
                         method=system_method, quantities="ijS")
     inside, edge = batch_reference(p0, np.zeros(len(p0), np.int64), cutoff, [np.eye(3)] * 7,
                                    [(True,) * 3] * 7, queries, bq)
@@ -379,7 +379,7 @@ def test_radius_batched(system_method):
 def test_engine_queries_and_shifts(system_method):
     points, cell, pbc, cutoff = case("small-triclinic", seed=30)
     queries = inside_cell(7, cell, pbc, seed=31)
-    engine = raycut.Engine(system_method)
+    engine = pyraycut.Engine(system_method)
     engine.build(points, cutoff, cell=cell, pbc=pbc, queries=queries)
     assert engine.size == 7 and engine.sources == len(points)
     offsets, indices, d, D, S = engine.neighbours(distances=True, vectors=True, shifts=True)
@@ -398,7 +398,7 @@ def test_engine_queries_and_shifts(system_method):
 
 def test_engine_periodic_update_and_kernels(system_method):
     x, cell, pbc, cutoff = case("small-triclinic", seed=33)
-    engine = raycut.Engine(system_method)
+    engine = pyraycut.Engine(system_method)
     engine.build(x, cutoff, cell=cell, pbc=pbc)
     moved = unwrapped(inside_cell(len(x), cell, pbc, seed=34), cell, pbc, 2, seed=35)
     engine.update(moved)  # the box kept
@@ -427,7 +427,7 @@ def test_padded_rows_carry_shifts(system_method):
     thinner than the cutoff a row holds a source once per image."""
     cell = np.array([[0.6, 0.0, 0.0], [0.2, 0.7, 0.0], [0.1, 0.1, 0.8]])
     x = inside_cell(12, cell, seed=5)
-    engine = raycut.Engine(system_method)
+    engine = pyraycut.Engine(system_method)
     engine.build(x, 1.0, cell=cell, pbc=True)
     offsets, indices, shifts = (np.asarray(a) for a in engine.neighbours(shifts=True))
     k = int(np.diff(offsets).max()) + 1
@@ -448,62 +448,62 @@ def test_errors():
     x = inside_cell(10, np.eye(3))
     method = SYSTEM_METHODS[0]
     with pytest.raises(ValueError, match="linearly dependent"):  # the library's message
-        raycut.neighbor_list("ij", x, 0.3, cell=[[1, 0, 0], [2, 0, 0], [0, 0, 1]], method=method)
+        pyraycut.neighbor_list("ij", x, 0.3, cell=[[1, 0, 0], [2, 0, 0], [0, 0, 1]], method=method)
     with pytest.raises(ValueError, match="zero length"):
-        raycut.neighbor_list("ij", x, 0.3, cell=np.diag([1.0, 1.0, 0.0]), pbc=True,
+        pyraycut.neighbor_list("ij", x, 0.3, cell=np.diag([1.0, 1.0, 0.0]), pbc=True,
                              method=method)
     with pytest.raises(ValueError, match="non-finite"):
-        raycut.neighbor_list("ij", x, 0.3, cell=np.diag([1.0, 1.0, np.nan]), method=method)
+        pyraycut.neighbor_list("ij", x, 0.3, cell=np.diag([1.0, 1.0, np.nan]), method=method)
     batch = np.array([0, 0, 1, 1, 1, 0, 2, 2, 2, 2])
     with pytest.raises(ValueError, match="sorted"):
-        raycut.neighbor_list("ij", x, 0.3, batch=batch, method=method)
+        pyraycut.neighbor_list("ij", x, 0.3, batch=batch, method=method)
     with pytest.raises(ValueError, match="sorted"):
-        raycut.radius(x, x, 0.3, batch_points=np.sort(batch), batch_queries=batch, method=method)
+        pyraycut.radius(x, x, 0.3, batch_points=np.sort(batch), batch_queries=batch, method=method)
     with pytest.raises(ValueError, match="one system index per particle"):
-        raycut.neighbor_list("ij", x, 0.3, batch=np.zeros(9, np.int64), method=method)
+        pyraycut.neighbor_list("ij", x, 0.3, batch=np.zeros(9, np.int64), method=method)
     with pytest.raises(ValueError, match="integers"):
-        raycut.neighbor_list("ij", x, 0.3, batch=np.zeros(10), method=method)
+        pyraycut.neighbor_list("ij", x, 0.3, batch=np.zeros(10), method=method)
     with pytest.raises(ValueError, match="negative"):
-        raycut.neighbor_list("ij", x, 0.3, batch=np.full(10, -1), method=method)
+        pyraycut.neighbor_list("ij", x, 0.3, batch=np.full(10, -1), method=method)
     with pytest.raises(ValueError, match="no batch"):
-        raycut.neighbor_list("ij", x, 0.3, cell=np.stack([np.eye(3)] * 2), method=method)
+        pyraycut.neighbor_list("ij", x, 0.3, cell=np.stack([np.eye(3)] * 2), method=method)
     with pytest.raises(ValueError, match="system index 2 but"):
-        raycut.neighbor_list("ij", x, 0.3, cell=np.stack([np.eye(3)] * 2),
+        pyraycut.neighbor_list("ij", x, 0.3, cell=np.stack([np.eye(3)] * 2),
                              batch=np.sort(batch), method=method)
     with pytest.raises(ValueError, match="cell gives 2 systems but pbc 3"):
-        raycut.neighbor_list("ij", x, 0.3, cell=np.stack([np.eye(3)] * 2), pbc=[[True] * 3] * 3,
+        pyraycut.neighbor_list("ij", x, 0.3, cell=np.stack([np.eye(3)] * 2), pbc=[[True] * 3] * 3,
                              batch=np.sort(batch) // 2, method=method)
     with pytest.raises(ValueError, match="cell must have shape"):
-        raycut.neighbor_list("ij", x, 0.3, cell=np.eye(2), method=method)
+        pyraycut.neighbor_list("ij", x, 0.3, cell=np.eye(2), method=method)
     with pytest.raises(ValueError, match="pbc must be"):
-        raycut.neighbor_list("ij", x, 0.3, cell=np.eye(3), pbc=[True, False], method=method)
+        pyraycut.neighbor_list("ij", x, 0.3, cell=np.eye(3), pbc=[True, False], method=method)
     with pytest.raises(ValueError, match="pbc without a cell"):
-        raycut.neighbor_list("ij", x, 0.3, pbc=True, method=method)
-    engine = raycut.Engine(method)
+        pyraycut.neighbor_list("ij", x, 0.3, pbc=True, method=method)
+    engine = pyraycut.Engine(method)
     engine.build(x, 0.3, queries=x)
     with pytest.raises(ValueError, match="half lists are not defined for query sets"):
         engine.neighbours(half=True)
     with pytest.raises(ValueError, match="queries must have shape"):
-        raycut.radius(x, np.zeros((4, 2), np.float32), 0.3, method=method)
+        pyraycut.radius(x, np.zeros((4, 2), np.float32), 0.3, method=method)
     with pytest.raises(ValueError, match="batch_queries without queries"):
-        raycut.Engine(method).build(x, 0.3, batch_queries=np.zeros(10, np.int64))
+        pyraycut.Engine(method).build(x, 0.3, batch_queries=np.zeros(10, np.int64))
     with pytest.raises(ValueError, match="unknown quantity"):
-        raycut.radius(x, x, 0.3, quantities="ijk", method=method)
+        pyraycut.radius(x, x, 0.3, quantities="ijk", method=method)
     # NaN positions still name their index with a box.
     bad = x.copy()
     bad[4, 2] = np.nan
     with pytest.raises(ValueError, match="index 4"):
-        raycut.neighbor_list("ij", bad, 0.3, cell=np.eye(3), method=method)
+        pyraycut.neighbor_list("ij", bad, 0.3, cell=np.eye(3), method=method)
 
 
 @pytest.mark.parametrize("method", [m for m in AVAILABLE if m not in SYSTEM_METHODS])
 def test_methods_without_systems_say_so(method):
     x = inside_cell(20, np.eye(3))
     with pytest.raises(NotImplementedError):
-        raycut.neighbor_list("ij", x, 0.3, cell=np.eye(3), method=method)
+        pyraycut.neighbor_list("ij", x, 0.3, cell=np.eye(3), method=method)
     with pytest.raises(NotImplementedError):
-        raycut.radius(x, x, 0.3, method=method)
-    raycut.neighbor_list("ij", x, 0.3, method=method)  # open single systems as before
+        pyraycut.radius(x, x, 0.3, method=method)
+    pyraycut.neighbor_list("ij", x, 0.3, method=method)  # open single systems as before
 
 
 # ---- PyTorch autograd --------------------------------------------------------------------------
@@ -531,16 +531,16 @@ def test_torch_gradcheck_positions_and_cell(system_method, name):
     c = torch.tensor(cell, dtype=torch.float64, requires_grad=True)
 
     def f(x, c):
-        i, d, D = raycut.neighbor_list("idD", x, cutoff, cell=c, pbc=pbc, method=system_method)
+        i, d, D = pyraycut.neighbor_list("idD", x, cutoff, cell=c, pbc=pbc, method=system_method)
         assert d.dtype == torch.float64 and D.dtype == torch.float64
         return pooled(torch, len(x), i, d, D)
 
     assert torch.autograd.gradcheck(f, (x, c), eps=1e-6, atol=1e-6)
     # D is x[j] - x[i] + S @ cell, as the library's float32 vectors.
-    i, j, D, S = raycut.neighbor_list("ijDS", x, cutoff, cell=c, pbc=pbc, method=system_method)
+    i, j, D, S = pyraycut.neighbor_list("ijDS", x, cutoff, cell=c, pbc=pbc, method=system_method)
     want = x[j] - x[i] + S.double() @ c
     torch.testing.assert_close(D, want)
-    D32 = raycut.neighbor_list("D", x.detach().float(), cutoff, cell=cell, pbc=pbc,
+    D32 = pyraycut.neighbor_list("D", x.detach().float(), cutoff, cell=cell, pbc=pbc,
                                method=system_method)
     assert D32.shape == D.shape
 
@@ -550,13 +550,13 @@ def test_torch_cell_forms_and_devices_of_outputs(system_method):
     x, cell, pbc, cutoff = case("small-cubic", seed=55)
     edges = torch.tensor([1.0, 1.0, 1.0], dtype=torch.float64, requires_grad=True)
     xt = torch.tensor(x, dtype=torch.float64, requires_grad=True)
-    i, j, d, S = raycut.neighbor_list("ijdS", xt, cutoff, cell=edges, method=system_method)
+    i, j, d, S = pyraycut.neighbor_list("ijdS", xt, cutoff, cell=edges, method=system_method)
     assert S.dtype == torch.int32 and i.dtype == torch.int64 and d.dtype == torch.float64
     (g,) = torch.autograd.grad(d.sum(), edges)
     # d |r| / d L_k = sum over pairs of S_k r_k / |r| (r = x_j - x_i + S L).
     r = xt.detach()[j] - xt.detach()[i] + S.double() * edges.detach()
     torch.testing.assert_close(g, (S.double() * r / d.detach()[:, None]).sum(0))
-    one = raycut.neighbor_list("d", xt, cutoff, cell=torch.eye(3, dtype=torch.float64)[None],
+    one = pyraycut.neighbor_list("d", xt, cutoff, cell=torch.eye(3, dtype=torch.float64)[None],
                                method=system_method)
     torch.testing.assert_close(torch.sort(one.detach()).values, torch.sort(d.detach()).values)
 
@@ -572,7 +572,7 @@ def test_torch_gradcheck_batch_and_radius(system_method):
     b = torch.from_numpy(batch)
 
     def f(x, c):
-        i, d, D = raycut.neighbor_list("idD", x, cutoff, cell=c, pbc=pbcs, batch=b,
+        i, d, D = pyraycut.neighbor_list("idD", x, cutoff, cell=c, pbc=pbcs, batch=b,
                                        method=system_method)
         return pooled(torch, len(x), i, d, D)
 
@@ -583,7 +583,7 @@ def test_torch_gradcheck_batch_and_radius(system_method):
     c3 = c.detach()[3].clone().requires_grad_()
 
     def g(p, q, c):
-        i, d, D = raycut.radius(p, q, cutoff, cell=c, method=system_method, quantities="idD")
+        i, d, D = pyraycut.radius(p, q, cutoff, cell=c, method=system_method, quantities="idD")
         return pooled(torch, len(q), i, d, D)
 
     assert torch.autograd.gradcheck(g, (p, q, c3), eps=1e-6, atol=1e-6)
@@ -598,11 +598,11 @@ def test_torch_stress_from_cell_gradient(system_method):
     strain = torch.zeros(3, 3, dtype=torch.float64, requires_grad=True)
     c0 = torch.tensor(cell, dtype=torch.float64)
     deform = torch.eye(3, dtype=torch.float64) + strain
-    d = raycut.neighbor_list("d", x @ deform, cutoff, cell=c0 @ deform, pbc=pbc,
+    d = pyraycut.neighbor_list("d", x @ deform, cutoff, cell=c0 @ deform, pbc=pbc,
                              method=system_method)
     energy = 0.5 * torch.sum((cutoff - d) ** 2)
     (g_strain,) = torch.autograd.grad(energy, strain)
-    D = raycut.neighbor_list("D", x, cutoff, cell=c0, pbc=pbc, method=system_method).detach()
+    D = pyraycut.neighbor_list("D", x, cutoff, cell=c0, pbc=pbc, method=system_method).detach()
     dd = torch.linalg.vector_norm(D, dim=1)
     dE_dD = (-(cutoff - dd) / dd)[:, None] * D  # per pair of the full list
     # D = D0 @ (1 + strain): dE/dstrain = sum over pairs of D0 (outer) dE/dD.

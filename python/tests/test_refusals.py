@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-import raycut
+import pyraycut
 
 N = 50
 
@@ -20,7 +20,7 @@ def cloud(n=N, seed=0):
 
 
 def built(n=N, cutoff=0.3):
-    e = raycut.Engine("cell-list")
+    e = pyraycut.Engine("cell-list")
     e.build(cloud(n), cutoff)
     return e
 
@@ -44,11 +44,11 @@ ROWS = [
      r"cutoff 1e-50 is outside the supported range \[2\^-60, 2\^60\]"),
     ("cutoff 1e39 (inf in float)", lambda: built().build(cloud(), 1e39), ValueError,
      r"cutoff 1e\+39 is outside the supported range \[2\^-60, 2\^60\]"),
-    ("neighbor_list cutoff 1e-50", lambda: raycut.neighbor_list("ij", cloud(), 1e-50), ValueError,
+    ("neighbor_list cutoff 1e-50", lambda: pyraycut.neighbor_list("ij", cloud(), 1e-50), ValueError,
      r"1e-50.*\[2\^-60, 2\^60\]"),
-    ("VerletList cutoff 1e39", lambda: raycut.VerletList(1e39, 0.1), ValueError,
+    ("VerletList cutoff 1e39", lambda: pyraycut.VerletList(1e39, 0.1), ValueError,
      r"1e\+39.*\[2\^-60, 2\^60\]"),
-    ("VerletList skin 1e39", lambda: raycut.VerletList(1.0, 1e39), ValueError,
+    ("VerletList skin 1e39", lambda: pyraycut.VerletList(1.0, 1e39), ValueError,
      r"cutoff \+ skin \(the list's reach\): cutoff 1e\+39 is outside the supported range"),
     ("padded K = 2^32", lambda: built().padded_neighbours(2**32), ValueError,
      r"K must be a whole number in \[1, 2\^32 - 1 = 4294967295\], got 4294967296"),
@@ -58,22 +58,22 @@ ROWS = [
     ("padded K = 2^31 on 50 particles", lambda: built().padded_neighbours(2**31), MemoryError,
      r"K = 2147483648.*needs .*GiB.*budget.*K = 50 is always enough"),
     ("uint64 batch above 2^63 - 1",
-     lambda: raycut.neighbor_list("ij", cloud(4), 0.3,
+     lambda: pyraycut.neighbor_list("ij", cloud(4), 0.3,
                                   batch=np.array([0, 0, 2**63, 2**64 - 1], np.uint64)),
      ValueError, r"batch holds system index 18446744073709551615, above the largest supported "
                  r"2\^63 - 1"),
     ("torch tensor on the meta device",
-     lambda: raycut.neighbor_list("ij", torch_tensor(lambda t: t.zeros((4, 3), device="meta")),
+     lambda: pyraycut.neighbor_list("ij", torch_tensor(lambda t: t.zeros((4, 3), device="meta")),
                                   0.3),
      ValueError, r"positions is on the 'meta' device: raycut reads tensors on the CPU and on "
                  r"CUDA devices"),
-    ("complex NumPy positions", lambda: raycut.neighbor_list("ij", cloud().astype(complex), 0.3),
+    ("complex NumPy positions", lambda: pyraycut.neighbor_list("ij", cloud().astype(complex), 0.3),
      ValueError, r"positions must be real numbers, got dtype complex128"),
     ("complex torch positions",
-     lambda: raycut.neighbor_list("ij", torch_tensor(lambda t: t.zeros((4, 3),
+     lambda: pyraycut.neighbor_list("ij", torch_tensor(lambda t: t.zeros((4, 3),
                                                                         dtype=t.complex64)), 0.3),
      ValueError, r"positions must be real numbers, got dtype torch.complex64"),
-    ("complex cutoff", lambda: raycut.neighbor_list("ij", cloud(), np.array(0.3 + 1j)),
+    ("complex cutoff", lambda: pyraycut.neighbor_list("ij", cloud(), np.array(0.3 + 1j)),
      ValueError, r"cutoff must be real numbers"),
     ("SPH density of shape (25, 2)", lambda: sph_force(density=np.ones((25, 2), np.float32)),
      ValueError, r"density must have shape \(50,\) \(one value per particle\), got \(25, 2\)"),
@@ -109,11 +109,11 @@ def test_a_list_beyond_the_budget_is_a_memory_error_before_allocation():
     result = run_child("""
         import time
         import numpy as np
-        import raycut
+        import pyraycut
         x = np.random.default_rng(0).random((12000, 3)).astype(np.float32)
         start = time.perf_counter()
         try:
-            raycut.neighbor_list("ijd", x, 10.0, method="cell-list")
+            pyraycut.neighbor_list("ijd", x, 10.0, method="cell-list")
         except MemoryError as e:
             print("MemoryError", round(time.perf_counter() - start, 2), e)
         """, "300M")
@@ -126,8 +126,8 @@ def test_a_list_beyond_the_budget_is_a_memory_error_before_allocation():
 def test_padded_k_beyond_the_budget_and_a_malformed_budget():
     result = run_child("""
         import numpy as np
-        import raycut
-        e = raycut.Engine("cell-list")
+        import pyraycut
+        e = pyraycut.Engine("cell-list")
         e.build(np.random.default_rng(0).random((50, 3)).astype(np.float32), 0.3)
         try:
             e.padded_neighbours(2**31)
@@ -139,9 +139,9 @@ def test_padded_k_beyond_the_budget_and_a_malformed_budget():
     assert "RAYCUT_MAX_MEMORY=300M" in result.stdout and "K = 50 is always enough" in result.stdout
     result = run_child("""
         import numpy as np
-        import raycut
+        import pyraycut
         try:
-            raycut.neighbor_list("ij", np.zeros((10**6, 3), np.float32), 0.1)
+            pyraycut.neighbor_list("ij", np.zeros((10**6, 3), np.float32), 0.1)
         except ValueError as err:
             print("ValueError", err)
         """, "a lot")
@@ -153,8 +153,8 @@ def test_padded_k_beyond_the_budget_and_a_malformed_budget():
 
 def test_float64_positions_give_float64_distances_and_vectors():
     x = cloud(300, 3)
-    i32, j32, d32, D32 = raycut.neighbor_list("ijdD", x, 0.2)
-    i, j, d, D = raycut.neighbor_list("ijdD", x.astype(np.float64), 0.2)
+    i32, j32, d32, D32 = pyraycut.neighbor_list("ijdD", x, 0.2)
+    i, j, d, D = pyraycut.neighbor_list("ijdD", x.astype(np.float64), 0.2)
     assert d.dtype == np.float64 and D.dtype == np.float64
     np.testing.assert_array_equal(i, i32)
     np.testing.assert_array_equal(j, j32)
@@ -165,9 +165,9 @@ def test_float64_positions_give_float64_distances_and_vectors():
 def test_float64_and_non_contiguous_torch_tensors_are_accepted():
     torch = pytest.importorskip("torch", reason="PyTorch is not installed")
     x = cloud(300, 4)
-    i32, j32, d32 = raycut.neighbor_list("ijd", x, 0.2)
+    i32, j32, d32 = pyraycut.neighbor_list("ijd", x, 0.2)
     wide = torch.from_numpy(x.astype(np.float64))
-    i, j, d = raycut.neighbor_list("ijd", wide, 0.2)
+    i, j, d = pyraycut.neighbor_list("ijd", wide, 0.2)
     assert d.dtype == torch.float64
     np.testing.assert_array_equal(i.numpy(), i32)
     # CPU tensors go through the PyTorch operator: d from the float64 positions themselves.
@@ -175,36 +175,36 @@ def test_float64_and_non_contiguous_torch_tensors_are_accepted():
     # A transposed view (strides (1, N)): copied to C order, not refused.
     strided = torch.from_numpy(np.ascontiguousarray(x.T)).T
     assert not strided.is_contiguous()
-    i, j, d = raycut.neighbor_list("ijd", strided, 0.2)
+    i, j, d = pyraycut.neighbor_list("ijd", strided, 0.2)
     assert d.dtype == torch.float32
     np.testing.assert_array_equal(i.numpy(), i32)
     np.testing.assert_array_equal(j.numpy(), j32)
-    e = raycut.Engine("cell-list")
+    e = pyraycut.Engine("cell-list")
     e.build(wide, 0.2)
     assert e.compute("lj_forces")["energy"].dtype == torch.float64
 
 
 def test_non_contiguous_numpy_positions_are_accepted():
     x = cloud(300, 5)
-    i32, j32 = raycut.neighbor_list("ij", x, 0.2)
+    i32, j32 = pyraycut.neighbor_list("ij", x, 0.2)
     strided = np.ascontiguousarray(x.T).T
     assert not strided.flags.c_contiguous
-    i, j = raycut.neighbor_list("ij", strided, 0.2)
+    i, j = pyraycut.neighbor_list("ij", strided, 0.2)
     np.testing.assert_array_equal(i, i32)
     np.testing.assert_array_equal(j, j32)
 
 
 def test_zero_dimensional_cutoff():
     x = cloud(300, 6)
-    want = raycut.neighbor_list("ij", x, 0.2)
-    got = raycut.neighbor_list("ij", x, np.array(0.2))
+    want = pyraycut.neighbor_list("ij", x, 0.2)
+    got = pyraycut.neighbor_list("ij", x, np.array(0.2))
     np.testing.assert_array_equal(got[0], want[0])
     torch = pytest.importorskip("torch", reason="PyTorch is not installed")
-    got = raycut.neighbor_list("ij", x, torch.tensor(0.2, dtype=torch.float64))
+    got = pyraycut.neighbor_list("ij", x, torch.tensor(0.2, dtype=torch.float64))
     np.testing.assert_array_equal(got[0], want[0])
     # A sequence is per-atom cutoffs: two for 300 particles is refused, naming both counts.
     with pytest.raises(ValueError, match="2 per-atom cutoffs for 300 particles"):
-        raycut.neighbor_list("ij", x, np.array([0.2, 0.3]))
+        pyraycut.neighbor_list("ij", x, np.array([0.2, 0.3]))
 
 
 def test_padded_report_gives_the_largest_row_without_overflow():
@@ -223,6 +223,6 @@ def test_distances_are_the_length_of_their_vectors(separation):
     off by 1 % (r^2 is a subnormal float there)."""
     x = np.array([[0, 0, 0], [separation, 0.6 * separation, 0.3 * separation]], np.float32)
     cutoff = max(4 * separation, 1e-18)
-    d, D = raycut.neighbor_list("dD", x, cutoff, method="cell-list")
+    d, D = pyraycut.neighbor_list("dD", x, cutoff, method="cell-list")
     length = np.sqrt((D.astype(np.float64) ** 2).sum(1))
     np.testing.assert_allclose(d.astype(np.float64), length, rtol=2**-22)

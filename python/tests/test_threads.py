@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-import raycut
+import pyraycut
 from conftest import AVAILABLE
 
 # Every method here: on a machine with a GPU the CUDA engines are hammered too (host inputs).
@@ -32,7 +32,7 @@ def run_child(code: str, timeout: float = 300) -> str:
 HAMMER = """
 import sys, threading
 import numpy as np
-import raycut
+import pyraycut
 
 method = sys.argv[1] if len(sys.argv) > 1 else "{method}"
 rng = np.random.default_rng(0)
@@ -55,15 +55,15 @@ def snapshot(engine, positions):
 
 reference = {{}}
 for name, positions in (("x", x), ("y", y)):
-    e = raycut.Engine(method)
+    e = pyraycut.Engine(method)
     e.build(positions, CUTOFF)
     reference[name] = snapshot(e, positions)
-verlet_reference = raycut.VerletList(CUTOFF, 0.02, method=method)
+verlet_reference = pyraycut.VerletList(CUTOFF, 0.02, method=method)
 verlet_reference.update(x)
 verlet_rows = rows(*verlet_reference.neighbours())
 
-shared = raycut.Engine(method)
-verlet = raycut.VerletList(CUTOFF, 0.02, method=method)
+shared = pyraycut.Engine(method)
+verlet = pyraycut.VerletList(CUTOFF, 0.02, method=method)
 errors = []
 
 
@@ -87,7 +87,7 @@ def worker(k):
             verlet.update(x)
             if rows(*verlet.neighbours()) != verlet_rows:
                 errors.append(f"thread {{k}} step {{step}}: the Verlet list differs")
-            i, j = raycut.neighbor_list("ij", positions, CUTOFF, method=method)
+            i, j = pyraycut.neighbor_list("ij", positions, CUTOFF, method=method)
             if len(i) != sum(len(r) for r in reference[name][0]):
                 errors.append(f"thread {{k}} step {{step}}: neighbor_list found {{len(i)}} pairs")
     except Exception as e:  # noqa: BLE001  reported by the parent
@@ -123,14 +123,14 @@ def test_different_engines_run_in_parallel(method):
     cutoff = 0.03
     want = []
     for x in inputs:
-        e = raycut.Engine(method)
+        e = pyraycut.Engine(method)
         e.build(x, cutoff)
         want.append(e.compute("count")["count"])
     intervals = [[] for _ in inputs]
     got = [None] * len(inputs)
 
     def worker(k):
-        e = raycut.Engine(method)
+        e = pyraycut.Engine(method)
         e.build(inputs[k], cutoff)
         for _ in range(3):
             start = time.perf_counter()
@@ -158,12 +158,12 @@ def test_engine_cache_hands_each_thread_its_own_engine():
     concurrent calls never share one; every answer is the single-threaded one."""
     rng = np.random.default_rng(2)
     inputs = [rng.random((2000, 3)).astype(np.float32) for _ in range(8)]
-    want = [raycut.neighbor_list("ij", x, 0.06) for x in inputs]
+    want = [pyraycut.neighbor_list("ij", x, 0.06) for x in inputs]
     failures = []
 
     def worker(k):
         for _ in range(5):
-            i, j = raycut.neighbor_list("ij", inputs[k], 0.06)
+            i, j = pyraycut.neighbor_list("ij", inputs[k], 0.06)
             if not (np.array_equal(i, want[k][0]) and np.array_equal(j, want[k][1])):
                 failures.append(k)
 

@@ -1,5 +1,5 @@
 """The PyTorch operators torch.ops.raycut.neighbor_list / .radius on the CPU, and
-raycut.neighbor_list / raycut.radius through them, in every framework mode: eager (against a
+pyraycut.neighbor_list / pyraycut.radius through them, in every framework mode: eager (against a
 float64 brute force over explicit images), TorchScript, torch.compile(fullgraph=True) with
 dynamic sizes and no recompilation, torch.export with a dynamic N, an AOTInductor package, and
 gradcheck / gradgradcheck of an energy with respect to positions and cell. Skipped (with the
@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from test_periodic import TRICLINIC, inside_cell, reference, triples
 
-import raycut
+import pyraycut
 
 torch = pytest.importorskip("torch", reason="PyTorch is not installed")
-if raycut._torch_ops() is None:
+if pyraycut._torch_ops() is None:
     pytest.skip("raycut's PyTorch operators are not built (the build's Python had no torch)",
                 allow_module_level=True)
 
@@ -39,8 +39,8 @@ def test_op_periodic_triclinic_vs_brute_force(scale, cutoff, dtype):
     assert len(found) == len(i)
     inside, edge = reference(x.double().numpy(), x.double().numpy(), cutoff, cell, (True,) * 3)
     assert found - edge == inside - edge
-    # The same call through raycut.neighbor_list: its d and D in the positions' dtype.
-    i2, j2, d, D, S2 = raycut.neighbor_list("ijdDS", x, cutoff, cell=c)
+    # The same call through pyraycut.neighbor_list: its d and D in the positions' dtype.
+    i2, j2, d, D, S2 = pyraycut.neighbor_list("ijdDS", x, cutoff, cell=c)
     assert triples(i2, j2, S2) == found and d.dtype == dtype and D.dtype == dtype
     want = x[j2] - x[i2] + S2.to(dtype) @ c
     torch.testing.assert_close(D, want, rtol=0, atol=0)
@@ -50,11 +50,11 @@ def test_op_periodic_triclinic_vs_brute_force(scale, cutoff, dtype):
 def test_half_and_numpy_agreement():
     x, c = periodic_system(50, TRICLINIC, (True, False, True), seed=4, dtype=torch.float32)
     pbc = torch.tensor([True, False, True])
-    full = triples(*raycut.neighbor_list("ijS", x, 0.4, cell=c, pbc=pbc))
-    numpy_full = triples(*raycut.neighbor_list("ijS", x.numpy(), 0.4, cell=c.numpy(),
+    full = triples(*pyraycut.neighbor_list("ijS", x, 0.4, cell=c, pbc=pbc))
+    numpy_full = triples(*pyraycut.neighbor_list("ijS", x.numpy(), 0.4, cell=c.numpy(),
                                                pbc=[True, False, True]))
     assert full == numpy_full
-    i, j, S = raycut.neighbor_list("ijS", x, 0.4, cell=c, pbc=pbc, half=True)
+    i, j, S = pyraycut.neighbor_list("ijS", x, 0.4, cell=c, pbc=pbc, half=True)
     half = triples(i, j, S)
     assert len(half) * 2 == len(full)
     for a, b, s0, s1, s2 in half:  # i < j, or i == j and S lexicographically positive
@@ -102,10 +102,10 @@ def test_max_pairs_padding_and_overflow():
     # One short: the count says so (the first max_pairs pairs are kept), the wrapper raises.
     si, sj, sS, scount = OPS.neighbor_list(x, 0.4, c, max_pairs=pairs - 1)
     assert si.shape == (pairs - 1,) and int(scount) == pairs
-    with pytest.raises(raycut.CapacityError, match=f"{pairs} pairs"):
-        raycut.neighbor_list("ij", x, 0.4, cell=c, max_pairs=pairs - 1)
+    with pytest.raises(pyraycut.CapacityError, match=f"{pairs} pairs"):
+        pyraycut.neighbor_list("ij", x, 0.4, cell=c, max_pairs=pairs - 1)
     # Through the wrapper, padding entries have d = 0 and D = 0.
-    d, D = raycut.neighbor_list("dD", x, 0.4, cell=c, max_pairs=pairs + 3)
+    d, D = pyraycut.neighbor_list("dD", x, 0.4, cell=c, max_pairs=pairs + 3)
     assert torch.all(d[pairs:] == 0) and torch.all(D[pairs:] == 0) and torch.all(d[:pairs] > 0)
 
 
@@ -118,7 +118,7 @@ def test_radius_op_periodic_batched_and_padded():
     i, j, S, count = OPS.radius(p, q, cutoff, c)
     inside, edge = reference(queries, points, cutoff, cell, (True,) * 3, exclude_self=False)
     assert triples(i, j, S) - edge == inside - edge and int(count) == len(i)
-    i2, j2, d = raycut.radius(p, q, cutoff, cell=c, quantities="ijd")
+    i2, j2, d = pyraycut.radius(p, q, cutoff, cell=c, quantities="ijd")
     assert torch.equal(i2, i) and torch.equal(j2, j)
     torch.testing.assert_close(d, torch.linalg.vector_norm(p[j] - q[i] + S.double() @ c, dim=1))
     pi, pj, _, pcount = OPS.radius(p, q, cutoff, c, max_pairs=len(i) + 2)
@@ -153,8 +153,8 @@ def test_op_errors_name_the_argument():
 
 
 def lj_energy(x, cell):
-    """A Lennard-Jones energy through raycut.neighbor_list (the op underneath)."""
-    d = raycut.neighbor_list("d", x, 0.45, cell=cell)
+    """A Lennard-Jones energy through pyraycut.neighbor_list (the op underneath)."""
+    d = pyraycut.neighbor_list("d", x, 0.45, cell=cell)
     inv6 = (0.2 / d) ** 6
     return 2.0 * (inv6 * inv6 - inv6).sum()
 
@@ -172,7 +172,7 @@ def test_torchscript_module_calls_the_op():
         x, c = periodic_system(n, np.eye(3), (True,) * 3, seed=n)
         torch.testing.assert_close(scripted(x, c), PairCount()(x, c))
     assert "raycut::neighbor_list" in str(scripted.graph)
-    assert raycut.load_torch_ops().endswith(".so") and "_torch_ops" in raycut.load_torch_ops()
+    assert pyraycut.load_torch_ops().endswith(".so") and "_torch_ops" in pyraycut.load_torch_ops()
 
 
 def test_compile_fullgraph_dynamic_no_recompilation():
@@ -192,7 +192,7 @@ def test_compile_fullgraph_dynamic_no_recompilation():
         (want_force,) = torch.autograd.grad(-want, x)
         torch.testing.assert_close(energy, want)
         torch.testing.assert_close(force, want_force)
-        pair_counts.add(len(raycut.neighbor_list("i", x, 0.45, cell=c)))
+        pair_counts.add(len(pyraycut.neighbor_list("i", x, 0.45, cell=c)))
     assert len(pair_counts) == 3, "the pair count changed from call to call"
     assert counter.frame_count == 1, "recompiled when N or the pair count changed"
 
@@ -201,7 +201,7 @@ def test_compile_radius_fullgraph_with_gradients():
     from torch._dynamo.testing import CompileCounterWithBackend
 
     def pooled(points, queries, cell):
-        return raycut.radius(points, queries, 0.3, cell=cell, quantities="d").sum()
+        return pyraycut.radius(points, queries, 0.3, cell=cell, quantities="d").sum()
 
     torch._dynamo.reset()
     counter = CompileCounterWithBackend("aot_eager")
@@ -221,14 +221,14 @@ def test_compile_inductor_static_capacity():
     torch._dynamo.reset()
 
     def energy(x, cell):
-        d = raycut.neighbor_list("d", x, 0.45, cell=cell, max_pairs=2000)
+        d = pyraycut.neighbor_list("d", x, 0.45, cell=cell, max_pairs=2000)
         inv6 = torch.where(d > 0, (0.2 / d.clamp_min(1e-3)) ** 6, 0.0)  # padding: d = 0
         return 2.0 * (inv6 * inv6 - inv6).sum()
 
     compiled = torch.compile(energy, fullgraph=True, dynamic=True)
     for n in (30, 40):
         x, c = periodic_system(n, np.eye(3), (True,) * 3, seed=n)
-        assert len(raycut.neighbor_list("i", x, 0.45, cell=c)) < 2000
+        assert len(pyraycut.neighbor_list("i", x, 0.45, cell=c)) < 2000
         torch.testing.assert_close(compiled(x, c), lj_energy(x, c))
 
 
@@ -251,7 +251,7 @@ def test_export_dynamic_n_and_aoti_package(tmp_path):
 
 def smooth_energy(x, cell, cutoff=0.45):
     """An energy that goes to zero with its first two derivatives at the cutoff."""
-    d = raycut.neighbor_list("d", x, cutoff, cell=cell)
+    d = pyraycut.neighbor_list("d", x, cutoff, cell=cell)
     return ((cutoff - d) ** 3 * torch.cos(3 * d)).sum()
 
 
@@ -270,14 +270,14 @@ def test_lj_forces_op_matches_the_engine_and_autograd():
     x, c = periodic_system(80, 4.0 * TRICLINIC, (True,) * 3, seed=11, dtype=torch.float32)
     energy, force, virial = OPS.lj_forces(x, 1.6, 0.5, 0.4, c)
     assert energy.shape == (80,) and force.shape == (80, 3) and virial.shape == (80, 6)
-    engine = raycut.Engine("cell-list")
+    engine = pyraycut.Engine("cell-list")
     engine.build(x.numpy(), 1.6, cell=c.numpy())
     want = engine.compute("lj_forces", lj_epsilon=0.5, lj_sigma=0.4)
     for name, got in (("energy", energy), ("force", force), ("virial", virial)):
         assert torch.equal(got, torch.as_tensor(want[name])), name
     # The forces are -dU/dx of the pair energy summed over the list (float64 in torch).
     xd = x.double().requires_grad_()
-    d = raycut.neighbor_list("d", xd, 1.6, cell=c.double())
+    d = pyraycut.neighbor_list("d", xd, 1.6, cell=c.double())
     u = (0.4 / d) ** 6
     total = 0.5 * (4 * 0.5 * (u * u - u)).sum()
     (grad,) = torch.autograd.grad(total, xd)

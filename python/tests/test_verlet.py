@@ -1,11 +1,11 @@
-"""raycut.VerletList: the list at cutoff + skin, kept while no particle has moved more than skin / 2
+"""pyraycut.VerletList: the list at cutoff + skin, kept while no particle has moved more than skin / 2
 (and still holding every pair within the cutoff then), rebuilt beyond that; arrays that outlive
 rebuilds. Host (NumPy) for every method here; CUDA (PyTorch, CuPy) skipped without them."""
 import numpy as np
 import pytest
 from conftest import CUTOFF, DEVICE_METHODS, brute_force, cupy_cuda, pair_set, torch_cuda, uniform
 
-import raycut
+import pyraycut
 
 SKIN = 0.03
 
@@ -40,7 +40,7 @@ def assert_holds_cutoff_pairs(offsets, indices, x, cutoff, half=False):
 
 def test_small_move_keeps_the_list(method):
     x = uniform(500)
-    verlet = raycut.VerletList(CUTOFF, SKIN, method=method)
+    verlet = pyraycut.VerletList(CUTOFF, SKIN, method=method)
     assert verlet.rebuilds == 0 and verlet.cutoff == pytest.approx(CUTOFF)
     assert verlet.skin == pytest.approx(SKIN) and verlet.method == method
     assert verlet.update(x) is True
@@ -64,7 +64,7 @@ def test_small_move_keeps_the_list(method):
 
 def test_large_move_rebuilds_at_cutoff_plus_skin(method):
     x = uniform(500)
-    verlet = raycut.VerletList(CUTOFF, SKIN, method=method, distances=True, vectors=True)
+    verlet = pyraycut.VerletList(CUTOFF, SKIN, method=method, distances=True, vectors=True)
     assert verlet.update(x)
     moved = large_move(x, SKIN)
     assert verlet.update(moved) is True
@@ -73,7 +73,7 @@ def test_large_move_rebuilds_at_cutoff_plus_skin(method):
     assert d.dtype == np.float32 and d.shape == indices.shape
     assert v.dtype == np.float32 and v.shape == (len(indices), 3)
     i, j = csr_pairs(offsets, indices)
-    ri, rj, rd, rv = raycut.neighbor_list("ijdD", moved, np.float32(CUTOFF) + np.float32(SKIN),
+    ri, rj, rd, rv = pyraycut.neighbor_list("ijdD", moved, np.float32(CUTOFF) + np.float32(SKIN),
                                           method=method)
     order, ref = np.lexsort((j, i)), np.lexsort((rj, ri))
     np.testing.assert_array_equal(i[order], ri[ref])
@@ -85,13 +85,13 @@ def test_large_move_rebuilds_at_cutoff_plus_skin(method):
 
 def test_half_list(method):
     x = uniform(400)
-    verlet = raycut.VerletList(CUTOFF, SKIN, method=method, half=True)
+    verlet = pyraycut.VerletList(CUTOFF, SKIN, method=method, half=True)
     verlet.update(x)
     verlet.update(small_move(x, SKIN))
     offsets, indices = verlet.neighbours()
     i, j = csr_pairs(offsets, indices)
     assert (i < j).all()
-    ri, rj = raycut.neighbor_list("ij", x, np.float32(CUTOFF) + np.float32(SKIN), half=True,
+    ri, rj = pyraycut.neighbor_list("ij", x, np.float32(CUTOFF) + np.float32(SKIN), half=True,
                                   method=method)
     assert pair_set(i, j) == pair_set(ri, rj)
     assert_holds_cutoff_pairs(offsets, indices, small_move(x, SKIN), CUTOFF, half=True)
@@ -100,7 +100,7 @@ def test_half_list(method):
 def test_rebuild_counter_over_a_trajectory():
     rng = np.random.default_rng(5)
     x = uniform(300)
-    verlet = raycut.VerletList(CUTOFF, SKIN)
+    verlet = pyraycut.VerletList(CUTOFF, SKIN)
     assert verlet.update(x) and verlet.rebuilds == 1
     start, rebuilt = x.copy(), 1
     for _ in range(20):
@@ -119,7 +119,7 @@ def test_rebuild_counter_over_a_trajectory():
 
 def test_arrays_outlive_a_rebuild():
     x = uniform(400)
-    verlet = raycut.VerletList(CUTOFF, SKIN, distances=True)
+    verlet = pyraycut.VerletList(CUTOFF, SKIN, distances=True)
     verlet.update(x)
     old = verlet.neighbours()
     kept = [a.copy() for a in old]
@@ -132,7 +132,7 @@ def test_arrays_outlive_a_rebuild():
 
 def test_float64_and_lists_are_converted():
     x = uniform(100).astype(np.float64)
-    verlet = raycut.VerletList(CUTOFF, SKIN)
+    verlet = pyraycut.VerletList(CUTOFF, SKIN)
     assert verlet.update(x)
     assert not verlet.update(x.tolist())
     assert isinstance(verlet.neighbours()[0], np.ndarray)
@@ -140,7 +140,7 @@ def test_float64_and_lists_are_converted():
 
 def test_errors():
     x = uniform(100)
-    verlet = raycut.VerletList(CUTOFF, SKIN)
+    verlet = pyraycut.VerletList(CUTOFF, SKIN)
     with pytest.raises(ValueError, match="update"):
         verlet.neighbours()
     verlet.update(x)
@@ -154,18 +154,18 @@ def test_errors():
         verlet.update(bad)
     assert verlet.rebuilds == 1
     with pytest.raises(ValueError):
-        raycut.VerletList(CUTOFF, -0.1)
+        pyraycut.VerletList(CUTOFF, -0.1)
     with pytest.raises(ValueError):
-        raycut.VerletList(0.0, SKIN)
+        pyraycut.VerletList(0.0, SKIN)
     with pytest.raises(ValueError):
-        raycut.VerletList(CUTOFF, float("inf"))
+        pyraycut.VerletList(CUTOFF, float("inf"))
     with pytest.raises(ValueError):
-        raycut.VerletList(CUTOFF, SKIN, method="no-such-method")
+        pyraycut.VerletList(CUTOFF, SKIN, method="no-such-method")
 
 
 def test_empty_and_single():
     for x in (np.zeros((0, 3), np.float32), np.array([[0.5, 0.5, 0.5]], np.float32)):
-        verlet = raycut.VerletList(CUTOFF, SKIN, distances=True, vectors=True)
+        verlet = pyraycut.VerletList(CUTOFF, SKIN, distances=True, vectors=True)
         assert verlet.update(x)
         assert not verlet.update(x)
         offsets, indices, d, v = verlet.neighbours()
@@ -180,7 +180,7 @@ def test_empty_and_single():
 def test_torch_verlet(method):
     torch = torch_cuda()
     x = uniform(800)
-    verlet = raycut.VerletList(CUTOFF, SKIN, method=method, distances=True)
+    verlet = pyraycut.VerletList(CUTOFF, SKIN, method=method, distances=True)
     assert verlet.update(torch.from_numpy(x).cuda())
     offsets, indices, d = verlet.neighbours()
     for t, dtype in zip((offsets, indices, d), (torch.int64, torch.int32, torch.float32)):
@@ -197,7 +197,7 @@ def test_torch_verlet(method):
     far = large_move(x, SKIN)
     assert verlet.update(torch.from_numpy(far).cuda()) is True and verlet.rebuilds == 2
     o3, i3, d3 = verlet.neighbours()
-    ri, rj = raycut.neighbor_list("ij", far, np.float32(CUTOFF) + np.float32(SKIN))
+    ri, rj = pyraycut.neighbor_list("ij", far, np.float32(CUTOFF) + np.float32(SKIN))
     assert pair_set(*csr_pairs(o3.cpu().numpy(), i3.cpu().numpy())) == pair_set(ri, rj)
     for t, k in zip((offsets, indices, d), kept):  # the first list's arrays are still intact
         assert torch.equal(t, k)
@@ -208,7 +208,7 @@ def test_torch_verlet(method):
 def test_cupy_verlet():
     cupy = cupy_cuda()
     x = uniform(600)
-    verlet = raycut.VerletList(CUTOFF, SKIN, vectors=True)
+    verlet = pyraycut.VerletList(CUTOFF, SKIN, vectors=True)
     assert verlet.update(cupy.asarray(x))
     offsets, indices, v = verlet.neighbours()
     for a in (offsets, indices, v):
@@ -218,5 +218,5 @@ def test_cupy_verlet():
     far = large_move(x, SKIN)
     assert verlet.update(cupy.asarray(far)) is True
     o, i, _ = verlet.neighbours()
-    ri, rj = raycut.neighbor_list("ij", far, np.float32(CUTOFF) + np.float32(SKIN))
+    ri, rj = pyraycut.neighbor_list("ij", far, np.float32(CUTOFF) + np.float32(SKIN))
     assert pair_set(*csr_pairs(o.get(), i.get())) == pair_set(ri, rj)

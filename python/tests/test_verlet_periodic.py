@@ -1,13 +1,13 @@
-"""raycut.VerletList in periodic boxes and batches (cell, pbc, batch; shifts S in its lists): over
+"""pyraycut.VerletList in periodic boxes and batches (cell, pbc, batch; shifts S in its lists): over
 trajectories of moving, unwrapped particles it rebuilds exactly when some particle has moved more
 than skin / 2 since the last rebuild, and its list, filtered by the cutoff at the current
-positions (r_ij = x[j] - x[i] + S @ cell), equals a fresh raycut.neighbor_list("ijS") at the
+positions (r_ij = x[j] - x[i] + S @ cell), equals a fresh pyraycut.neighbor_list("ijS") at the
 cutoff at every step. Host (NumPy) on every method with boxes; CUDA (PyTorch) skipped without it."""
 import numpy as np
 import pytest
 from conftest import AVAILABLE, SYSTEM_METHODS, torch_cuda
 
-import raycut
+import pyraycut
 
 CUTOFF, SKIN = 2.5, 0.4
 DENSITY = 0.8442  # the LJ liquid of the benchmarks (docs/benchmarks.md)
@@ -110,11 +110,11 @@ def test_periodic_trajectory(system_method, shape, half):
     else:
         x0 = liquid(n, cell, 1)
     trajectory = [x0] + walk(x0, 12, 0.04, seed=2)
-    verlet = raycut.VerletList(CUTOFF, SKIN, method=system_method, half=half, shifts=True,
+    verlet = pyraycut.VerletList(CUTOFF, SKIN, method=system_method, half=half, shifts=True,
                                cell=cell, pbc=pbc)
 
     def fresh(x):
-        return raycut.neighbor_list("ijS", x, CUTOFF, cell=cell, pbc=pbc, half=half,
+        return pyraycut.neighbor_list("ijS", x, CUTOFF, cell=cell, pbc=pbc, half=half,
                                     method=system_method)
 
     rebuilds = follow(verlet, trajectory, fresh, cell, half=half)
@@ -132,11 +132,11 @@ def test_batch_trajectory(system_method):
                     [True, True, True], [False, False, False]])
     x0 = np.concatenate([liquid(s, cells[k], 10 + k) for k, s in enumerate(sizes)])
     trajectory = [x0] + walk(x0, 10, 0.05, seed=3)
-    verlet = raycut.VerletList(CUTOFF, SKIN, method=system_method, shifts=True, distances=True,
+    verlet = pyraycut.VerletList(CUTOFF, SKIN, method=system_method, shifts=True, distances=True,
                                cell=cells, pbc=pbc, batch=batch)
 
     def fresh(x):
-        return raycut.neighbor_list("ijS", x, CUTOFF, cell=cells, pbc=pbc, batch=batch,
+        return pyraycut.neighbor_list("ijS", x, CUTOFF, cell=cells, pbc=pbc, batch=batch,
                                     method=system_method)
 
     rebuilds = follow(verlet, trajectory, fresh, cells * pbc[:, :, None], offsets)
@@ -151,14 +151,14 @@ def test_batch_trajectory(system_method):
 
 def test_shifts_zero_without_a_cell_and_flags():
     x = liquid(200, cube(200), 4)
-    verlet = raycut.VerletList(CUTOFF, SKIN, shifts=True, vectors=True)
+    verlet = pyraycut.VerletList(CUTOFF, SKIN, shifts=True, vectors=True)
     assert verlet.shifts and verlet.vectors and not verlet.distances and not verlet.half
     verlet.update(x)
     offsets, indices, D, S = verlet.neighbours()
     assert S.dtype == np.int32 and S.shape == (len(indices), 3) and not S.any()
     i = csr_rows(offsets)
     np.testing.assert_allclose(D, x[indices].astype(np.float64) - x[i], atol=1e-5)
-    plain = raycut.VerletList(CUTOFF, SKIN, cell=cube(200), pbc=True)
+    plain = pyraycut.VerletList(CUTOFF, SKIN, cell=cube(200), pbc=True)
     assert not plain.shifts
     plain.update(x)
     assert len(plain.neighbours()) == 2  # (offsets, indices): shifts only when asked
@@ -168,7 +168,7 @@ def test_vectors_and_distances_with_shifts(system_method):
     n = 12
     cell = cube(n)  # side 2.4 < cutoff + skin: pairs once per image, and self-images
     x = liquid(n, cell, 5)
-    verlet = raycut.VerletList(CUTOFF, SKIN, method=system_method, distances=True, vectors=True,
+    verlet = pyraycut.VerletList(CUTOFF, SKIN, method=system_method, distances=True, vectors=True,
                                shifts=True, cell=cell, pbc=True)
     verlet.update(x)
     offsets, indices, d, D, S = verlet.neighbours()
@@ -177,7 +177,7 @@ def test_vectors_and_distances_with_shifts(system_method):
     np.testing.assert_allclose(D, r, atol=2e-5)
     np.testing.assert_allclose(d, np.linalg.norm(r, axis=1), atol=2e-5)
     assert (i == indices).any(), "self-images in a box smaller than the list's range"
-    ri, rj, rS = raycut.neighbor_list("ijS", x, np.float32(CUTOFF) + np.float32(SKIN), cell=cell,
+    ri, rj, rS = pyraycut.neighbor_list("ijS", x, np.float32(CUTOFF) + np.float32(SKIN), cell=cell,
                                       method=system_method)
     assert ({(a, b) + tuple(s) for a, b, s in zip(i.tolist(), indices.tolist(), S.tolist())} ==
             {(a, b) + tuple(s) for a, b, s in zip(ri.tolist(), rj.tolist(), rS.tolist())})
@@ -186,13 +186,13 @@ def test_vectors_and_distances_with_shifts(system_method):
 def test_errors():
     cells = np.stack([cube(50)] * 2)
     with pytest.raises(ValueError, match="batch"):
-        raycut.VerletList(CUTOFF, SKIN, cell=cells)  # two boxes, no batch
+        pyraycut.VerletList(CUTOFF, SKIN, cell=cells)  # two boxes, no batch
     with pytest.raises(ValueError, match="sorted"):
-        raycut.VerletList(CUTOFF, SKIN, cell=cube(50), batch=[0, 1, 0])
+        pyraycut.VerletList(CUTOFF, SKIN, cell=cube(50), batch=[0, 1, 0])
     with pytest.raises(ValueError, match="singular|cell"):
-        raycut.VerletList(CUTOFF, SKIN, cell=np.zeros((3, 3)), pbc=True).update(
+        pyraycut.VerletList(CUTOFF, SKIN, cell=np.zeros((3, 3)), pbc=True).update(
             liquid(10, cube(10), 0))
-    verlet = raycut.VerletList(CUTOFF, SKIN, cell=cube(50), batch=np.repeat([0, 1], 25))
+    verlet = pyraycut.VerletList(CUTOFF, SKIN, cell=cube(50), batch=np.repeat([0, 1], 25))
     with pytest.raises(ValueError):
         verlet.update(liquid(40, cube(50), 0))  # the batch says 50 particles
     assert verlet.rebuilds == 0
@@ -201,7 +201,7 @@ def test_errors():
 
 @pytest.mark.parametrize("method", [m for m in AVAILABLE if m not in SYSTEM_METHODS])
 def test_methods_without_boxes_say_so(method):
-    verlet = raycut.VerletList(CUTOFF, SKIN, method=method, cell=cube(50))
+    verlet = pyraycut.VerletList(CUTOFF, SKIN, method=method, cell=cube(50))
     with pytest.raises(NotImplementedError):
         verlet.update(liquid(50, cube(50), 0))
 
@@ -217,7 +217,7 @@ def test_torch_periodic_batch_trajectory(method):
     cells = np.stack([cube(120), cube(90) * 1.1, cube(40)])
     x0 = np.concatenate([liquid(s, cells[k], 20 + k) for k, s in enumerate(sizes)])
     batch = torch.repeat_interleave(torch.arange(3), torch.tensor(sizes)).cuda()
-    verlet = raycut.VerletList(CUTOFF, SKIN, method=method, shifts=True, cell=cells, pbc=True,
+    verlet = pyraycut.VerletList(CUTOFF, SKIN, method=method, shifts=True, cell=cells, pbc=True,
                                batch=batch)
     trajectory = [x0] + walk(x0, 8, 0.05, seed=6)
     start = trajectory[0]
@@ -235,7 +235,7 @@ def test_torch_periodic_batch_trajectory(method):
         assert S.dtype == torch.int32
         got, gb = split(csr_rows(o.cpu().numpy()), idx.cpu().numpy(), S.cpu().numpy(), x,
                         cells, offsets)
-        fi, fj, fS = raycut.neighbor_list("ijS", torch.from_numpy(x).cuda(), CUTOFF, cell=cells,
+        fi, fj, fS = pyraycut.neighbor_list("ijS", torch.from_numpy(x).cuda(), CUTOFF, cell=cells,
                                           batch=batch, method=method)
         want, wb = split(fi.cpu().numpy(), fj.cpu().numpy(), fS.cpu().numpy(), x, cells, offsets)
         assert got - (gb | wb) == want - (gb | wb)

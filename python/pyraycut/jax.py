@@ -1,13 +1,13 @@
 """raycut's neighbour list inside JAX programs: an XLA FFI custom call on the CPU
-(python/src/jax_ffi.cpp, raycut/_jax_ffi.so) with static-capacity outputs, so that it runs under
+(python/src/jax_ffi.cpp, pyraycut/_jax_ffi.so) with static-capacity outputs, so that it runs under
 ``jax.jit``; vectors and distances come from ``vectors``, in JAX, so ``jax.grad`` flows to
 positions and cell.
 
->>> import jax, jax.numpy as jnp, raycut.jax
+>>> import jax, jax.numpy as jnp, pyraycut.jax
 >>> @jax.jit
 ... def energy(x, cell):
-...     i, j, S, count = raycut.jax.neighbor_list(x, 2.5, cell=cell, max_pairs=20_000)
-...     d = jnp.linalg.norm(raycut.jax.vectors(x, i, j, S, cell), axis=1)
+...     i, j, S, count = pyraycut.jax.neighbor_list(x, 2.5, cell=cell, max_pairs=20_000)
+...     d = jnp.linalg.norm(pyraycut.jax.vectors(x, i, j, S, cell), axis=1)
 ...     inv6 = jnp.where(d > 0, 1.0 / jnp.where(d > 0, d, 1.0) ** 6, 0.0)  # padding: d = 0
 ...     return 2.0 * jnp.sum(inv6 * inv6 - inv6)
 >>> forces = -jax.grad(energy)(x, cell)
@@ -36,7 +36,7 @@ def _library() -> str:
     found = sorted(glob.glob(os.path.join(here, "_jax_ffi*.so")))
     if not found:
         raise ImportError(
-            f"raycut.jax's custom call is not built in {here}: it is built when the Python that "
+            f"pyraycut.jax's custom call is not built in {here}: it is built when the Python that "
             "configures raycut imports jax (pip install --no-build-isolation ., or the CMake "
             "build with RAYCUT_BUILD_JAX=ON)")
     return found[0]
@@ -49,7 +49,7 @@ jax.ffi.register_ffi_target(_TARGET, jax.ffi.pycapsule(_handler), platform="cpu"
 
 def neighbor_list(positions: Any, cutoff: float, cell: Any = None, pbc: Any = None,
                   max_pairs: Optional[int] = None, half: bool = False) -> tuple:
-    """Every pair (i, j, S) with ``|x[j] - x[i] + S @ cell| < cutoff``, as raycut.neighbor_list
+    """Every pair (i, j, S) with ``|x[j] - x[i] + S @ cell| < cutoff``, as pyraycut.neighbor_list
     finds them, in arrays of the static size ``max_pairs`` (K):
 
     - ``i``, ``j`` (K,) int32: the pairs first (sorted by i), then padding ``i = j = N``;
@@ -62,7 +62,7 @@ def neighbor_list(positions: Any, cutoff: float, cell: Any = None, pbc: Any = No
     positions (and cells) gives every system its own K slots and count, in one search.
     """
     if max_pairs is None or int(max_pairs) != max_pairs or max_pairs < 0:
-        raise ValueError(f"raycut.jax.neighbor_list needs max_pairs, a whole number >= 0 (the "
+        raise ValueError(f"pyraycut.jax.neighbor_list needs max_pairs, a whole number >= 0 (the "
                          f"static size of its outputs), got {max_pairs!r}")
     x = jnp.asarray(jax.lax.stop_gradient(positions), jnp.float32)
     if x.ndim != 2 or x.shape[1] != 3:

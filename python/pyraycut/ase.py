@@ -1,7 +1,7 @@
 """A drop-in for ``ase.neighborlist.neighbor_list``, for any Atoms: open, periodic, triclinic,
 cells smaller than twice the cutoff, mixed pbc.
 
->>> from raycut.ase import neighbor_list
+>>> from pyraycut.ase import neighbor_list
 >>> i, j, d, D, S = neighbor_list("ijdDS", atoms, 3.0)   # as ase.neighborlist.neighbor_list
 
 ASE's conventions: every (i, j, S) with ``D = positions[j] - positions[i] + S @ cell`` shorter
@@ -11,7 +11,7 @@ or not). ASE's types: ``i``, ``j`` intp sorted by ``i``; ``d`` (P,) and ``D`` (P
 computed in float64 from the Atoms' own positions and cell (as ASE computes them); ``S`` (P, 3)
 int (int64). The order of pairs within a row may differ from ASE's.
 
-The pairs are found by ``raycut.neighbor_list`` in float32 (the one float32 predicate): on
+The pairs are found by ``pyraycut.neighbor_list`` in float32 (the one float32 predicate): on
 positions wrapped into the cell in float64 first (so that far-unwrapped positions lose no float32
 precision) and translated in float64 so that their bounding box is centred on the origin (so
 that Atoms far from the origin along an open axis lose none either), the shifts then translated
@@ -49,7 +49,7 @@ def __getattr__(name: str) -> Any:
         from ._ase_lj import LennardJones
 
         return LennardJones
-    raise AttributeError(f"module 'raycut.ase' has no attribute {name!r}")
+    raise AttributeError(f"module 'pyraycut.ase' has no attribute {name!r}")
 
 
 def _effective_cell(cell: np.ndarray, pbc: np.ndarray) -> np.ndarray:
@@ -115,7 +115,7 @@ def _system(atoms: Any) -> tuple:
 def neighbor_list(quantities: str, atoms: Any, cutoff: Any, self_interaction: bool = False,
                   method: str = "auto") -> Any:
     """``ase.neighborlist.neighbor_list(quantities, atoms, cutoff, self_interaction)``, computed
-    by raycut (``method``: a name from ``raycut.methods()`` or ``"auto"``).
+    by raycut (``method``: a name from ``pyraycut.methods()`` or ``"auto"``).
 
     ``quantities``: letters of ``"ijdDS"``, returned in that order (one letter: the array
     alone). ``cutoff``: one number, a list of per-atom radii, ``{(Z1, Z2): rc}`` or
@@ -194,7 +194,7 @@ class NeighborList:
     an image pair in the other row: the set of pairs is the same. ``sorted``: each row sorted by
     neighbour index, then offset (x, y, z) as ASE sorts it; otherwise the order within a row is
     unspecified. ``primitive`` is accepted and ignored (ASE's choice of implementation).
-    ``method``: a name from ``raycut.methods()`` or ``"auto"``.
+    ``method``: a name from ``pyraycut.methods()`` or ``"auto"``.
 
     Offsets (int64) and indices (intp) refer to the positions as given (wrapped or not).
     """

@@ -1,4 +1,4 @@
-"""raycut.ase.LennardJones: ASE's Lennard-Jones calculator on raycut's pair pass."""
+"""pyraycut.ase.LennardJones: ASE's Lennard-Jones calculator on raycut's pair pass."""
 from __future__ import annotations
 
 from typing import Any
@@ -10,7 +10,7 @@ from . import Engine
 from .ase import _centred_float32, _system, _wrap
 from .ase import neighbor_list as _ase_neighbor_list
 
-# Voigt order xx yy zz yz xz xy (ASE) from raycut's virial components xx yy zz xy xz yz.
+# Voigt order xx yy zz yz xz xy (ASE) from pyraycut's virial components xx yy zz xy xz yz.
 _TO_VOIGT = [0, 1, 2, 5, 4, 3]
 
 
@@ -18,14 +18,14 @@ class LennardJones(Calculator):
     """``ase.calculators.lj.LennardJones``, computed by raycut: the same parameters, results and
     conventions.
 
-    >>> atoms.calc = raycut.ase.LennardJones(sigma=3.4, epsilon=0.0104, rc=8.5)
+    >>> atoms.calc = pyraycut.ase.LennardJones(sigma=3.4, epsilon=0.0104, rc=8.5)
     >>> atoms.get_potential_energy(), atoms.get_forces(), atoms.get_stress()
 
     Parameters (ASE's): ``sigma`` (1.0), ``epsilon`` (1.0), ``rc`` (cutoff; None: 3 sigma),
     ``ro`` (onset of the smooth cutoff; None: 0.66 rc), ``smooth`` (False: the pair energy
     shifted to 0 at rc, forces jumping to 0 there; True: the pair energy multiplied by ASE's C^1
     polynomial cutoff function between ro and rc). ``method``: a name from
-    ``raycut.methods()`` or ``"auto"``.
+    ``pyraycut.methods()`` or ``"auto"``.
 
     Results: ``energy`` = ``free_energy`` (eV), ``energies`` (per atom, each pair's energy half
     on each atom: they sum to ``energy``), ``forces``, and for a full-rank cell ``stress`` and
@@ -35,7 +35,7 @@ class LennardJones(Calculator):
     where there is one), on positions wrapped and centred in float64, and the per-atom results
     are summed in float64: each per-atom value carries a relative error of a few float32 ulps
     of the sum of its terms' magnitudes (~1e-6). ``smooth=True`` runs on the pairs of
-    ``raycut.ase.neighbor_list`` in float64, as ASE does (the cutoff function is not in the
+    ``pyraycut.ase.neighbor_list`` in float64, as ASE does (the cutoff function is not in the
     fused pass yet).
     """
 

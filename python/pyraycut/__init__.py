@@ -120,7 +120,7 @@ _K_MAX = 2**32 - 1  # the padded list's K is a 32-bit count
 class Engine:
     """A method built over positions: fused pair kernels and neighbour lists.
 
-    >>> engine = raycut.Engine("auto")
+    >>> engine = pyraycut.Engine("auto")
     >>> engine.build(positions, cutoff=0.1)      # (N, 3) float32, NumPy or a CUDA tensor
     >>> engine.compute("lj_forces")["force"]     # (N, 3), in the positions' framework
     >>> offsets, indices = engine.neighbours()   # CSR, on the positions' device
@@ -140,7 +140,7 @@ class Engine:
         self._batch = _systems.Batch(None, 1, None, None)
 
     def __repr__(self) -> str:
-        return (f"raycut.Engine(method={self.method!r}, space={self.space!r}, size={self.size}, "
+        return (f"pyraycut.Engine(method={self.method!r}, space={self.space!r}, size={self.size}, "
                 f"cutoff={self.cutoff})")
 
     @property
@@ -333,7 +333,7 @@ class VerletList:
     particle has moved more than ``skin / 2`` since the last rebuild (until then no pair within
     ``cutoff`` can be missing from it), in open or periodic boxes, of one system or a batch.
 
-    >>> verlet = raycut.VerletList(cutoff=2.5, skin=0.3, shifts=True, cell=cell, pbc=True)
+    >>> verlet = pyraycut.VerletList(cutoff=2.5, skin=0.3, shifts=True, cell=cell, pbc=True)
     >>> for step in range(steps):
     ...     x = integrate(x)                          # (N, 3) float32, NumPy or a CUDA tensor
     ...     verlet.update(x)                          # True when it rebuilt the list
@@ -374,7 +374,7 @@ class VerletList:
         self._like = _arrays.HOST
 
     def __repr__(self) -> str:
-        return (f"raycut.VerletList(cutoff={self.cutoff}, skin={self.skin}, "
+        return (f"pyraycut.VerletList(cutoff={self.cutoff}, skin={self.skin}, "
                 f"method={self.method!r}, size={self.size}, rebuilds={self.rebuilds})")
 
     @property
@@ -615,8 +615,8 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     tensors only): outputs of that static size, the pairs first, then padding (i = j = N, S = 0,
     d = 0); a list that does not fit raises ``CapacityError`` in eager mode.
 
-    >>> i, j, S = raycut.neighbor_list("ijS", x, 3.0, cell=[10.0, 10.0, 10.0], pbc=True)
-    >>> i, j = raycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
+    >>> i, j, S = pyraycut.neighbor_list("ijS", x, 3.0, cell=[10.0, 10.0, 10.0], pbc=True)
+    >>> i, j = pyraycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
     """
     letters = _letters(quantities)
     if _cutoffs.is_varying(cutoff):
@@ -664,8 +664,8 @@ def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any 
     PyTorch CPU tensors go through ``torch.ops.raycut.radius`` as ``neighbor_list``'s do
     through its operator (``max_pairs`` too; padding: i = M, j = N).
 
-    >>> i, j = raycut.radius(points, queries, 0.05)           # query i, point j
-    >>> i, j, S = raycut.radius(points, queries, 0.05, cell=[1, 1, 1], quantities="ijS")
+    >>> i, j = pyraycut.radius(points, queries, 0.05)           # query i, point j
+    >>> i, j, S = pyraycut.radius(points, queries, 0.05, cell=[1, 1, 1], quantities="ijS")
     """
     letters = _letters(quantities)
     if _torch_ops_route(points, method, max_pairs):
@@ -684,11 +684,11 @@ def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any 
     return out
 
 
-_TORCH_OPS: list = []  # [raycut._torch, or None when the operators are not built] once tried
+_TORCH_OPS: list = []  # [pyraycut._torch, or None when the operators are not built] once tried
 
 
 def _torch_ops() -> Any:
-    """raycut._torch (it imports torch and loads the operators), or None where they are not
+    """pyraycut._torch (it imports torch and loads the operators), or None where they are not
     built: PyTorch tensors then go through the extension as other arrays do."""
     if not _TORCH_OPS:
         try:
@@ -704,7 +704,7 @@ def _torch_ops() -> Any:
 def load_torch_ops() -> str:
     """Loads raycut's PyTorch operators (``torch.ops.raycut.neighbor_list``, ``.radius``,
     ``.lj_forces``) and returns their library's path: what a TorchScript module or an
-    AOTInductor package needs loaded first (``import raycut`` after ``import torch`` does it).
+    AOTInductor package needs loaded first (``import pyraycut`` after ``import torch`` does it).
     Raises ImportError when they are not built or do not load with this torch."""
     if _torch_ops() is None:
         from . import _torch  # noqa: F401  raises the ImportError that says why
@@ -712,7 +712,7 @@ def load_torch_ops() -> str:
 
 
 def _torch_ops_route(x: Any, method: str, max_pairs: Optional[int]) -> bool:
-    """Whether a call goes through the PyTorch operators (raycut._torch.routes)."""
+    """Whether a call goes through the PyTorch operators (pyraycut._torch.routes)."""
     if _arrays.framework_of(x) == "torch":
         ops = _torch_ops()
         if ops is not None and ops.routes(x, method):
@@ -732,7 +732,7 @@ def _host_cell(cell: Any) -> Any:
     return cell
 
 
-from . import ase  # noqa: E402  raycut.ase.neighbor_list: ASE Atoms in, ASE's types out
+from . import ase  # noqa: E402  pyraycut.ase.neighbor_list: ASE Atoms in, ASE's types out
 
 if "torch" in sys.modules:  # torch already imported: its operators now, before any tracing
     _torch_ops()

@@ -1,8 +1,8 @@
 """PyTorch tensors through the raycut operators (torch.ops.raycut.neighbor_list and .radius), so
-that the same ``raycut.neighbor_list`` / ``raycut.radius`` call works in eager mode, under
+that the same ``pyraycut.neighbor_list`` / ``pyraycut.radius`` call works in eager mode, under
 ``torch.compile(fullgraph=True)``, ``torch.export`` and in AOTInductor packages.
 
-The operators (C++, raycut/_torch_ops.so) return integer pairs only: (i, j, S, count). Distances
+The operators (C++, pyraycut/_torch_ops.so) return integer pairs only: (i, j, S, count). Distances
 and vectors are computed here in PyTorch from them and the caller's own positions and cell
 (``r = x[j] - x[i] + S @ cell``), in the positions' dtype, so autograd flows to positions and
 cell to any order and never reaches the operator. Importing this module imports torch, loads the
@@ -74,7 +74,7 @@ def _lj_forces_fake(positions, cutoff, epsilon=1.0, sigma=1.0, cell=None, pbc=No
 def _lj_forces_backward(ctx, *grads):
     raise RuntimeError("torch.ops.raycut.lj_forces is not differentiable (it returns the forces "
                        "themselves): for gradients, compute the energy from "
-                       "raycut.neighbor_list's d, or pass positions.detach()")
+                       "pyraycut.neighbor_list's d, or pass positions.detach()")
 
 
 torch.library.register_autograd("raycut::lj_forces", _lj_forces_backward)
