@@ -141,9 +141,9 @@ RAYCUT_HD float fast_reciprocal(float b) {
 #endif
 }
 
-// The image shift S of a pair (i, j, S): r_ij = x_j - x_i + S . cell (docs/periodic.md, "Semantics");
-// zero without a periodic box. A functor that declares `static constexpr bool takes_shift =
-// true` gets it as a last argument of operator() and accepts():
+// The image shift S of a pair (i, j, S): r_ij = x_j - x_i + S . cell (docs/periodic.md,
+// "Semantics"); zero without a periodic box. A functor that declares `static constexpr bool
+// takes_shift = true` gets it as a last argument of operator() and accepts():
 //   operator()(acc, i, j, r, r2, const Shift& s)   accepts(i, j, const Shift& s)
 struct Shift {
   std::int32_t a = 0, b = 0, c = 0;

@@ -1,7 +1,8 @@
-// raycut's neighbour list as an XLA FFI custom call on the CPU (pyraycut.jax, python/pyraycut/jax.py):
-// static-capacity outputs, so that it runs inside jax.jit. Built as its own shared library,
-// pyraycut/_jax_ffi.so, against the FFI headers jaxlib ships (jax.ffi.include_dir()); the Python
-// side registers the handler symbol with jax.ffi.register_ffi_target.
+// raycut's neighbour list as an XLA FFI custom call on the CPU (pyraycut.jax,
+// python/pyraycut/jax.py): static-capacity outputs, so that it runs inside jax.jit. Built as its
+// own shared library, pyraycut/_jax_ffi.so, against the FFI headers jaxlib ships
+// (jax.ffi.include_dir()); the Python side registers the handler symbol with
+// jax.ffi.register_ffi_target.
 //
 // Inputs: positions (N, 3) float32; cell (3, 3) float32 or float64; pbc (3,) bool; or the same
 // with leading batch axes (jax.vmap). Attributes: cutoff (float32), half (int64, 0 or 1).
