@@ -116,7 +116,10 @@ void HostImagePoints::expand(const ImagePlan& plan, const float* sources, const 
   const std::size_t n = plan.source_count(), targets = plan.target_count();
   const bool with_queries = plan.has_queries();
   std::vector<ImageFrame> frames = plan.frames;
-  if (plan.own_frames)
+  // Batches: each system in its own frame. float64 sources too (one system as well): their
+  // float points then span the system rather than its distance from the origin, so the band
+  // decided in double, and the cells it widens, stay narrow (geographic or far-offset clouds).
+  if (plan.own_frames || float64)
     for (std::uint32_t s = 0; s < systems; ++s) {
       if (plan.sources[s] < plan.sources[s + 1])
         float64 ? system_origin(frames[s], float64 + 3 * plan.sources[s])
