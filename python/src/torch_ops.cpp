@@ -55,9 +55,9 @@ using Pairs = std::tuple<at::Tensor, at::Tensor, at::Tensor, at::Tensor>;
   }
 }
 
-// (N, 3) float32 or float64 points as the engine reads them: float32, C-contiguous, on their
-// device.
-// The pair decision is the library's float32 predicate on these values (docs/python.md).
+// (N, 3) float32 or float64 points as the engine searches them: float32, C-contiguous, on their
+// device. float64 CPU positions also go to the engine as they are (run's `wide`), which decides
+// in double what the float rounding could (docs/limits.md, "float64 positions").
 at::Tensor search_points(const at::Tensor& x, const char* name) {
   TORCH_CHECK_VALUE(x.dim() == 2 && x.size(1) == 3, name, " must have shape (N, 3), got ",
                     x.sizes());
@@ -270,9 +270,11 @@ Pairs pair_tensors(const raycut::NeighbourListBuffer& list, std::optional<std::i
 }
 
 // Builds the engine of `x`'s device over x (and `systems`) and fills a COO list with shifts:
-// on the CPU in place, on CUDA on the current device and stream.
+// on the CPU in place, on CUDA on the current device and stream. `wide`: the float64 CPU
+// positions x was rounded from (undefined otherwise).
 Pairs run(const at::Tensor& x, double cutoff, const raycut::Systems& systems, bool half,
-          std::optional<std::int64_t> max_pairs, std::int64_t pad_i, std::int64_t pad_j) {
+          std::optional<std::int64_t> max_pairs, std::int64_t pad_i, std::int64_t pad_j,
+          const at::Tensor& wide = at::Tensor()) {
   const at::Device device = x.device();
   Work& work = work_for(device);
   raycut::NeighbourListBuffer fresh;
@@ -286,8 +288,13 @@ Pairs run(const at::Tensor& x, double cutoff, const raycut::Systems& systems, bo
   }
 #endif
   try {
-    work.engine.build({x.data_ptr<float>(), static_cast<std::size_t>(x.size(0)), space},
-                      static_cast<float>(cutoff), systems);
+    if (wide.defined())
+      work.engine.build(
+          raycut::Float64Positions{wide.data_ptr<double>(), static_cast<std::size_t>(wide.size(0))},
+          static_cast<float>(cutoff), systems);
+    else
+      work.engine.build({x.data_ptr<float>(), static_cast<std::size_t>(x.size(0)), space},
+                        static_cast<float>(cutoff), systems);
     raycut::ListOptions options;
     options.half = half;
     options.shifts = true;
@@ -308,7 +315,9 @@ Pairs neighbor_list(const at::Tensor& positions, double cutoff,
   const raycut::Systems systems =
       systems_of(boxes_of(cell, pbc), system_index(batch, n, "batch"), n, at::Tensor(), 0,
                  /*with_queries=*/false, "batch");
-  return run(x, cutoff, systems, half, max_pairs, n, n);
+  const bool wide = positions.is_cpu() && positions.scalar_type() == at::kDouble;
+  return run(x, cutoff, systems, half, max_pairs, n, n,
+             wide ? positions.contiguous() : at::Tensor());
 }
 
 Pairs radius(const at::Tensor& points, const at::Tensor& queries, double cutoff,

@@ -47,6 +47,23 @@ def test_op_periodic_triclinic_vs_brute_force(scale, cutoff, dtype):
     torch.testing.assert_close(d, torch.linalg.vector_norm(want, dim=1), rtol=0, atol=0)
 
 
+def test_float64_cpu_positions_decide_in_double():
+    # Two points 1 - 1e-9 apart at 1e6: as float32 they round to 1.0 apart (no pair); float64
+    # CPU positions are decided in double (the engine's Float64Positions).
+    x = torch.tensor([[1e6 + 0.01, 0.0, 0.0], [1e6 + 1.01 - 1e-9, 0.0, 0.0]], dtype=torch.float64)
+    i, j, S, count = OPS.neighbor_list(x, 1.0)
+    assert int(count) == 2 and sorted(i.tolist()) == [0, 1]
+    d = pyraycut.neighbor_list("d", x, 1.0)
+    assert d.dtype == torch.float64 and torch.all(d < 1.0)
+    assert int(OPS.neighbor_list(x.float(), 1.0)[3]) == 0
+    # In a box 10^4 cutoffs wide: every pair the float64 answer, and symmetric.
+    cell = torch.eye(3, dtype=torch.float64) * 1e4
+    y = torch.tensor([[0.3004, 5000.0, 5000.0], [9999.30078125, 5000.0, 5000.0]],
+                     dtype=torch.float64)
+    i, j, S, count = OPS.neighbor_list(y, 1.0, cell)
+    assert triples(i, j, S) == {(0, 1, -1, 0, 0), (1, 0, 1, 0, 0)}
+
+
 def test_half_and_numpy_agreement():
     x, c = periodic_system(50, TRICLINIC, (True, False, True), seed=4, dtype=torch.float32)
     pbc = torch.tensor([True, False, True])
