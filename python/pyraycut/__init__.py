@@ -136,6 +136,7 @@ class Engine:
     def __init__(self, method: str = "auto") -> None:
         self._engine = _raycut.Engine(method)
         self._like = _arrays.HOST
+        self._wide = False  # built from float64 host positions (decided in double)
         self._queries = False
         self._batch = _systems.Batch(None, 1, None, None)
 
@@ -211,9 +212,12 @@ class Engine:
         periodic = boxes is not None and boxes.periodic
         cells = boxes.cells if periodic else None
         flags = boxes.pbc if periodic else None
+        # float64 host positions beside their float32 rounding: pairs decided in double.
+        wide = _arrays.float64_host(positions) if like.host else None
         self._call(like, self._engine.build, _arrays.readable(x), _cutoff(cutoff), cells, flags,
-                   b.offsets, None if q is None else _arrays.readable(q), b.query_offsets)
+                   b.offsets, None if q is None else _arrays.readable(q), b.query_offsets, wide)
         self._like = like
+        self._wide = wide is not None
         self._queries = queries is not None
         self._batch = b
 
@@ -224,9 +228,11 @@ class Engine:
         methods refit their structure instead of rebuilding it while no particle has moved more
         than skin / 2 since the last full build."""
         x, like = _arrays.prepare(positions)
+        wide = _arrays.float64_host(positions) if like.host and self._wide else None
         self._engine.set_skin(float(skin))
-        self._call(like, self._engine.update, _arrays.readable(x))
+        self._call(like, self._engine.update, _arrays.readable(x), wide)
         self._like = like
+        self._wide = wide is not None
 
     def _kernel_input(self, value: Any, name: str) -> Any:
         if value is None:
@@ -631,9 +637,11 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
                                           max_pairs)
     grad = _requires_grad(positions) or (_arrays.framework_of(positions) == "torch"
                                          and _requires_grad(cell))
-    x, like = _arrays.prepare(_search_input(positions, grad))
+    search = _search_input(positions, grad)
+    x, like = _arrays.prepare(search)
     engine, key = _take_engine(method, like)
-    engine.build(x, cutoff, cell=_host_cell(cell), pbc=pbc, batch=batch)
+    # The search input itself, not x: float64 host positions are decided in double.
+    engine.build(search, cutoff, cell=_host_cell(cell), pbc=pbc, batch=batch)
     engine._like = like  # the caller's dtype: x may be its float32 conversion
     out = _pair_quantities(letters, engine, half, grad, positions, positions, cell)
     _put_back(key, engine)

@@ -56,6 +56,20 @@ def _is_float64(dtype: Any) -> bool:
     return str(dtype).rsplit(".", 1)[-1] == "float64"
 
 
+def float64_host(x: Any) -> Any:
+    """The caller's float64 positions as a NumPy (N, 3) C-contiguous array when they are on the
+    host (NumPy, array likes, CPU PyTorch tensors), for the engine to decide in double what their
+    float32 rounding could (``Float64Positions``); None for any other input."""
+    framework = framework_of(x)
+    if framework == "numpy":
+        array = np.asarray(x)
+        return (np.ascontiguousarray(array, dtype=np.float64).reshape(-1, 3)
+                if array.dtype == np.float64 else None)
+    if framework == "torch" and x.device.type == "cpu" and _is_float64(x.dtype):
+        return x.detach().contiguous().numpy().reshape(-1, 3)
+    return None
+
+
 def prepare(x: Any, name: str = "positions", points: bool = True) -> tuple[Any, Like]:
     """The object the extension reads (in place) and where the caller's outputs go. Float
     arrays of another precision and non-contiguous ones are converted to float32 C-contiguous

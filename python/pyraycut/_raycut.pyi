@@ -36,10 +36,12 @@ class Engine:
     def set_stream(self, stream: int) -> None: ...
     def build(self, positions: Any, cutoff: float, cells: Optional[Any] = None,
               pbc: Optional[Any] = None, offsets: Optional[Any] = None,
-              queries: Optional[Any] = None, query_offsets: Optional[Any] = None) -> None:
+              queries: Optional[Any] = None, query_offsets: Optional[Any] = None,
+              positions64: Optional[Any] = None) -> None:
         """cells (B, 3, 3) float64 and pbc (B, 3) bool (B = 1: one box for all), offsets and
-        query_offsets (S + 1,) uint64, queries (M, 3) float32: raycut::Systems."""
-    def update(self, positions: Any) -> None: ...
+        query_offsets (S + 1,) uint64, queries (M, 3) float32: raycut::Systems. positions64:
+        the (N, 3) float64 host positions that `positions` rounds (raycut::Float64Positions)."""
+    def update(self, positions: Any, positions64: Optional[Any] = None) -> None: ...
     def set_skin(self, skin: float) -> None: ...
     def compute(self, kernel: str, lj_epsilon: float = 1.0, lj_sigma: float = 1.0,
                 sph_mass: float = 0.0, sph_viscosity: float = 0.0,

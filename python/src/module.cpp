@@ -219,6 +219,15 @@ raycut::PositionsView positions_view(const FloatInput& in) {
 using HostCells = nb::ndarray<const double, nb::ndim<3>, nb::c_contig, nb::device::cpu>;
 using HostFlags = nb::ndarray<const bool, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
 using HostOffsets = nb::ndarray<const std::uint64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+// The caller's float64 positions on the host, beside their float32 rounding: the engine decides
+// in double what that rounding could (raycut::Float64Positions).
+using HostPositions64 = nb::ndarray<const double, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
+
+raycut::Float64Positions float64_positions(const HostPositions64& wide, std::size_t n) {
+  if (wide.shape(0) != n || wide.shape(1) != 3)
+    value_error("positions64 must have shape (" + std::to_string(n) + ", 3)");
+  return {wide.data(), n};
+}
 
 // raycut::Systems from what the Python layer prepared: cells (B, 3, 3) float64 and pbc (B, 3)
 // bool (B = 1: one box for every system), batch offsets, query points and their offsets. The
@@ -824,7 +833,8 @@ NB_MODULE(_raycut, m) {
           [](PyEngine& e, nb::handle positions, double cutoff,
              const std::optional<HostCells>& cells, const std::optional<HostFlags>& pbc,
              const std::optional<HostOffsets>& offsets, nb::handle queries,
-             const std::optional<HostOffsets>& query_offsets) {
+             const std::optional<HostOffsets>& query_offsets,
+             const std::optional<HostPositions64>& positions64) {
             const float checked = raycut::checked_cutoff(cutoff);  // as given, then float
             const FloatInput in = float_input(positions, "positions");
             const raycut::PositionsView view = positions_view(in);
@@ -832,23 +842,29 @@ NB_MODULE(_raycut, m) {
             const raycut::Systems systems =
                 make_systems(cells, pbc, offsets, queries, query_offsets, query_input);
             Exclusive hold(e.mutex);
-            if (systems.plain())
+            if (positions64)
+              e.engine.build(float64_positions(*positions64, view.size), checked, systems);
+            else if (systems.plain())
               e.engine.build(view, checked);
             else
               e.engine.build(view, checked, systems);
           },
           nb::arg("positions"), nb::arg("cutoff"), nb::arg("cells").none() = nb::none(),
           nb::arg("pbc").none() = nb::none(), nb::arg("offsets").none() = nb::none(),
-          nb::arg("queries").none() = nb::none(), nb::arg("query_offsets").none() = nb::none())
+          nb::arg("queries").none() = nb::none(), nb::arg("query_offsets").none() = nb::none(),
+          nb::arg("positions64").none() = nb::none())
       .def(
           "update",
-          [](PyEngine& e, nb::handle positions) {
+          [](PyEngine& e, nb::handle positions, const std::optional<HostPositions64>& positions64) {
             const FloatInput in = float_input(positions, "positions");
             const raycut::PositionsView view = positions_view(in);
             Exclusive hold(e.mutex);
-            e.engine.update(view);
+            if (positions64)
+              e.engine.update(float64_positions(*positions64, view.size));
+            else
+              e.engine.update(view);
           },
-          nb::arg("positions"))
+          nb::arg("positions"), nb::arg("positions64").none() = nb::none())
       .def(
           "set_skin",
           [](PyEngine& e, float skin) {

@@ -151,15 +151,27 @@ def test_padded_k_beyond_the_budget_and_a_malformed_budget():
 
 # ---- inputs that are accepted (issue 29) -------------------------------------------------------
 
+def by_pair(i, j, *values):
+    """The entries sorted by (i, j): the order within a row is not part of the contract (float64
+    positions take the engine's float64 route, whose rows may list the same pairs in another
+    order)."""
+    i, j = np.asarray(i), np.asarray(j)
+    order = np.lexsort((j, i))
+    return (i[order], j[order]) + tuple(np.asarray(v)[order] for v in values)
+
+
 def test_float64_positions_give_float64_distances_and_vectors():
     x = cloud(300, 3)
-    i32, j32, d32, D32 = pyraycut.neighbor_list("ijdD", x, 0.2)
+    i32, j32, d32, D32 = by_pair(*pyraycut.neighbor_list("ijdD", x, 0.2))
     i, j, d, D = pyraycut.neighbor_list("ijdD", x.astype(np.float64), 0.2)
     assert d.dtype == np.float64 and D.dtype == np.float64
+    i, j, d, D = by_pair(i, j, d, D)
     np.testing.assert_array_equal(i, i32)
     np.testing.assert_array_equal(j, j32)
-    np.testing.assert_array_equal(d, d32.astype(np.float64))
-    np.testing.assert_array_equal(D, D32.astype(np.float64))
+    # float64 positions are searched in their own frame: r may differ by a float32 rounding
+    # of the coordinates (~1e-7 in this unit cube).
+    np.testing.assert_allclose(d, d32.astype(np.float64), rtol=0, atol=2e-7)
+    np.testing.assert_allclose(D, D32.astype(np.float64), rtol=0, atol=2e-7)
 
 
 def test_float64_and_non_contiguous_torch_tensors_are_accepted():
@@ -169,9 +181,12 @@ def test_float64_and_non_contiguous_torch_tensors_are_accepted():
     wide = torch.from_numpy(x.astype(np.float64))
     i, j, d = pyraycut.neighbor_list("ijd", wide, 0.2)
     assert d.dtype == torch.float64
-    np.testing.assert_array_equal(i.numpy(), i32)
+    i, j, d = by_pair(i.numpy(), j.numpy(), d.numpy())
+    i32s, j32s, d32s = by_pair(i32, j32, d32)
+    np.testing.assert_array_equal(i, i32s)
+    np.testing.assert_array_equal(j, j32s)
     # CPU tensors go through the PyTorch operator: d from the float64 positions themselves.
-    np.testing.assert_allclose(d.numpy(), d32.astype(np.float64), rtol=3e-7)
+    np.testing.assert_allclose(d, d32s.astype(np.float64), rtol=3e-7)
     # A transposed view (strides (1, N)): copied to C order, not refused.
     strided = torch.from_numpy(np.ascontiguousarray(x.T)).T
     assert not strided.is_contiguous()
@@ -226,3 +241,25 @@ def test_distances_are_the_length_of_their_vectors(separation):
     d, D = pyraycut.neighbor_list("dD", x, cutoff, method="cell-list")
     length = np.sqrt((D.astype(np.float64) ** 2).sum(1))
     np.testing.assert_allclose(d.astype(np.float64), length, rtol=2**-22)
+
+
+def test_float64_numpy_positions_decide_in_double():
+    # Two points 1 - 1e-9 apart at 1e6: their float32 rounding is 1.0 apart (no pair); float64
+    # NumPy positions go to the engine beside it, which decides in double.
+    x = np.array([[1e6 + 0.01, 0.0, 0.0], [1e6 + 1.01 - 1e-9, 0.0, 0.0]])
+    i, j, d = pyraycut.neighbor_list("ijd", x, 1.0)
+    # In range in double; d is the engine's float32 distance widened (1 - 1e-9 rounds to 1).
+    assert sorted(i.tolist()) == [0, 1] and d.dtype == np.float64 and np.all(d <= 1.0)
+    assert len(pyraycut.neighbor_list("i", x.astype(np.float32), 1.0)) == 0
+    engine = pyraycut.Engine("cell-list")
+    engine.build(x, 1.0)
+    assert engine.compute("count")["count"].tolist() == [1, 1]
+    moved = x.copy()
+    moved[1, 0] += 2e-9  # 1 + 1e-9 apart: out
+    engine.update(moved)
+    assert engine.compute("count")["count"].tolist() == [0, 0]
+    # A periodic box 10^4 cutoffs wide: the pair across the face, both ways.
+    y = np.array([[0.3004, 5000.0, 5000.0], [9999.30078125, 5000.0, 5000.0]])
+    i, j, S = pyraycut.neighbor_list("ijS", y, 1.0, cell=np.eye(3) * 1e4)
+    assert sorted(zip(i.tolist(), j.tolist(), S[:, 0].tolist())) == [(0, 1, -1), (1, 0, 1)]
+

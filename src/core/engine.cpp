@@ -317,6 +317,7 @@ void Engine::require_updatable(std::size_t n) const {
 void Engine::update(PositionsView positions, bool checked) {
   detail::Method& m = impl("update");
   require_updatable(positions.size);
+  float64_ = false;  // float32 positions from here on
   if (!systems_.plain()) {
     const Systems systems = systems_;
     build(positions, cutoff_, systems);
