@@ -10,6 +10,8 @@ caller's framework through its own ``from_dlpack``, without a copy.
 from __future__ import annotations
 
 import contextlib
+import glob
+import os
 from dataclasses import dataclass
 from typing import Any
 
@@ -54,6 +56,19 @@ def _refuse_complex(name: str, dtype: Any, complex_: bool) -> None:
 
 def _is_float64(dtype: Any) -> bool:
     return str(dtype).rsplit(".", 1)[-1] == "float64"
+
+
+def built_library(stem: str, what: str, framework: str, option: str) -> str:
+    """The path of the package's shared library `stem`*.so (the PyTorch operators, the JAX
+    custom call); ImportError saying how it gets built when it is not there."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    found = sorted(glob.glob(os.path.join(here, stem + "*.so")))
+    if not found:
+        raise ImportError(
+            f"{what} not built in {here}: it is built when the Python that configures raycut "
+            f"imports {framework} (pip install --no-build-isolation ., or the CMake build with "
+            f"{option}=ON)")
+    return found[0]
 
 
 def float64_host(x: Any) -> Any:

@@ -14,8 +14,6 @@ and no reads of tensor values except in eager mode (the capacity check).
 """
 from __future__ import annotations
 
-import glob
-import os
 from typing import Any, Optional
 
 import torch
@@ -24,19 +22,8 @@ from . import _arrays
 from . import _systems
 from ._raycut import CapacityError
 
-
-def _library() -> str:
-    here = os.path.dirname(os.path.abspath(__file__))
-    found = sorted(glob.glob(os.path.join(here, "_torch_ops*.so")))
-    if not found:
-        raise ImportError(
-            f"raycut's PyTorch operators are not built in {here}: they are built when the "
-            "Python that configures raycut imports torch (pip install --no-build-isolation ., "
-            "or the CMake build with RAYCUT_BUILD_TORCH=ON)")
-    return found[0]
-
-
-LIBRARY = _library()
+LIBRARY = _arrays.built_library("_torch_ops", "raycut's PyTorch operators are", "torch",
+                                "RAYCUT_BUILD_TORCH")
 try:
     torch.ops.load_library(LIBRARY)
 except OSError as e:  # built against another torch (the classic C++ API binds to one version)

@@ -20,29 +20,17 @@ are searched in one call as a batch of the library's, each with its own K slots 
 from __future__ import annotations
 
 import ctypes
-import glob
-import os
 from typing import Any, Optional
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _arrays
+
 _TARGET = "raycut_neighbor_list"
-
-
-def _library() -> str:
-    here = os.path.dirname(os.path.abspath(__file__))
-    found = sorted(glob.glob(os.path.join(here, "_jax_ffi*.so")))
-    if not found:
-        raise ImportError(
-            f"pyraycut.jax's custom call is not built in {here}: it is built when the Python that "
-            "configures raycut imports jax (pip install --no-build-isolation ., or the CMake "
-            "build with RAYCUT_BUILD_JAX=ON)")
-    return found[0]
-
-
-LIBRARY = _library()
+LIBRARY = _arrays.built_library("_jax_ffi", "pyraycut.jax's custom call is", "jax",
+                                "RAYCUT_BUILD_JAX")
 _handler = ctypes.cdll.LoadLibrary(LIBRARY).RaycutNeighborList
 jax.ffi.register_ffi_target(_TARGET, jax.ffi.pycapsule(_handler), platform="cpu")
 
