@@ -4,6 +4,7 @@
 # JAX included, a few GB, for the operators and the custom call) into a virtual environment in
 # the repository, .venv (ignored by git; Debian's own Python refuses `pip install` outside one,
 # PEP 668). scripts/test.sh uses it.
+# doxygen and sphinx build the API reference (scripts/docs.sh).
 # Open MPI builds raycut::mpi, the distributed engine, and its tests (mpirun, 1 to 4 ranks).
 # The CUDA toolkit is optional and not a Debian package here: when nvcc is on the machine
 # (/usr/local/cuda), the CUDA methods are built; otherwise the CPU methods only.
@@ -17,7 +18,7 @@ $SUDO apt-get install -y -qq --no-install-recommends \
   cmake ninja-build g++ make git \
   libgtest-dev libgmock-dev libcli11-dev libpng-dev \
   clang-format python3 python3-dev python3-venv python3-numpy python3-matplotlib \
-  openmpi-bin libopenmpi-dev \
+  openmpi-bin libopenmpi-dev doxygen \
   clang libclang-rt-14-dev  # the readers' fuzz test (tests/fuzz: libFuzzer, sanitizers)
 [ -x .venv/bin/python ] || python3 -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
