@@ -44,6 +44,8 @@ import sys
 import warnings
 from typing import Any, Optional
 
+import numpy as np
+
 # OpenMP threads sleep between parallel regions instead of spinning on cores that the caller's
 # own threads (or other processes) need. Read when the OpenMP runtime starts, so only when
 # raycut is the first to load it; set OMP_WAIT_POLICY yourself to choose otherwise.
@@ -541,24 +543,33 @@ def _search_input(x: Any, grad: bool) -> Any:
 
 
 def _pair_quantities(letters: str, engine: Engine, half: bool, grad: bool, sources: Any,
-                     targets: Any, cell: Any) -> Any:
+                     targets: Any, cell: Any, wide: Optional[np.ndarray] = None) -> Any:
     """The letters of the built engine's pairs, in the order asked. On the autograd path ``d``
-    and ``D`` are computed in PyTorch from i, j and S (docs/python.md)."""
+    and ``D`` are computed in PyTorch from i, j and S (docs/python.md); from ``wide``, the
+    caller's float64 host positions, they are computed in float64 from i, j and S."""
     batch = engine._batch
     periodic = batch.boxes is not None and batch.boxes.periodic
     metric = "d" in letters or "D" in letters
     grad = grad and metric
-    i, j, d, v, shifts = engine._pairs(half, "d" in letters and not grad,
-                                       "D" in letters and not grad,
-                                       "S" in letters or (grad and periodic))
+    recompute = grad or (wide is not None and metric)
+    i, j, d, v, shifts = engine._pairs(half, "d" in letters and not recompute,
+                                       "D" in letters and not recompute,
+                                       "S" in letters or (recompute and periodic))
+    rows = batch.query_offsets if batch.query_offsets is not None else batch.offsets
     if grad:
         import torch
 
-        rows = batch.query_offsets if batch.query_offsets is not None else batch.offsets
         v = _systems.torch_vectors(torch, sources, targets, i, j, shifts, cell, batch.boxes,
                                    rows)
         if "d" in letters:
             d = torch.linalg.vector_norm(v, dim=1)
+    elif recompute:
+        host = _systems.host_vectors(wide, wide, _arrays.to_numpy(i), _arrays.to_numpy(j),
+                                     None if shifts is None else _arrays.to_numpy(shifts),
+                                     batch.boxes, rows)
+        v = _arrays.output(host, engine._like)
+        if "d" in letters:
+            d = _arrays.output(np.sqrt(np.einsum("pk,pk->p", host, host)), engine._like)
     found = {"i": i, "j": j, "d": d, "D": v, "S": shifts}
     out = tuple(found[letter] for letter in letters)
     return out[0] if len(out) == 1 else out
@@ -581,8 +592,9 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     - ``"i"``, ``"j"``: the pairs (int64), sorted by i; every ordered pair (i, j, S) and
       (j, i, -S) (with ``half=True`` each pair once: the one with i < j, or i == j and S
       lexicographically positive);
-    - ``"d"``: distances ``|r_ij|`` (float32);
-    - ``"D"``: vectors ``r_ij = x_j - x_i + S @ cell`` (P, 3) float32;
+    - ``"d"``: distances ``|r_ij|`` (float32; float64 for float64 positions on the host,
+      computed in float64 from them);
+    - ``"D"``: vectors ``r_ij = x_j - x_i + S @ cell`` (P, 3) float32 (float64 likewise);
     - ``"S"``: image shifts S (P, 3) int32 (zeros on open axes and without a cell).
 
     ``cutoff``: one number, or per atom or per pair as ASE takes them: a sequence of N radii
@@ -643,7 +655,8 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     # The search input itself, not x: float64 host positions are decided in double.
     engine.build(search, cutoff, cell=_host_cell(cell), pbc=pbc, batch=batch)
     engine._like = like  # the caller's dtype: x may be its float32 conversion
-    out = _pair_quantities(letters, engine, half, grad, positions, positions, cell)
+    wide = _arrays.float64_host(search) if engine._wide and not grad else None
+    out = _pair_quantities(letters, engine, half, grad, positions, positions, cell, wide)
     _put_back(key, engine)
     return out
 

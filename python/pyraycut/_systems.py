@@ -1,7 +1,8 @@
 """Periodic boxes, batches and query sets as the extension takes them (raycut::Systems): cells
 (B, 3, 3) float64 and pbc (B, 3) bool, B = 1 for a box shared by every system; per-system index
 arrays (torch_cluster's ``batch``) turned into offsets (on the device for CUDA PyTorch indices);
-and the differentiable vectors of the PyTorch path (D = x_j - x_i + S . cell in PyTorch).
+the differentiable vectors of the PyTorch path (D = x_j - x_i + S . cell in PyTorch), and the
+same vectors in float64 on the host from float64 positions.
 """
 from __future__ import annotations
 
@@ -268,3 +269,19 @@ def add_shifts(torch: Any, vectors: Any, shifts: Any, cell: Any, pair_systems: A
     if cell.dim() == 2:
         return vectors + s @ cell
     return vectors + torch.bmm(s.unsqueeze(1), cell.index_select(0, pair_systems())).squeeze(1)
+
+
+def host_vectors(sources: np.ndarray, targets: np.ndarray, i: np.ndarray, j: np.ndarray,
+                 shifts: Optional[np.ndarray], boxes_: Optional[Boxes],
+                 target_offsets: Any) -> np.ndarray:
+    """r_ij = x_j - x_i + S . cell in float64 from the caller's float64 (N, 3) positions (and
+    the cells as the engine took them), so that ``d`` and ``D`` carry the input's precision
+    rather than the float32 search's."""
+    vectors = sources[j] - targets[i]
+    if boxes_ is None or not boxes_.periodic or shifts is None:
+        return vectors
+    s = np.asarray(shifts, dtype=np.float64)
+    if boxes_.count == 1:
+        return vectors + s @ boxes_.cells[0]
+    systems = np.searchsorted(np.asarray(target_offsets, np.int64), i, side="right") - 1
+    return vectors + np.einsum("pk,pkl->pl", s, boxes_.cells[systems])

@@ -158,6 +158,28 @@ def test_periodic_vs_brute_force(system_method, name):
         assert any(a == b for a, b, *_ in found), "self-images expected in a small cell"
 
 
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_float64_positions_give_float64_distances(system_method, name):
+    """float64 host positions far from the origin and unwrapped by whole cells: d and D come in
+    float64, computed from those positions (not widened from the float32 search), for the
+    reference's triples."""
+    if pyraycut.Engine(system_method).space != "host":
+        pytest.skip("float64 positions are decided in double on the host methods")
+    x, cell, pbc, cutoff = case(name, seed=3)
+    rng = np.random.default_rng(7)
+    x = x.astype(np.float64) + rng.random(x.shape) * 1e-3
+    x = x + rng.integers(-4, 5, (len(x), 3)) * np.asarray(pbc, bool) @ np.asarray(cell) + 1e3
+    i, j, d, D, S = pyraycut.neighbor_list("ijdDS", x, cutoff, cell=cell, pbc=pbc,
+                                           method=system_method)
+    assert d.dtype == np.float64 and D.dtype == np.float64
+    inside, edge = reference(x, x, cutoff, cell, pbc)
+    found = triples(i, j, S)
+    assert found - edge == inside - edge
+    r = x[j] - x[i] + S.astype(np.float64) @ np.asarray(cell, np.float64)
+    np.testing.assert_allclose(D, r, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(d, np.linalg.norm(r, axis=1), rtol=0, atol=1e-12)
+
+
 @pytest.mark.parametrize("name", ["cubic", "triclinic", "small-triclinic", "slab",
                                   "mixed-triclinic"])
 @pytest.mark.parametrize("boxes", [3, 40])
