@@ -31,7 +31,7 @@
 //   list_full       build + neighbours(buffer): full CSR
 //   list_half       build + neighbours(buffer, {half})
 //   list_full_dv    build + neighbours(buffer, {distances, vectors})
-//   padded          build + padded_neighbours(buffer, K), K = ceil(1.25 x mean count)
+//   padded          build + padded_neighbours(buffer, {.k = K}), K = ceil(1.25 x mean count)
 //   lj, lj_forces   build + run(Kernel::lj / Kernel::lj_forces)
 //   functor_lj      build + raycut::cuda::for_each_pair with a user functor carrying the
 //                   built-in LJ energy math and its own output buffer
@@ -316,7 +316,7 @@ void execute(Op op, State& s, const Context& c) {
       e.neighbours(s.list, raycut::ListOptions{false, true, true});
       break;
     case Op::padded:
-      s.report = e.padded_neighbours(s.padded, c.k);
+      s.report = e.padded_neighbours(s.padded, {.k = c.k});
       break;
     case Op::lj:
       e.run(raycut::Kernel::lj);

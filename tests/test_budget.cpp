@@ -132,7 +132,7 @@ TEST(MemoryBudget, PaddedKFarAboveNIsRefusedNamingTheKThatIsEnough) {
       engine.build({xyz.data(), n, MemorySpace::host}, 0.3f);
       raycut::PaddedNeighbourBuffer padded;
       const std::string message = error_message(ErrorCode::out_of_memory, [&] {
-        engine.padded_neighbours(padded, std::uint32_t{1} << 31);
+        engine.padded_neighbours(padded, {.k = std::uint32_t{1} << 31});
       });
       EXPECT_TRUE(contains(message, "K = 2147483648")) << message;
       EXPECT_TRUE(contains(message, "K = 50 is always enough")) << message;
@@ -162,10 +162,10 @@ TEST(PaddedReport, LargestCountIsTheLargestRowWithoutOverflow) {
     Engine engine(method);
     engine.build({xyz.data(), 4, MemorySpace::host}, 0.6f);
     raycut::PaddedNeighbourBuffer padded;
-    const raycut::PaddedReport report = engine.padded_neighbours(padded, 8);
+    const raycut::PaddedReport report = engine.padded_neighbours(padded, {.k = 8});
     EXPECT_FALSE(report.overflowed());
     EXPECT_EQ(report.largest_count, 3u) << method;
-    EXPECT_EQ(engine.padded_neighbours(padded, 2).largest_count, 3u) << method;
+    EXPECT_EQ(engine.padded_neighbours(padded, {.k = 2}).largest_count, 3u) << method;
   }
 }
 

@@ -147,7 +147,7 @@ TEST_P(Conformance, MatchesBruteForce) {
     }
     raycut::PaddedNeighbourBuffer padded;
     const auto k = static_cast<std::uint32_t>(std::max<std::size_t>(largest, 1));
-    EXPECT_FALSE(engine.padded_neighbours(padded, k).overflowed());
+    EXPECT_FALSE(engine.padded_neighbours(padded, {.k = k}).overflowed());
     if (n > 0) {
       const auto counts = padded.counts_to_host();
       const auto matrix = padded.indices_to_host();
@@ -159,13 +159,24 @@ TEST_P(Conformance, MatchesBruteForce) {
         for (std::size_t c = counts[i]; c < k; ++c) ASSERT_EQ(matrix[i * k + c], n);
       }
     }
+    // The half matrix: row i holds the reference's upper neighbours.
+    EXPECT_FALSE(engine.padded_neighbours(padded, {.k = k, .half = true}).overflowed());
+    if (n > 0) {
+      const auto counts = padded.counts_to_host();
+      const auto matrix = padded.indices_to_host();
+      for (std::size_t i = 0; i < n; ++i) {
+        std::vector<std::uint32_t> row(matrix.begin() + i * k, matrix.begin() + i * k + counts[i]);
+        std::sort(row.begin(), row.end());
+        ASSERT_EQ(row, half_rows[i]) << "padded half row " << i;
+      }
+    }
     if (largest >= 2) {
       std::uint64_t over = 0;
       for (const auto& row : ref.rows) over += row.size() > largest - 1;
-      const raycut::PaddedReport report = engine.padded_neighbours(padded, k - 1);
+      const raycut::PaddedReport report = engine.padded_neighbours(padded, {.k = k - 1});
       EXPECT_EQ(report.overflowed_rows, over);
       EXPECT_EQ(report.largest_count, largest);
-      EXPECT_THROW(engine.padded_neighbours(padded, k - 1, /*throw_on_overflow=*/true),
+      EXPECT_THROW(engine.padded_neighbours(padded, {.k = k - 1, .throw_on_overflow = true}),
                    raycut::Error);
     }
   }

@@ -205,7 +205,7 @@ TEST_P(EngineEdges, QueryPointsRefuseUpdateAndSphForceAndPadWithTheSourceCount) 
   }
   const std::vector<std::uint32_t> count = e.compute(Kernel::count).count;
   raycut::PaddedNeighbourBuffer padded;
-  e.padded_neighbours(padded, 40);
+  e.padded_neighbours(padded, {.k = 40});
   const std::vector<std::uint32_t> indices = padded.indices_to_host();
   for (std::size_t q = 0; q < 3; ++q) {
     ASSERT_GT(count[q], 0u);

@@ -58,7 +58,7 @@ TEST_P(Lists, EmptyAndSingleParticle) {
     ASSERT_EQ(list.offsets, std::vector<std::uint64_t>(n + 1, 0));
     EXPECT_TRUE(list.indices.empty());
     raycut::PaddedNeighbourBuffer padded;
-    EXPECT_FALSE(engine.padded_neighbours(padded, 4).overflowed());
+    EXPECT_FALSE(engine.padded_neighbours(padded, {.k = 4}).overflowed());
     EXPECT_EQ(padded.counts_to_host(), std::vector<std::uint32_t>(n, 0));
   }
 }

@@ -483,7 +483,7 @@ void expect_matches(Engine& engine, const Batch& b, const std::string& what) {
     largest = std::max<std::uint32_t>(largest, full.offsets[i + 1] - full.offsets[i]);
   raycut::PaddedNeighbourBuffer padded;
   const std::uint32_t k = std::max<std::uint32_t>(largest, 1);
-  EXPECT_FALSE(engine.padded_neighbours(padded, k).overflowed()) << what;
+  EXPECT_FALSE(engine.padded_neighbours(padded, {.k = k}).overflowed()) << what;
   if (b.targets() > 0) {
     const std::vector<std::uint32_t> counts = padded.counts_to_host(),
                                      matrix = padded.indices_to_host();
@@ -499,7 +499,7 @@ void expect_matches(Engine& engine, const Batch& b, const std::string& what) {
     }
   }
   if (largest >= 2) {
-    const raycut::PaddedReport report = engine.padded_neighbours(padded, largest - 1);
+    const raycut::PaddedReport report = engine.padded_neighbours(padded, {.k = largest - 1});
     EXPECT_EQ(report.largest_count, largest) << what;
     EXPECT_GT(report.overflowed_rows, 0u) << what;
   }
@@ -1080,7 +1080,7 @@ TEST_P(PeriodicEdgeCases, PaddedRowsCarryShifts) {
     for (std::size_t i = 0; i < n; ++i)
       k = std::max<std::uint32_t>(k, static_cast<std::uint32_t>(l.offsets[i + 1] - l.offsets[i]));
     raycut::PaddedNeighbourBuffer padded;
-    ASSERT_FALSE(engine.padded_neighbours(padded, k + 1, false, true).overflowed());
+    ASSERT_FALSE(engine.padded_neighbours(padded, {.k = k + 1, .shifts = true}).overflowed());
     const std::vector<std::uint32_t> idx = padded.indices_to_host();
     const std::vector<std::int32_t> sh = padded.shifts_to_host();
     ASSERT_EQ(sh.size(), 3 * idx.size()) << name;
@@ -1102,7 +1102,7 @@ TEST_P(PeriodicEdgeCases, PaddedRowsCarryShifts) {
       std::sort(got.begin(), got.end());
       EXPECT_EQ(got, want) << method << " " << name << " row " << i;
     }
-    ASSERT_FALSE(engine.padded_neighbours(padded, k + 1).overflowed());
+    ASSERT_FALSE(engine.padded_neighbours(padded, {.k = k + 1}).overflowed());
     EXPECT_EQ(padded.shifts(), nullptr);
     EXPECT_TRUE(padded.shifts_to_host().empty());
   }

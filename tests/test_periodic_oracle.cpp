@@ -331,7 +331,7 @@ struct AseCase {
 
 AseCase read_ase_case(const std::string& name) {
   const std::filesystem::path file =
-      std::filesystem::path(__FILE__).parent_path() / "data" / ("periodic_ase_" + name + ".txt");
+      std::filesystem::path(RAYCUT_TEST_DATA) / ("periodic_ase_" + name + ".txt");
   std::ifstream in(file);
   EXPECT_TRUE(in) << "cannot open " << file;
   AseCase c;

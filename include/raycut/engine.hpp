@@ -160,6 +160,19 @@ class NeighbourListBuffer {
   std::unique_ptr<detail::ListStorage> storage_;
 };
 
+// What Engine::padded_neighbours writes: the [N, K] matrix of each row's first K neighbours.
+struct PaddedOptions {
+  std::uint32_t k = 0;  // K, the matrix's width (>= 1 unless N = 0)
+  // Each pair once, as ListOptions::half says (not with query sets).
+  bool half = false;
+  // The image shift S of each entry too (3 int32; with a periodic box a row can hold one source
+  // once per image).
+  bool shifts = false;
+  // Rows over K raise Error(capacity_exceeded) (after the matrix is written); otherwise they
+  // are only reported. Never truncated silently either way.
+  bool throw_on_overflow = false;
+};
+
 // Rows past K of a padded list, never truncated silently.
 struct PaddedReport {
   std::uint64_t overflowed_rows = 0;  // rows with more than K neighbours
@@ -332,13 +345,11 @@ class Engine {
   void neighbours(NeighbourListBuffer& list, const ListOptions& options = {});
   // The same, copied to the host.
   NeighbourList neighbours(const ListOptions& options = {});
-  // The padded [N, K] matrix in one pass. Overflowing rows are reported (and raise
-  // Error(capacity_exceeded) when `throw_on_overflow`), never truncated silently.
-  // `shifts`: the image shift S of each entry too (3 int32; with a periodic box a row can hold
-  // one source once per image). A matrix beyond the memory budget (raycut/host_memory.hpp; on
-  // the GPU the free device memory) is Error(out_of_memory) before anything is allocated.
-  PaddedReport padded_neighbours(PaddedNeighbourBuffer& list, std::uint32_t k,
-                                 bool throw_on_overflow = false, bool shifts = false);
+  // The padded [N, K] matrix in one pass (PaddedOptions says what). Overflowing rows are
+  // reported, never truncated silently. A matrix beyond the memory budget
+  // (raycut/host_memory.hpp; on the GPU the free device memory) is Error(out_of_memory) before
+  // anything is allocated.
+  PaddedReport padded_neighbours(PaddedNeighbourBuffer& list, const PaddedOptions& options);
 
   const Timings& last_timings() const { return timings_; }
   // The number of targets (rows of lists, entries of results): N, or M with query points.

@@ -306,7 +306,7 @@ class Engine:
                              "point) are not symmetric (pass half=False)")
 
     def padded_neighbours(self, k: int, raise_on_overflow: bool = False,
-                          shifts: bool = False) -> tuple:
+                          shifts: bool = False, half: bool = False) -> tuple:
         """The padded [N, K] neighbour matrix: ``(indices, counts, report)``, and with
         ``shifts`` also S, (N, K, 3) int32 (0 in empty slots): ``(indices, counts, report, S)``.
 
@@ -316,15 +316,18 @@ class Engine:
         and the largest row's count (``largest_count``: grow K to it and retry); with
         ``raise_on_overflow`` an overflow raises ``CapacityError``. K is a whole number in
         [1, 2^32 - 1] (ValueError otherwise); a matrix beyond the memory budget raises
-        MemoryError before it is allocated, saying which K is always enough.
+        MemoryError before it is allocated, saying which K is always enough. ``half``: each
+        pair once, as ``neighbours`` says.
         """
+        self._no_half_with_queries(half)
         if (isinstance(k, bool) or not isinstance(k, numbers.Real) or int(k) != k or int(k) < 0
                 or int(k) > _K_MAX):
             raise ValueError(f"padded neighbour list: K must be a whole number in [1, 2^32 - 1 = "
                              f"{_K_MAX}], got {k!r}")
         like = self._like
         indices, counts, report, s = self._call(like, self._engine.padded, int(k),
-                                                bool(raise_on_overflow), like.host, bool(shifts))
+                                                bool(raise_on_overflow), like.host, bool(shifts),
+                                                bool(half))
         out = (_arrays.output(indices, like), _arrays.output(counts, like), report)
         return out + (_arrays.output(s, like),) if shifts else out
 

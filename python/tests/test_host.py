@@ -141,6 +141,20 @@ def test_engine_empty_and_single(method):
         assert idx.shape == (n, 4) and counts.shape == (n,) and not report["overflowed"]
 
 
+def test_padded_half_matches_half_list(method):
+    x = INPUTS["clustered"]()
+    engine = pyraycut.Engine(method)
+    engine.build(x, CUTOFF)
+    offsets, indices = engine.neighbours(half=True)
+    k = max(1, int(np.diff(offsets).max()))
+    idx, counts, report = engine.padded_neighbours(k, half=True)
+    assert not report["overflowed"]
+    np.testing.assert_array_equal(counts, np.diff(offsets))
+    for i in range(len(x)):
+        assert sorted(idx[i, :counts[i]]) == sorted(indices[offsets[i]:offsets[i + 1]])
+        assert all(j > i for j in idx[i, :counts[i]])
+
+
 def test_padded_overflow_report(method):
     x = INPUTS["clustered"]()
     engine = pyraycut.Engine(method)

@@ -22,6 +22,12 @@
 namespace raycut {
 namespace {
 
+Error half_with_queries() {
+  return Error(ErrorCode::invalid_argument,
+               "half lists need one point set: with query points every (query, source) pair is "
+               "a pair of its own (ask for the full list)");
+}
+
 // What a CPU method allocates per point when it builds: the cell list's keys, order and cells
 // and its sort's scratch (~70 B), more than brute force's copy of the positions (12 B).
 constexpr double host_build_bytes_per_point = 80;
@@ -433,10 +439,7 @@ void Engine::neighbours(NeighbourListBuffer& list, const ListOptions& options) {
   if (!built_)
     throw Error(ErrorCode::invalid_argument, "Engine::neighbours() called before build()");
   if (!list.storage_ || list.storage_->space() != m.space()) list.storage_ = m.make_list_storage();
-  if (options.half && queries_)
-    throw Error(ErrorCode::invalid_argument,
-                "half lists need one point set: with query points every (query, source) pair is "
-                "a pair of its own (ask for the full list)");
+  if (options.half && queries_) throw half_with_queries();
   if (size_ == 0) {
     list.storage_->set_empty(options);
     return;
@@ -451,11 +454,13 @@ NeighbourList Engine::neighbours(const ListOptions& options) {
   return list.to_host();
 }
 
-PaddedReport Engine::padded_neighbours(PaddedNeighbourBuffer& list, std::uint32_t k,
-                                       bool throw_on_overflow, bool shifts) {
+PaddedReport Engine::padded_neighbours(PaddedNeighbourBuffer& list, const PaddedOptions& options) {
   detail::Method& m = impl("padded_neighbours");
   if (!built_)
     throw Error(ErrorCode::invalid_argument, "Engine::padded_neighbours() called before build()");
+  const std::uint32_t k = options.k;
+  const bool shifts = options.shifts;
+  if (options.half && queries_) throw half_with_queries();
   if (!list.storage_ || list.storage_->space() != m.space())
     list.storage_ = m.make_padded_storage();
   if (k == 0 && size_ > 0)
@@ -483,13 +488,13 @@ PaddedReport Engine::padded_neighbours(PaddedNeighbourBuffer& list, std::uint32_
       "), so K = " + std::to_string(std::max<std::uint64_t>(candidates, 1)) + " is always enough";
   try {
     if (m.space() == MemorySpace::host) require_host_memory(bytes, what);
-    m.padded_neighbours(*list.storage_, k, false, shifts);
+    m.padded_neighbours(*list.storage_, k, options.half, shifts);
   } catch (const Error& e) {
     if (e.code() != ErrorCode::out_of_memory || k <= candidates) throw;
     throw Error(ErrorCode::out_of_memory, e.what() + bound);
   }
   m.synchronize();
-  detail::report_padded(*list.storage_, throw_on_overflow);
+  detail::report_padded(*list.storage_, options.throw_on_overflow);
   return list.storage_->report;
 }
 
