@@ -151,7 +151,8 @@ def _knn_pairs(x: torch.Tensor, y: torch.Tensor, k: int, batch_x: Any, batch_y: 
     # A radius that holds ~k points of a uniform cloud, then doubled until every query has its.
     r = max((3 * volume * k / (4 * math.pi * n)) ** (1 / 3), extent * 1e-6, _SMALLEST_RADIUS)
     if cells is not None:  # a point alone in its box has its images a cell row away
-        rows = torch.linalg.vector_norm(cells, dim=2)[torch.as_tensor(boxes.pbc)]
+        periodic_rows = torch.as_tensor(boxes.pbc, device=cells.device)
+        rows = torch.linalg.vector_norm(cells, dim=2)[periodic_rows]
         r = max(r, 0.5 * float(rows[rows > 0].min()) if bool((rows > 0).any()) else r)
     pending = torch.arange(m, device=y.device)
     found_i, found_j, found_s = [], [], []
