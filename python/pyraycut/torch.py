@@ -132,6 +132,9 @@ def _knn_pairs(x: torch.Tensor, y: torch.Tensor, k: int, batch_x: Any, batch_y: 
     # Whether each query's system repeats along some axis: then its images never run out.
     periodic = torch.zeros(systems, dtype=torch.bool, device=y.device)
     if boxes is not None:
+        if boxes.count not in (1, systems):
+            raise ValueError(f"the batch has system index {systems - 1} but cell/pbc give "
+                             f"{boxes.count} systems")
         periodic[:] = torch.as_tensor(boxes.pbc.any(axis=1), device=y.device)
     periodic = periodic[qb]
     sizes = _system_sizes(batch_x, n, systems, y.device)[qb]

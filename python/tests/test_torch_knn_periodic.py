@@ -167,6 +167,8 @@ def test_bad_periodic_input_is_named():
         rt.knn_graph(x, 2, cell=[1.0, 2.0])
     with pytest.raises(ValueError, match="pbc without a cell"):
         rt.knn(x, x, 2, pbc=True)
+    with pytest.raises(ValueError, match="system index 2 but cell/pbc give 2 systems"):
+        rt.knn_graph(x, 2, torch.tensor([0, 0, 1, 2, 2]), cell=np.stack([np.eye(3)] * 2))
     with pytest.raises(ValueError, match="k must be a whole number >= 1, got 0"):
         rt.knn_graph(x, 0, cell=np.eye(3))
 
