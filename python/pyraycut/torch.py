@@ -92,8 +92,10 @@ def radius_graph(x: torch.Tensor, r: float, batch: Any = None, loop: bool = Fals
 
 
 def _system_sizes(batch: Any, n: int, systems: int, device: torch.device) -> torch.Tensor:
-    if batch is None:
-        return torch.full((systems,), n, device=device)
+    if batch is None:  # every point in system 0 (torch_cluster's convention)
+        sizes = torch.zeros(systems, dtype=torch.int64, device=device)
+        sizes[0] = n
+        return sizes
     return torch.bincount(torch.as_tensor(batch, device=device).long(), minlength=systems)
 
 

@@ -148,6 +148,17 @@ def test_batches_with_a_box_per_system():
         assert got[q] == [(j + start, s) for j, s in want], q
 
 
+def test_queries_of_a_system_without_points_get_none():
+    """batch_x None: every point is in system 0, so queries of system 1 have no neighbour
+    (torch_cluster's convention), periodic or not."""
+    cell = np.diag([2.0, 2.0, 2.0])
+    x, y = positions(6, cell, 7), positions(3, cell, 8)
+    edge_index, shifts = rt.knn(x, y, 4, None, torch.tensor([0, 0, 1]), cell=cell)
+    assert edge_index[0].tolist() == [0] * 4 + [1] * 4
+    assert rows_of(edge_index, shifts, 3) == oracle(x, y[:2], 4, cell, True) + [[]]
+    assert rt.knn(x, y, 4, None, torch.tensor([0, 0, 1]))[0].tolist() == [0] * 4 + [1] * 4
+
+
 def test_float32_positions_and_open_boxes_keep_their_forms():
     cell = np.diag([2.2, 2.4, 2.6])
     x64 = positions(30, cell, 5)
