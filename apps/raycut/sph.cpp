@@ -383,6 +383,7 @@ int run_steps(const SphOptions& o, const sph::WcsphConfig& config, const sph::Sp
   double step_seconds = 0, step_cpu_seconds = 0;
   const auto wall_start = Clock::now();
   auto last_report = wall_start;
+  const Progress progress("sph", static_cast<std::uint64_t>(frames), o.quiet);  // each line's ETA
   save(0);
   sample(true);
   for (int frame = 1; frame <= frames; ++frame) {
@@ -406,12 +407,14 @@ int run_steps(const SphOptions& o, const sph::WcsphConfig& config, const sph::Sp
     if (frame % o.every == 0 || frame == frames) save(frame);
     if (root && !o.quiet && (seconds_since(last_report) > 1.0 || frame == frames)) {
       last_report = Clock::now();
+      const std::string eta = progress.eta(static_cast<std::uint64_t>(frame));
       if (wcsph)
-        std::fprintf(stderr, "  frame %d/%d  %.1f steps/s  t = %.4f s  Z = %.3f  KE = %.4g J\n",
-                     frame, frames, frame / step_seconds, solver.time(), fronts.back().Z,
-                     fronts.back().kinetic_energy);
+        std::fprintf(stderr, "  frame %d/%d  %.1f steps/s  %s  t = %.4f s  Z = %.3f  KE = %.4g J\n",
+                     frame, frames, frame / step_seconds, eta.c_str(), solver.time(),
+                     fronts.back().Z, fronts.back().kinetic_energy);
       else
-        std::fprintf(stderr, "  frame %d/%d  %.1f steps/s\n", frame, frames, frame / step_seconds);
+        std::fprintf(stderr, "  frame %d/%d  %.1f steps/s  %s\n", frame, frames,
+                     frame / step_seconds, eta.c_str());
     }
   }
   const double total_s = seconds_since(wall_start);

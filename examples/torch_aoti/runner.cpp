@@ -2,10 +2,13 @@
 // operator) from C++, without Python, and checks it against the same energy computed here by
 // calling torch.ops.raycut.neighbor_list through the dispatcher.
 //
-//   torch_aoti_runner energy.pt2 path/to/pyraycut/_torch_ops.so [atoms per side]
+//   torch_aoti_runner energy.pt2 path/to/pyraycut/_torch_ops.so [atoms per side [expected]]
 //
 // Loading _torch_ops.so registers the operators with the dispatcher, where the package's code
-// finds them. Prints the energies and pair count; exits 1 when they disagree.
+// finds them. Prints the energies and pair count; exits 1 when they disagree. Any package of a
+// model `(x, cell) -> energy` runs here; for one that is not model.py's Lennard-Jones energy (a
+// learned potential: examples/python/model_every_mode.py), pass the energy it must give on this
+// lattice as `expected`, which then replaces the direct Lennard-Jones value in the check.
 #include <ATen/ATen.h>
 #include <ATen/core/dispatch/Dispatcher.h>
 #include <dlfcn.h>
@@ -31,7 +34,8 @@ using NeighborList = Pairs(const at::Tensor&, double, const std::optional<at::Te
 
 int main(int argc, char** argv) {
   if (argc < 3) {
-    std::fprintf(stderr, "usage: %s energy.pt2 _torch_ops.so [atoms per side]\n", argv[0]);
+    std::fprintf(stderr, "usage: %s energy.pt2 _torch_ops.so [atoms per side [expected]]\n",
+                 argv[0]);
     return 2;
   }
   if (dlopen(argv[2], RTLD_NOW | RTLD_GLOBAL) == nullptr) {
@@ -42,6 +46,15 @@ int main(int argc, char** argv) {
   if (side < 2) {
     std::fprintf(stderr, "error: atoms per side must be >= 2, got %s\n", argv[3]);
     return 2;
+  }
+  std::optional<double> expected;
+  if (argc > 4) {
+    char* end = nullptr;
+    expected = std::strtod(argv[4], &end);
+    if (end == argv[4] || *end != '\0' || !std::isfinite(*expected)) {
+      std::fprintf(stderr, "error: expected energy must be a finite number, got %s\n", argv[4]);
+      return 2;
+    }
   }
   // A jittered simple cubic lattice of spacing 1.1 in its periodic box.
   const double spacing = 1.1, edge = spacing * side;
@@ -63,11 +76,11 @@ int main(int argc, char** argv) {
   const at::Tensor r =
       x.index_select(0, j) - x.index_select(0, i) + shifts.to(at::kDouble).matmul(cell);
   const at::Tensor inv6 = (sigma / r.norm(2, {1})).pow(6);
-  const double direct = (2.0 * (inv6 * inv6 - inv6).sum()).item<double>();
+  const double direct = expected.value_or((2.0 * (inv6 * inv6 - inv6).sum()).item<double>());
 
   const bool agree = std::abs(packaged - direct) <= 1e-9 * std::max(1.0, std::abs(direct));
-  std::printf("atoms %lld pairs %lld packaged %.12g direct %.12g %s\n",
+  std::printf("atoms %lld pairs %lld packaged %.12g %s %.12g %s\n",
               static_cast<long long>(x.size(0)), static_cast<long long>(count.item<std::int64_t>()),
-              packaged, direct, agree ? "ok" : "DISAGREE");
+              packaged, expected ? "expected" : "direct", direct, agree ? "ok" : "DISAGREE");
   return agree ? 0 : 1;
 }

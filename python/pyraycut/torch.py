@@ -1,6 +1,7 @@
 """torch_cluster's graph builders on raycut's search, for PyTorch Geometric users: ``radius``,
 ``radius_graph``, ``knn`` and ``knn_graph`` with torch_cluster's signatures and ``edge_index``
-conventions (docs/compatibility.md). Open boxes; ``batch`` vectors as torch_cluster takes them.
+conventions (docs/compatibility.md). Open boxes (and periodic ones for kNN); ``batch`` vectors
+as torch_cluster takes them.
 
 Where they differ from torch_cluster, on purpose:
 
@@ -10,7 +11,9 @@ Where they differ from torch_cluster, on purpose:
   ``pyraycut.CapacityError`` instead).
 - ``knn`` is exact: the k nearest points of each query (ties broken by index), found by radius
   searches whose radius doubles for the queries that have fewer than k points within it (a
-  query whose system has fewer than k points gets them all).
+  query whose open system has fewer than k points gets them all).
+- ``knn`` and ``knn_graph`` also take periodic boxes (``cell``, ``pbc``): the k nearest images,
+  returned with their shifts as ``(edge_index, shifts)``, which torch_cluster has no slot for.
 """
 from __future__ import annotations
 
@@ -20,7 +23,7 @@ from typing import Any, Optional
 
 import torch
 
-from . import CapacityError, neighbor_list
+from . import CapacityError, _systems, neighbor_list
 from . import radius as _radius_pairs
 
 
@@ -89,79 +92,144 @@ def radius_graph(x: torch.Tensor, r: float, batch: Any = None, loop: bool = Fals
 
 
 def _system_sizes(batch: Any, n: int, systems: int, device: torch.device) -> torch.Tensor:
-    if batch is None:
-        return torch.full((systems,), n, device=device)
+    if batch is None:  # every point in system 0 (torch_cluster's convention)
+        sizes = torch.zeros(systems, dtype=torch.int64, device=device)
+        sizes[0] = n
+        return sizes
     return torch.bincount(torch.as_tensor(batch, device=device).long(), minlength=systems)
 
 
+_SMALLEST_RADIUS = 2.0**-59  # the library takes cutoffs from 2^-60: all points coincide
+
+
+def _nearest_first(i: torch.Tensor, j: torch.Tensor, d: torch.Tensor,
+                   shifts: torch.Tensor) -> torch.Tensor:
+    """The order (i, d, j, S) of the entries: by row, nearest first, ties by index then shift."""
+    order = torch.arange(len(i), device=i.device)
+    for key in (shifts[:, 2], shifts[:, 1], shifts[:, 0], j, d, i):  # least significant first
+        order = order[torch.argsort(key[order], stable=True)]
+    return order
+
+
 def _knn_pairs(x: torch.Tensor, y: torch.Tensor, k: int, batch_x: Any, batch_y: Any,
-               exclude_self: bool) -> tuple[torch.Tensor, torch.Tensor]:
-    """(i, j): for each y[i] its k nearest x[j] (ties by j), exactly."""
-    if not isinstance(k, int) or k < 1:
+               exclude_self: bool, cell: Any = None,
+               pbc: Any = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(i, j, S): for each y[i] its k nearest images x[j] + S @ cell (ties by j, then S),
+    exactly, nearest first within each row; S (E, 3) int32, zeros without periodic axes."""
+    if not isinstance(k, int) or isinstance(k, bool) or k < 1:
         raise ValueError(f"k must be a whole number >= 1, got {k!r}")
     m, n = len(y), len(x)
     empty = torch.zeros(0, dtype=torch.int64, device=y.device)
+    no_shifts = torch.zeros((0, 3), dtype=torch.int32, device=y.device)
     if m == 0 or n == 0:
-        return empty, empty
+        return empty, empty, no_shifts
+    boxes = _systems.boxes(cell.detach() if isinstance(cell, torch.Tensor) else cell, pbc)
     qb = (torch.zeros(m, dtype=torch.int64, device=y.device) if batch_y is None
           else torch.as_tensor(batch_y, device=y.device).long())
     systems = int(qb.max()) + 1
     if batch_x is not None:
         systems = max(systems, int(torch.as_tensor(batch_x).max()) + 1)
-    # What each query can have: k, or every point of its system (less itself).
-    want = torch.clamp(_system_sizes(batch_x, n, systems, y.device)[qb] - int(exclude_self),
-                       max=k)
-    lo = torch.minimum(x.detach().min(0).values, y.detach().min(0).values)
-    hi = torch.maximum(x.detach().max(0).values, y.detach().max(0).values)
+    if boxes is not None and boxes.count > 1:
+        systems = max(systems, boxes.count)
+    # Whether each query's system repeats along some axis: then its images never run out.
+    periodic = torch.zeros(systems, dtype=torch.bool, device=y.device)
+    if boxes is not None:
+        if boxes.count not in (1, systems):
+            raise ValueError(f"the batch has system index {systems - 1} but cell/pbc give "
+                             f"{boxes.count} systems")
+        periodic[:] = torch.as_tensor(boxes.pbc.any(axis=1), device=y.device)
+    periodic = periodic[qb]
+    sizes = _system_sizes(batch_x, n, systems, y.device)[qb]
+    # What each query can have: k, or (open boxes) every point of its system (less itself).
+    want = torch.where(periodic & (sizes > 0), torch.full_like(sizes, k),
+                       torch.clamp(sizes - int(exclude_self), min=0, max=k))
+    # Each pair's vector in the positions' own dtype (float64 stays float64), for the order.
+    xd, yd = x.detach(), y.detach()
+    cells = None
+    if boxes is not None and boxes.periodic:
+        cells = torch.as_tensor(boxes.cells, dtype=xd.dtype, device=xd.device)
+    lo = torch.minimum(xd.min(0).values, yd.min(0).values)
+    hi = torch.maximum(xd.max(0).values, yd.max(0).values)
     extent = float(torch.linalg.vector_norm(hi - lo))
     volume = float(torch.prod(torch.clamp(hi - lo, min=extent * 1e-3 + 1e-30)))
+    scale = float(torch.maximum(lo.abs(), hi.abs()).max())
     # A radius that holds ~k points of a uniform cloud, then doubled until every query has its.
-    r = max((3 * volume * k / (4 * math.pi * n)) ** (1 / 3), extent * 1e-6, 1e-30)
+    r = max((3 * volume * k / (4 * math.pi * n)) ** (1 / 3), extent * 1e-6, _SMALLEST_RADIUS)
+    if cells is not None:  # a point alone in its box has its images a cell row away
+        periodic_rows = torch.as_tensor(boxes.pbc, device=cells.device)
+        rows = torch.linalg.vector_norm(cells, dim=2)[periodic_rows]
+        r = max(r, 0.5 * float(rows[rows > 0].min()) if bool((rows > 0).any()) else r)
     pending = torch.arange(m, device=y.device)
-    found_i, found_j = [], []
+    found_i, found_j, found_s = [], [], []
     while len(pending):
-        # Past the whole extent every point of a query's system is within r: the last round.
+        # Past the whole extent every point of an open system is within r: its last round.
         last = r > 2 * extent
         sub_batch = None if batch_y is None else qb[pending]
-        i, j, d = _radius_pairs(x, y[pending], r, batch_points=batch_x, batch_queries=sub_batch,
-                                quantities="ijd")
-        d = d.detach()
+        i, j, shifts = _radius_pairs(x, y[pending], r, cell=cell, pbc=pbc, batch_points=batch_x,
+                                     batch_queries=sub_batch, quantities="ijS")
+        shifts = shifts.to(torch.int32)
         if exclude_self:
-            keep = pending[i] != j
-            i, j, d = i[keep], j[keep], d[keep]
-        counts = torch.bincount(i, minlength=len(pending))
+            keep = (pending[i] != j) | (shifts != 0).any(1)  # own images are neighbours
+            i, j, shifts = i[keep], j[keep], shifts[keep]
+        v = xd[j] - yd[pending[i]]
+        if cells is not None:
+            c = cells[0] if len(cells) == 1 else cells[qb[pending[i]]]
+            v = v + (shifts.to(v.dtype).unsqueeze(1) @ c).squeeze(1)
+        d = torch.linalg.vector_norm(v, dim=1)
+        # The search decides |r| < radius in float32: only pairs clearly inside count towards
+        # k, so that no nearer image can have been missed at the edge.
+        inside = d < r * (1 - 1e-3) - 1e-6 * scale
+        counts = torch.bincount(i[inside], minlength=len(pending))
         done = counts >= want[pending]
         if last:
-            done[:] = True
+            done |= ~periodic[pending]
         take = done[i]
-        i, j = _keep_nearest(i[take], j[take], d[take], None, len(pending), "warn")
+        i, j, d, shifts = i[take], j[take], d[take], shifts[take]
+        order = _nearest_first(i, j, d, shifts)
+        i, j, shifts = i[order], j[order], shifts[order]
         counts = torch.bincount(i, minlength=len(pending))
         starts = torch.cumsum(counts, 0) - counts
         rank = torch.arange(len(i), device=i.device) - starts[i]
         first = rank < want[pending][i]
         found_i.append(pending[i[first]])
         found_j.append(j[first])
+        found_s.append(shifts[first])
         pending = pending[~done]
         r *= 2
-    i, j = torch.cat(found_i), torch.cat(found_j)
+    i, j, shifts = torch.cat(found_i), torch.cat(found_j), torch.cat(found_s)
     order = torch.argsort(i, stable=True)
-    return i[order], j[order]
+    return i[order], j[order], shifts[order]
 
 
-def knn(x: torch.Tensor, y: torch.Tensor, k: int, batch_x: Any = None,
-        batch_y: Any = None) -> torch.Tensor:
+def knn(x: torch.Tensor, y: torch.Tensor, k: int, batch_x: Any = None, batch_y: Any = None,
+        cell: Any = None, pbc: Any = None) -> Any:
     """For each point of ``y``, its ``k`` nearest points of ``x`` (ties broken by index):
-    ``edge_index`` (2, E) with row 0 indexing ``y`` and row 1 indexing ``x`` (torch_cluster.knn).
-    A query whose system has fewer than k points gets them all."""
-    i, j = _knn_pairs(x, y, k, batch_x, batch_y, exclude_self=False)
-    return torch.stack([i, j])
+    ``edge_index`` (2, E) with row 0 indexing ``y`` and row 1 indexing ``x`` (torch_cluster.knn),
+    each row's edges nearest first. A query of an open system with fewer than k points gets them
+    all.
+
+    ``cell``, ``pbc``: periodic boxes as ``pyraycut.neighbor_list`` takes them ((3,), (3, 3) or
+    (B, 3, 3) per system of the batch; pbc one, 3 or (B, 3) bools). The neighbours are then the
+    k nearest periodic images (ties by index, then by image shift, lexicographically), so a
+    point may be a neighbour several times, through several images (k above the points of a
+    small box). ``edge_index`` cannot say which image, so with a ``cell`` this returns
+    ``(edge_index, shifts)``: ``shifts`` (E, 3) int32 with the neighbour's image at
+    ``x[j] + shifts @ cell`` (the vector ``x[j] - y[i] + shifts @ cell``)."""
+    i, j, shifts = _knn_pairs(x, y, k, batch_x, batch_y, exclude_self=False, cell=cell, pbc=pbc)
+    edge_index = torch.stack([i, j])
+    return edge_index if cell is None else (edge_index, shifts)
 
 
 def knn_graph(x: torch.Tensor, k: int, batch: Any = None, loop: bool = False,
-              flow: str = "source_to_target") -> torch.Tensor:
+              flow: str = "source_to_target", cell: Any = None, pbc: Any = None) -> Any:
     """Each point's ``k`` nearest other points (itself too with ``loop``) as ``edge_index``
     (2, E); ``flow`` as in ``radius_graph`` (torch_cluster.knn_graph). Without ``loop`` a point
-    is never its own neighbour, even where points coincide."""
+    is never its own neighbour, even where points coincide.
+
+    ``cell``, ``pbc``: periodic boxes, as in ``knn``: returns ``(edge_index, shifts)``, the
+    vector from a centre c to its neighbour n being ``x[n] - x[c] + shifts @ cell`` (either
+    flow). A point's own images (shift not 0) are neighbours like any other, ``loop`` or not."""
     _check_flow(flow)
-    i, j = _knn_pairs(x, x, k, batch, batch, exclude_self=not loop)
-    return torch.stack([j, i] if flow == "source_to_target" else [i, j])
+    i, j, shifts = _knn_pairs(x, x, k, batch, batch, exclude_self=not loop, cell=cell, pbc=pbc)
+    edge_index = torch.stack([j, i] if flow == "source_to_target" else [i, j])
+    return edge_index if cell is None else (edge_index, shifts)

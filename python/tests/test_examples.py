@@ -130,3 +130,20 @@ def test_torch_aoti_runner_without_python(tmp_path):
         # The same energy in eager PyTorch is what the runner's own check compares against: here
         # the packaged value must also be finite and negative (a bound liquid-like lattice).
         assert float(words[5]) < 0 and torch.isfinite(torch.tensor(float(words[5])))
+    # Any (x, cell) -> energy package runs there: the learned potential of model_every_mode.py,
+    # checked against the energy its eager model gives on the runner's own lattice.
+    every_mode = load("model_every_mode")
+    learned = every_mode.PairPotential()
+    learned_package = every_mode.package(learned, str(tmp_path / "learned.pt2"))
+    for side in (3, 5):
+        expected = every_mode.expected_energy(learned, side)
+        out = subprocess.run([str(build / "torch_aoti_runner"), learned_package,
+                              pyraycut.load_torch_ops(), str(side), repr(expected)],
+                             capture_output=True, text=True)
+        assert out.returncode == 0, out.stdout + out.stderr
+        words = out.stdout.split()
+        assert words[-1] == "ok" and words[6] == "expected" and int(words[1]) == side**3
+        assert abs(float(words[5]) - expected) <= 1e-9 * max(1.0, abs(expected))
+    bad = subprocess.run([str(build / "torch_aoti_runner"), learned_package,
+                          pyraycut.load_torch_ops(), "3", "nan"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "expected energy must be a finite number, got nan" in bad.stderr
