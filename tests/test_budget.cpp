@@ -155,6 +155,28 @@ TEST(MemoryBudget, BuildBeyondTheBudgetIsRefusedBeforeItAllocates) {
   }
 }
 
+// A box far thinner than the cutoff: 10 particles in a unit box at C = 200 make ~6.4e8 image
+// points (~65 GiB with the structure over them), refused before any is placed.
+TEST(MemoryBudget, PeriodicImagesBeyondTheBudgetAreRefusedBeforeTheyAreMade) {
+  Budget b("300M");
+  std::vector<float> xyz;
+  for (int p = 0; p < 10; ++p)
+    for (int a = 0; a < 3; ++a) xyz.push_back(0.05f + 0.09f * p + 0.01f * a);
+  raycut::Box box;
+  for (int a = 0; a < 3; ++a) box.cell[a][a] = 1.0, box.pbc[a] = true;
+  for (const std::string& method : cpu_methods()) {
+    Engine engine(method);
+    const auto start = std::chrono::steady_clock::now();
+    const std::string message = error_message(ErrorCode::out_of_memory, [&] {
+      engine.build({xyz.data(), 10, MemorySpace::host}, 200.0f, box);
+    });
+    EXPECT_TRUE(contains(message, "periodic images")) << message;
+    EXPECT_TRUE(contains(message, "for 10 targets")) << message;
+    EXPECT_TRUE(contains(message, "RAYCUT_MAX_MEMORY=300M")) << message;
+    EXPECT_LT(std::chrono::steady_clock::now() - start, std::chrono::seconds(5)) << method;
+  }
+}
+
 TEST(PaddedReport, LargestCountIsTheLargestRowWithoutOverflow) {
   // Particle 0 has 3 neighbours, the others 1 each.
   const std::vector<float> xyz = {0, 0, 0, 0.5f, 0, 0, 0, 0.5f, 0, 0, 0, 0.5f};

@@ -28,17 +28,13 @@ Error half_with_queries() {
                "a pair of its own (ask for the full list)");
 }
 
-// What a CPU method allocates per point when it builds: the cell list's keys, order and cells
-// and its sort's scratch (~70 B), more than brute force's copy of the positions (12 B).
-constexpr double host_build_bytes_per_point = 80;
-
 // Refuses a CPU method's build over `points` points beyond the host memory budget, before it
 // allocates (device methods check the free device memory themselves).
 void require_build_memory(const detail::Method& m, const std::string& method, std::size_t points) {
   if (m.space() != MemorySpace::host) return;
-  require_host_memory(host_build_bytes_per_point * static_cast<double>(points),
+  require_host_memory(detail::host_build_bytes_per_point * static_cast<double>(points),
                       "method '" + method + "' over " + std::to_string(points) + " points (~" +
-                          detail::number(host_build_bytes_per_point) + " B each)");
+                          detail::number(detail::host_build_bytes_per_point) + " B each)");
 }
 
 using Clock = std::chrono::steady_clock;

@@ -5,8 +5,10 @@
 #include <cstring>
 #include <string>
 
+#include "core/method.hpp"
 #include "core/validation.hpp"
 #include "raycut/box.hpp"
+#include "raycut/host_memory.hpp"
 
 namespace raycut::detail {
 namespace {
@@ -143,6 +145,16 @@ void HostImagePoints::expand(const ImagePlan& plan, const float* sources, const 
   const std::uint64_t total = first_image + image_offset_[n];
   if (std::string why = too_many_points(total, targets); !why.empty()) refuse(why);
 
+  // Refused before anything is allocated when the points and the CPU method's structure over
+  // them (which the engine builds next) exceed the memory budget: a box far thinner than the
+  // cutoff makes ~(4/3) pi (C / L)^3 images per particle.
+  const double point_bytes = 3 * sizeof(float) + sizeof(PointImage) +
+                             (systems > 1 ? sizeof(std::uint32_t) : 0) + host_build_bytes_per_point;
+  require_host_memory(
+      point_bytes * static_cast<double>(total),
+      "periodic images and the method's structure over them: " + std::to_string(total) +
+          " points for " + std::to_string(targets) + " targets (~" + number(point_bytes) +
+          " B each; a box far thinner than the cutoff makes many images)");
   try {
     xyz_.resize(3 * total);
     image_.resize(total);

@@ -15,6 +15,10 @@
 
 namespace raycut::detail {
 
+// What a CPU method allocates per point when it builds: the cell list's keys, order and cells
+// and its sort's scratch (~70 B), more than brute force's copy of the positions (12 B).
+constexpr double host_build_bytes_per_point = 80;
+
 // What a method builds over when there are images, batches or query points (the engine makes
 // it, src/core/images.hpp): points [0, targets) are the targets; every point is a candidate
 // source, mapped by `images` to the caller's source and shift. Pointers in the method's memory
