@@ -97,6 +97,7 @@ class Method {
 struct MethodEntry {
   std::string name;
   std::string summary;
+  MethodCapabilities capabilities;
   // Empty when available; otherwise why not (not built, no GPU, no OptiX).
   std::function<std::string()> why_unavailable;
   std::function<std::unique_ptr<Method>()> make;

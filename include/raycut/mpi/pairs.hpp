@@ -81,6 +81,34 @@ struct LocalPass {
   }
 };
 
+// The one visitor of the local engines (host methods): f over every owned row, through the
+// engine over owned + halos (all rows), or with owned rows only the boundary rows' pairs with
+// halos first (`halos`: the query engine, null when it has nothing to do), then every owned row's
+// pairs among owned particles, which finishes each row once. The distributed engine runs its
+// kernels, lists and sph_force through it; for_each_pair below a caller's functor.
+template <class F>
+void for_each_local_pair(const Engine& local, const Engine* halos,
+                         const std::vector<std::uint32_t>& boundary, bool owned_rows_only,
+                         std::uint32_t owned, const std::int32_t* halo_shifts, const F& f) {
+  using Pass = LocalPass<F>;
+  using Kind = typename Pass::Kind;
+  if (!owned_rows_only) {
+    raycut::for_each_pair(local,
+                          Pass{f, Kind::all_rows, owned, halo_shifts, nullptr, nullptr, nullptr});
+    return;
+  }
+  std::vector<typename F::Accumulator> carry;
+  std::vector<std::int32_t> slot(owned, -1);
+  if (halos) {
+    carry.resize(boundary.size());
+    raycut::for_each_pair(
+        *halos, Pass{f, Kind::halos, owned, halo_shifts, boundary.data(), nullptr, carry.data()});
+    for (std::size_t b = 0; b < boundary.size(); ++b) slot[boundary[b]] = static_cast<int>(b);
+  }
+  raycut::for_each_pair(
+      local, Pass{f, Kind::owned, owned, halo_shifts, nullptr, slot.data(), carry.data()});
+}
+
 }  // namespace detail
 
 // Runs f for every owned target of the built engine (not collective: halos are the last
@@ -93,28 +121,9 @@ void for_each_pair(const DistributedEngine& engine, const F& f) {
                 "raycut::mpi::for_each_pair: method '" + engine.local_engine().method() +
                     "' works on the GPU; this runs host methods (cell-list, brute-force), "
                     "raycut::mpi::cuda::for_each_pair (raycut/mpi/pairs.cuh) GPU ones");
-  using Pass = detail::LocalPass<F>;
-  using Kind = typename Pass::Kind;
-  const auto owned = static_cast<std::uint32_t>(engine.owned());
-  const std::int32_t* halo_shifts = engine.halo_shifts().data();
-  if (!engine.owned_rows_only()) {
-    raycut::for_each_pair(engine.local_engine(),
-                          Pass{f, Kind::all_rows, owned, halo_shifts, nullptr, nullptr, nullptr});
-    return;
-  }
-  // Owned rows only: the boundary rows' pairs with halos first, then every owned row's pairs
-  // among owned particles, which finishes each row once.
-  const std::vector<std::uint32_t>& boundary = engine.boundary();
-  std::vector<typename F::Accumulator> carry;
-  std::vector<std::int32_t> slot(owned, -1);
-  if (const Engine* halos = engine.halo_engine()) {
-    carry.resize(boundary.size());
-    raycut::for_each_pair(
-        *halos, Pass{f, Kind::halos, owned, halo_shifts, boundary.data(), nullptr, carry.data()});
-    for (std::size_t b = 0; b < boundary.size(); ++b) slot[boundary[b]] = static_cast<int>(b);
-  }
-  raycut::for_each_pair(engine.local_engine(), Pass{f, Kind::owned, owned, halo_shifts, nullptr,
-                                                    slot.data(), carry.data()});
+  detail::for_each_local_pair(engine.local_engine(), engine.halo_engine(), engine.boundary(),
+                              engine.owned_rows_only(), static_cast<std::uint32_t>(engine.owned()),
+                              engine.halo_shifts().data(), f);
 }
 
 }  // namespace raycut::mpi
