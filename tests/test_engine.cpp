@@ -95,7 +95,8 @@ TEST(Engine, DeclaredCapabilitiesMatchWhatMethodsDo) {
                 Engine e(name);
                 e.build({xyz.data(), 3, MemorySpace::host}, 1.0f,
                         raycut::Systems::periodic(raycut::Box::orthorhombic(4, 4, 4)));
-                EXPECT_EQ(e.compute(Kernel::count).count[0], 1u);  // 0.5 away, not 3.3
+                // 0.5 away, and 0.7 across the periodic face (3.3 in an open box)
+                EXPECT_EQ(e.compute(Kernel::count).count[0], 2u);
               }));
     EXPECT_EQ(caps.query_points, outcome([&] {
                 Engine e(name);
