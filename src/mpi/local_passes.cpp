@@ -102,9 +102,10 @@ Results LocalPasses::visit_kernel(Kernel kernel, const KernelOptions& options) c
   if (p.force) out.force = (r.force.assign(3 * owned_, 0.0f), r.force.data());
   if (p.virial) out.virial = (r.virial.assign(6 * owned_, 0.0f), r.virial.data());
   if (p.density) out.density = (r.density.assign(owned_, 0.0f), r.density.data());
+  // The built-in kernels read no row data in their pair terms: all rows may run on halo rows.
   with_kernel(kernel, options, squared_cutoff(cutoff_), out, [&](const auto& f) {
     for_each_local_pair(*engine_, halo_engine(), boundary_, split_,
-                        static_cast<std::uint32_t>(owned_), halo_shifts_, f);
+                        static_cast<std::uint32_t>(owned_), halo_shifts_, f, true);
   });
   return r;
 }

@@ -81,32 +81,83 @@ struct LocalPass {
   }
 };
 
+// Whether f's operator() reads only the pair (r, r2): no source index, no shift, no filter (the
+// built-in kernels but sph_force declare uses_source = false).
+template <class F>
+inline constexpr bool reads_pair_only =
+    !raycut::uses_source<F>::value && !raycut::has_accepts<F>::value &&
+    !raycut::takes_shift<F>::value;
+
+// LocalPass for such a functor, on the host: nothing to map per pair but the row, and no
+// accepts() or shift, so each traversal runs its plain loop (no image lookup per pair: an open
+// cloud's). All rows only for a functor whose operator() reads no row data either (`halo_rows`:
+// halo rows are computed, as on one engine, and not finished).
+template <class F>
+struct RowPass {
+  using Accumulator = typename F::Accumulator;
+  static constexpr bool uses_source = false;
+  using Kind = typename LocalPass<F>::Kind;
+
+  const F& f;
+  Kind kind;
+  std::uint32_t owned;
+  const std::uint32_t* boundary;  // halo pass: query b is owned row boundary[b]
+  const std::int32_t* slot;       // owned pass: owned row -> its carry slot, or -1
+  Accumulator* carry;             // one per boundary row
+
+  std::uint32_t row(std::uint32_t i) const { return kind == Kind::halos ? boundary[i] : i; }
+  Accumulator init(std::uint32_t i) const {
+    if (kind == Kind::owned && slot[i] >= 0) return carry[slot[i]];
+    if (kind == Kind::all_rows && i >= owned) return Accumulator{};  // a halo's row: unused
+    return initial_state(f, row(i));
+  }
+  void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3 r, float r2) const {
+    f(acc, row(i), j, r, r2);
+  }
+  void finish(std::uint32_t i, Accumulator& acc) const {
+    if (kind == Kind::halos)
+      carry[i] = acc;
+    else if (kind == Kind::owned || i < owned)
+      f.finish(i, acc);
+  }
+};
+
 // The one visitor of the local engines (host methods): f over every owned row, through the
 // engine over owned + halos (all rows), or with owned rows only the boundary rows' pairs with
 // halos first (`halos`: the query engine, null when it has nothing to do), then every owned row's
 // pairs among owned particles, which finishes each row once. The distributed engine runs its
 // kernels, lists and sph_force through it; for_each_pair below a caller's functor.
+// `rows_unread`: f's operator() reads no data of its row i (the built-in kernels), so that all
+// rows may run it on halo rows too.
 template <class F>
 void for_each_local_pair(const Engine& local, const Engine* halos,
                          const std::vector<std::uint32_t>& boundary, bool owned_rows_only,
-                         std::uint32_t owned, const std::int32_t* halo_shifts, const F& f) {
+                         std::uint32_t owned, const std::int32_t* halo_shifts, const F& f,
+                         bool rows_unread = false) {
   using Pass = LocalPass<F>;
   using Kind = typename Pass::Kind;
+  const auto pass = [&](Kind kind, const std::uint32_t* rows, const std::int32_t* slots,
+                        typename F::Accumulator* carry, const auto& run) {
+    if constexpr (reads_pair_only<F>)
+      if (kind != Kind::all_rows || rows_unread)
+        return run(RowPass<F>{f, kind, owned, rows, slots, carry});
+    run(Pass{f, kind, owned, halo_shifts, rows, slots, carry});
+  };
+  const auto on = [](const Engine& engine) {
+    return [&engine](const auto& p) { raycut::for_each_pair(engine, p); };
+  };
   if (!owned_rows_only) {
-    raycut::for_each_pair(local,
-                          Pass{f, Kind::all_rows, owned, halo_shifts, nullptr, nullptr, nullptr});
+    pass(Kind::all_rows, nullptr, nullptr, nullptr, on(local));
     return;
   }
   std::vector<typename F::Accumulator> carry;
   std::vector<std::int32_t> slot(owned, -1);
   if (halos) {
     carry.resize(boundary.size());
-    raycut::for_each_pair(
-        *halos, Pass{f, Kind::halos, owned, halo_shifts, boundary.data(), nullptr, carry.data()});
+    pass(Kind::halos, boundary.data(), nullptr, carry.data(), on(*halos));
     for (std::size_t b = 0; b < boundary.size(); ++b) slot[boundary[b]] = static_cast<int>(b);
   }
-  raycut::for_each_pair(
-      local, Pass{f, Kind::owned, owned, halo_shifts, nullptr, slot.data(), carry.data()});
+  pass(Kind::owned, nullptr, slot.data(), carry.data(), on(local));
 }
 
 }  // namespace detail
