@@ -11,6 +11,7 @@
 
 #include "core/list_storage.hpp"
 #include "raycut/detail/pair_pass.hpp"
+#include "raycut/detail/row_pass.hpp"
 #include "raycut/engine.hpp"
 
 namespace raycut::detail {
@@ -86,6 +87,11 @@ class Method {
 
   // The traversal a caller's functor runs through (kind none: the method cannot run one).
   virtual PairPass pair_pass() const { return {}; }
+  // A built-in kernel over mapped rows (raycut/detail/row_pass.hpp), written by mapped row to
+  // `out`, in the method's own loop: the CPU methods (the distributed engine's local passes).
+  virtual void compute_rows(Kernel, const KernelOptions&, const RowMap&, const KernelOutputs&) {
+    throw Error(ErrorCode::unsupported, "this method runs no kernel over mapped rows");
+  }
 
   // Waits for the work queued by build()/compute() (GPU methods); CPU methods are synchronous.
   virtual void synchronize() {}

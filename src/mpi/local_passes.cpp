@@ -11,23 +11,37 @@
 namespace raycut::mpi::detail {
 namespace {
 
-// A row's neighbours as the visitor finds them: the accumulator is the row's entries, moved to
-// rows[i] when the row is finished (a boundary row's halo entries carried into its owned pass).
-struct ListRows {
-  struct Entry {
-    std::uint32_t source;
-    std::int32_t shift[3];
-    float distance;
-    Vec3 r;
-  };
-  using Accumulator = std::vector<Entry>;
+// A local list in two passes of the visitor, as the methods make theirs: each owned row's
+// count, then each row written from its offset (the accumulator is the row's cursor, carried
+// from a boundary row's halo pass into its owned pass). No allocation per row.
+struct RowCounts {
+  using Accumulator = std::uint32_t;
+  std::uint64_t* counts;  // at row + 1: the offsets after a running sum
+  void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float) const { ++acc; }
+  void finish(std::uint32_t i, Accumulator& acc) const { counts[i + 1] = acc; }
+};
+
+struct RowFill {
+  using Accumulator = std::uint64_t;
   static constexpr bool takes_shift = true;
-  std::vector<Entry>* rows;
-  void operator()(Accumulator& acc, std::uint32_t, std::uint32_t j, Vec3 r, float r2,
+  LocalList* list;
+  Accumulator init(std::uint32_t i) const { return list->offsets[i]; }
+  void operator()(Accumulator& at, std::uint32_t, std::uint32_t j, Vec3 r, float r2,
                   const Shift& s) const {
-    acc.push_back({j, {s.a, s.b, s.c}, raycut::detail::pair_distance(r, r2), r});
+    list->sources[at] = j;
+    std::int32_t* shift = &list->shifts[3 * at];
+    shift[0] = s.a;
+    shift[1] = s.b;
+    shift[2] = s.c;
+    if (!list->distances.empty()) list->distances[at] = raycut::detail::pair_distance(r, r2);
+    if (!list->vectors.empty()) {
+      list->vectors[3 * at] = r.x;
+      list->vectors[3 * at + 1] = r.y;
+      list->vectors[3 * at + 2] = r.z;
+    }
+    ++at;
   }
-  void finish(std::uint32_t i, Accumulator& acc) const { rows[i] = std::move(acc); }
+  void finish(std::uint32_t, Accumulator&) const {}
 };
 
 }  // namespace
@@ -90,7 +104,7 @@ void LocalPasses::select_boundary(const std::vector<float>& owned_xyz, const Dom
   }
 }
 
-// The built-in kernel's functor (with_kernel, as every method runs it) through the visitor.
+// The built-in kernel over the owned rows, in the method's own loop (Method::compute_rows).
 Results LocalPasses::visit_kernel(Kernel kernel, const KernelOptions& options) const {
   validate_kernel_range(kernel, options, cutoff_);
   Results r;
@@ -102,10 +116,13 @@ Results LocalPasses::visit_kernel(Kernel kernel, const KernelOptions& options) c
   if (p.force) out.force = (r.force.assign(3 * owned_, 0.0f), r.force.data());
   if (p.virial) out.virial = (r.virial.assign(6 * owned_, 0.0f), r.virial.data());
   if (p.density) out.density = (r.density.assign(owned_, 0.0f), r.density.data());
-  // The built-in kernels read no row data in their pair terms: all rows may run on halo rows.
+  // The rows' schedule of every job, each pass the method's own loop over mapped rows.
   with_kernel(kernel, options, squared_cutoff(cutoff_), out, [&](const auto& f) {
-    for_each_local_pair(*engine_, halo_engine(), boundary_, split_,
-                        static_cast<std::uint32_t>(owned_), halo_shifts_, f, true);
+    raycut::detail::run_local_rows<typename std::decay_t<decltype(f)>::Accumulator>(
+        *engine_, halo_engine(), boundary_, split_, static_cast<std::uint32_t>(owned_),
+        [&](const Engine& engine, const raycut::detail::RowMap& rows) {
+          raycut::detail::EngineAccess::compute_rows(engine, kernel, options, rows, out);
+        });
   });
   return r;
 }
@@ -146,17 +163,19 @@ LocalList LocalPasses::neighbours(const ListOptions& options,
     if (options.vectors) out.vectors.insert(out.vectors.end(), r, r + 3);
   };
   if (space() == MemorySpace::host) {
-    std::vector<std::vector<ListRows::Entry>> rows(owned_);
-    if (owned_ > 0)
+    if (owned_ == 0) return out;
+    const auto visit = [&](const auto& f) {
       for_each_local_pair(*engine_, halo_engine(), boundary_, split_,
-                          static_cast<std::uint32_t>(owned_), halo_shifts_, ListRows{rows.data()});
-    for (std::size_t i = 0; i < owned_; ++i) {
-      for (const ListRows::Entry& e : rows[i]) {
-        const float r[3] = {e.r.x, e.r.y, e.r.z};
-        append(e.source, e.shift, e.distance, r);
-      }
-      out.offsets[i + 1] = out.sources.size();
-    }
+                          static_cast<std::uint32_t>(owned_), halo_shifts_, f);
+    };
+    visit(RowCounts{out.offsets.data()});
+    for (std::size_t i = 0; i < owned_; ++i) out.offsets[i + 1] += out.offsets[i];
+    const std::uint64_t entries = out.offsets[owned_];
+    out.sources.resize(entries);
+    out.shifts.resize(3 * entries);
+    if (options.distances) out.distances.resize(entries);
+    if (options.vectors) out.vectors.resize(3 * entries);
+    visit(RowFill{&out});
     return out;
   }
   // The method's own list over all rows: the owned rows, the halos' shifts added to the
