@@ -440,7 +440,7 @@ void DistributedEngine::check_sph_fields(const SphFields& owned, bool device) {
 
 // The owned particles' fields extended to owned + halos by the residence (host: one exchange of
 // the three; device: on the GPU), then sph_force through the local passes (a host method's
-// visitor, or a GPU method's own pass over all rows).
+// row schedule, or a GPU method's own pass over all rows).
 ResultsView DistributedEngine::run(Kernel kernel, const KernelOptions& options,
                                    const SphFields& owned) {
   check_built("run");

@@ -11,7 +11,7 @@
 namespace raycut::mpi::detail {
 namespace {
 
-// A local list in two passes of the visitor, as the methods make theirs: each owned row's
+// A local list in two passes of LocalPass, as the methods make theirs: each owned row's
 // count, then each row written from its offset (the accumulator is the row's cursor, carried
 // from a boundary row's halo pass into its owned pass). No allocation per row.
 struct RowCounts {
@@ -65,7 +65,7 @@ void LocalPasses::build(Residence& residence, std::size_t owned, std::size_t hal
     raycut::detail::EngineAccess::update_checked(*engine_, local);
   else
     engine_->build(local, cutoff, box);
-  // The visitor's (host methods, host residence: no copy) global shifts.
+  // LocalPass's global shifts (host methods, so a host residence: no copy).
   halo_shifts_ = space() == MemorySpace::host ? residence.halo_shifts().data() : nullptr;
   if (split_) select_boundary(residence.positions(), domains, rank, reach);
   halo_engine_built_ = split_ && !boundary_.empty() && halos > 0;
@@ -82,7 +82,7 @@ void LocalPasses::build(Residence& residence, std::size_t owned, std::size_t hal
 // axes) come from an engine over them (which excludes (i, i, 0) by index, as a single rank
 // does), pairs with halos (and their local images) from the owned particles near a face as
 // queries over the halos only. Every pair of an owned target is in exactly one of the two; a
-// particle's own images are halos or local images, so (i, i, S != 0) is kept. The visitor takes
+// particle's own images are halos or local images, so (i, i, S != 0) is kept. The row schedule takes
 // a boundary row's state from its halo pass into its owned pass, so each row is one sum.
 //
 // Only owned particles within cutoff + skin of a face that halos cross (Decomposition::halo_axis:

@@ -1,11 +1,12 @@
 // The local passes of the distributed engine: the single-rank engines over a rank's owned
 // particles and halos, and every job on them (kernels, neighbour lists, sph_force, the caller's
-// functors) as rows of the owned targets. A host method runs every job through one visitor,
-// raycut::mpi::detail::for_each_local_pair (raycut/mpi/pairs.hpp): over one engine of owned +
-// halos, or with owned rows only over two (the owned particles; the boundary rows as queries over
-// the halos), each owned row's pairs visited once and finished once, so nothing is merged after.
-// A GPU method has one engine over owned + halos, all rows, and its own passes (the rows past the
-// owned ones are the halos', not read).
+// functors) as rows of the owned targets. A host method runs every job on one row schedule
+// (raycut/detail/row_pass.hpp): one engine of owned + halos, or with owned rows only two (the
+// owned particles; the boundary rows as queries over the halos), each owned row's pairs visited
+// through both and finished once, so nothing is merged after. The built-in kernels run it in the
+// method's own loop (Method::compute_rows), lists and functors through LocalPass. A GPU method
+// has one engine over owned + halos, all rows, and its own passes (the rows past the owned ones
+// are the halos', not read).
 #pragma once
 
 #include <cstddef>
@@ -76,7 +77,7 @@ class LocalPasses {
   const std::int32_t* halo_shifts_ = nullptr;  // host methods: the residence's, since build()
   std::vector<std::uint32_t> boundary_;        // owned indices, ascending
   std::vector<float> boundary_xyz_;
-  Results results_;  // run()'s, from the visitor
+  Results results_;  // run()'s, of a host method
 };
 
 }  // namespace raycut::mpi::detail
