@@ -100,6 +100,13 @@ class Method {
   virtual double device_compute_ms() const { return -1; }
 };
 
+// What a traversal can do (MethodCapabilities), for the registry's entries: the CPU methods and
+// the GPU grid and brute force take every Systems form and run functors; the OptiX pipelines
+// neither; the paper's grid runs functors on plain particles only.
+inline constexpr MethodCapabilities all_capabilities{true, true, true};
+inline constexpr MethodCapabilities no_capabilities{false, false, false};
+inline constexpr MethodCapabilities functors_only{false, false, true};
+
 struct MethodEntry {
   std::string name;
   std::string summary;

@@ -12,13 +12,6 @@
 namespace raycut::detail {
 namespace {
 
-// What each traversal can do (MethodCapabilities): the CPU methods and the GPU grid and brute
-// force take every Systems form and run functors; the OptiX pipelines neither; the paper's grid
-// runs functors on plain particles only.
-constexpr MethodCapabilities everything{true, true, true};
-constexpr MethodCapabilities plain_only{false, false, false};
-constexpr MethodCapabilities plain_with_functors{false, false, true};
-
 std::string always_available() {
   return {};
 }
@@ -55,27 +48,27 @@ std::string optix_status() {
 
 const std::vector<MethodEntry>& method_registry() {
   static const std::vector<MethodEntry> registry = {
-      {"brute-force", "CPU, all pairs: the reference oracle", everything, always_available,
+      {"brute-force", "CPU, all pairs: the reference oracle", all_capabilities, always_available,
        make_brute_force_cpu},
-      {"cell-list", "CPU, compact cell list (OpenMP), memory O(N)", everything, always_available,
-       make_cell_list_cpu},
-      {"brute-force-gpu", "CUDA, all pairs: the oracle on the GPU", everything, cuda_status,
+      {"cell-list", "CPU, compact cell list (OpenMP), memory O(N)", all_capabilities,
+       always_available, make_cell_list_cpu},
+      {"brute-force-gpu", "CUDA, all pairs: the oracle on the GPU", all_capabilities, cuda_status,
        RAYCUT_CUDA_FACTORY(cuda::make_brute_force)},
       {"optix-spheres", "OptiX, built-in spheres + 3 axis rays (the paper's method 2, exact)",
-       plain_only, optix_status, RAYCUT_OPTIX_FACTORY(optix::make_spheres)},
+       no_capabilities, optix_status, RAYCUT_OPTIX_FACTORY(optix::make_spheres)},
       {"optix-triangles", "OptiX, double squares of triangles + 4 rays (method 3, exact)",
-       plain_only, optix_status, RAYCUT_OPTIX_FACTORY(optix::make_triangles)},
-      {"optix-aabb", "OptiX, custom AABBs + zero-length rays (the paper's method 4)", plain_only,
-       optix_status, RAYCUT_OPTIX_FACTORY([] { return optix::make_aabb(false); })},
-      {"optix-aabb-sorted", "OptiX, custom AABBs on Morton-sorted particles", plain_only,
+       no_capabilities, optix_status, RAYCUT_OPTIX_FACTORY(optix::make_triangles)},
+      {"optix-aabb", "OptiX, custom AABBs + zero-length rays (the paper's method 4)",
+       no_capabilities, optix_status, RAYCUT_OPTIX_FACTORY([] { return optix::make_aabb(false); })},
+      {"optix-aabb-sorted", "OptiX, custom AABBs on Morton-sorted particles", no_capabilities,
        optix_status, RAYCUT_OPTIX_FACTORY([] { return optix::make_aabb(true); })},
       {"optix-aabb-fused", "OptiX, custom AABBs, work in the intersection program (as the paper)",
-       plain_only, optix_status,
+       no_capabilities, optix_status,
        RAYCUT_OPTIX_FACTORY([] { return optix::make_aabb(false, true); })},
-      {"grid", "CUDA, sorted grid of cells, memory O(N): the fastest general method", everything,
-       cuda_status, RAYCUT_CUDA_FACTORY(cuda::make_grid)},
+      {"grid", "CUDA, sorted grid of cells, memory O(N): the fastest general method",
+       all_capabilities, cuda_status, RAYCUT_CUDA_FACTORY(cuda::make_grid)},
       {"grid-paper", "CUDA, the paper's dense grid, for comparison (memory grows with the box)",
-       plain_with_functors, cuda_status, RAYCUT_CUDA_FACTORY(cuda::make_grid_paper)},
+       functors_only, cuda_status, RAYCUT_CUDA_FACTORY(cuda::make_grid_paper)},
   };
   return registry;
 }
