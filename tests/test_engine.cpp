@@ -11,6 +11,7 @@
 #include "raycut/compare.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/generators.hpp"
+#include "raycut/pairs.hpp"
 
 namespace {
 
@@ -49,6 +50,70 @@ TEST(Engine, AutoPicksAnAvailableMethod) {
   bool found = false;
   for (const auto& m : raycut::list_methods()) found |= m.name == e.method() && m.available;
   EXPECT_TRUE(found) << e.method();
+}
+
+TEST(Engine, CapabilitiesOfUnknownMethodsAreRefused) {
+  expect_error([] { raycut::method_capabilities("no-such-method"); }, ErrorCode::invalid_argument,
+               "unknown method 'no-such-method'");
+}
+
+TEST(Engine, CapabilitiesOfAutoAreThoseOfTheMethodItPicks) {
+  const auto picked = raycut::method_capabilities(raycut::auto_method());
+  const auto given = raycut::method_capabilities("auto");
+  EXPECT_EQ(given.periodic_boxes, picked.periodic_boxes);
+  EXPECT_EQ(given.query_points, picked.query_points);
+  EXPECT_EQ(given.pair_functors, picked.pair_functors);
+}
+
+// A functor that counts pairs, for the functor capability.
+struct PairCounter {
+  using Accumulator = std::uint32_t;
+  std::uint32_t* count;
+  void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, raycut::Vec3, float) const {
+    ++acc;
+  }
+  void finish(std::uint32_t i, Accumulator& acc) const { count[i] = acc; }
+};
+
+// What each available method declares is what it does: a periodic box, query points and a
+// caller's functor are taken exactly when declared, refused with unsupported otherwise.
+TEST(Engine, DeclaredCapabilitiesMatchWhatMethodsDo) {
+  const std::vector<float> xyz = {0.5f, 0.5f, 0.5f, 1.0f, 0.5f, 0.5f, 3.8f, 0.5f, 0.5f};
+  for (const std::string& name : available_methods()) {
+    SCOPED_TRACE(name);
+    const raycut::MethodCapabilities caps = raycut::method_capabilities(name);
+    const auto outcome = [](auto&& f) {
+      try {
+        f();
+        return true;
+      } catch (const Error& e) {
+        EXPECT_EQ(e.code(), ErrorCode::unsupported) << e.what();
+        return false;
+      }
+    };
+    EXPECT_EQ(caps.periodic_boxes, outcome([&] {
+                Engine e(name);
+                e.build({xyz.data(), 3, MemorySpace::host}, 1.0f,
+                        raycut::Systems::periodic(raycut::Box::orthorhombic(4, 4, 4)));
+                // 0.5 away, and 0.7 across the periodic face (3.3 in an open box)
+                EXPECT_EQ(e.compute(Kernel::count).count[0], 2u);
+              }));
+    EXPECT_EQ(caps.query_points, outcome([&] {
+                Engine e(name);
+                raycut::Systems systems;
+                systems.queries = {xyz.data(), 1, MemorySpace::host};
+                e.build({xyz.data() + 3, 2, MemorySpace::host}, 1.0f, systems);
+                EXPECT_EQ(e.compute(Kernel::count).count.size(), 1u);
+              }));
+    EXPECT_EQ(caps.pair_functors, outcome([&] {
+                Engine e(name);
+                e.build({xyz.data(), 3, MemorySpace::host}, 1.0f);
+                if (e.space() != MemorySpace::host) return;  // a GPU functor needs nvcc
+                std::vector<std::uint32_t> count(3);
+                raycut::for_each_pair(e, PairCounter{count.data()});
+                EXPECT_EQ(count[0], 1u);
+              }));
+  }
 }
 
 TEST(Engine, UnknownKernelNameIsRefused) {

@@ -24,7 +24,16 @@ if(mpi_line)
   endif()
   run(${CMAKE_COMMAND} -E env OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
       ${WORK}/build/consumer_mpi)
-  message(STATUS "install: raycut::mpi consumer built and ran (one process)")
+  run(${CMAKE_COMMAND} -E env OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+      ${WORK}/build/consumer_sph_mpi)
+  # raycut::mpi alone brings neither the SPH library nor libpng (raycut::sph_mpi does).
+  file(GLOB targets ${WORK}/prefix/lib*/cmake/raycut/raycutTargets.cmake)
+  file(READ ${targets} exported)
+  string(REGEX MATCH "set_target_properties\\(raycut::mpi PROPERTIES[^)]*\\)" mpi_props "${exported}")
+  if(NOT mpi_props OR mpi_props MATCHES "sph|PNG|png")
+    message(FATAL_ERROR "raycut::mpi's exported properties name SPH or PNG:\n${mpi_props}")
+  endif()
+  message(STATUS "install: raycut::mpi and raycut::sph_mpi consumers built and ran (one process)")
 endif()
 message(STATUS "install: find_package(raycut) consumer built and ran")
 

@@ -226,6 +226,14 @@ struct UpdatePolicy {
   float skin = 0;
 };
 
+// What a method's traversal can do, declared by the method (not found by trying it): callers
+// such as the distributed engine choose their scheme from it before building anything.
+struct MethodCapabilities {
+  bool periodic_boxes = false;  // Systems with a periodic box (and batches of systems)
+  bool query_points = false;    // Systems::queries: targets other than the sources
+  bool pair_functors = false;   // raycut::for_each_pair with a caller's functor
+};
+
 struct MethodDescription {
   std::string name;
   std::string summary;
@@ -267,6 +275,9 @@ SystemInfo system_info();
 std::vector<MethodDescription> list_methods();
 // What "auto" picks on this machine.
 std::string auto_method();
+// The capabilities of a method of list_methods() (or "auto": those of auto_method()), whether or
+// not it is available in this process. Error(invalid_argument) for an unknown name.
+MethodCapabilities method_capabilities(std::string_view method);
 // True when a CUDA device is usable in this process.
 bool cuda_device_available();
 // A cutoff given in double (Python, option parsers) as the float Engine::build takes: checked as

@@ -119,6 +119,10 @@ std::string auto_method() {
   return "brute-force";
 }
 
+MethodCapabilities method_capabilities(std::string_view method) {
+  return find_entry(method == "auto" ? std::string_view(auto_method()) : method).capabilities;
+}
+
 Engine::Engine(std::string_view method) {
   method_ = method == "auto" ? auto_method() : std::string(method);
   const auto& entry = find_entry(method_);

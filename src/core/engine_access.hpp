@@ -2,6 +2,7 @@
 // distributed engine's local engine, over positions that engine has checked already.
 #pragma once
 
+#include "core/method.hpp"
 #include "raycut/engine.hpp"
 
 namespace raycut::detail {
@@ -11,6 +12,12 @@ struct EngineAccess {
   // `positions` are known to be finite.
   static void update_checked(Engine& engine, PositionsView positions) {
     engine.update(positions, true);
+  }
+  // A built-in kernel over mapped rows (Method::compute_rows) of a built engine of a CPU method
+  // with particles; the caller validated the kernel's options (validate_kernel_range).
+  static void compute_rows(const Engine& engine, Kernel kernel, const KernelOptions& options,
+                           const RowMap& rows, const KernelOutputs& out) {
+    engine.impl("compute_rows").compute_rows(kernel, options, rows, out);
   }
 };
 

@@ -11,6 +11,7 @@
 
 #include "core/list_storage.hpp"
 #include "raycut/detail/pair_pass.hpp"
+#include "raycut/detail/row_pass.hpp"
 #include "raycut/engine.hpp"
 
 namespace raycut::detail {
@@ -90,6 +91,11 @@ class Method {
 
   // The traversal a caller's functor runs through (kind none: the method cannot run one).
   virtual PairPass pair_pass() const { return {}; }
+  // A built-in kernel over mapped rows (raycut/detail/row_pass.hpp), written by mapped row to
+  // `out`, in the method's own loop: the CPU methods (the distributed engine's local passes).
+  virtual void compute_rows(Kernel, const KernelOptions&, const RowMap&, const KernelOutputs&) {
+    throw Error(ErrorCode::unsupported, "this method runs no kernel over mapped rows");
+  }
 
   // Waits for the work queued by build()/compute() (GPU methods); CPU methods are synchronous.
   virtual void synchronize() {}
@@ -98,9 +104,17 @@ class Method {
   virtual double device_compute_ms() const { return -1; }
 };
 
+// What a traversal can do (MethodCapabilities), for the registry's entries: the CPU methods and
+// the GPU grid and brute force take every Systems form and run functors; the OptiX pipelines
+// neither; the paper's grid runs functors on plain particles only.
+inline constexpr MethodCapabilities all_capabilities{true, true, true};
+inline constexpr MethodCapabilities no_capabilities{false, false, false};
+inline constexpr MethodCapabilities functors_only{false, false, true};
+
 struct MethodEntry {
   std::string name;
   std::string summary;
+  MethodCapabilities capabilities;
   // Empty when available; otherwise why not (not built, no GPU, no OptiX).
   std::function<std::string()> why_unavailable;
   std::function<std::unique_ptr<Method>()> make;

@@ -40,6 +40,12 @@ class HostMethod : public Method {
     with_kernel(kernel, options, cutoff_squared_, out, [&](const auto& f) { run(f); });
     results_ = std::move(fresh);
   }
+  void compute_rows(Kernel kernel, const KernelOptions& options, const RowMap& rows,
+                    const KernelOutputs& out) override {
+    with_kernel(kernel, options, cutoff_squared_, out, [&](const auto& f) {
+      run(RowPass<std::decay_t<decltype(f)>>{f, rows});
+    });
+  }
   Results results() const override { return results_; }
   ResultsView results_view() const override { return view_of(results_); }
   OwnedResults take_results() override {

@@ -273,6 +273,31 @@ TEST(Distributed, PeriodicBoxMatchesSingleProcess) {
       }
 }
 
+// The scheme follows what each method declares (raycut::method_capabilities), not a probe: owned
+// rows only for host methods with query points and periodic boxes, local periodic axes for
+// methods with periodic boxes; and a host method's rows are the reference's either way.
+TEST(Distributed, SchemeFollowsDeclaredCapabilities) {
+  if (world_size() > 6) GTEST_SKIP() << "x slabs of 12 / ranks under the cutoff";
+  const Box box = Box::orthorhombic(12, 12, 12);
+  const std::vector<float> xyz = lattice(10, 1.2, 0.15, 5);
+  const float cutoff = 2.0f;
+  const Reference ref = reference(xyz, box, cutoff);
+  for (const auto& m : raycut::list_methods()) {
+    if (!m.available) continue;
+    const raycut::MethodCapabilities caps = raycut::method_capabilities(m.name);
+    DistributedOptions options;
+    options.method = m.name;
+    options.dims = {0, 1, 1};
+    DistributedEngine engine(MPI_COMM_WORLD, options);
+    const bool host = engine.local_engine().space() == MemorySpace::host;
+    EXPECT_EQ(engine.owned_rows_only(), caps.query_points && caps.periodic_boxes && host) << m.name;
+    build(engine, xyz, cutoff, box, Spread::strided);
+    EXPECT_EQ(engine.decomposition().local[1], caps.periodic_boxes) << m.name;
+    EXPECT_EQ(engine.decomposition().local[2], caps.periodic_boxes) << m.name;
+    if (host) expect_matches(engine, ref, m.name);  // GPU methods: the device tests below
+  }
+}
+
 // A periodic axis with one domain is the local engine's: no halo crosses it. Split along x only,
 // every halo comes across x (an image S_x != 0 across the box's ends, or another rank's
 // particle), none has S != 0 along y or z; at one rank there is none at all.

@@ -38,9 +38,11 @@
 
 namespace raycut::mpi {
 
-namespace detail {
-class DeviceResidence;
-}
+namespace detail {  // the engine's parts (src/mpi)
+class Exchange;
+class Residence;
+class LocalPasses;
+}  // namespace detail
 
 // Moves per-rank blocks of bytes between the ranks of a communicator: the payload of a
 // migration or a halo exchange. Sizes are agreed beforehand over MPI (the engine's control
@@ -144,8 +146,9 @@ struct DistributedOptions {
   // device-resident engine; host-resident ones use host-staged MPI whatever is given here.
   std::shared_ptr<Transport> transport;
   // Owned rows only: one engine over the owned particles (pairs among them) and one with the
-  // owned particles near a face as query points over the halos (pairs with halos), summed.
-  // false, or a method without query points (grid-paper, OptiX), or a device-resident engine:
+  // owned particles near a face as query points over the halos (pairs with halos), each owned
+  // row visited through both and finished once. false, or a method that does not declare query
+  // points (grid-paper, OptiX; raycut::method_capabilities), or a method that works on the GPU:
   // one engine over owned + halos, halo rows discarded (on a GPU the second build costs more
   // than the rows it saves). docs/distributed.md measures both.
   bool owned_rows_only = true;
@@ -273,7 +276,7 @@ class DistributedEngine {
   std::size_t owned() const { return ids_.size(); }
   std::size_t halos() const { return halo_count_; }
   // Where the owned positions and carried floats live: the space of build()'s positions.
-  MemorySpace space() const { return device_ ? MemorySpace::device : MemorySpace::host; }
+  MemorySpace space() const;
   // The owned particles: global indices, positions (wrapped into the cell at the last exchange;
   // as given since), carried floats (width() per particle). positions() and carried() are host
   // copies; a device-resident engine downloads them at the first call after an exchange:
@@ -302,75 +305,45 @@ class DistributedEngine {
   const Decomposition& decomposition() const { return decomposition_; }
   const DistributedStats& stats() const { return stats_; }
   // Whether the local passes compute the owned rows only (DistributedOptions::owned_rows_only
-  // and a method that takes query points), or every row of owned + halos.
-  bool owned_rows_only() const { return split_; }
+  // and a host method that declares query points and periodic boxes), or every row of owned +
+  // halos.
+  bool owned_rows_only() const;
   // The local engines (raycut::mpi::for_each_pair runs a functor through them): over owned +
   // halos, or with owned rows only over the owned particles, plus the boundary rows (owned
   // indices, ascending) as queries over the halos (null when it has nothing to do).
-  const Engine& local_engine() const { return *engine_; }
-  const Engine* halo_engine() const { return halo_engine_built_ ? halo_engine_.get() : nullptr; }
-  const std::vector<std::uint32_t>& boundary() const { return boundary_; }
+  const Engine& local_engine() const;
+  const Engine* halo_engine() const;
+  const std::vector<std::uint32_t>& boundary() const;
 
  private:
-  struct HaloPlan;
   void check_built(const char* call) const;
-  PositionsView local_positions(std::size_t count);
   void agree(const std::string& local_error, ErrorCode code);
   void setup();  // the constructor's local part, no collectives (its errors are agreed)
-  [[noreturn]] void throw_error_of(int first, const std::string& local_error, ErrorCode code);
-  void balance();
-  void migrate();
   void build_halos();
-  void plan_halos_on_host(double reach);
   void refresh_halos();
-  void exchange_on_device(const void* send, std::size_t bytes, void* recv);
-  void device_halo_fields(const float* owned, std::size_t width, float* local);
-  void fetch_halos() const;
+  void build_local_engine(bool same_sources);
   void check_field_width(const char* call, const float* owned, std::size_t width);
   void check_sph_fields(const SphFields& owned, bool device);
-  void build_local_engine(bool same_sources);
-  void select_boundary();
-  void exchange_counts(const std::vector<std::uint64_t>& send, std::vector<std::uint64_t>& recv);
 
   MPI_Comm comm_;
   int rank_ = 0, size_ = 1;
   DistributedOptions options_;
-  // What a device-resident engine sends along its halo plan through transport_ (the option's,
-  // or host_transport_); everything else through host_transport_.
-  std::shared_ptr<Transport> transport_, host_transport_;
-  std::unique_ptr<detail::DeviceResidence> device_;  // device-resident engines only
+  // The parts: the ranks' side (transports, the halo plan, migration); where the particles live
+  // (host or device, chosen at build() from the positions' memory); the local engines and every
+  // job on them (the scheme chosen at construction from the method's capabilities).
+  std::unique_ptr<detail::Exchange> exchange_;
+  std::unique_ptr<detail::Residence> residence_;
+  std::unique_ptr<detail::LocalPasses> passes_;
   Decomposition decomposition_;
+  // The local engines' box: the cell, periodic on the local axes only (the others cross by halos).
+  Box local_box_;
   float cutoff_ = 0;
   double halo_width_ = 0;
   bool built_ = false;
   std::uint64_t global_size_ = 0;
   std::size_t width_ = 0;
-
   std::vector<std::uint64_t> ids_;
-  // A device-resident engine's are host copies, made when asked (positions(), carried()) or
-  // needed (Balance::particles): current while host_positions_ / host_carried_.
-  mutable std::vector<float> xyz_, carried_;
-  mutable bool host_positions_ = true, host_carried_ = true;
-  std::vector<float> xyz_at_exchange_;  // the skin's reference
-  // The halos' (host copies of a device-resident engine's, current while host_halos_).
   std::size_t halo_count_ = 0;
-  mutable std::vector<std::uint64_t> halo_ids_;
-  mutable std::vector<std::int32_t> halo_shifts_;
-  mutable bool host_halos_ = true;
-  std::vector<float> local_xyz_;  // owned then halos: what the local engine is built over
-  Results summed_;                // run()'s results when two engines' rows are added
-  std::unique_ptr<HaloPlan> plan_;
-  // Owned rows only: engine_ over the owned particles, halo_engine_ with the owned particles
-  // near a face (boundary_, owned indices ascending; their positions boundary_xyz_) as queries
-  // over the halos, built when both exist. Otherwise engine_ over owned + halos.
-  std::unique_ptr<Engine> engine_, halo_engine_;
-  // Both engines' box: the cell, periodic on the local axes only (the others cross by halos).
-  Box local_box_;
-  bool takes_boxes_ = false;  // the method takes periodic boxes and query points
-  bool split_ = false;
-  bool halo_engine_built_ = false;
-  std::vector<std::uint32_t> boundary_;
-  std::vector<float> boundary_xyz_;
   DistributedStats stats_;
 };
 

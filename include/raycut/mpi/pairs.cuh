@@ -36,12 +36,11 @@ void for_each_pair(const DistributedEngine& engine, const F& f, cudaStream_t str
                     "from device positions (a device-resident engine)");
   // A device-resident engine runs all rows (one local engine over owned + halos).
   using Pass = detail::LocalPass<F, F>;  // f copied to the device
-  using Kind = typename Pass::Kind;
   const auto owned = static_cast<std::uint32_t>(engine.owned());
-  raycut::cuda::for_each_pair(
-      engine.local_engine(),
-      Pass{f, Kind::all_rows, owned, engine.device_ids().halo_shifts, nullptr, nullptr, nullptr},
-      stream);
+  const raycut::detail::RowMap rows{raycut::detail::RowKind::all_rows, owned, nullptr, nullptr,
+                                    nullptr};
+  raycut::cuda::for_each_pair(engine.local_engine(), Pass{f, rows, engine.device_ids().halo_shifts},
+                              stream);
 }
 
 }  // namespace raycut::mpi::cuda

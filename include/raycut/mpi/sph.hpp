@@ -5,6 +5,7 @@
 // density and pressure) and migrates particles with their velocity. A method that works in
 // device memory (grid, brute-force-gpu, the OptiX methods) keeps the whole step on the GPU: a
 // device-resident engine, sph::Solver's CUDA steps, the halo fields by the refreshes' transport.
+// Library: raycut::sph_mpi (raycut::sph and raycut::mpi; raycut::mpi alone has no SPH).
 //
 //   raycut::mpi::SphSolver solver(MPI_COMM_WORLD, raycut::sph::hiprt_drop(), "cell-list");
 //   for (int f = 0; f < 200; ++f) solver.step();

@@ -1,0 +1,99 @@
+// Passes whose rows are not simply an engine's targets: the distributed engine's local engines
+// (include/raycut/mpi/distributed.hpp), where a rank computes the rows of its owned particles
+// either with one engine over owned + halos (all rows; the halos' rows are not finished) or, owned
+// rows only, with two: the owned particles' engine and one with the boundary rows as queries over
+// the halos. A row whose pairs come from both keeps its state between the two passes (carried),
+// so every row is one sum, finished once: no results are merged afterwards. RowMap says which
+// pass runs; a functor wrapper applies it (raycut::mpi's LocalPass for a caller's functor,
+// RowPass for the built-in kernels inside the CPU methods' own loops); run_local_rows is the
+// schedule. Not a stable interface.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <type_traits>
+#include <vector>
+
+#include "raycut/engine.hpp"
+#include "raycut/kernels.hpp"
+
+namespace raycut::detail {
+
+enum class RowKind {
+  all_rows,  // one engine over owned + halos: targets past `owned` are halos', not finished
+  owned,     // the owned particles' engine: a boundary row starts from its carried state
+  halos,     // boundary rows as queries over the halos: query b is owned row boundary[b], its
+             // sources halos (local source owned + j), its state carried, not finished
+};
+
+struct RowMap {
+  RowKind kind = RowKind::all_rows;
+  std::uint32_t owned = 0;
+  const std::uint32_t* boundary = nullptr;  // halos: the owned row of each query
+  const std::int32_t* slot = nullptr;       // owned: owned row -> its carried state, or -1
+  void* carry = nullptr;                    // one functor Accumulator per boundary row
+
+  RAYCUT_HD std::uint32_t row(std::uint32_t i) const {
+    return kind == RowKind::halos ? boundary[i] : i;
+  }
+  RAYCUT_HD std::uint32_t source(std::uint32_t j) const {
+    return kind == RowKind::halos ? owned + j : j;
+  }
+  RAYCUT_HD bool halo_row(std::uint32_t i) const { return kind == RowKind::all_rows && i >= owned; }
+  template <class F>
+  RAYCUT_HD typename F::Accumulator init(const F& f, std::uint32_t i) const {
+    using A = typename F::Accumulator;
+    if (kind == RowKind::owned && slot[i] >= 0) return static_cast<A*>(carry)[slot[i]];
+    if (halo_row(i)) return A{};  // unused
+    return initial_state(f, row(i));
+  }
+  template <class F>
+  RAYCUT_HD void finish(const F& f, std::uint32_t i, typename F::Accumulator& acc) const {
+    if (kind == RowKind::halos)
+      static_cast<typename F::Accumulator*>(carry)[i] = acc;
+    else if (!halo_row(i))
+      f.finish(i, acc);
+  }
+};
+
+// A built-in kernel's functor over mapped rows (Method::compute_rows runs it in the method's own
+// loop): rows and sources mapped, no filter and no shift, so the traversal keeps its plain loop.
+// All rows run the halos' rows too (the kernels' arrays span owned + halos; not finished).
+template <class F>
+struct RowPass {
+  static_assert(!has_accepts<F>::value && !takes_shift<F>::value,
+                "RowPass maps the built-in kernels, which neither filter nor take shifts");
+  using Accumulator = typename F::Accumulator;
+  static constexpr bool uses_source = raycut::uses_source<F>::value;
+  const F& f;
+  RowMap rows;
+  Accumulator init(std::uint32_t i) const { return rows.init(f, i); }
+  void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3 r, float r2) const {
+    f(acc, rows.row(i), rows.source(j), r, r2);
+  }
+  void finish(std::uint32_t i, Accumulator& acc) const { rows.finish(f, i, acc); }
+};
+
+// The schedule for `owned` rows with accumulators of type A: one pass of all rows over `local`,
+// or, owned rows only, the query engine's pass (`halos`, null when it has nothing to do; query b
+// is owned row boundary[b]) and then the owned engine's, which finishes every row once.
+// pass(engine, rows) runs one.
+template <class A, class Pass>
+void run_local_rows(const Engine& local, const Engine* halos,
+                    const std::vector<std::uint32_t>& boundary, bool owned_rows_only,
+                    std::uint32_t owned, Pass&& pass) {
+  if (!owned_rows_only) {
+    pass(local, RowMap{RowKind::all_rows, owned, nullptr, nullptr, nullptr});
+    return;
+  }
+  std::vector<A> carry;
+  std::vector<std::int32_t> slot(owned, -1);
+  if (halos) {
+    carry.resize(boundary.size());
+    pass(*halos, RowMap{RowKind::halos, owned, boundary.data(), nullptr, carry.data()});
+    for (std::size_t b = 0; b < boundary.size(); ++b) slot[boundary[b]] = static_cast<int>(b);
+  }
+  pass(local, RowMap{RowKind::owned, owned, nullptr, slot.data(), carry.data()});
+}
+
+}  // namespace raycut::detail
