@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Scaling tables (and a plot) of `raycut bench --distributed` runs, against issue 16's goals.
+"""Scaling tables (and a plot) of `raycut bench --distributed` runs, against the scaling goals (docs/distributed.md).
 
 Reads the CSVs that `mpirun -np K raycut bench --distributed` writes (one per rank count; rows
 of the same method, rows scheme, periodic images, positions and transport are compared with

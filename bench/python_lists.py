@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Neighbour lists from Python against the same C++ call, on the workloads of docs/benchmarks.md,
-"Neighbour lists" (issue 15's goal: Python within 10 % of C++).
+"Neighbour lists" (the goal: Python within 10 % of C++).
 
 Workloads (``--tiny``: the same shapes, small enough for the CPU in a few seconds):
 

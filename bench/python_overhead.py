@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The overhead of raycut's Python API over the same C++ work, at 1,000 particles (issue 15's
+"""The overhead of raycut's Python API over the same C++ work, at 1,000 particles (the
 target: <= 30 us a call).
 
 For each input (NumPy on the host; PyTorch CUDA tensors when torch and a GPU build are there) and

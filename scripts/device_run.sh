@@ -11,7 +11,7 @@
 #                .deps/paper/Cuda-version/cudaLJ.cu (docs/benchmarks.md; never committed)
 #   lists        neighbour lists vs fused kernels (bench/neighbour_bench: uniform beta 16 and 32,
 #                and the LJ liquid; cold and prepared), lists.csv/.md/.png (docs/benchmarks.md)
-#   periodic     bench/neighbour_bench --periodic (issue 14): the LJ liquid in a periodic cube
+#   periodic     bench/neighbour_bench --periodic: the LJ liquid in a periodic cube
 #                (2^20) and batches of 512 x 128 and 64 x 4096 periodic cubes; lists with shifts,
 #                lj_forces; cold and prepared; PERIODIC_METHODS (default grid) picks the methods.
 #                periodic.csv/.md (with lists.csv's tables too when the lists step ran before)
@@ -31,7 +31,7 @@
 #   mpi-scaling  the MPI tests, then weak (2^24 per GPU) and strong (2^25) scaling of the
 #                device-resident engine with NCCL at 1, 2, 4 and all visible GPUs (kinds
 #                nvidia-h200-x2/x4/x8): weak-npK.csv, strong-npK.csv, scaling.md/.png
-#                (bench/plot_distributed.py; issues 16 and 17); then the distributed SPH solver
+#                (bench/plot_distributed.py); then the distributed SPH solver
 #                on the GPUs (the article's drop and 524,288 particles): sph-scaling.csv
 set -uo pipefail
 cd "$(dirname "$0")/.." || exit 1
@@ -190,7 +190,7 @@ while [ $# -gt 0 ]; do
       done
       ;;
     mpi-scaling)
-      # Issue 16 (2 GPUs) and 17 (4, 8): weak (MPI_WEAK_N per GPU, default 2^24) and strong
+      # 2, 4 or 8 GPUs: weak (MPI_WEAK_N per GPU, default 2^24) and strong
       # (MPI_STRONG_N in total, default 2^25) scaling of the device-resident engine, halo
       # refreshes by NCCL, one rank per GPU, from 1 rank to every visible GPU; the MPI tests
       # first (the NCCL twin runs at np > 1 only with a GPU per rank).
@@ -214,7 +214,7 @@ while [ $# -gt 0 ]; do
       done
       [ ${#csvs[@]} -gt 0 ] && "$py" bench/plot_distributed.py "${csvs[@]}" \
         --md "$res/scaling.md" --png "$res/scaling.png" && cat "$res/scaling.md"
-      # The distributed SPH solver on the GPUs (issue 16's "hiprt-drop and a scaled-up one"),
+      # The distributed SPH solver on the GPUs ("hiprt-drop and a scaled-up one"),
       # beside the single-process solver: sph-single.csv and sph-scaling.csv, a row per run.
       sph_summary() { grep -E "steps/s|distributed:"; }
       "$raycut" sph --scenario hiprt-drop -m grid -q --csv "$res/sph-single.csv" | sph_summary

@@ -1,5 +1,5 @@
 # The repository speaks of the product, not of its history: no tracked file outside bench/results
-# carries a numbered work-log label ("session" followed by a number) or points at a spec file
+# carries a numbered work-log label ("session" or "issue" followed by a number) or points at a spec file
 # that is not in the repository (spec/<NAME>.md, "spec <NAME>.md" or "spec section <n>"). Prints every offending line; fails if any.
 # Usage: cmake -DSOURCE=<repository root> -P no_history_labels.cmake
 cmake_policy(SET CMP0007 NEW)  # keep the list semantics of this CMake, no warning
@@ -25,7 +25,7 @@ list(FILTER files EXCLUDE REGEX "^bench/results/")
 list(FILTER files EXCLUDE REGEX "\\.(png|jpg|jpeg|gif|pdf|ico|gz|zip|npz|npy|bin)$")
 
 # CMake regexes have no \b or case folding: spell both out.
-set(session_label "(^|[^A-Za-z0-9_])[Ss][Ee][Ss][Ss][Ii][Oo][Nn][Ss]?[ -]?[0-9]+")
+set(session_label "(^|[^A-Za-z0-9_])([Ss][Ee][Ss][Ss][Ii][Oo][Nn]|[Ii][Ss][Ss][Uu][Ee])[Ss]?[ -]?[0-9]+")
 set(spec_file "spec[/ ][A-Z]+[.]md|spec sections? [0-9]")
 
 list(LENGTH files file_count)

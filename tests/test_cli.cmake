@@ -55,7 +55,7 @@ file(CHMOD ${WORK}/fake_paper.sh PERMISSIONS OWNER_READ OWNER_WRITE OWNER_EXECUT
 expect_exit(0 bench --methods cell-list --param 4 --p 1 --reps 1 --out ${WORK}/m.csv --paper-binary ${WORK}/fake_paper.sh)
 file(READ ${WORK}/m.csv csv)
 expect_match("${csv}" "uniform,paper-cudaLJ,4,1,64,0.25,,2.0000,2.0000,4.0000,3.0000,5.0000,2,host,")
-# Issue 12: hostile options, inputs and outputs give one-line errors naming what is wrong, exit 2.
+# Hostile options, inputs and outputs give one-line errors naming what is wrong, exit 2.
 expect_exit(2 no-such-subcommand)
 expect_match("${last_err}" "unknown subcommand 'no-such-subcommand'")
 expect_exit(2 check -n -1 -m cell-list -f uniform)
@@ -109,7 +109,7 @@ if(leftovers)
   message(FATAL_ERROR "temporary files left behind: ${leftovers}")
 endif()
 
-# Issue 14: periodic boxes. --cell (9 numbers, or 3 for an orthorhombic box) and --pbc, as
+# Periodic boxes. --cell (9 numbers, or 3 for an orthorhombic box) and --pbc, as
 # separate values or one quoted string; each method against the brute force in the same box.
 # Boxes thinner than 2 cutoffs: pairs once per image, self-images.
 expect_exit(0 check -m cell-list -f uniform,lattice-k1,coincident -n 0,1,150 --cell 1.5 1.5 1.5)

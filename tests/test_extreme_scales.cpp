@@ -1,7 +1,7 @@
 // Every method (CPU and, where available, GPU) on the extreme-scale families and at the edges of
 // the supported cutoff range, against the double-precision oracle of tests/oracle.hpp, which does
 // not share raycut's predicate (docs/limits.md). Just outside the range, and on the
-// inputs of issue 12 that used to give silently wrong answers, build() must refuse with a clear
+// inputs that used to give silently wrong answers, build() must refuse with a clear
 // Error naming the supported range.
 #include <gtest/gtest.h>
 
@@ -140,7 +140,7 @@ std::vector<Case> cases() {
     out.push_back({f, 2000, 0x1p-60f, false});
     out.push_back({f, 2000, 0x1p60f, false});
   }
-  // Just outside the range, and issue 12's silently wrong inputs: refused.
+  // Just outside the range, and the inputs that used to be silently wrong: refused.
   out.push_back({"tiny-scale", 1000, 0x1p-11f, true});
   out.push_back({"huge-scale", 1000, 0x1p11f, true});
   out.push_back({"coincident", 1000, 1e-30f, true});
@@ -187,7 +187,7 @@ TEST(DoubleOracle, CellHashAgreesWithBruteForce) {
   }
 }
 
-// The oracle is not the predicate: it sees the pairs that the float predicate of issue 12 lost.
+// The oracle is not the predicate: it sees the pairs that a plain float predicate loses.
 TEST(DoubleOracle, SeesWhatTheFloatPredicateLost) {
   const std::vector<float> coincident = {1e-20f, 0, 0, 1e-20f, 0, 0};
   const auto o = raycut_test::make_oracle(coincident, 1e-30f);

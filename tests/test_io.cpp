@@ -227,7 +227,7 @@ TEST_F(PositionsIo, UnwritablePathNamesThePath) {
   EXPECT_TRUE(contains(io_error([&] { write_csv(file, PointCloud{}); }), file));
 }
 
-// Issue 12: hostile inputs give clear errors, never a crash, a hang or a silent misreading.
+// Hostile inputs give clear errors, never a crash, a hang or a silent misreading.
 
 TEST_F(PositionsIo, XyzHugePropertiesCountIsAnError) {
   const std::string file = write_file(

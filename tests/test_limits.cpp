@@ -52,7 +52,7 @@ TEST(CutoffRange, EdgesAcceptedOutsideRefusedWithTheRangeNamed) {
   }
 }
 
-// The two silently wrong answers of issue 12 are refused by Engine::build.
+// Two inputs that used to give silently wrong answers are refused by Engine::build.
 TEST(CutoffRange, EngineRefusesWhatUsedToBeSilentlyWrong) {
   const std::vector<float> coincident = {0, 0, 0, 0, 0, 0};
   const std::vector<float> far_pair = {0, 0, 0, 2e19f, 0, 0};

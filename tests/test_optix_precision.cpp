@@ -1,4 +1,4 @@
-// Issue 12, item 2: the OptiX methods on inputs whose coordinates span many orders of magnitude
+// The OptiX methods on inputs whose coordinates span many orders of magnitude
 // beyond the cutoff. For every OptiX method available here and every input class (a compact cloud
 // far from the origin, groups of particles far apart, heavy-tailed clouds with far outliers):
 // either the method's CSR neighbour list equals a double-precision oracle (pairs within a relative

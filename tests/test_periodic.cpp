@@ -145,7 +145,7 @@ Box scaled(Box box, double s) {
   return box;
 }
 
-// The box families of issue 14: cubic, orthorhombic, triclinic (60 degrees, very skewed,
+// The box families: cubic, orthorhombic, triclinic (60 degrees, very skewed,
 // left-handed), 0.3 C to 10 C wide, slabs and wires, faces, unwrapped by up to 1000 cells.
 std::vector<Family> families() {
   std::vector<Family> out;

@@ -168,7 +168,7 @@ TEST(RayDomain, ExactShiftLeavesEveryCoordinateDifferenceExact) {
   EXPECT_NE(geo::exact_shift(1e5f, 1e5f + 30), 0.0f);
 }
 
-// Issue 12, far offsets of a compact cloud: in the local frame the scene is the cloud's own
+// Far offsets of a compact cloud: in the local frame the scene is the cloud's own
 // half-width, the pair vectors are the caller's bit for bit, and the emulated geometry (float hit
 // tests) keeps every pair once. Without the shift, 1e7 is beyond every geometry's bound.
 TEST(RayDomain, FarOffsetCloudIsCompactInTheLocalFrame) {
@@ -209,7 +209,7 @@ TEST(RayDomain, FloatGeometryIsExactUpToEachBound) {
   }
 }
 
-// Issue 12, groups astronomically far apart: the margin follows the largest coordinate, and at
+// Groups astronomically far apart: the margin follows the largest coordinate, and at
 // 1e30 cutoffs the sphere's r^2 and the triangles' edge products overflow float: float hit tests
 // lose the pairs (the exact ones do not). The domain check refuses every geometry there, and
 // already at 1e6 cutoffs.

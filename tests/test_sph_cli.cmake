@@ -61,7 +61,7 @@ expect_exit(2 sph --scenario nowhere)
 expect_exit(2 sph --scenario small --method no-such-method --frames 1)
 expect_exit(2 sph --scenario small --png --frames 1)
 
-# Issue 12: sizes refused up front with the memory they need; bad keys and files named.
+# Sizes refused up front with the memory they need; bad keys and files named.
 foreach(option "--resolution;1000" "--column-height;1e6" "--tank-length;1e6" "--tank-length;1e30")
   expect_exit(2 sph --scenario dam-break -m cell-list ${option})
   expect_match("${last_err}" "out of memory: scenario dam-break: .* needs .* of host memory, .* is available")

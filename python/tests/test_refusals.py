@@ -149,7 +149,7 @@ def test_padded_k_beyond_the_budget_and_a_malformed_budget():
     assert "got 'a lot'" in result.stdout
 
 
-# ---- inputs that are accepted (issue 29) -------------------------------------------------------
+# ---- inputs that are accepted -------------------------------------------------------------------
 
 def by_pair(i, j, *values):
     """The entries sorted by (i, j): the order within a row is not part of the contract (float64

@@ -11,7 +11,7 @@
 //
 // Query points (targets that are no source) are sorted after every source and are never
 // candidates: a query set over sources costs the pairs with sources only, not the query-query
-// candidates rejected one by one (issue 16's owned rows only, raycut.radius), and a cell's
+// candidates rejected one by one (the distributed engine's owned rows, raycut.radius), and a cell's
 // sources stay next to the next cell's.
 #include <algorithm>
 #include <array>
