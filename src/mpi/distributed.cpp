@@ -136,12 +136,21 @@ detail::Domains domains_of(const Decomposition& dec) {
   return d;
 }
 
-void refuse_sph_force_without_fields(Kernel kernel) {
+// A kernel that reads per-particle inputs needs its neighbours' values on the halos: only
+// sph_force's fields are exchanged (SphFields), the other kernels' are refused.
+void refuse_inputs_without_fields(Kernel kernel) {
   if (kernel == Kernel::sph_force)
     throw Error(ErrorCode::unsupported,
                 "distributed engine: sph_force needs its neighbours' velocities, densities and "
                 "pressures: call compute(Kernel::sph_force, options, SphFields{...}) with the "
                 "owned particles' fields");
+  visit_kernel(kernel, [&](auto spec) {
+    if (!decltype(spec)::inputs.empty())
+      throw Error(ErrorCode::unsupported,
+                  "distributed engine: kernel " + to_string(kernel) +
+                      " reads per-particle inputs of its neighbours, which the distributed "
+                      "engine does not exchange; run it on a raycut::Engine");
+  });
 }
 
 // The device side of a device-resident engine: asked for by methods that work on the device
@@ -1027,7 +1036,7 @@ const float* DistributedEngine::owned_carried() const {
 
 ResultsView DistributedEngine::run(Kernel kernel, const KernelOptions& options) {
   check_built("run");
-  refuse_sph_force_without_fields(kernel);
+  refuse_inputs_without_fields(kernel);
   if (split_ && halo_engine_built_) {  // two engines' rows added: on the host
     summed_ = compute(kernel, options);
     const auto data = [](const auto& v) { return v.empty() ? nullptr : v.data(); };
@@ -1040,7 +1049,7 @@ ResultsView DistributedEngine::run(Kernel kernel, const KernelOptions& options) 
 
 Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options) {
   check_built("compute");
-  refuse_sph_force_without_fields(kernel);
+  refuse_inputs_without_fields(kernel);
   Results r = engine_->compute(kernel, options);
   const std::size_t n = ids_.size();
   if (!split_) {  // rows past n are the halos'
