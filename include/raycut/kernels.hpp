@@ -520,7 +520,7 @@ struct KernelInput {
   const float*& (*field)(KernelOptions& options);  // the pointer it is passed in
 };
 
-// Reads an input's pointer from options.
+// Reads an input's pointer from options (a copy of them: `field` hands out a mutable reference).
 inline const float* input_pointer(const KernelInput& input, KernelOptions options) {
   return input.field(options);
 }

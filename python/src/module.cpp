@@ -10,6 +10,7 @@
 #include <nanobind/stl/string_view.h>
 #include <nanobind/stl/vector.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -556,11 +557,10 @@ void check_kernel_input(KernelInput& out, const raycut::Engine& engine) {
 void set_kernel_parameter(raycut::KernelOptions& options, const std::string& name,
                           nb::handle value) {
   bool found = false;
-  std::string known;
+  std::vector<std::string_view> known;  // each name once (kernels share parameters)
   raycut::for_each_kernel([&](auto spec) {
     for (const raycut::KernelParameter& p : decltype(spec)::parameters) {
-      if (known.find(std::string(p.name)) == std::string::npos)
-        known += (known.empty() ? "" : ", ") + std::string(p.name);
+      if (std::find(known.begin(), known.end(), p.name) == known.end()) known.push_back(p.name);
       if (found || p.name != name) continue;
       found = true;
       if (p.flag)
@@ -569,7 +569,10 @@ void set_kernel_parameter(raycut::KernelOptions& options, const std::string& nam
         options.*p.value = nb::cast<float>(value);
     }
   });
-  if (!found) value_error("unknown kernel parameter '" + name + "' (known: " + known + ")");
+  if (found) return;
+  std::string list;
+  for (std::string_view k : known) list += (list.empty() ? "" : ", ") + std::string(k);
+  value_error("unknown kernel parameter '" + name + "' (known: " + list + ")");
 }
 
 // run() and its results in one locked call: another thread's run() in between would take them.
