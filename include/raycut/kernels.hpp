@@ -421,8 +421,8 @@ struct SphForceKernel {
   }
 };
 
-// Damped shifted-force (DSF) Coulomb, Fennell & Gezelter, J. Chem. Phys. 124, 234104 (2006), as
-// LAMMPS's pair coul/dsf: with a = alpha and
+// Damped shifted-force (DSF) Coulomb, Fennell & Gezelter, J. Chem. Phys. 124, 234104 (2006) (the
+// formula of LAMMPS's pair coul/dsf documentation; its per-atom self term too): with a = alpha and
 //   phi(r)  = erfc(a r) / r - e_C + f_C (r - C),   e_C = erfc(a C) / C,
 //   f_C     = erfc(a C) / C^2 + 2 a / sqrt(pi) exp(-a^2 C^2) / C,
 //   phi'(r) = f_C - erfc(a r) / r^2 - 2 a / sqrt(pi) exp(-a^2 r^2) / r

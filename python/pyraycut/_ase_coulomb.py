@@ -13,8 +13,8 @@ from .ase import _engine_on
 
 class CoulombDSF(Calculator):
     """Damped shifted-force (DSF) Coulomb, Fennell & Gezelter, J. Chem. Phys. 124, 234104
-    (2006), as LAMMPS's ``pair_style coul/dsf``, computed by raycut's fused ``coulomb_dsf``
-    pass.
+    (2006), the formula documented for LAMMPS's ``pair_style coul/dsf``, computed by raycut's
+    fused ``coulomb_dsf`` pass.
 
     >>> atoms.set_initial_charges(q)
     >>> atoms.calc = pyraycut.ase.CoulombDSF(alpha=0.2, rc=10.0)
