@@ -1,4 +1,5 @@
-// coulomb_dsf (damped shifted-force Coulomb, Fennell & Gezelter 2006) on every CPU method, on
+// coulomb_dsf (damped shifted-force Coulomb, Fennell & Gezelter 2006) on every method that takes
+// boxes, batches and query points (the CPU methods; brute-force-gpu and grid where a GPU is), on
 // open, periodic (triclinic, thinner than 2C: several images and self-images), batched and
 // query-point inputs, against a double-precision oracle written here from the paper's formulas:
 // it shares no code with the library (its own image enumeration, erfc in double).
@@ -8,6 +9,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -214,12 +216,33 @@ void expect_matches(const raycut::Results& got, const Expected& want, const std:
     near(got.virial[i], want.virial[i], want.virial_scale[i], "virial", i);
 }
 
-KernelOptions options_of(const Dsf& dsf, const Points& p) {
-  KernelOptions o;
-  o.dsf_alpha = static_cast<float>(dsf.alpha);
-  o.coulomb_constant = static_cast<float>(dsf.k);
-  o.coulomb.charge = p.charge.data();
-  return o;
+// `values` where `engine` reads its inputs: in place on the host, a device copy (kept in
+// `holder`) for a method that works on the device.
+const float* where_read(const Engine& engine, const std::vector<float>& values,
+                        std::optional<raycut::DeviceArray>& holder) {
+  if (engine.space() == MemorySpace::host) return values.data();
+  holder.emplace(values);
+  return holder->data();
+}
+
+// Why `method` cannot run here; empty when it can.
+std::string unavailable(const std::string& method) {
+  for (const auto& m : raycut::list_methods())
+    if (m.name == method)
+      return m.available ? "" : (m.why_unavailable.empty() ? "not available" : m.why_unavailable);
+  return "not in list_methods()";
+}
+
+struct DsfRun {
+  KernelOptions options;
+  std::optional<raycut::DeviceArray> charge, query_charge;
+};
+
+// The options of a run of `dsf` over charges p on `engine` (which must be built).
+void set_options(DsfRun& run, const Engine& engine, const Dsf& dsf, const Points& p) {
+  run.options.dsf_alpha = static_cast<float>(dsf.alpha);
+  run.options.coulomb_constant = static_cast<float>(dsf.k);
+  run.options.coulomb.charge = where_read(engine, p.charge, run.charge);
 }
 
 // The oracle's constants from the float values the engine gets.
@@ -227,7 +250,13 @@ Dsf dsf_of(float alpha, float cutoff, float k) {
   return {alpha, std::sqrt(static_cast<double>(static_cast<float>(double{cutoff} * cutoff))), k};
 }
 
-class CoulombDsf : public ::testing::TestWithParam<const char*> {};
+class CoulombDsf : public ::testing::TestWithParam<const char*> {
+ protected:
+  void SetUp() override {
+    const std::string why = unavailable(GetParam());
+    if (!why.empty()) GTEST_SKIP() << GetParam() << ": " << why;
+  }
+};
 
 TEST_P(CoulombDsf, OpenCloudMatchesTheOracle) {
   const float cutoff = 2.5f;
@@ -237,7 +266,9 @@ TEST_P(CoulombDsf, OpenCloudMatchesTheOracle) {
     const Points p = make_points(300, open, 7);
     Engine engine(GetParam());
     engine.build({p.xyz.data(), 300, MemorySpace::host}, cutoff);
-    const raycut::Results got = engine.compute(Kernel::coulomb_dsf, options_of(dsf, p));
+    DsfRun run;
+    set_options(run, engine, dsf, p);
+    const raycut::Results got = engine.compute(Kernel::coulomb_dsf, run.options);
     Expected want;
     want.resize(300);
     oracle(dsf, Cell{}, p.xyz64, p.charge64, p.xyz64, p.charge64, true, want, 0);
@@ -263,7 +294,9 @@ TEST_P(CoulombDsf, PeriodicTriclinicWithSelfImagesMatchesTheOracle) {
   Systems systems;
   systems.box = box_of(cell);
   engine.build({p.xyz.data(), 40, MemorySpace::host}, cutoff, systems);
-  const raycut::Results got = engine.compute(Kernel::coulomb_dsf, options_of(dsf, p));
+  DsfRun run;
+  set_options(run, engine, dsf, p);
+  const raycut::Results got = engine.compute(Kernel::coulomb_dsf, run.options);
   Expected want;
   want.resize(40);
   oracle(dsf, cell, p.xyz64, p.charge64, p.xyz64, p.charge64, true, want, 0);
@@ -292,7 +325,9 @@ TEST_P(CoulombDsf, BatchedSystemsMatchTheOracleSystemBySystem) {
   const std::size_t n = systems.offsets.back();
   Engine engine(GetParam());
   engine.build({all.xyz.data(), n, MemorySpace::host}, cutoff, systems);
-  const raycut::Results got = engine.compute(Kernel::coulomb_dsf, options_of(dsf, all));
+  DsfRun run;
+  set_options(run, engine, dsf, all);
+  const raycut::Results got = engine.compute(Kernel::coulomb_dsf, run.options);
   Expected want;
   want.resize(n);
   for (int s = 0; s < 3; ++s) {
@@ -315,8 +350,10 @@ TEST_P(CoulombDsf, QueryPointsReadTheirOwnCharges) {
     systems.queries = {queries.xyz.data(), 25, MemorySpace::host};
     Engine engine(GetParam());
     engine.build({sources.xyz.data(), 120, MemorySpace::host}, cutoff, systems);
-    KernelOptions o = options_of(dsf, sources);
-    o.coulomb.query_charge = queries.charge.data();
+    DsfRun run;
+    set_options(run, engine, dsf, sources);
+    KernelOptions& o = run.options;
+    o.coulomb.query_charge = where_read(engine, queries.charge, run.query_charge);
     const raycut::Results got = engine.compute(Kernel::coulomb_dsf, o);
     Expected want;
     want.resize(25);
@@ -331,7 +368,8 @@ TEST_P(CoulombDsf, QueryPointsReadTheirOwnCharges) {
   }
 }
 
-INSTANTIATE_TEST_SUITE_P(CpuMethods, CoulombDsf, ::testing::Values("brute-force", "cell-list"),
+INSTANTIATE_TEST_SUITE_P(SystemMethods, CoulombDsf,
+                         ::testing::Values("brute-force", "cell-list", "brute-force-gpu", "grid"),
                          [](const auto& info) {
                            std::string name = info.param;
                            std::replace(name.begin(), name.end(), '-', '_');
