@@ -72,13 +72,13 @@ struct Systems {
 };
 
 // Per-target results on the host; a vector is empty when the kernel does not produce it
-// (raycut::produces(kernel) says which it does).
+// (raycut::produces(kernel) says which it does; docs/kernels.md lists them per kernel).
 struct Results {
-  std::vector<std::uint32_t> count;  // count
-  std::vector<float> energy;         // lj, lj_forces, smooth
-  std::vector<float> force;          // lj_forces, smooth, sph_force: 3 per target (fx fy fz)
-  std::vector<float> virial;         // lj_forces: 6 per target (xx yy zz xy xz yz)
-  std::vector<float> density;        // sph_density
+  std::vector<std::uint32_t> count;  // 1 per target
+  std::vector<float> energy;         // 1 per target
+  std::vector<float> force;          // 3 per target (fx fy fz)
+  std::vector<float> virial;         // 6 per target (xx yy zz xy xz yz)
+  std::vector<float> density;        // 1 per target
 };
 
 // The results of the last run() where the method keeps them (Engine::space()), without a copy:

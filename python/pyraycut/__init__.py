@@ -62,6 +62,7 @@ __all__ = [
     "CapacityError",
     "Engine",
     "KERNELS",
+    "KERNEL_CATALOGUE",
     "VerletList",
     "auto_method",
     "clear_engine_cache",
@@ -73,15 +74,20 @@ __all__ = [
     "set_engine_cache",
 ]
 
+#: The built-in kernels of ``Engine.compute``, from the library's own catalogue: per kernel name,
+#: a dict of its ``parameters`` (name, type, default, accepted min and max), its per-particle
+#: ``inputs`` (name, components, ``end``: read at both ends of a pair from one array ("both"),
+#: one per source ("sources") or one per query point ("queries"), positive) and its ``outputs``
+#: ((name, components) pairs).
+KERNEL_CATALOGUE = {k["name"]: k for k in _raycut.kernel_catalogue()}
+
 #: The built-in kernels of ``Engine.compute`` and what each returns.
-KERNELS = {
-    "count": ("count",),
-    "lj": ("energy",),
-    "lj_forces": ("energy", "force", "virial"),
-    "smooth": ("energy", "force"),
-    "sph_density": ("density",),
-    "sph_force": ("force",),
-}
+KERNELS = {name: tuple(out for out, _ in k["outputs"]) for name, k in KERNEL_CATALOGUE.items()}
+
+# Every kernel's parameters and inputs by name (one compute call may pass every kernel's
+# parameters: those the kernel does not read are ignored).
+_KERNEL_PARAMETERS = {p["name"]: p for k in KERNEL_CATALOGUE.values() for p in k["parameters"]}
+_KERNEL_INPUTS = {i["name"] for k in KERNEL_CATALOGUE.values() for i in k["inputs"]}
 
 
 def methods() -> list[dict]:
@@ -244,17 +250,24 @@ class Engine:
         x, _ = _arrays.prepare(value, name, points=False)
         return _arrays.readable(x)
 
-    def compute(self, kernel: str = "count", *, lj_epsilon: float = 1.0, lj_sigma: float = 1.0,
-                sph_mass: float = 0.0, sph_viscosity: float = 0.0, velocity: Any = None,
-                density: Any = None, pressure: Any = None, lj_shift: bool = False) -> dict:
+    def compute(self, kernel: str = "count", **options: Any) -> dict:
         """Runs a built-in kernel over every in-range pair, fused in the method's traversal, and
         returns its per-particle results as a dict of new arrays (``KERNELS`` says which):
 
         - ``count`` (N,) int32: neighbours per particle;
-        - ``energy`` (N,) float32 (``lj``, ``lj_forces``, ``smooth``);
-        - ``force`` (N, 3) float32 (``lj_forces``, ``smooth``, ``sph_force``);
-        - ``virial`` (N, 6) float32, xx yy zz xy xz yz (``lj_forces``);
+        - ``energy`` (N,) float32 (``lj``, ``lj_forces``, ``smooth``, ``coulomb_dsf``);
+        - ``force`` (N, 3) float32 (``lj_forces``, ``smooth``, ``sph_force``, ``coulomb_dsf``);
+        - ``virial`` (N, 6) float32, xx yy zz xy xz yz (``lj_forces``, ``coulomb_dsf``);
         - ``density`` (N,) float32 (``sph_density``).
+
+        ``options`` are the kernel's parameters and per-particle inputs by name
+        (``KERNEL_CATALOGUE`` lists each kernel's): ``lj_epsilon`` (1), ``lj_sigma`` (1),
+        ``lj_shift`` (False), ``sph_mass`` (0), ``sph_viscosity`` (0), ``alpha`` (0) and
+        ``coulomb_constant`` (1); ``velocity`` (N, 3), ``density`` and ``pressure`` (N,) for
+        ``sph_force``; ``charge`` (one per source) and, with query points only,
+        ``query_charge`` (one per query) for ``coulomb_dsf``. Parameters of other kernels are
+        ignored (one set of options can serve several kernels); an unknown name, or an input the
+        kernel does not read, raises ValueError.
 
         Lennard-Jones conventions: ``lj_forces`` shares each pair's energy and virial half and
         half between its two atoms (LAMMPS's and ASE's per-atom convention), so
@@ -265,19 +278,25 @@ class Engine:
         (``energy.sum()`` is twice the system's), never shifted (``lj_shift`` raises
         ValueError).
 
-        ``sph_force`` reads per-particle ``velocity`` (N, 3), ``density`` and ``pressure`` (N,)
-        float32 arrays. The results are the engine's own arrays handed over without a copy (on
-        the device for device positions and GPU methods), never changed by a later call.
+        ``coulomb_dsf`` is the damped shifted-force Coulomb sum of Fennell and Gezelter (2006)
+        with the same per-atom convention, each atom's self term included in its energy
+        (docs/kernels.md). The results are the engine's own arrays handed over without a copy
+        (on the device for device positions and GPU methods), never changed by a later call.
         """
-        velocity = self._kernel_input(velocity, "velocity")
-        density = self._kernel_input(density, "density")
-        pressure = self._kernel_input(pressure, "pressure")
+        parameters, inputs = {}, {}
+        for name, value in options.items():
+            if name in _KERNEL_INPUTS:
+                if value is not None:
+                    inputs[name] = self._kernel_input(value, name)
+            elif name in _KERNEL_PARAMETERS:
+                is_flag = _KERNEL_PARAMETERS[name]["type"] == "bool"
+                parameters[name] = bool(value) if is_flag else float(value)
+            else:
+                known = sorted(_KERNEL_PARAMETERS) + sorted(_KERNEL_INPUTS)
+                raise ValueError(f"compute: unknown option {name!r} (known: "
+                                 f"{', '.join(known)})")
         like = self._like
-        engine = self._engine
-
-        out = self._call(like, engine.compute, kernel, float(lj_epsilon), float(lj_sigma),
-                         float(sph_mass), float(sph_viscosity), velocity, density, pressure,
-                         like.host, bool(lj_shift))
+        out = self._call(like, self._engine.compute, kernel, parameters, inputs, like.host)
         return {name: _arrays.output(array, like) for name, array in out.items()}
 
     def neighbours(self, half: bool = False, distances: bool = False, vectors: bool = False,

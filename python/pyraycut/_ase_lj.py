@@ -6,8 +6,7 @@ from typing import Any
 import numpy as np
 from ase.calculators.calculator import Calculator, all_changes
 
-from . import Engine
-from .ase import _centred_float32, _system, _wrap
+from .ase import _engine_on
 from .ase import neighbor_list as _ase_neighbor_list
 
 # Voigt order xx yy zz yz xz xy (ASE) from pyraycut's virial components xx yy zz xy xz yz.
@@ -86,13 +85,7 @@ class LennardJones(Calculator):
     def _fused(self) -> tuple:
         """lj_forces, shifted at rc: per-atom energy, force and virial (xx yy zz xy xz yz)."""
         p = self.parameters
-        positions, cell, pbc = _system(self.atoms)
-        engine = Engine(p.method)
-        if pbc.any():
-            wrapped, _ = _wrap(positions, cell, pbc)
-            engine.build(_centred_float32(wrapped), p.rc, cell=cell, pbc=pbc)
-        else:
-            engine.build(_centred_float32(positions), p.rc)
+        engine = _engine_on(self.atoms, p.rc, p.method)
         out = engine.compute("lj_forces", lj_epsilon=p.epsilon, lj_sigma=p.sigma, lj_shift=True)
         return (np.asarray(out["energy"], np.float64), np.asarray(out["force"], np.float64),
                 np.asarray(out["virial"], np.float64))

@@ -12,6 +12,9 @@ class CapacityError(RuntimeError):
 
 def methods() -> list[dict[str, Any]]: ...
 def auto_method() -> str: ...
+def kernel_catalogue() -> list[dict[str, Any]]:
+    """The built-in kernels ("count", "lj", "lj_forces", "smooth", "sph_density", "sph_force",
+    "coulomb_dsf"): name, parameters, inputs and outputs of each."""
 def cuda_device_available() -> bool: ...
 def device_index_summary(index: Any, stream: int) -> tuple[int, int, int, int, int]:
     """(first, last, k, index[k], index[k + 1]) of a 1-D int32/int64 CUDA index, k the first
@@ -43,13 +46,11 @@ class Engine:
         the (N, 3) float64 host positions that `positions` rounds (raycut::Float64Positions)."""
     def update(self, positions: Any, positions64: Optional[Any] = None) -> None: ...
     def set_skin(self, skin: float) -> None: ...
-    def compute(self, kernel: str, lj_epsilon: float = 1.0, lj_sigma: float = 1.0,
-                sph_mass: float = 0.0, sph_viscosity: float = 0.0,
-                velocity: Optional[Any] = None, density: Optional[Any] = None,
-                pressure: Optional[Any] = None, to_host: bool = True,
-                lj_shift: bool = False) -> dict[str, Any]:
+    def compute(self, kernel: str, parameters: dict[str, Any] = ...,
+                inputs: dict[str, Any] = ..., to_host: bool = True) -> dict[str, Any]:
         """run() and results() in one call under the engine's lock (a run of another thread in
-        between would take the results)."""
+        between would take the results). parameters: names of kernel_catalogue()'s parameters
+        to numbers (flags); inputs: the kernel's input names to arrays."""
     def results(self, kernel: str, to_host: bool) -> dict[str, Any]:
         """The last run's arrays, handed over (Engine::take_results; host copies of device
         results with to_host): the engine holds no results after it."""

@@ -27,8 +27,9 @@ the largest pair cutoff, then the pairs are filtered on their float64 distance w
 host (not yet inside the device pass).
 
 Also here: ``NeighborList``, a drop-in for ``ase.neighborlist.NeighborList``, and
-``LennardJones``, an ASE calculator equal to ``ase.calculators.lj.LennardJones`` (imported on
-first use: only it needs ASE).
+``LennardJones``, an ASE calculator equal to ``ase.calculators.lj.LennardJones``, and
+``CoulombDSF``, the damped shifted-force Coulomb sum (Fennell & Gezelter 2006) as an ASE
+calculator (both imported on first use: only they need ASE).
 """
 from __future__ import annotations
 
@@ -41,7 +42,7 @@ from . import neighbor_list as _neighbor_list
 
 from . import _cutoffs
 
-__all__ = ["LennardJones", "NeighborList", "neighbor_list"]
+__all__ = ["CoulombDSF", "LennardJones", "NeighborList", "neighbor_list"]
 
 
 def __getattr__(name: str) -> Any:
@@ -49,6 +50,10 @@ def __getattr__(name: str) -> Any:
         from ._ase_lj import LennardJones
 
         return LennardJones
+    if name == "CoulombDSF":
+        from ._ase_coulomb import CoulombDSF
+
+        return CoulombDSF
     raise AttributeError(f"module 'pyraycut.ase' has no attribute {name!r}")
 
 
@@ -110,6 +115,22 @@ def _system(atoms: Any) -> tuple:
     cell = getattr(atoms, "cell", None)
     cell = np.zeros((3, 3)) if cell is None else np.asarray(cell, dtype=np.float64).reshape(3, 3)
     return positions, cell, pbc
+
+
+def _engine_on(atoms: Any, cutoff: float, method: str) -> Any:
+    """A pyraycut Engine built over an Atoms at ``cutoff``: its positions wrapped into the cell
+    along periodic axes and centred, in float64, then rounded to float32 (the calculators'
+    fused passes)."""
+    from . import Engine
+
+    positions, cell, pbc = _system(atoms)
+    engine = Engine(method)
+    if pbc.any():
+        wrapped, _ = _wrap(positions, cell, pbc)
+        engine.build(_centred_float32(wrapped), cutoff, cell=cell, pbc=pbc)
+    else:
+        engine.build(_centred_float32(positions), cutoff)
+    return engine
 
 
 def neighbor_list(quantities: str, atoms: Any, cutoff: Any, self_interaction: bool = False,

@@ -10,11 +10,13 @@
 #include <nanobind/stl/string_view.h>
 #include <nanobind/stl/vector.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <deque>
 #include <limits>
 #include <memory>
 #include <mutex>
@@ -504,50 +506,44 @@ nb::dict results(PyEngine& locked_engine, std::string_view kernel_name, bool to_
   return results_dict(taken, kernel);
 }
 
-// A per-particle float input of a kernel (sph_force's velocity, density, pressure) where the
-// method works: read in place there, copied to the device (raycut::DeviceArray) from the host.
-// `source` is read with the GIL held; the rest (checked against the engine's size) under the
-// engine's lock, since another thread may build it with another N in between.
+// A per-particle float input of a kernel (raycut::KernelInput: sph_force's velocity, density,
+// pressure, coulomb_dsf's charge) where the method works: read in place there, copied to the
+// device (raycut::DeviceArray) from the host. `source` is read with the GIL held; the rest
+// (checked against the engine's size) under the engine's lock, since another thread may build
+// it with another N in between.
 struct KernelInput {
+  const raycut::KernelInput* spec = nullptr;
   const float* data = nullptr;
   std::optional<raycut::DeviceArray> device_copy;
   FloatInput source;
-  const char* name = nullptr;
-  std::size_t components = 1;
-  bool given = false;
 };
 
-void read_kernel_input(KernelInput& out, nb::handle obj, const char* name, std::size_t components) {
-  out.name = name;
-  out.components = components;
-  if (obj.is_none()) return;
-  out.source = float_input(obj, name);
-  out.given = true;
-}
-
 void check_kernel_input(KernelInput& out, const raycut::Engine& engine) {
-  if (!out.given) return;
-  const std::string name = out.name;
-  const std::size_t n = engine.size(), components = out.components;
+  const raycut::KernelInput& spec = *out.spec;
+  const std::string name(spec.name);
+  // One value (or vector) per source, or per target: the targets are the queries with query
+  // points, the sources otherwise.
+  const std::size_t n = spec.end == raycut::InputEnd::sources ? engine.sources() : engine.size();
+  const std::size_t components = spec.components;
   const std::vector<std::size_t>& shape = out.source.shape;
-  const bool ok = components == 3 ? shape.size() == 2 && shape[0] == n && shape[1] == 3
-                                  : shape.size() == 1 && shape[0] == n;
+  const bool ok = components > 1 ? shape.size() == 2 && shape[0] == n && shape[1] == components
+                                 : shape.size() == 1 && shape[0] == n;
+  const char* per = spec.end == raycut::InputEnd::queries ? " per query" : " per particle";
   if (!ok)
-    value_error(
-        name + " must have shape " +
-        (components == 3 ? "(" + std::to_string(n) + ", 3)" : "(" + std::to_string(n) + ",)") +
-        " (one " + (components == 3 ? "vector" : "value") + " per particle), got " +
-        describe_shape(shape));
+    value_error(name + " must have shape " +
+                (components > 1 ? "(" + std::to_string(n) + ", " + std::to_string(components) + ")"
+                                : "(" + std::to_string(n) + ",)") +
+                " (one " + (components > 1 ? "vector" : "value") + per + "), got " +
+                describe_shape(shape));
   out.data = out.source.data;
   if (out.source.space == MemorySpace::host) {
     // Host values are checked here (device ones are read in place, unchecked): a zero or
-    // non-finite density or a non-finite pressure or velocity gives non-finite forces.
-    const bool density = name == "density";
+    // non-finite density, a non-finite pressure, velocity or charge gives non-finite results.
     for (std::size_t k = 0; k < n * components; ++k) {
       const float value = out.data[k];
-      if (!std::isfinite(value) || (density && !(value > 0.0f)))
+      if (!std::isfinite(value) || (spec.positive && !(value > 0.0f)))
         value_error(name + "[" + std::to_string(k / components) + "] = " + number(value) +
-                    (density ? ": densities must be finite and > 0" : ": must be finite"));
+                    (spec.positive ? ": must be finite and > 0" : ": must be finite"));
     }
   }
   if (out.source.space == engine.space()) return;
@@ -558,33 +554,114 @@ void check_kernel_input(KernelInput& out, const raycut::Engine& engine) {
   out.data = out.device_copy->data();
 }
 
+// Sets the parameter `name` (of any built-in kernel: one call may pass every kernel's) in options.
+void set_kernel_parameter(raycut::KernelOptions& options, const std::string& name,
+                          nb::handle value) {
+  bool found = false;
+  std::vector<std::string_view> known;  // each name once (kernels share parameters)
+  raycut::for_each_kernel([&](auto spec) {
+    for (const raycut::KernelParameter& p : decltype(spec)::parameters) {
+      if (std::find(known.begin(), known.end(), p.name) == known.end()) known.push_back(p.name);
+      if (found || p.name != name) continue;
+      found = true;
+      if (p.flag)
+        options.*p.flag = nb::cast<bool>(value);
+      else
+        options.*p.value = nb::cast<float>(value);
+    }
+  });
+  if (found) return;
+  std::string list;
+  for (std::string_view k : known) list += (list.empty() ? "" : ", ") + std::string(k);
+  value_error("unknown kernel parameter '" + name + "' (known: " + list + ")");
+}
+
 // run() and its results in one locked call: another thread's run() in between would take them.
-nb::dict compute(PyEngine& locked_engine, std::string_view kernel_name, float lj_epsilon,
-                 float lj_sigma, float sph_mass, float sph_viscosity, nb::handle velocity,
-                 nb::handle density, nb::handle pressure, bool to_host, bool lj_shift) {
+// `parameters` maps parameter names to numbers (or flags), `inputs` input names to arrays
+// (raycut's kernel catalogue, kernel_catalogue()).
+nb::dict compute(PyEngine& locked_engine, std::string_view kernel_name, nb::dict parameters,
+                 nb::dict inputs, bool to_host) {
   const raycut::Kernel kernel = raycut::parse_kernel(kernel_name);
   raycut::KernelOptions options;
-  options.lj_epsilon = lj_epsilon;
-  options.lj_sigma = lj_sigma;
-  options.lj_shift = lj_shift;
-  options.sph_mass = sph_mass;
-  options.sph_viscosity = sph_viscosity;
-  KernelInput v, d, p;
-  read_kernel_input(v, velocity, "velocity", 3);
-  read_kernel_input(d, density, "density", 1);
-  read_kernel_input(p, pressure, "pressure", 1);
+  for (auto [key, value] : parameters)
+    set_kernel_parameter(options, nb::cast<std::string>(key), value);
+  std::deque<KernelInput> given;  // stable addresses, no moves
+  raycut::visit_kernel(kernel, [&](auto spec) {
+    using Spec = decltype(spec);
+    for (auto [key, value] : inputs) {
+      const std::string name = nb::cast<std::string>(key);
+      const raycut::KernelInput* found = nullptr;
+      std::string known;
+      for (const raycut::KernelInput& input : Spec::inputs) {
+        if (input.name == name) found = &input;
+        known += (known.empty() ? "" : ", ") + std::string(input.name);
+      }
+      if (!found)
+        value_error("kernel " + std::string(Spec::name) + " reads no input '" + name +
+                    "' (its inputs: " + (known.empty() ? "none" : known) + ")");
+      if (value.is_none()) continue;
+      KernelInput& in = given.emplace_back();
+      in.spec = found;
+      in.source = float_input(value, found->name.data());
+    }
+  });
   TakenResults taken;
   {
     Exclusive hold(locked_engine.mutex);
     raycut::Engine& engine = locked_engine.engine;
-    check_kernel_input(v, engine);
-    check_kernel_input(d, engine);
-    check_kernel_input(p, engine);
-    options.sph = {v.data, d.data, p.data};
+    for (KernelInput& in : given) {
+      check_kernel_input(in, engine);
+      in.spec->field(options) = in.data;
+    }
     engine.run(kernel, options);
     taken = take_results(engine, to_host);
   }
   return results_dict(taken, kernel);
+}
+
+// The built-in kernels (raycut's catalogue), in a stable order: per kernel its name, its
+// parameters (name, type "float" or "bool", default, accepted [min, max]), its per-particle
+// inputs (name, components, end: "both", "sources" or "queries", positive) and its outputs
+// (name, components).
+nb::list kernel_catalogue() {
+  nb::list out;
+  const raycut::KernelOptions defaults;
+  raycut::for_each_kernel([&](auto spec) {
+    using Spec = decltype(spec);
+    nb::list parameters, inputs, outputs;
+    for (const raycut::KernelParameter& p : Spec::parameters) {
+      nb::dict d;
+      d["name"] = std::string(p.name);
+      d["type"] = p.flag ? "bool" : "float";
+      if (p.flag)
+        d["default"] = defaults.*p.flag;
+      else
+        d["default"] = static_cast<double>(defaults.*p.value);
+      d["min"] = p.min;
+      d["max"] = p.max;
+      parameters.append(d);
+    }
+    for (const raycut::KernelInput& in : Spec::inputs) {
+      nb::dict d;
+      d["name"] = std::string(in.name);
+      d["components"] = in.components;
+      d["end"] = in.end == raycut::InputEnd::both
+                     ? "both"
+                     : (in.end == raycut::InputEnd::sources ? "sources" : "queries");
+      d["positive"] = in.positive;
+      inputs.append(d);
+    }
+    for (const raycut::KernelOutputField& field : raycut::kernel_output_fields)
+      if (Spec::outputs.*field.produced)
+        outputs.append(nb::make_tuple(std::string(field.name), field.components));
+    nb::dict k;
+    k["name"] = std::string(Spec::name);
+    k["parameters"] = parameters;
+    k["inputs"] = inputs;
+    k["outputs"] = outputs;
+    out.append(k);
+  });
+  return out;
 }
 
 // ---- Verlet list ------------------------------------------------------------------------------
@@ -760,6 +837,8 @@ NB_MODULE(_raycut, m) {
         return out;
       },
       "Every method raycut knows, available here or not.");
+  m.def("kernel_catalogue", &kernel_catalogue,
+        "The built-in kernels: name, parameters, per-particle inputs and outputs of each.");
   m.def("auto_method", &raycut::auto_method, "What method='auto' picks on this machine.");
   m.def("cuda_device_available", &raycut::cuda_device_available);
   m.def(
@@ -873,11 +952,8 @@ NB_MODULE(_raycut, m) {
             e.engine.set_update_policy(raycut::UpdatePolicy{skin});
           },
           nb::arg("skin"))
-      .def("compute", &compute, nb::arg("kernel"), nb::arg("lj_epsilon") = 1.0f,
-           nb::arg("lj_sigma") = 1.0f, nb::arg("sph_mass") = 0.0f, nb::arg("sph_viscosity") = 0.0f,
-           nb::arg("velocity").none() = nb::none(), nb::arg("density").none() = nb::none(),
-           nb::arg("pressure").none() = nb::none(), nb::arg("to_host") = true,
-           nb::arg("lj_shift") = false)
+      .def("compute", &compute, nb::arg("kernel"), nb::arg("parameters") = nb::dict(),
+           nb::arg("inputs") = nb::dict(), nb::arg("to_host") = true)
       .def("results", &results, nb::arg("kernel"), nb::arg("to_host"))
       .def("neighbours", &neighbours, nb::arg("half"), nb::arg("distances"), nb::arg("vectors"),
            nb::arg("to_host"), nb::arg("shifts") = false)

@@ -107,6 +107,13 @@ def test_torch_engine_equals_host(method):
     c = dev.compute("sph_force", velocity=np.zeros((n, 3), np.float32),
                     density=np.ones(n, np.float32), pressure=np.ones(n, np.float32), **kw)
     close(c["force"], a["force"])
+    # coulomb_dsf: charges read at the source of every pair, device and host charges alike.
+    q = np.sin(np.arange(n) * 0.7).astype(np.float32)
+    a = host.compute("coulomb_dsf", charge=q, alpha=8.0)
+    for charge in (torch.from_numpy(q).cuda(), q):
+        b = dev.compute("coulomb_dsf", charge=charge, alpha=8.0)
+        for name in ("energy", "force", "virial"):
+            close(b[name], a[name])
     idx, counts, report = dev.padded_neighbours(8)
     idx_h, counts_h, report_h = host.padded_neighbours(8)
     assert idx.device.type == "cuda" and report == report_h

@@ -80,7 +80,7 @@ ROWS = [
     ("SPH velocity of shape (150,)", lambda: sph_force(velocity=np.zeros(150, np.float32)),
      ValueError, r"velocity must have shape \(50, 3\)"),
     ("SPH density 0", lambda: sph_force(density=np.zeros(N, np.float32)), ValueError,
-     r"density\[0\] = 0: densities must be finite and > 0"),
+     r"density\[0\] = 0: must be finite and > 0"),
     ("SPH density NaN",
      lambda: sph_force(density=np.where(np.arange(N) == 7, np.nan, 1).astype(np.float32)),
      ValueError, r"density\[7\] = nan"),

@@ -384,13 +384,7 @@ void Engine::run(Kernel kernel, const KernelOptions& options) {
   if (!built_) throw Error(ErrorCode::invalid_argument, "Engine::run() called before build()");
   has_run_ = false;  // a run that throws leaves no results behind
   validate_kernel_range(kernel, options, cutoff_);
-  // sph_force reads density, pressure and velocity at both ends of a pair, from one array
-  // indexed by target (i) and by source (j): with query points those are two sets.
-  if (kernel == Kernel::sph_force && queries_)
-    throw Error(ErrorCode::unsupported,
-                "sph_force with query points: its density, pressure and velocity are read for "
-                "the target and the source of each pair from one array per field; build without "
-                "query points (the targets are then the sources)");
+  validate_kernel_inputs(kernel, options, queries_);
   if (size_ > 0) {
     const auto start = Clock::now();
     m.compute(kernel, options);

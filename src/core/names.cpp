@@ -28,37 +28,27 @@ const char* to_string(ErrorCode code) noexcept {
   return "error";
 }
 
-namespace {
-constexpr Kernel all_kernels[] = {Kernel::count,  Kernel::lj,          Kernel::lj_forces,
-                                  Kernel::smooth, Kernel::sph_density, Kernel::sph_force};
-}  // namespace
-
 Kernel parse_kernel(std::string_view name) {
+  Kernel found{};
+  bool known_name = false;
   std::string known;
-  for (Kernel k : all_kernels) {
-    if (name == to_string(k)) return k;
-    known += (known.empty() ? "" : ", ") + to_string(k);
-  }
+  for_each_kernel([&](auto spec) {
+    using Spec = decltype(spec);
+    if (name == Spec::name) {
+      found = Spec::id;
+      known_name = true;
+    }
+    known += (known.empty() ? "" : ", ") + std::string(Spec::name);
+  });
+  if (known_name) return found;
   throw Error(ErrorCode::invalid_argument,
               "unknown kernel '" + std::string(name) + "' (known: " + known + ")");
 }
 
 std::string to_string(Kernel kernel) {
-  switch (kernel) {
-    case Kernel::count:
-      return "count";
-    case Kernel::lj:
-      return "lj";
-    case Kernel::lj_forces:
-      return "lj_forces";
-    case Kernel::smooth:
-      return "smooth";
-    case Kernel::sph_density:
-      return "sph_density";
-    case Kernel::sph_force:
-      return "sph_force";
-  }
-  return "?";
+  std::string name = "?";
+  visit_kernel(kernel, [&](auto spec) { name = decltype(spec)::name; });
+  return name;
 }
 
 }  // namespace raycut

@@ -96,67 +96,66 @@ float checked_cutoff(double cutoff) {
 }
 
 void validate_kernel_range(Kernel kernel, const KernelOptions& options, float cutoff) {
-  constexpr double pi = 3.14159265358979;  // as kernels.hpp (its float pi, widened)
   constexpr double float_max = std::numeric_limits<float>::max();
   constexpr double float_min = std::numeric_limits<float>::min();  // smallest normal
   const std::string name = to_string(kernel);
   // `value` must be a finite float and, unless it is legitimately zero, not below the smallest
   // normal float (a subnormal or zero largest term has lost its relative precision).
-  auto require = [&](const char* what, double value, bool may_be_zero) {
+  auto require = [&](const char* what, double value, bool may_be_zero, double lowest_cutoff = 0,
+                     double highest_cutoff = 0) {
     const double magnitude = std::fabs(value);
     const bool overflows = !(magnitude <= float_max);
     const bool underflows = !overflows && magnitude < float_min && !(may_be_zero && value == 0);
     if (!overflows && !underflows) return;
-    throw Error(ErrorCode::invalid_argument,
-                "kernel " + name + " cannot be evaluated in float at cutoff " + number(cutoff) +
-                    ": its " + what + " = " + number(value) +
-                    (overflows ? " overflows" : " underflows") + " float (range [" +
-                    number(float_min) + ", " + number(float_max) + "])" +
-                    (kernel == Kernel::smooth
-                         ? "; smooth supports cutoffs in [" + number(std::pow(float_min, 0.25)) +
-                               ", " + number(std::pow(float_max, 0.25)) + "]"
-                         : std::string()));
+    throw Error(
+        ErrorCode::invalid_argument,
+        "kernel " + name + " cannot be evaluated in float at cutoff " + number(cutoff) + ": its " +
+            what + " = " + number(value) + (overflows ? " overflows" : " underflows") +
+            " float (range [" + number(float_min) + ", " + number(float_max) + "])" +
+            (highest_cutoff > 0 ? "; " + name + " supports cutoffs in [" + number(lowest_cutoff) +
+                                      ", " + number(highest_cutoff) + "]"
+                                : std::string()));
   };
   // What the kernels see: the squared cutoff rounded to float, h its float square root.
   const double c2 = static_cast<float>(static_cast<double>(cutoff) * cutoff);
-  const double h = std::sqrt(static_cast<float>(c2));
-  const double mass = options.sph_mass;
-  switch (kernel) {
-    case Kernel::count:
-      return;
-    case Kernel::lj:
-    case Kernel::lj_forces: {
-      const double sigma6 = std::pow(static_cast<double>(options.lj_sigma), 6);
-      const bool zero = options.lj_sigma == 0.0f || options.lj_epsilon == 0.0f;
-      require("sigma^6", sigma6, options.lj_sigma == 0.0f);
-      require("factor 4 eps sigma^6", 4.0 * options.lj_epsilon * sigma6, zero);
-      return;
+  const KernelScale scale{cutoff, c2, std::sqrt(static_cast<float>(c2))};
+  visit_kernel(kernel, [&](auto spec) {
+    using Spec = decltype(spec);
+    Spec::check_range(options, scale, require);
+    for (const KernelParameter& p : Spec::parameters) {
+      if (!p.value) continue;  // a flag
+      const double value = options.*p.value;
+      if (std::isfinite(value) && value >= p.min && value <= p.max) continue;
+      throw Error(ErrorCode::invalid_argument, "kernel " + name + ": parameter " +
+                                                   std::string(p.name) + " = " + number(value) +
+                                                   " is not accepted (finite values in [" +
+                                                   number(p.min) + ", " + number(p.max) + "])");
     }
-    case Kernel::smooth:
-      require("largest energy term (C^2)^2", c2 * c2, false);
-      require("largest force term C^2 * C", c2 * cutoff, false);
-      return;
-    case Kernel::sph_density: {
-      const double factor = mass * 315.0 / (64.0 * pi * std::pow(h, 9));
-      require("factor m 315 / (64 pi h^9)", factor, mass == 0);
-      require("largest raw term (h^2)^3", c2 * c2 * c2, false);
-      require("largest pair term m 315 / (64 pi h^9) h^6", factor * c2 * c2 * c2, mass == 0);
-      return;
+  });
+}
+
+void validate_kernel_inputs(Kernel kernel, const KernelOptions& options, bool query_points) {
+  const std::string name = to_string(kernel);
+  visit_kernel(kernel, [&](auto spec) {
+    using Spec = decltype(spec);
+    for (const KernelInput& input : Spec::inputs) {
+      const bool given = input_pointer(input, options) != nullptr;
+      const std::string what = std::string(input.name);
+      if (query_points && input.end == InputEnd::both)
+        throw Error(ErrorCode::unsupported,
+                    "kernel " + name + " with query points: its input " + what +
+                        " is read for the target and the source of each pair from one array; "
+                        "build without query points (the targets are then the sources)");
+      if (input.end == InputEnd::queries && given != query_points)
+        throw Error(ErrorCode::invalid_argument,
+                    "kernel " + name + ": input " + what +
+                        (query_points ? " is missing: with query points it gives the queries' "
+                                        "values (one per query)"
+                                      : " is given without query points: it is the queries' "
+                                        "values (without query points the targets are the "
+                                        "sources and read the sources' array)"));
     }
-    case Kernel::sph_force: {
-      const double spiky = 45.0 / (pi * std::pow(h, 6));
-      const double viscosity = options.sph_viscosity;
-      require("factor 45 / (pi h^6)", spiky, false);
-      require("pressure factor per unit p / rho, m 45 / (pi h^6)", mass * spiky, mass == 0);
-      require("viscosity factor per unit v / rho, mu m 45 / (pi h^6)", viscosity * mass * spiky,
-              viscosity * mass == 0);
-      require("largest pressure term per unit p / rho, m 45 / (pi h^6) h^2", mass * spiky * c2,
-              mass == 0);
-      require("largest viscosity term per unit v / rho, mu m 45 / (pi h^6) h",
-              viscosity * mass * spiky * h, viscosity * mass == 0);
-      return;
-    }
-  }
+  });
 }
 
 }  // namespace raycut

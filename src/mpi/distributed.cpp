@@ -30,12 +30,21 @@ std::string dims_text(const std::array<int, 3>& d) {
   return "[" + std::to_string(d[0]) + " " + std::to_string(d[1]) + " " + std::to_string(d[2]) + "]";
 }
 
-void refuse_sph_force_without_fields(Kernel kernel) {
+// A kernel that reads per-particle inputs needs its neighbours' values on the halos: only
+// sph_force's fields are exchanged (SphFields), the other kernels' are refused.
+void refuse_inputs_without_fields(Kernel kernel) {
   if (kernel == Kernel::sph_force)
     throw Error(ErrorCode::unsupported,
                 "distributed engine: sph_force needs its neighbours' velocities, densities and "
                 "pressures: call compute(Kernel::sph_force, options, SphFields{...}) with the "
                 "owned particles' fields");
+  visit_kernel(kernel, [&](auto spec) {
+    if (!decltype(spec)::inputs.empty())
+      throw Error(ErrorCode::unsupported,
+                  "distributed engine: kernel " + to_string(kernel) +
+                      " reads per-particle inputs of its neighbours, which the distributed "
+                      "engine does not exchange; run it on a raycut::Engine");
+  });
 }
 
 // [id][image xyz][shift] of a new halo, [xyz] of a refreshed one.
@@ -409,13 +418,13 @@ const std::vector<std::uint32_t>& DistributedEngine::boundary() const {
 
 ResultsView DistributedEngine::run(Kernel kernel, const KernelOptions& options) {
   check_built("run");
-  refuse_sph_force_without_fields(kernel);
+  refuse_inputs_without_fields(kernel);
   return passes_->run(kernel, options);
 }
 
 Results DistributedEngine::compute(Kernel kernel, const KernelOptions& options) {
   check_built("compute");
-  refuse_sph_force_without_fields(kernel);
+  refuse_inputs_without_fields(kernel);
   return passes_->compute(kernel, options);
 }
 

@@ -5,26 +5,48 @@
 #include <optix_types.h>
 
 #include <cstdint>
+#include <type_traits>
+#include <utility>
 
 #include "core/list_functors.hpp"
 #include "raycut/kernels.hpp"
 
 namespace raycut::detail::optix {
 
-// Which functor a launch runs (the programs are compiled ahead, so the functor is chosen by a
-// mode among the library's own: kernels, list passes).
-enum class RayMode : int {
-  count,
-  lj,
-  lj_forces,
-  smooth,
-  sph_density,
-  sph_force,
-  list_count,       // neighbour list, pass 1: neighbours per target
-  half_list_count,  // the same for a half list
-  list_fill,        // neighbour list, pass 2: write them at their offsets
-  padded,           // the padded [N, K] matrix
+// The functors a launch can run (the programs are compiled ahead, so the functor is chosen by a
+// mode among the library's own): every built-in kernel's (the catalogue, BuiltinKernels), then
+// the list passes.
+template <class... Fs>
+struct FunctorList {};
+template <class... Specs>
+FunctorList<decltype(Specs::make(std::declval<const KernelOptions&>(), 0.0f,
+                                 std::declval<const KernelOutputs&>()))...,
+            ListCount, HalfListCount, ListFill, PaddedFill>
+    ray_functors_of(KernelList<Specs...>);
+using RayFunctors = decltype(ray_functors_of(BuiltinKernels{}));
+
+// A launch's mode: the position of its functor in RayFunctors.
+using RayMode = int;
+
+template <class F, class... Fs>
+constexpr RayMode mode_in(FunctorList<Fs...>) {
+  RayMode mode = 0, found = -1;
+  ((std::is_same_v<F, Fs> ? found = mode : ++mode), ...);
+  return found;
+}
+template <class F>
+inline constexpr RayMode mode_of = mode_in<F>(RayFunctors{});
+
+// One slot per functor, side by side (their default member initializers rule out a union).
+template <class F>
+struct FunctorSlot {
+  F functor;
 };
+template <class... Fs>
+struct FunctorSlots : FunctorSlot<Fs>... {};
+template <class... Fs>
+FunctorSlots<Fs...> slots_of(FunctorList<Fs...>);
+using RayFunctorSlots = decltype(slots_of(RayFunctors{}));
 
 struct LaunchParams {
   OptixTraversableHandle handle;
@@ -37,95 +59,35 @@ struct LaunchParams {
   float inverse_scale;   // local frame -> the caller's units (a power of two: exact)
   RayMode mode;
   // The functor of the mode (the others unused); each writes its outputs by caller index.
-  CountKernel count;
-  LennardJonesKernel lj;
-  LennardJonesForceKernel lj_forces;
-  SmoothKernel smooth;
-  SphDensityKernel sph_density;
-  SphForceKernel sph_force;
-  ListCount list_count;
-  HalfListCount half_list_count;
-  ListFill list_fill;
-  PaddedFill padded;
+  RayFunctorSlots functors;
 };
 
-// The launch's mode and functor; one overload per functor the programs know.
-inline void set_functor(LaunchParams& p, const CountKernel& f) {
-  p.mode = RayMode::count;
-  p.count = f;
-}
-inline void set_functor(LaunchParams& p, const LennardJonesKernel& f) {
-  p.mode = RayMode::lj;
-  p.lj = f;
-}
-inline void set_functor(LaunchParams& p, const LennardJonesForceKernel& f) {
-  p.mode = RayMode::lj_forces;
-  p.lj_forces = f;
-}
-inline void set_functor(LaunchParams& p, const SmoothKernel& f) {
-  p.mode = RayMode::smooth;
-  p.smooth = f;
-}
-inline void set_functor(LaunchParams& p, const SphDensityKernel& f) {
-  p.mode = RayMode::sph_density;
-  p.sph_density = f;
-}
-inline void set_functor(LaunchParams& p, const SphForceKernel& f) {
-  p.mode = RayMode::sph_force;
-  p.sph_force = f;
-}
-inline void set_functor(LaunchParams& p, const ListCount& f) {
-  p.mode = RayMode::list_count;
-  p.list_count = f;
-}
-inline void set_functor(LaunchParams& p, const HalfListCount& f) {
-  p.mode = RayMode::half_list_count;
-  p.half_list_count = f;
-}
-inline void set_functor(LaunchParams& p, const ListFill& f) {
-  p.mode = RayMode::list_fill;
-  p.list_fill = f;
-}
-inline void set_functor(LaunchParams& p, const PaddedFill& f) {
-  p.mode = RayMode::padded;
-  p.padded = f;
+// The launch's mode and functor, for any functor the programs know.
+template <class F>
+inline void set_functor(LaunchParams& p, const F& f) {
+  static_assert(mode_of<F> >= 0, "a functor the ray-tracing programs were not compiled for");
+  p.mode = mode_of<F>;
+  static_cast<FunctorSlot<F>&>(p.functors).functor = f;
 }
 
-// Calls visit(functor) with the functor of the launch's mode.
+// Calls visit(functor) with the functor of the launch's mode: a chain of compile-time modes.
+template <class Visit, class... Fs, std::size_t... Modes>
+__host__ __device__ __forceinline__ void visit_functor(const LaunchParams& p, Visit& visit,
+                                                       FunctorList<Fs...>,
+                                                       std::index_sequence<Modes...>) {
+  (void)((p.mode == static_cast<RayMode>(Modes)
+              ? (visit(static_cast<const FunctorSlot<Fs>&>(p.functors).functor), true)
+              : false) ||
+         ...);
+}
+template <class Visit, class... Fs>
+__host__ __device__ __forceinline__ void visit_functor(const LaunchParams& p, Visit& visit,
+                                                       FunctorList<Fs...> list) {
+  visit_functor(p, visit, list, std::index_sequence_for<Fs...>{});
+}
 template <class Visit>
 __host__ __device__ __forceinline__ void with_functor(const LaunchParams& p, Visit&& visit) {
-  switch (p.mode) {
-    case RayMode::count:
-      visit(p.count);
-      break;
-    case RayMode::lj:
-      visit(p.lj);
-      break;
-    case RayMode::lj_forces:
-      visit(p.lj_forces);
-      break;
-    case RayMode::smooth:
-      visit(p.smooth);
-      break;
-    case RayMode::sph_density:
-      visit(p.sph_density);
-      break;
-    case RayMode::sph_force:
-      visit(p.sph_force);
-      break;
-    case RayMode::list_count:
-      visit(p.list_count);
-      break;
-    case RayMode::half_list_count:
-      visit(p.half_list_count);
-      break;
-    case RayMode::list_fill:
-      visit(p.list_fill);
-      break;
-    case RayMode::padded:
-      visit(p.padded);
-      break;
-  }
+  visit_functor(p, visit, RayFunctors{});
 }
 
 }  // namespace raycut::detail::optix
