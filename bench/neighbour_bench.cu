@@ -60,8 +60,8 @@
 
 #include "raycut/cuda/pairs.cuh"
 #include "raycut/engine.hpp"
-#include "raycut/generators.hpp"
 #include "raycut/kernels.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace neighbour_bench {
 

@@ -8,9 +8,9 @@
 #include <vector>
 
 #include "core/validation.hpp"
-#include "raycut/compare.hpp"
 #include "raycut/engine.hpp"
-#include "raycut/generators.hpp"
+#include "raycut/tools/compare.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace {
 

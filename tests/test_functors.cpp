@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "raycut/engine.hpp"
-#include "raycut/generators.hpp"
 #include "raycut/pairs.hpp"
+#include "raycut/tools/generators.hpp"
 #include "user_functors.hpp"
 
 namespace {

@@ -10,11 +10,11 @@
 
 #include "core/method.hpp"
 #include "core/validation.hpp"
-#include "raycut/compare.hpp"
 #include "raycut/engine.hpp"
-#include "raycut/generators.hpp"
 #include "raycut/sph/scenario.hpp"
 #include "raycut/sph/solver.hpp"
+#include "raycut/tools/compare.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace {
 
