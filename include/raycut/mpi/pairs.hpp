@@ -35,7 +35,7 @@ namespace detail {
 template <class F, class Held = const F&>
 struct LocalPass {
   using Accumulator = typename F::Accumulator;
-  static constexpr bool takes_shift = true;
+  using options = functor_options<option::init, option::accepts>;
   enum class Kind { all_rows, owned, halos };
 
   Held f;
@@ -88,6 +88,8 @@ struct LocalPass {
 // for_each_pair, include/raycut/mpi/pairs.cuh); Error(unsupported) otherwise.
 template <class F>
 void for_each_pair(const DistributedEngine& engine, const F& f) {
+  static_assert(raycut::detail::check_functor<F>(),
+                "raycut::mpi::for_each_pair: see the messages above");
   if (engine.local_engine().space() != MemorySpace::host)
     throw Error(ErrorCode::unsupported,
                 "raycut::mpi::for_each_pair: method '" + engine.local_engine().method() +
