@@ -177,7 +177,7 @@ TEST_P(GpuFunctors, WithoutCombineSameAnswerAtSmallN) {
   for_each_case(method(), {2, 100, 1000}, [&](Engine& engine, const auto& options) {
     const std::size_t n = engine.size();
     if (method() == "grid" && n > 0) {
-      const raycut::detail::GridKernel k = engine.pair_pass().grid.kernel;
+      const raycut::detail::GridKernel k = raycut::detail::PairPassAccess::of(engine).grid.kernel;
       lanes_seen |= k != raycut::detail::GridKernel::thread &&
                     k != raycut::detail::GridKernel::thread_many_registers;
     }

@@ -119,6 +119,12 @@ void run_host_pass(const PairPass& pass, const Walk& walk, const F& f) {
   });
 }
 
+// The traversal view of a built engine: what for_each_pair (here and in cuda/pairs.cuh) runs a
+// caller's functor through. Internal: it follows the methods' internals.
+struct PairPassAccess {
+  static PairPass of(const Engine& engine) { return engine.pair_pass(); }
+};
+
 // What methods without a pass for the caller's functors (OptiX) answer.
 inline Error no_pair_pass(const std::string& method) {
   return Error(ErrorCode::unsupported,
@@ -147,7 +153,7 @@ struct HostPassWalk {
 template <class F>
 void for_each_pair(const Engine& engine, const F& f) {
   static_assert(detail::check_functor<F>(), "raycut::for_each_pair: see the messages above");
-  const detail::PairPass pass = engine.pair_pass();
+  const detail::PairPass pass = detail::PairPassAccess::of(engine);
   if (pass.kind == detail::PassKind::none && engine.size() == 0) return;
   if (pass.kind == detail::PassKind::none) throw detail::no_pair_pass(engine.method());
   if (pass.kind != detail::PassKind::host)

@@ -34,7 +34,7 @@ template <class F>
 void for_each_pair(const Engine& engine, const F& f, cudaStream_t stream = nullptr) {
   static_assert(raycut::detail::check_functor<F>(),
                 "raycut::cuda::for_each_pair: see the messages above");
-  const detail::PairPass pass = engine.pair_pass();
+  const detail::PairPass pass = raycut::detail::PairPassAccess::of(engine);
   if (!stream) stream = static_cast<cudaStream_t>(engine.stream());
   switch (pass.kind) {
     case detail::PassKind::none:
