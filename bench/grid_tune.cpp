@@ -23,7 +23,7 @@
 
 #include "cuda/grid_policy.hpp"
 #include "cuda/methods.hpp"
-#include "raycut/generators.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace {
 

@@ -60,8 +60,8 @@
 
 #include "raycut/cuda/pairs.cuh"
 #include "raycut/engine.hpp"
-#include "raycut/generators.hpp"
 #include "raycut/kernels.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace neighbour_bench {
 
@@ -69,12 +69,12 @@ namespace neighbour_bench {
 // same instructions, so functor_lj against lj measures the cost of the user-functor path.
 struct UserLennardJones {
   using Accumulator = float;
-  static constexpr bool vanishes_at_infinity = true;
+  using options =
+      raycut::functor_options<raycut::option::vanishes_at_infinity, raycut::option::combine>;
   float sigma6;
   float four_epsilon_sigma6;
   float* energy;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, raycut::Vec3,
-                            float r2) const {
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, raycut::Vec3, float r2) const {
     const float t = raycut::fast_reciprocal(r2);
     const float w = t * t * t;
     acc += w * (sigma6 * w - 1.0f);

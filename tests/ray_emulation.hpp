@@ -14,8 +14,8 @@
 #include <vector>
 
 #include "geometry/ray_geometry.hpp"
-#include "raycut/generators.hpp"
 #include "raycut/predicate.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace raycut::emulation {
 

@@ -8,10 +8,10 @@
 #include <vector>
 
 #include "core/validation.hpp"
-#include "raycut/compare.hpp"
 #include "raycut/engine.hpp"
-#include "raycut/generators.hpp"
 #include "raycut/pairs.hpp"
+#include "raycut/tools/compare.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace {
 

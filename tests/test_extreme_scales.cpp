@@ -13,7 +13,7 @@
 
 #include "oracle.hpp"
 #include "raycut/engine.hpp"
-#include "raycut/generators.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace {
 

@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "raycut/engine.hpp"
-#include "raycut/generators.hpp"
 #include "raycut/pairs.hpp"
+#include "raycut/tools/generators.hpp"
 #include "user_functors.hpp"
 
 namespace {
@@ -92,6 +92,15 @@ TEST(Functors, UserLennardJonesForcesEqualBuiltInBitForBit) {
 TEST(Functors, InitWithoutCombine) {
   static_assert(raycut::has_init<user::CountFromInit>::value);
   static_assert(!raycut::has_combine<user::CountFromInit>::value);
+  // The pair call's form says what a functor reads; its options, what else it has.
+  static_assert(raycut::uses_source<user::CountFromInit>::value &&
+                !raycut::takes_shift<user::CountFromInit>::value);
+  static_assert(!raycut::uses_source<user::Lj>::value && raycut::has_combine<user::Lj>::value &&
+                raycut::vanishes_at_infinity<user::Lj>::value &&
+                !raycut::has_combine<user::LjNoCombine>::value);
+  static_assert(!raycut::uses_source<raycut::CountKernel>::value &&
+                !raycut::vanishes_at_infinity<raycut::CountKernel>::value &&
+                raycut::uses_source<raycut::SphForceKernel>::value);
   for_each_case([](Engine& engine, const raycut::KernelOptions&) {
     const raycut::Results want = engine.compute(Kernel::count);
     std::vector<std::uint32_t> got(engine.size(), 0);

@@ -20,7 +20,7 @@
 #include "periodic_oracle.hpp"
 #include "raycut/cuda/pairs.cuh"
 #include "raycut/engine.hpp"
-#include "raycut/generators.hpp"
+#include "raycut/tools/generators.hpp"
 #include "user_functors.hpp"
 
 namespace raycut {
@@ -177,7 +177,7 @@ TEST_P(GpuFunctors, WithoutCombineSameAnswerAtSmallN) {
   for_each_case(method(), {2, 100, 1000}, [&](Engine& engine, const auto& options) {
     const std::size_t n = engine.size();
     if (method() == "grid" && n > 0) {
-      const raycut::detail::GridKernel k = engine.pair_pass().grid.kernel;
+      const raycut::detail::GridKernel k = raycut::detail::PairPassAccess::of(engine).grid.kernel;
       lanes_seen |= k != raycut::detail::GridKernel::thread &&
                     k != raycut::detail::GridKernel::thread_many_registers;
     }
@@ -227,8 +227,8 @@ TEST_P(GpuFunctors, EmptyAndSingleParticle) {
 // Each target's triples (i, j, S) at its row of a CSR list sized by a count pass: reads j and S,
 // so a periodic pass takes the image tables. end[i] is where the row stopped.
 struct FillTriples {
-  static constexpr bool takes_shift = true;
   using Accumulator = std::uint32_t;
+  using options = raycut::functor_options<raycut::option::init>;
   const std::uint32_t* offsets;
   std::uint32_t capacity;
   std::uint32_t *i_out, *j_out, *end;
@@ -248,7 +248,8 @@ struct FillTriples {
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& at) const { end[i] = at; }
 };
 
-// nvcc once took every takes_shift functor for one with accepts(), so FillTriples did not compile.
+// nvcc once took every functor with the shifted pair call for one with accepts(), so FillTriples
+// did not compile.
 static_assert(!raycut::has_accepts<FillTriples>::value && raycut::takes_shift<FillTriples>::value);
 
 // A periodic build's triples through a caller's functor, in rows sized by the built-in count

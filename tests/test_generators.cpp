@@ -12,8 +12,8 @@
 #include <vector>
 
 #include "raycut/error.hpp"
-#include "raycut/generators.hpp"
 #include "raycut/predicate.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace raycut {
 namespace {

@@ -16,9 +16,9 @@
 
 #include "cuda/grid_policy.hpp"
 #include "cuda/methods.hpp"
-#include "raycut/compare.hpp"
 #include "raycut/engine.hpp"
-#include "raycut/generators.hpp"
+#include "raycut/tools/compare.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace {
 

@@ -15,6 +15,7 @@ run(${CMAKE_COMMAND} -S ${SOURCE}/tests/consumer -B ${WORK}/build -DCMAKE_PREFIX
 run(${CMAKE_COMMAND} --build ${WORK}/build)
 run(${WORK}/build/consumer)
 run(${WORK}/build/consumer_sph)
+run(${WORK}/build/consumer_tools)
 # raycut::mpi where the install has it: the config must find MPI and export the target.
 file(GLOB config ${WORK}/prefix/lib*/cmake/raycut/raycutConfig.cmake)
 file(STRINGS ${config} mpi_line REGEX "set\\(raycut_HAVE_MPI ON\\)")

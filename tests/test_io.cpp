@@ -17,9 +17,9 @@
 #include "error_helpers.hpp"
 #include "raycut/box.hpp"
 #include "raycut/error.hpp"
-#include "raycut/files.hpp"
-#include "raycut/generators.hpp"
-#include "raycut/io.hpp"
+#include "raycut/tools/files.hpp"
+#include "raycut/tools/generators.hpp"
+#include "raycut/tools/io.hpp"
 
 namespace raycut {
 namespace {

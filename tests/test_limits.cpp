@@ -10,11 +10,11 @@
 
 #include "core/method.hpp"
 #include "core/validation.hpp"
-#include "raycut/compare.hpp"
 #include "raycut/engine.hpp"
-#include "raycut/generators.hpp"
 #include "raycut/sph/scenario.hpp"
 #include "raycut/sph/solver.hpp"
+#include "raycut/tools/compare.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace {
 
@@ -122,7 +122,7 @@ TEST(KernelRange, AgreesWithTheKernelsOverTheWholeCutoffRange) {
             const raycut::Vec3 r{xyz[3 * j] - xyz[3 * i], xyz[3 * j + 1] - xyz[3 * i + 1],
                                  xyz[3 * j + 2] - xyz[3 * i + 2]};
             const float r2 = raycut::squared_distance(r.x, r.y, r.z);
-            if (raycut::in_range(r2, raycut::squared_cutoff(c))) f(acc, i, j, r, r2);
+            if (raycut::in_range(r2, raycut::squared_cutoff(c))) raycut::apply(f, acc, i, j, r, r2);
           }
           f.finish(i, acc);
         }

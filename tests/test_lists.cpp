@@ -8,9 +8,9 @@
 #include <tuple>
 #include <vector>
 
-#include "raycut/compare.hpp"
 #include "raycut/engine.hpp"
-#include "raycut/generators.hpp"
+#include "raycut/tools/compare.hpp"
+#include "raycut/tools/generators.hpp"
 
 #if defined(RAYCUT_TESTS_CUDA)
 #include "cuda/runtime.hpp"  // download(): taken device results read back

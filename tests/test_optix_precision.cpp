@@ -25,7 +25,7 @@
 #include "geometry/ray_geometry.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/error.hpp"
-#include "raycut/generators.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace {
 

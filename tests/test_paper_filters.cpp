@@ -33,10 +33,10 @@
 #include <string>
 #include <vector>
 
-#include "core/random.hpp"
 #include "ray_emulation.hpp"
-#include "raycut/generators.hpp"
 #include "raycut/predicate.hpp"
+#include "raycut/tools/generators.hpp"
+#include "tools/random.hpp"
 
 namespace {
 

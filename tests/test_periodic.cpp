@@ -840,7 +840,6 @@ struct RecordPairs {
     float r2;
   };
   using Accumulator = std::vector<Entry>;
-  static constexpr bool takes_shift = true;
   std::vector<Accumulator>* rows;
   void operator()(Accumulator& acc, std::uint32_t, std::uint32_t j, raycut::Vec3 r, float r2,
                   const raycut::Shift& s) const {
@@ -854,6 +853,7 @@ static_assert(raycut::takes_shift<RecordPairs>::value);
 // ... and takes only the pairs whose shift is lexicographically positive or zero with i < j:
 // accepts() sees the shift too.
 struct HalfByShift : RecordPairs {
+  using options = raycut::functor_options<raycut::option::accepts>;
   bool accepts(std::uint32_t i, std::uint32_t j, const raycut::Shift& s) const {
     return i != j ? i < j : s.positive();
   }

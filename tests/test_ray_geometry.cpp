@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "ray_emulation.hpp"
-#include "raycut/generators.hpp"
 #include "raycut/predicate.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace {
 

@@ -15,11 +15,10 @@ namespace user {
 // sum_j 4 eps ((sigma/r)^12 - (sigma/r)^6), without combine().
 struct LjNoCombine {
   using Accumulator = float;
-  static constexpr bool vanishes_at_infinity = true;
+  using options = raycut::functor_options<raycut::option::vanishes_at_infinity>;
   float sigma6, four_epsilon_sigma6;
   float* energy;
-  RAYCUT_HD void operator()(float& acc, std::uint32_t, std::uint32_t, raycut::Vec3,
-                            float r2) const {
+  RAYCUT_HD void operator()(float& acc, std::uint32_t, raycut::Vec3, float r2) const {
     const float t = raycut::fast_reciprocal(r2);
     const float w = t * t * t;
     acc += w * (sigma6 * w - 1.0f);
@@ -29,6 +28,8 @@ struct LjNoCombine {
   }
 };
 struct Lj : LjNoCombine {
+  using options =
+      raycut::functor_options<raycut::option::vanishes_at_infinity, raycut::option::combine>;
   RAYCUT_HD static void combine(float& a, const float& b) { a += b; }
 };
 
@@ -37,11 +38,11 @@ struct LjForces {
   struct Accumulator {
     float energy = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0};
   };
-  static constexpr bool vanishes_at_infinity = true;
+  using options =
+      raycut::functor_options<raycut::option::vanishes_at_infinity, raycut::option::combine>;
   float sigma2, four_epsilon;  // reduced units: u = (sigma^2 / r^2)^3
   float *energy, *force, *virial;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, raycut::Vec3 r,
-                            float r2) const {
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, raycut::Vec3 r, float r2) const {
     const float t = raycut::fast_reciprocal(r2);
     const float s = sigma2 * t;
     const float u = s * s * s;
@@ -85,9 +86,11 @@ struct CountFromInit {
     std::uint32_t count = 0;
     std::uint32_t calls = 0;
   };
+  using options = raycut::functor_options<raycut::option::init>;
   std::uint32_t offset;
   std::uint32_t* out;
   RAYCUT_HD Accumulator init(std::uint32_t i) const { return {offset + i % 5, 0}; }
+  // The pair call with j (unread): the traversal looks up each pair's source with images.
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, raycut::Vec3,
                             float) const {
     ++acc.count;
@@ -97,6 +100,7 @@ struct CountFromInit {
 };
 // The same with combine(): lanes sharing a target add their pairs; init() seeds the total once.
 struct CountFromInitCombine : CountFromInit {
+  using options = raycut::functor_options<raycut::option::init, raycut::option::combine>;
   RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) {
     a.count += b.count;
     a.calls += b.calls;

@@ -17,8 +17,8 @@
 
 #include "commands.hpp"
 #include "raycut/engine.hpp"
-#include "raycut/files.hpp"
-#include "raycut/generators.hpp"
+#include "raycut/tools/files.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace raycut::cli {
 

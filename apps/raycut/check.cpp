@@ -9,10 +9,10 @@
 #include <memory>
 
 #include "commands.hpp"
-#include "raycut/compare.hpp"
 #include "raycut/engine.hpp"
-#include "raycut/generators.hpp"
-#include "raycut/io.hpp"
+#include "raycut/tools/compare.hpp"
+#include "raycut/tools/generators.hpp"
+#include "raycut/tools/io.hpp"
 
 namespace raycut::cli {
 namespace {

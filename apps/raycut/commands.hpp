@@ -12,7 +12,7 @@
 
 #include "raycut/box.hpp"
 #include "raycut/engine.hpp"
-#include "raycut/generators.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace raycut::cli {
 

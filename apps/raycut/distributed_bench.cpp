@@ -23,8 +23,8 @@
 #include "commands.hpp"
 #include "mpi_session.hpp"
 #include "raycut/engine.hpp"
-#include "raycut/files.hpp"
 #include "raycut/mpi/distributed.hpp"
+#include "raycut/tools/files.hpp"
 
 namespace raycut::cli {
 namespace {

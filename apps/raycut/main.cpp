@@ -16,10 +16,10 @@
 
 #include "commands.hpp"
 #include "raycut/engine.hpp"
-#include "raycut/files.hpp"
-#include "raycut/generators.hpp"
 #include "raycut/host_memory.hpp"
-#include "raycut/io.hpp"
+#include "raycut/tools/files.hpp"
+#include "raycut/tools/generators.hpp"
+#include "raycut/tools/io.hpp"
 
 namespace raycut::cli {
 

@@ -11,8 +11,8 @@
 
 #include "commands.hpp"
 #include "raycut/engine.hpp"
-#include "raycut/files.hpp"
-#include "raycut/io.hpp"
+#include "raycut/tools/files.hpp"
+#include "raycut/tools/io.hpp"
 
 namespace raycut::cli {
 namespace {

@@ -20,11 +20,11 @@
 
 #include "commands.hpp"
 #include "raycut/engine.hpp"
-#include "raycut/files.hpp"
 #include "raycut/sph/render.hpp"
 #include "raycut/sph/scenario.hpp"
 #include "raycut/sph/solver.hpp"
 #include "raycut/sph/vtk.hpp"
+#include "raycut/tools/files.hpp"
 #if defined(RAYCUT_CLI_MPI)
 #include <mpi.h>
 

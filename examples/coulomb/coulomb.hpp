@@ -22,8 +22,9 @@ struct ShiftedForce {
   struct Accumulator {
     float energy = 0, f[3] = {0, 0, 0};
   };
-  // No vanishes_at_infinity: at r2 = +inf the terms are NaN (r * (1/r)), so out-of-range pairs
-  // must never reach operator().
+  // No option::vanishes_at_infinity: at r2 = +inf the terms are NaN (r * (1/r)), so out-of-range
+  // pairs must never reach operator(). combine() lets GPU lanes share a target.
+  using options = raycut::functor_options<raycut::option::combine>;
 
   const float* charge;  // 1 per particle, in the engine's memory space
   float rc, inv_rc, inv_rc2;

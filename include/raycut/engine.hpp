@@ -291,6 +291,7 @@ class ImagePoints;
 struct ImagePlan;
 struct PairPass;
 struct EngineAccess;
+struct PairPassAccess;
 }  // namespace detail
 
 class Engine {
@@ -370,12 +371,12 @@ class Engine {
   const Systems& systems() const { return systems_; }
   float cutoff() const { return cutoff_; }
 
-  // What include/raycut/pairs.hpp and include/raycut/cuda/pairs.cuh run a user's functor
-  // through; not for other use.
-  detail::PairPass pair_pass() const;
-
  private:
   friend struct detail::EngineAccess;
+  friend struct detail::PairPassAccess;
+  // What include/raycut/pairs.hpp and include/raycut/cuda/pairs.cuh run a user's functor
+  // through (detail::PairPassAccess).
+  detail::PairPass pair_pass() const;
   // update(); `checked`: the caller has checked the coordinates (raycut's own engines over
   // positions they checked), so a plain update skips its finiteness pass (one with systems
   // rebuilds, and checks as build() does).

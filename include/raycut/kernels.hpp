@@ -1,37 +1,8 @@
 // Pair functors: what a method runs for every in-range (target i, source j) pair, fused in its
 // own traversal. The built-in kernels below are ordinary functors; a user's own follows the same
-// shape (include/raycut/pairs.hpp runs one on the CPU methods, include/raycut/cuda/pairs.cuh on
-// the CUDA methods):
-//
-//   struct MyFunctor {
-//     using Accumulator = ...;             // per-target state, default-constructible
-//     RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3 r,
-//                               float r2) const;   // r = x_j - x_i, r2 = |r|^2 < C^2
-//     RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const;  // once per target: store
-//     // Optional:
-//     static constexpr bool vanishes_at_infinity = true;  // terms are 0 at r2 = +inf: the
-//                                                         // traversal may feed out-of-range
-//                                                         // candidates that instead of a branch
-//     RAYCUT_HD Accumulator init(std::uint32_t i) const;  // initial state (default: {})
-//     RAYCUT_HD bool accepts(std::uint32_t i, std::uint32_t j) const;  // which in-range pairs
-//                                    // the functor takes (default: all), decided before the call
-//     static constexpr bool emits_entries = true;  // the Accumulator is the position of the
-//                                    // target's next entry: each call writes one entry there
-//                                    // and adds one. The grid may then give each call its
-//                                    // position itself, so that the lanes sharing a target
-//                                    // write its entries together (coalesced lists)
-//     static constexpr bool uses_source = false;  // operator() reads neither j nor the shift:
-//                                    // with periodic images (and no accepts) the traversal runs
-//                                    // as on an open cloud, no lookup per pair (j is then a
-//                                    // point's index, not a particle's)
-//     static constexpr bool takes_shift = true;  // operator() and accepts() take the pair's
-//                                    // image shift S as a last argument (const Shift&)
-//     RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b);  // a += b: lets
-//                                    // several GPU lanes share one target (small inputs); then
-//                                    // Accumulator{} must be its identity (lanes start there and
-//                                    // init(i) is combined once) and the Accumulator made of
-//                                    // 32-bit words (it is shuffled between lanes)
-//   };
+// contract (include/raycut/functor.hpp: its shape, its options, the compile-time checks;
+// include/raycut/pairs.hpp runs one on the CPU methods, include/raycut/cuda/pairs.cuh on the CUDA
+// methods).
 //
 // i and j are the caller's particle indices (with query points: i a query, j a source); with a
 // periodic box r already includes the image shift (r = x_j - x_i + S . cell). The functor carries
@@ -48,6 +19,7 @@
 #include <type_traits>
 
 #include "raycut/error.hpp"
+#include "raycut/functor.hpp"
 #include "raycut/predicate.hpp"
 
 namespace raycut {
@@ -150,113 +122,15 @@ RAYCUT_HD float fast_reciprocal(float b) {
 #endif
 }
 
-// The image shift S of a pair (i, j, S): r_ij = x_j - x_i + S . cell (docs/periodic.md,
-// "Semantics"); zero without a periodic box. A functor that declares `static constexpr bool
-// takes_shift = true` gets it as a last argument of operator() and accepts():
-//   operator()(acc, i, j, r, r2, const Shift& s)   accepts(i, j, const Shift& s)
-struct Shift {
-  std::int32_t a = 0, b = 0, c = 0;
-  // Lexicographically positive: the half-list orientation of a self-image (i, i, S).
-  RAYCUT_HD bool positive() const { return a != 0 ? a > 0 : (b != 0 ? b > 0 : c > 0); }
-};
-
-// ---- what the traversals ask of a functor (defaults for the optional members) ----------------
-
-template <class F, class = void>
-struct uses_source : std::true_type {};
-template <class F>
-struct uses_source<F, std::enable_if_t<!F::uses_source>> : std::false_type {};
-
-template <class F, class = void>
-struct takes_shift : std::false_type {};
-template <class F>
-struct takes_shift<F, std::enable_if_t<F::takes_shift>> : std::true_type {};
-
-template <class F, class = void>
-struct vanishes_at_infinity : std::false_type {};
-template <class F>
-struct vanishes_at_infinity<F, std::enable_if_t<F::vanishes_at_infinity>> : std::true_type {};
-
-template <class F, class = void>
-struct has_combine : std::false_type {};
-template <class F>
-struct has_combine<
-    F, std::void_t<decltype(F::combine(std::declval<typename F::Accumulator&>(),
-                                       std::declval<const typename F::Accumulator&>()))>>
-    : std::true_type {};
-
-template <class F, class = void>
-struct has_init : std::false_type {};
-template <class F>
-struct has_init<F, std::void_t<decltype(std::declval<const F&>().init(std::uint32_t{}))>>
-    : std::true_type {};
-
-template <class F, class = void>
-struct emits_entries : std::false_type {};
-template <class F>
-struct emits_entries<F, std::enable_if_t<F::emits_entries>> : std::true_type {};
-
-// accepts(i, j), or accepts(i, j, s) for a functor that takes shifts. Two plain detections and a
-// choice: nvcc's front end took any takes_shift functor for one with accepts when the shift's
-// detection sat inside enable_if_t.
-template <class F, class = void>
-struct has_accepts_of_pair : std::false_type {};
-template <class F>
-struct has_accepts_of_pair<
-    F, std::void_t<decltype(std::declval<const F&>().accepts(std::uint32_t{}, std::uint32_t{}))>>
-    : std::true_type {};
-template <class F, class = void>
-struct has_accepts_of_shifted_pair : std::false_type {};
-template <class F>
-struct has_accepts_of_shifted_pair<F, std::void_t<decltype(std::declval<const F&>().accepts(
-                                          std::uint32_t{}, std::uint32_t{}, Shift{}))>>
-    : std::true_type {};
-template <class F>
-struct has_accepts
-    : std::bool_constant<takes_shift<F>::value ? has_accepts_of_shifted_pair<F>::value
-                                               : has_accepts_of_pair<F>::value> {};
-
-// Whether f takes the in-range pair (i, j, s).
-template <class F>
-RAYCUT_HD bool accepts(const F& f, std::uint32_t i, std::uint32_t j, const Shift& s = {}) {
-  if constexpr (!has_accepts<F>::value)
-    return true;
-  else if constexpr (takes_shift<F>::value)
-    return f.accepts(i, j, s);
-  else
-    return f.accepts(i, j);
-}
-
-// f's call for the in-range pair (i, j, s), the shift passed where f takes it.
-template <class F>
-RAYCUT_HD void apply(const F& f, typename F::Accumulator& acc, std::uint32_t i, std::uint32_t j,
-                     Vec3 r, float r2, const Shift& s = {}) {
-  if constexpr (takes_shift<F>::value)
-    f(acc, i, j, r, r2, s);
-  else
-    f(acc, i, j, r, r2);
-}
-
-// The initial state of target i.
-template <class F>
-RAYCUT_HD typename F::Accumulator initial_state(const F& f, std::uint32_t i) {
-  if constexpr (has_init<F>::value)
-    return f.init(i);
-  else
-    return typename F::Accumulator{};
-}
-
 // ---- built-in kernels ------------------------------------------------------------------------
 // Each adds a pair's terms to its Accumulator; finish() then applies, once per target, the
 // constant factors common to all terms (an instruction less per pair in the hottest loop).
 
 struct CountKernel {
   using Accumulator = std::uint32_t;
-  static constexpr bool uses_source = false;
+  using options = functor_options<option::combine>;
   std::uint32_t* count;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float) const {
-    ++acc;
-  }
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, Vec3, float) const { ++acc; }
   RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { count[i] = acc; }
 };
@@ -268,12 +142,11 @@ struct CountKernel {
 // vanish at r2 = +inf (w = 0), so a pair out of range can be fed r2 = +inf instead of a branch.
 struct LennardJonesKernel {
   using Accumulator = float;
-  static constexpr bool vanishes_at_infinity = true;
-  static constexpr bool uses_source = false;
+  using options = functor_options<option::vanishes_at_infinity, option::combine>;
   float sigma6;               // sigma^6
   float four_epsilon_sigma6;  // 4 eps sigma^6
   float* energy;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float r2) const {
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, Vec3, float r2) const {
     const float t = fast_reciprocal(r2);
     const float w = t * t * t;
     acc += w * (sigma6 * w - 1.0f);
@@ -302,16 +175,14 @@ struct LennardJonesForceKernel {
   struct Accumulator {
     float energy = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0};
   };
-  static constexpr bool vanishes_at_infinity = true;
-  static constexpr bool uses_source = false;
+  using options = functor_options<option::vanishes_at_infinity, option::combine>;
   float sigma2;        // sigma^2
   float four_epsilon;  // 4 eps
   float* energy;       // 1 per target
   float* force;        // 3 per target
   float* virial;       // 6 per target
   float shift = 0.0f;  // u_C (u_C - 1), reduced (0: no shift)
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3 r,
-                            float r2) const {
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, Vec3 r, float r2) const {
     const float t = fast_reciprocal(r2);
     const float s = sigma2 * t;
     const float u = s * s * s;
@@ -347,12 +218,11 @@ struct SmoothKernel {
   struct Accumulator {
     float energy = 0, f[3] = {0, 0, 0};
   };
-  static constexpr bool uses_source = false;
+  using options = functor_options<option::combine>;
   float cutoff_squared;
   float* energy;
   float* force;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3 r,
-                            float r2) const {
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, Vec3 r, float r2) const {
     const float w = cutoff_squared - r2;
     acc.energy += w * w;
     acc.f[0] += w * r.x;
@@ -372,11 +242,11 @@ struct SmoothKernel {
 // rho_i contribution m W_poly6(r, h) = m 315 / (64 pi h^9) (h^2 - r^2)^3 (Mueller et al. 2003).
 struct SphDensityKernel {
   using Accumulator = float;
-  static constexpr bool uses_source = false;
+  using options = functor_options<option::combine>;
   float mass_poly6;  // m 315 / (64 pi h^9)
   float h_squared;
   float* density;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float r2) const {
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, Vec3, float r2) const {
     const float w = h_squared - r2;
     acc += w * w * w;
   }
@@ -392,6 +262,7 @@ struct SphForceKernel {
   struct Accumulator {
     float f[3] = {0, 0, 0};
   };
+  using options = functor_options<option::combine>;
   float mass, h, spiky;  // spiky = 45 / (pi h^6)
   float viscosity;
   SphInputs in;

@@ -1,9 +1,8 @@
-// Runs a caller's pair functor (include/raycut/kernels.hpp says its shape) through the traversal
+// Runs a caller's pair functor (include/raycut/functor.hpp says its shape) through the traversal
 // of a built CPU method, fused: no list in between. GPU methods: include/raycut/cuda/pairs.cuh.
 //
-//   struct Coulomb { using Accumulator = float; const float* q; float* energy; ... };
-//   raycut::Engine engine("cell-list");
-//   engine.build(positions, cutoff);
+//   struct Coulomb { using Accumulator = float; const float* q; float* energy; ... };  //
+//   functor.hpp raycut::Engine engine("cell-list"); engine.build(positions, cutoff);
 //   raycut::for_each_pair(engine, Coulomb{q, energy.data()});
 //
 // Also the one CPU pair loop of the library's own methods (src/cpu/host_method.hpp).
@@ -87,6 +86,7 @@ template <class Walk, class F, class Images = NoImages>
 void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk& walk, const F& f,
               const Images& images = {}, const std::uint32_t* order = nullptr,
               const ExactImages* exact = nullptr) {
+  static_assert(check_functor<F>());
   const auto visit = [&](const std::uint32_t i) {
     typename F::Accumulator acc = initial_state(f, i);
     const typename Images::Target ti = images.target(i);
@@ -119,6 +119,12 @@ void run_host_pass(const PairPass& pass, const Walk& walk, const F& f) {
   });
 }
 
+// The traversal view of a built engine: what for_each_pair (here and in cuda/pairs.cuh) runs a
+// caller's functor through. Internal: it follows the methods' internals.
+struct PairPassAccess {
+  static PairPass of(const Engine& engine) { return engine.pair_pass(); }
+};
+
 // What methods without a pass for the caller's functors (OptiX) answer.
 inline Error no_pair_pass(const std::string& method) {
   return Error(ErrorCode::unsupported,
@@ -146,7 +152,8 @@ struct HostPassWalk {
 // host (Engine::space() == host); GPU methods: raycut::cuda::for_each_pair (pairs.cuh, nvcc).
 template <class F>
 void for_each_pair(const Engine& engine, const F& f) {
-  const detail::PairPass pass = engine.pair_pass();
+  static_assert(detail::check_functor<F>(), "raycut::for_each_pair: see the messages above");
+  const detail::PairPass pass = detail::PairPassAccess::of(engine);
   if (pass.kind == detail::PassKind::none && engine.size() == 0) return;
   if (pass.kind == detail::PassKind::none) throw detail::no_pair_pass(engine.method());
   if (pass.kind != detail::PassKind::host)

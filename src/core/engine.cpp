@@ -9,15 +9,12 @@
 #include <string>
 #include <vector>
 
+#include "core/device_services.hpp"
 #include "core/images.hpp"
 #include "core/list_storage.hpp"
 #include "core/method.hpp"
 #include "core/validation.hpp"
 #include "raycut/host_memory.hpp"
-#if defined(RAYCUT_HAVE_CUDA)
-#include "cuda/images.hpp"
-#include "cuda/runtime.hpp"
-#endif
 
 namespace raycut {
 namespace {
@@ -73,22 +70,20 @@ void validate_positions(const PositionsView& positions, void* stream, bool value
     if (bad < positions.size) detail::throw_non_finite(bad, positions.xyz + 3 * bad, what);
     return;
   }
-#if defined(RAYCUT_HAVE_CUDA)
-  if (!detail::cuda::device_available())
+  const detail::DeviceServices* device = detail::device_services();
+  if (!device)
+    throw Error(ErrorCode::unsupported,
+                "positions are in device memory but raycut was built without CUDA");
+  if (!device->available())
     throw Error(ErrorCode::unsupported,
                 "positions are in device memory but no CUDA device is usable in this process");
   if (!values) return;
-  const std::size_t bad = detail::cuda::first_non_finite(positions.xyz, positions.size, stream);
+  const std::size_t bad = device->first_non_finite(positions.xyz, positions.size, stream);
   if (bad < positions.size) {
     float xyz[3];
-    detail::cuda::download(xyz, positions.xyz + 3 * bad, sizeof xyz);
+    device->download(xyz, positions.xyz + 3 * bad, sizeof xyz);
     detail::throw_non_finite(bad, xyz, what);
   }
-#else
-  (void)stream;
-  throw Error(ErrorCode::unsupported,
-              "positions are in device memory but raycut was built without CUDA");
-#endif
 }
 
 }  // namespace
@@ -103,11 +98,8 @@ std::vector<MethodDescription> list_methods() {
 }
 
 bool cuda_device_available() {
-#if defined(RAYCUT_HAVE_CUDA)
-  return detail::cuda::device_available();
-#else
-  return false;
-#endif
+  const detail::DeviceServices* device = detail::device_services();
+  return device && device->available();
 }
 
 std::string auto_method() {
@@ -287,9 +279,8 @@ void Engine::build_points(PositionsView positions, float cutoff, const Systems& 
         if (m.space() == MemorySpace::host) {
           images_ = detail::make_host_image_points();
         } else {
-#if defined(RAYCUT_HAVE_CUDA)
-          images_ = detail::cuda::make_device_image_points();
-#endif
+          // A method on the device exists only where the CUDA backend is built.
+          images_ = detail::device_services()->make_image_points();
         }
       }
       images_->set_float64_sources(float64);
@@ -357,24 +348,19 @@ void Engine::with_positions_in_method_space(const PositionsView& positions, F&& 
   // Move the positions to where the method works (not part of the timed phases).
   const float* xyz = positions.xyz;
   std::vector<float> host_copy;
-#if defined(RAYCUT_HAVE_CUDA)
-  detail::cuda::DeviceMemory device_copy;
-#endif
+  detail::DeviceBytes device_copy;
   if (positions.space != impl_->space() && positions.size > 0) {
     const std::size_t bytes = 3 * positions.size * sizeof(float);
-#if defined(RAYCUT_HAVE_CUDA)
+    const detail::DeviceServices* device = detail::device_services();
+    if (!device) throw Error(ErrorCode::unsupported, "raycut was built without CUDA");
     if (impl_->space() == MemorySpace::host) {
       host_copy.resize(3 * positions.size);
-      detail::cuda::download(host_copy.data(), xyz, bytes);
+      device->download(host_copy.data(), xyz, bytes);
       xyz = host_copy.data();
     } else {
-      device_copy = detail::cuda::upload(xyz, bytes);
+      device_copy = device->upload(xyz, bytes);
       xyz = static_cast<const float*>(device_copy.get());
     }
-#else
-    (void)bytes;
-    throw Error(ErrorCode::unsupported, "raycut was built without CUDA");
-#endif
   }
   f(xyz);
 }
@@ -608,9 +594,7 @@ namespace {
 struct KeptPositions {
   PositionsView view;
   std::vector<float> host;
-#if defined(RAYCUT_HAVE_CUDA)
-  detail::cuda::DeviceMemory device;
-#endif
+  detail::DeviceBytes device;
 };
 
 std::shared_ptr<void> keep_positions(const PositionsView& p, void* stream) {
@@ -619,13 +603,9 @@ std::shared_ptr<void> keep_positions(const PositionsView& p, void* stream) {
   if (p.space == MemorySpace::host) {
     kept->host.assign(p.xyz, p.xyz + 3 * p.size);
     kept->view.xyz = kept->host.data();
-  } else {
-#if defined(RAYCUT_HAVE_CUDA)
-    kept->device = detail::cuda::copy_on_device(p.xyz, 3 * p.size * sizeof(float), stream);
+  } else if (const detail::DeviceServices* device = detail::device_services()) {
+    kept->device = device->copy_on_device(p.xyz, 3 * p.size * sizeof(float), stream);
     kept->view.xyz = static_cast<const float*>(kept->device.get());
-#else
-    (void)stream;
-#endif
   }
   return kept;
 }
@@ -646,11 +626,9 @@ bool moved_beyond(const PositionsView& now, const KeptPositions& then, float dis
     }
     return false;
   }
-#if defined(RAYCUT_HAVE_CUDA)
-  if (now.space == MemorySpace::device && then.view.space == MemorySpace::device)
-    return detail::cuda::moved_beyond(now.xyz, then.view.xyz, now.size, distance, stream);
-#endif
-  (void)stream;
+  const detail::DeviceServices* device = detail::device_services();
+  if (device && now.space == MemorySpace::device && then.view.space == MemorySpace::device)
+    return device->moved_beyond(now.xyz, then.view.xyz, now.size, distance, stream);
   return true;  // the caller moved its positions to another memory space: rebuild
 }
 

@@ -14,7 +14,7 @@ namespace raycut::detail {
 // Half lists keep, of (i, j, S) and (j, i, -S), the one with i < j, or i == j and S
 // lexicographically positive (a self-image; (i, i, 0) never reaches a functor).
 struct HalfFilter {
-  static constexpr bool takes_shift = true;
+  using options = functor_options<option::accepts>;
   bool half;
   RAYCUT_HD bool accepts(std::uint32_t i, std::uint32_t j, const Shift& s) const {
     return !half || i < j || (i == j && s.positive());
@@ -24,17 +24,16 @@ struct HalfFilter {
 // The full list's count reads no source (no lookup with images); the half list's filters.
 struct ListCount {
   using Accumulator = std::uint32_t;
-  static constexpr bool uses_source = false;
+  using options = functor_options<option::combine>;
   std::uint32_t* counts;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float) const {
-    ++acc;
-  }
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, Vec3, float) const { ++acc; }
   RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { counts[i] = acc; }
 };
 
 struct HalfListCount : HalfFilter {
   using Accumulator = std::uint32_t;
+  using options = functor_options<option::accepts, option::combine>;
   std::uint32_t* counts;
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float,
                             const Shift&) const {
@@ -60,7 +59,7 @@ RAYCUT_HD float pair_distance(Vec3 r, float r2) {
 // Row i written from offsets[i]; distances, vectors and shifts where asked (null otherwise).
 struct ListFill : HalfFilter {
   using Accumulator = std::uint64_t;  // the next entry of the row
-  static constexpr bool emits_entries = true;
+  using options = functor_options<option::accepts, option::init, option::emits_entries>;
   const std::uint64_t* offsets;
   std::uint32_t* indices;
   float* distances;
@@ -103,7 +102,7 @@ struct PaddedOverflow {
 // counts[i] the true count, and the overflow recorded, never hidden.
 struct PaddedFill : HalfFilter {
   using Accumulator = std::uint32_t;  // the row's next entry (its count so far)
-  static constexpr bool emits_entries = true;
+  using options = functor_options<option::accepts, option::emits_entries>;
   std::uint32_t k;
   std::uint32_t n;
   std::uint32_t* indices;

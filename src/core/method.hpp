@@ -120,7 +120,8 @@ struct MethodEntry {
   std::function<std::unique_ptr<Method>()> make;
 };
 
-// All methods of this build, in the order list_methods() reports them.
+// All methods of this build, in the order list_methods() reports them (the composition root,
+// src/backends/registry.cpp).
 const std::vector<MethodEntry>& method_registry();
 
 // Factories, defined by each backend (only those compiled in are referenced).

@@ -6,27 +6,22 @@
 #include <thread>
 #include <utility>
 
+#include "core/device_services.hpp"
 #include "raycut/engine.hpp"
-#if defined(RAYCUT_HAVE_CUDA)
-#include "cuda/runtime.hpp"
-#endif
 
 namespace raycut {
 
 DeviceArray::DeviceArray(const std::vector<float>& values) : size_(values.size()) {
-#if defined(RAYCUT_HAVE_CUDA)
+  const detail::DeviceServices* device = detail::device_services();
+  if (!device)
+    throw Error(ErrorCode::unsupported, "device arrays need CUDA; raycut was built without it");
   if (size_ > 0)
-    data_ = static_cast<float*>(
-        detail::cuda::upload(values.data(), values.size() * sizeof(float)).release());
-#else
-  throw Error(ErrorCode::unsupported, "device arrays need CUDA; raycut was built without it");
-#endif
+    data_ =
+        static_cast<float*>(device->upload(values.data(), values.size() * sizeof(float)).release());
 }
 
 DeviceArray::~DeviceArray() {
-#if defined(RAYCUT_HAVE_CUDA)
-  detail::cuda::DeviceFree{}(data_);
-#endif
+  if (data_) detail::device_services()->free(data_);  // data_ was made by the same services
 }
 
 DeviceArray::DeviceArray(DeviceArray&& o) noexcept
@@ -40,7 +35,6 @@ DeviceArray& DeviceArray::operator=(DeviceArray&& o) noexcept {
 
 namespace {
 
-#if defined(RAYCUT_HAVE_CUDA)
 // "580.159.04": the first dotted number on the kernel module's version line ("NVRM version:
 // NVIDIA UNIX Open Kernel Module for x86_64  580.159.04  Release Build ..."), or "unknown".
 std::string nvidia_driver_version() {
@@ -53,7 +47,6 @@ std::string nvidia_driver_version() {
   }
   return "unknown";
 }
-#endif
 
 std::string cpu_model() {
   std::ifstream in("/proc/cpuinfo");
@@ -78,18 +71,13 @@ SystemInfo system_info() {
   std::ostringstream cpu;
   cpu << cpu_model() << " (" << std::thread::hardware_concurrency() << " threads)";
   info.cpu = cpu.str();
-#if defined(RAYCUT_HAVE_CUDA)
-  if (detail::cuda::device_available()) {
-    info.gpu = detail::cuda::device_name();
+  const detail::DeviceServices* device = detail::device_services();
+  if (device && device->available()) {
+    info.gpu = device->device_name();
     info.driver = nvidia_driver_version();
-    info.cuda = detail::cuda::runtime_version();
+    info.cuda = device->runtime_version();
   }
-#endif
-#if defined(RAYCUT_OPTIX_VERSION)
-  info.optix = std::to_string(RAYCUT_OPTIX_VERSION / 10000) + "." +
-               std::to_string(RAYCUT_OPTIX_VERSION % 10000 / 100) + "." +
-               std::to_string(RAYCUT_OPTIX_VERSION % 100);
-#endif
+  if (std::string optix = detail::optix_headers_version(); !optix.empty()) info.optix = optix;
   return info;
 }
 

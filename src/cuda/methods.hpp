@@ -3,6 +3,7 @@
 
 #include <memory>
 
+#include "core/device_services.hpp"
 #include "core/method.hpp"
 
 namespace raycut::detail::cuda {
@@ -17,5 +18,8 @@ std::unique_ptr<Method> make_grid_paper();
 struct GridPolicy;
 std::unique_ptr<Method> make_grid_with(const GridPolicy& policy);
 std::unique_ptr<Method> make_grid();
+
+// The engine's device services (core/device_services.hpp) on the CUDA runtime.
+const DeviceServices& device_services();
 
 }  // namespace raycut::detail::cuda

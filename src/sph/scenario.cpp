@@ -10,9 +10,9 @@
 #include <utility>
 
 #include "raycut/error.hpp"
-#include "raycut/files.hpp"
 #include "raycut/host_memory.hpp"
 #include "raycut/sph/solver.hpp"
+#include "raycut/tools/files.hpp"
 
 namespace raycut::sph {
 namespace {

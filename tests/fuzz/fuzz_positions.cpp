@@ -10,7 +10,7 @@
 #include <string>
 
 #include "raycut/error.hpp"
-#include "raycut/io.hpp"
+#include "raycut/tools/io.hpp"
 
 namespace {
 

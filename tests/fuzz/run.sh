@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Builds the position readers' fuzz target (fuzz_positions.cpp + src/io) with clang++ and
+# Builds the position readers' fuzz target (fuzz_positions.cpp + src/tools/positions_io.cpp) with clang++ and
 # -fsanitize=fuzzer,address,undefined, and runs it for a bounded time on the committed seed
 # corpus (corpus/; new inputs go to a working copy, never into the repository).
 #   tests/fuzz/run.sh [WORK_DIR]        FUZZ_SECONDS (default 60), CXX_FUZZ (default clang++)
@@ -30,7 +30,7 @@ fi
 binary="$work/fuzz_positions"
 "$cxx" -std=c++20 -O1 -g -fno-omit-frame-pointer -fsanitize=fuzzer,address,undefined \
   -fno-sanitize-recover=all -I"$root/include" -I"$root/src" \
-  "$here/fuzz_positions.cpp" "$root/src/io/positions_io.cpp" "$root/src/core/box.cpp" -o "$binary"
+  "$here/fuzz_positions.cpp" "$root/src/tools/positions_io.cpp" "$root/src/core/box.cpp" -o "$binary"
 
 # Every input is written to a file and read back: on tmpfs when there is one (a disk is ~50x
 # slower), in a folder of this run's own.

@@ -612,7 +612,7 @@ struct Probe {
     std::uint32_t pairs = 0;
     std::int64_t shifts = 0;
   };
-  static constexpr bool takes_shift = true;
+  using options = raycut::functor_options<raycut::option::init, raycut::option::accepts>;
   const float* q;            // per source
   const std::int64_t* base;  // per target
   Accumulator* out;          // per target

@@ -36,7 +36,7 @@ struct Census {
     long long shifts = 0;
     double charge = 0;
   };
-  static constexpr bool takes_shift = true;
+  using options = raycut::functor_options<raycut::option::accepts>;
   std::uint32_t owned;
   const std::uint64_t* ids;       // owned, then halos' (halo_ids)
   const std::uint64_t* halo_ids;  //

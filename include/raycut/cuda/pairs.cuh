@@ -1,4 +1,4 @@
-// Runs a caller's pair functor (include/raycut/kernels.hpp says its shape) through the traversal
+// Runs a caller's pair functor (include/raycut/functor.hpp says its shape) through the traversal
 // of a built engine, fused in the method's own kernel, on any CPU or CUDA method. Compile with
 // nvcc; the functor's operator() and finish() must be __host__ __device__ (RAYCUT_HD) and it
 // is copied to the device by value (device pointers inside for GPU methods, host pointers for
@@ -6,7 +6,6 @@
 //
 //   struct Coulomb {
 //     using Accumulator = float;
-//     static constexpr bool vanishes_at_infinity = false;
 //     const float* charge; float* energy;  // device pointers
 //     RAYCUT_HD void operator()(float& e, std::uint32_t i, std::uint32_t j, raycut::Vec3,
 //                               float r2) const { e += charge[i] * charge[j] * rsqrtf(r2); }
@@ -33,7 +32,9 @@ namespace raycut::cuda {
 // engine's own when null) and return without waiting; CPU methods run it on the host.
 template <class F>
 void for_each_pair(const Engine& engine, const F& f, cudaStream_t stream = nullptr) {
-  const detail::PairPass pass = engine.pair_pass();
+  static_assert(raycut::detail::check_functor<F>(),
+                "raycut::cuda::for_each_pair: see the messages above");
+  const detail::PairPass pass = raycut::detail::PairPassAccess::of(engine);
   if (!stream) stream = static_cast<cudaStream_t>(engine.stream());
   switch (pass.kind) {
     case detail::PassKind::none:

@@ -3,8 +3,8 @@
 // where periodic images, batches and query points meet the functors. A traversal is instantiated
 // with NoImages (the points are the caller's particles: j = k, S = 0, nothing to look up) or
 // WithImages (tables of src/core/images.hpp), so plain runs pay nothing for images. with_images
-// picks the policy per functor: one that reads neither j nor S (uses_source = false) and filters
-// nothing runs as on an open cloud when every point is some particle's image.
+// picks the policy per functor: one that reads neither j nor S (the pair call without j) and
+// filters nothing runs as on an open cloud when every point is some particle's image.
 #pragma once
 
 #include <cstdint>
@@ -67,6 +67,7 @@ inline constexpr bool needs_images = uses_source<F>::value || has_accepts<F>::va
 // and no deferred table is made. `stream`: where a GPU traversal is launched (null on the host).
 template <class F, class Launch>
 void with_images(const PairPass& pass, Launch&& launch, void* stream = nullptr) {
+  static_assert(check_functor<F>());
   if (pass.images.active() && (needs_images<F> || !pass.images.candidates_are_sources))
     launch(WithImages{pass.images.table(stream)});
   else

@@ -25,6 +25,8 @@ namespace raycut::mpi::cuda {
 // Error(unsupported): its halo shifts are on the host).
 template <class F>
 void for_each_pair(const DistributedEngine& engine, const F& f, cudaStream_t stream = nullptr) {
+  static_assert(raycut::detail::check_functor<F>(),
+                "raycut::mpi::cuda::for_each_pair: see the messages above");
   if (engine.local_engine().space() == MemorySpace::host) {
     raycut::mpi::for_each_pair(engine, f);
     return;

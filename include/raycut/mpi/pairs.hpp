@@ -9,9 +9,9 @@
 // What the functor sees: i is an owned row (0 .. owned() - 1, ids() order; finish(i) is called
 // once per owned row, after every pair of it); j is a local source index, owned (< owned()) then
 // halos (owned() + k for halo_ids()[k]), the order of halo_fields(), so per-source data comes
-// from there; r and r2 as on one engine; S (takes_shift) the pair's global image shift, relative
-// to the positions() of each particle's owner (DistributedList::shifts's). Global indices: ids()
-// and halo_ids().
+// from there; r and r2 as on one engine; S (to an operator() that takes a Shift) the pair's
+// global image shift, relative to the positions() of each particle's owner
+// (DistributedList::shifts's). Global indices: ids() and halo_ids().
 #pragma once
 
 #include <cstdint>
@@ -34,7 +34,7 @@ namespace detail {
 template <class F, class Held = const F&>
 struct LocalPass {
   using Accumulator = typename F::Accumulator;
-  static constexpr bool takes_shift = true;
+  using options = functor_options<option::init, option::accepts>;
 
   Held f;
   raycut::detail::RowMap rows;
@@ -81,6 +81,8 @@ void for_each_local_pair(const Engine& local, const Engine* halos,
 // for_each_pair, include/raycut/mpi/pairs.cuh); Error(unsupported) otherwise.
 template <class F>
 void for_each_pair(const DistributedEngine& engine, const F& f) {
+  static_assert(raycut::detail::check_functor<F>(),
+                "raycut::mpi::for_each_pair: see the messages above");
   if (engine.local_engine().space() != MemorySpace::host)
     throw Error(ErrorCode::unsupported,
                 "raycut::mpi::for_each_pair: method '" + engine.local_engine().method() +

@@ -1,4 +1,10 @@
-// The list of methods this build knows, in the order users see them.
+// The composition root: the list of methods this build knows, in the order users see them, and
+// the backends' services handed to core (core/device_services.hpp). The one place that knows
+// which backends are compiled in (RAYCUT_HAVE_CUDA, RAYCUT_HAVE_OPTIX): core, cpu and the
+// backends below it never ask (scripts/check_layers.py checks what each layer includes).
+#include <string>
+
+#include "core/device_services.hpp"
 #include "core/method.hpp"
 
 #if defined(RAYCUT_HAVE_CUDA)
@@ -71,6 +77,24 @@ const std::vector<MethodEntry>& method_registry() {
        functors_only, cuda_status, RAYCUT_CUDA_FACTORY(cuda::make_grid_paper)},
   };
   return registry;
+}
+
+const DeviceServices* device_services() {
+#if defined(RAYCUT_HAVE_CUDA)
+  return &cuda::device_services();
+#else
+  return nullptr;
+#endif
+}
+
+std::string optix_headers_version() {
+#if defined(RAYCUT_OPTIX_VERSION)
+  return std::to_string(RAYCUT_OPTIX_VERSION / 10000) + "." +
+         std::to_string(RAYCUT_OPTIX_VERSION % 10000 / 100) + "." +
+         std::to_string(RAYCUT_OPTIX_VERSION % 100);
+#else
+  return {};
+#endif
 }
 
 }  // namespace raycut::detail

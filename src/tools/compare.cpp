@@ -1,4 +1,4 @@
-#include "raycut/compare.hpp"
+#include "raycut/tools/compare.hpp"
 
 #include <algorithm>
 #include <array>

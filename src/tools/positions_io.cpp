@@ -1,9 +1,9 @@
 // CSV and extended-XYZ positions. Numbers are written in the shortest form that reads back to
 // the same float (std::to_chars), and read with std::from_chars, so a write/read round trip is
 // bit-exact. Every error names the file, and the line where there is one. Also the file helpers
-// of src/io/files.hpp (capped line reader, whole-or-nothing output file) that every reader and
-// writer of raycut uses.
-#include "raycut/io.hpp"
+// of include/raycut/tools/files.hpp (capped line reader, whole-or-nothing output file) that every
+// reader and writer of raycut uses.
+#include "raycut/tools/io.hpp"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -26,7 +26,7 @@
 
 #include "raycut/box.hpp"
 #include "raycut/error.hpp"
-#include "raycut/files.hpp"
+#include "raycut/tools/files.hpp"
 
 namespace raycut {
 namespace {
@@ -515,7 +515,7 @@ void check_positions_extension(const std::string& path) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// Files in and out (src/io/files.hpp).
+// Files in and out (include/raycut/tools/files.hpp).
 namespace io {
 
 std::string printable(std::string_view text, std::size_t limit) {

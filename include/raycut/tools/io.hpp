@@ -4,7 +4,7 @@
 
 #include <string>
 
-#include "raycut/generators.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace raycut {
 

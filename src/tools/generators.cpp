@@ -1,7 +1,7 @@
 // The benchmark suites (docs/benchmarks.md, "Protocol") and the test families (docs/methods.md,
 // "Test inputs"). Everything is drawn from detail::SplitMix64, so a (name, n, cutoff,
 // seed) gives the same bits on every platform and for every thread count.
-#include "raycut/generators.hpp"
+#include "raycut/tools/generators.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -9,8 +9,8 @@
 #include <numbers>
 #include <thread>
 
-#include "core/random.hpp"
 #include "raycut/error.hpp"
+#include "tools/random.hpp"
 
 namespace raycut {
 namespace {

@@ -1,0 +1,3 @@
+// Fixture of the layering check (scripts/check_layers.py): core reaching up into cuda.
+#pragma once
+#include "cuda/upper.hpp"
