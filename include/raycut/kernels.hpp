@@ -303,13 +303,13 @@ struct SphForceKernel {
 //   virial_i = -1/2 sum_j r_ij (x) force_i(j)
 // each pair's energy and virial half on each atom, as lj_forces: sum_i energy_i is the system's
 // energy with its self energy. Per pair the terms without k q_i; finish() multiplies by them.
-// Reads q_j: uses_source. With query points q_i is the query's charge (CoulombInputs).
+// Reads q_j (its pair call takes j). With query points q_i is the query's charge (CoulombInputs).
 // Coincident pairs (r = 0) give non-finite terms (1 / r): the physics, as for lj.
 struct CoulombDsfKernel {
   struct Accumulator {
     float energy = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0};
   };
-  static constexpr bool uses_source = true;
+  using options = functor_options<option::combine>;
   float alpha;                   // a
   float alpha_squared;           // a^2
   float two_alpha_over_sqrt_pi;  // 2 a / sqrt(pi)

@@ -17,13 +17,13 @@ namespace {
 struct RowCounts {
   using Accumulator = std::uint32_t;
   std::uint64_t* counts;  // at row + 1: the offsets after a running sum
-  void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float) const { ++acc; }
+  void operator()(Accumulator& acc, std::uint32_t, Vec3, float) const { ++acc; }
   void finish(std::uint32_t i, Accumulator& acc) const { counts[i + 1] = acc; }
 };
 
 struct RowFill {
   using Accumulator = std::uint64_t;
-  static constexpr bool takes_shift = true;
+  using options = raycut::functor_options<raycut::option::init>;
   LocalList* list;
   Accumulator init(std::uint32_t i) const { return list->offsets[i]; }
   void operator()(Accumulator& at, std::uint32_t, std::uint32_t j, Vec3 r, float r2,
@@ -82,8 +82,8 @@ void LocalPasses::build(Residence& residence, std::size_t owned, std::size_t hal
 // axes) come from an engine over them (which excludes (i, i, 0) by index, as a single rank
 // does), pairs with halos (and their local images) from the owned particles near a face as
 // queries over the halos only. Every pair of an owned target is in exactly one of the two; a
-// particle's own images are halos or local images, so (i, i, S != 0) is kept. The row schedule takes
-// a boundary row's state from its halo pass into its owned pass, so each row is one sum.
+// particle's own images are halos or local images, so (i, i, S != 0) is kept. The row schedule
+// takes a boundary row's state from its halo pass into its owned pass, so each row is one sum.
 //
 // Only owned particles within cutoff + skin of a face that halos cross (Decomposition::halo_axis:
 // not a local axis's, nor the outer face of an open end slab) are queries (the others meet no

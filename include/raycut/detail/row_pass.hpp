@@ -58,20 +58,33 @@ struct RowMap {
 
 // A built-in kernel's functor over mapped rows (Method::compute_rows runs it in the method's own
 // loop): rows and sources mapped, no filter and no shift, so the traversal keeps its plain loop.
-// All rows run the halos' rows too (the kernels' arrays span owned + halos; not finished).
+// All rows run the halos' rows too (the kernels' arrays span owned + halos; not finished). Its
+// pair call has F's form: with j when F reads its source, without it otherwise.
 template <class F>
-struct RowPass {
+struct RowPassRows {
   static_assert(!has_accepts<F>::value && !takes_shift<F>::value,
                 "RowPass maps the built-in kernels, which neither filter nor take shifts");
   using Accumulator = typename F::Accumulator;
-  static constexpr bool uses_source = raycut::uses_source<F>::value;
+  using options = functor_options<option::init>;
   const F& f;
   RowMap rows;
   Accumulator init(std::uint32_t i) const { return rows.init(f, i); }
-  void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3 r, float r2) const {
-    f(acc, rows.row(i), rows.source(j), r, r2);
-  }
   void finish(std::uint32_t i, Accumulator& acc) const { rows.finish(f, i, acc); }
+};
+
+template <class F, bool = uses_source<F>::value>
+struct RowPass : RowPassRows<F> {
+  void operator()(typename F::Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3 r,
+                  float r2) const {
+    this->f(acc, this->rows.row(i), this->rows.source(j), r, r2);
+  }
+};
+
+template <class F>
+struct RowPass<F, false> : RowPassRows<F> {
+  void operator()(typename F::Accumulator& acc, std::uint32_t i, Vec3 r, float r2) const {
+    this->f(acc, this->rows.row(i), r, r2);
+  }
 };
 
 // The schedule for `owned` rows with accumulators of type A: one pass of all rows over `local`,
