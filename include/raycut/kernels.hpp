@@ -157,6 +157,30 @@ struct LennardJonesKernel {
   }
 };
 
+// The per-target state of the kernels that write energy, force and virial: a pair's force factor
+// g adds g r to the force and g r (x) r to the virial (xx yy zz xy xz yz); each kernel's finish()
+// applies its constant factors.
+struct EnergyForceVirial {
+  float energy = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0};
+  RAYCUT_HD void add_force(float g, Vec3 r) {
+    const float gx = g * r.x, gy = g * r.y, gz = g * r.z;
+    f[0] += gx;
+    f[1] += gy;
+    f[2] += gz;
+    v[0] += gx * r.x;
+    v[1] += gy * r.y;
+    v[2] += gz * r.z;
+    v[3] += gx * r.y;
+    v[4] += gx * r.z;
+    v[5] += gy * r.z;
+  }
+  RAYCUT_HD void add(const EnergyForceVirial& b) {
+    energy += b.energy;
+    for (int k = 0; k < 3; ++k) f[k] += b.f[k];
+    for (int k = 0; k < 6; ++k) v[k] += b.v[k];
+  }
+};
+
 // Energy, force and virial of Lennard-Jones in one pass, in reduced units: with t = 1/r^2 and
 // u = (sigma^2 t)^3 = (sigma/r)^6,
 //   energy_i = 1/2 4 eps sum_j [u (u - 1) - shift]             (each pair half on each atom)
@@ -172,9 +196,7 @@ struct LennardJonesKernel {
 // ~1e-5 or above ~3e5 (inf, or zero forces), where u stays near 1 around the minimum and t
 // scales as 1 / sigma^2 (docs/limits.md).
 struct LennardJonesForceKernel {
-  struct Accumulator {
-    float energy = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0};
-  };
+  using Accumulator = EnergyForceVirial;
   using options = functor_options<option::vanishes_at_infinity, option::combine>;
   float sigma2;        // sigma^2
   float four_epsilon;  // 4 eps
@@ -189,22 +211,9 @@ struct LennardJonesForceKernel {
     acc.energy += u * (u - 1.0f);
     acc.energy -= u > 0.0f ? shift : 0.0f;      // a separate step: without a shift, the same bits
     const float g = t * u * (2.0f * u - 1.0f);  // force factor, times -6 (4 eps)
-    const float gx = g * r.x, gy = g * r.y, gz = g * r.z;
-    acc.f[0] += gx;
-    acc.f[1] += gy;
-    acc.f[2] += gz;
-    acc.v[0] += gx * r.x;
-    acc.v[1] += gy * r.y;
-    acc.v[2] += gz * r.z;
-    acc.v[3] += gx * r.y;
-    acc.v[4] += gx * r.z;
-    acc.v[5] += gy * r.z;
+    acc.add_force(g, r);
   }
-  RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) {
-    a.energy += b.energy;
-    for (int k = 0; k < 3; ++k) a.f[k] += b.f[k];
-    for (int k = 0; k < 6; ++k) a.v[k] += b.v[k];
-  }
+  RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a.add(b); }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
     energy[i] = acc.energy * (0.5f * four_epsilon);  // half of each pair's energy
     const float fs = -6.0f * four_epsilon, vs = 3.0f * four_epsilon;
@@ -306,9 +315,7 @@ struct SphForceKernel {
 // Reads q_j (its pair call takes j). With query points q_i is the query's charge (CoulombInputs).
 // Coincident pairs (r = 0) give non-finite terms (1 / r): the physics, as for lj.
 struct CoulombDsfKernel {
-  struct Accumulator {
-    float energy = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0};
-  };
+  using Accumulator = EnergyForceVirial;
   using options = functor_options<option::combine>;
   float alpha;                   // a
   float alpha_squared;           // a^2
@@ -331,22 +338,9 @@ struct CoulombDsfKernel {
     const float gaussian = two_alpha_over_sqrt_pi * expf(-alpha_squared * r2);
     acc.energy += q * (screened - energy_shift + force_shift * (d - cutoff));
     const float g = q * (force_shift - (screened + gaussian) * inverse) * inverse;  // q phi' / r
-    const float gx = g * r.x, gy = g * r.y, gz = g * r.z;
-    acc.f[0] += gx;
-    acc.f[1] += gy;
-    acc.f[2] += gz;
-    acc.v[0] += gx * r.x;
-    acc.v[1] += gy * r.y;
-    acc.v[2] += gz * r.z;
-    acc.v[3] += gx * r.y;
-    acc.v[4] += gx * r.z;
-    acc.v[5] += gy * r.z;
+    acc.add_force(g, r);
   }
-  RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) {
-    a.energy += b.energy;
-    for (int k = 0; k < 3; ++k) a.f[k] += b.f[k];
-    for (int k = 0; k < 6; ++k) a.v[k] += b.v[k];
-  }
+  RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a.add(b); }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
     const float qi = in.query_charge ? in.query_charge[i] : in.charge[i];
     const float kq = constant * qi;
