@@ -309,7 +309,7 @@ struct CoulombDsfKernel {
   struct Accumulator {
     float energy = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0};
   };
-  static constexpr bool uses_source = true;
+  using options = functor_options<option::combine>;
   float alpha;                   // a
   float alpha_squared;           // a^2
   float two_alpha_over_sqrt_pi;  // 2 a / sqrt(pi)
