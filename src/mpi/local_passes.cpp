@@ -27,7 +27,7 @@ void LocalPasses::build(Residence& residence, std::size_t owned, std::size_t hal
     raycut::detail::EngineAccess::update_checked(*engine_, local);
   else
     engine_->build(local, cutoff, box);
-  // LocalPass's global shifts (host methods, so a host residence: no copy).
+  // The lists' global shifts (host methods, so a host residence: no copy).
   halo_shifts_ = space() == MemorySpace::host ? residence.halo_shifts().data() : nullptr;
   if (split_) select_boundary(residence.positions(), domains, rank, reach);
   halo_engine_built_ = split_ && !boundary_.empty() && halos > 0;
