@@ -19,6 +19,11 @@ struct EngineAccess {
                            const RowMap& rows, const KernelOutputs& out) {
     engine.impl("compute_rows").compute_rows(kernel, options, rows, out);
   }
+  // A neighbour list's count or fill pass over mapped rows (Method::list_rows), the same engines.
+  template <class ListPass>
+  static void list_rows(const Engine& engine, const RowMap& rows, const ListPass& pass) {
+    engine.impl("list_rows").list_rows(rows, pass);
+  }
 };
 
 }  // namespace raycut::detail

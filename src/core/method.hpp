@@ -96,6 +96,14 @@ class Method {
   virtual void compute_rows(Kernel, const KernelOptions&, const RowMap&, const KernelOutputs&) {
     throw Error(ErrorCode::unsupported, "this method runs no kernel over mapped rows");
   }
+  // A full neighbour list's count and fill passes over mapped rows, the same way: counts and
+  // offsets by mapped row, sources and shifts mapped (RowPass).
+  virtual void list_rows(const RowMap&, const ListCount&) {
+    throw Error(ErrorCode::unsupported, "this method runs no list over mapped rows");
+  }
+  virtual void list_rows(const RowMap&, const ListFill&) {
+    throw Error(ErrorCode::unsupported, "this method runs no list over mapped rows");
+  }
 
   // Waits for the work queued by build()/compute() (GPU methods); CPU methods are synchronous.
   virtual void synchronize() {}

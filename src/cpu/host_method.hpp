@@ -43,8 +43,14 @@ class HostMethod : public Method {
   void compute_rows(Kernel kernel, const KernelOptions& options, const RowMap& rows,
                     const KernelOutputs& out) override {
     with_kernel(kernel, options, cutoff_squared_, out, [&](const auto& f) {
-      run(RowPass<std::decay_t<decltype(f)>>{f, rows});
+      run(RowPass<std::decay_t<decltype(f)>>{{f, rows}});
     });
+  }
+  void list_rows(const RowMap& rows, const ListCount& count) override {
+    run(RowPass<ListCount>{{count, rows}});
+  }
+  void list_rows(const RowMap& rows, const ListFill& fill) override {
+    run(RowPass<ListFill>{{fill, rows}});
   }
   Results results() const override { return results_; }
   ResultsView results_view() const override { return view_of(results_); }

@@ -521,6 +521,12 @@ DistributedList DistributedEngine::neighbours(const ListOptions& options) {
   DistributedList out;
   out.targets = ids_;
   out.offsets.assign(n + 1, 0);
+  // A full list keeps every local entry, a half list about half of them: no regrowth.
+  const std::uint64_t kept = options.half ? local.sources.size() / 2 : local.sources.size();
+  out.indices.reserve(kept);
+  if (options.distances) out.distances.reserve(kept);
+  if (options.vectors) out.vectors.reserve(3 * kept);
+  if (options.shifts) out.shifts.reserve(3 * kept);
   for (std::size_t i = 0; i < n; ++i) {
     for (std::uint64_t e = local.offsets[i]; e < local.offsets[i + 1]; ++e) {
       const std::uint32_t j = local.sources[e];

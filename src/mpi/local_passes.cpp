@@ -5,47 +5,9 @@
 
 #include "core/engine_access.hpp"
 #include "core/list_functors.hpp"
-#include "raycut/mpi/pairs.hpp"
-#include "raycut/pairs.hpp"
+#include "raycut/detail/row_pass.hpp"
 
 namespace raycut::mpi::detail {
-namespace {
-
-// A local list in two passes of LocalPass, as the methods make theirs: each owned row's
-// count, then each row written from its offset (the accumulator is the row's cursor, carried
-// from a boundary row's halo pass into its owned pass). No allocation per row.
-struct RowCounts {
-  using Accumulator = std::uint32_t;
-  std::uint64_t* counts;  // at row + 1: the offsets after a running sum
-  void operator()(Accumulator& acc, std::uint32_t, Vec3, float) const { ++acc; }
-  void finish(std::uint32_t i, Accumulator& acc) const { counts[i + 1] = acc; }
-};
-
-struct RowFill {
-  using Accumulator = std::uint64_t;
-  using options = raycut::functor_options<raycut::option::init>;
-  LocalList* list;
-  Accumulator init(std::uint32_t i) const { return list->offsets[i]; }
-  void operator()(Accumulator& at, std::uint32_t, std::uint32_t j, Vec3 r, float r2,
-                  const Shift& s) const {
-    list->sources[at] = j;
-    std::int32_t* shift = &list->shifts[3 * at];
-    shift[0] = s.a;
-    shift[1] = s.b;
-    shift[2] = s.c;
-    if (!list->distances.empty()) list->distances[at] = raycut::detail::pair_distance(r, r2);
-    if (!list->vectors.empty()) {
-      list->vectors[3 * at] = r.x;
-      list->vectors[3 * at + 1] = r.y;
-      list->vectors[3 * at + 2] = r.z;
-    }
-    ++at;
-  }
-  void finish(std::uint32_t, Accumulator&) const {}
-};
-
-}  // namespace
-
 LocalPasses::LocalPasses(const std::string& method, bool owned_rows_only)
     : engine_(std::make_unique<Engine>(method)) {  // an unknown method throws here
   const MethodCapabilities caps = method_capabilities(engine_->method());
@@ -65,7 +27,7 @@ void LocalPasses::build(Residence& residence, std::size_t owned, std::size_t hal
     raycut::detail::EngineAccess::update_checked(*engine_, local);
   else
     engine_->build(local, cutoff, box);
-  // LocalPass's global shifts (host methods, so a host residence: no copy).
+  // The lists' global shifts (host methods, so a host residence: no copy).
   halo_shifts_ = space() == MemorySpace::host ? residence.halo_shifts().data() : nullptr;
   if (split_) select_boundary(residence.positions(), domains, rank, reach);
   halo_engine_built_ = split_ && !boundary_.empty() && halos > 0;
@@ -119,7 +81,7 @@ Results LocalPasses::visit_kernel(Kernel kernel, const KernelOptions& options) c
   // The rows' schedule of every job, each pass the method's own loop over mapped rows.
   with_kernel(kernel, options, squared_cutoff(cutoff_), out, [&](const auto& f) {
     raycut::detail::run_local_rows<typename std::decay_t<decltype(f)>::Accumulator>(
-        *engine_, halo_engine(), boundary_, split_, static_cast<std::uint32_t>(owned_),
+        *engine_, halo_engine(), boundary_, split_, static_cast<std::uint32_t>(owned_), nullptr,
         [&](const Engine& engine, const raycut::detail::RowMap& rows) {
           raycut::detail::EngineAccess::compute_rows(engine, kernel, options, rows, out);
         });
@@ -164,18 +126,33 @@ LocalList LocalPasses::neighbours(const ListOptions& options,
   };
   if (space() == MemorySpace::host) {
     if (owned_ == 0) return out;
-    const auto visit = [&](const auto& f) {
-      for_each_local_pair(*engine_, halo_engine(), boundary_, split_,
-                          static_cast<std::uint32_t>(owned_), halo_shifts_, f);
+    // The engine's own count and fill functors over the row schedule, in the method's own loop
+    // (Method::list_rows): a row's cursor carried from a boundary row's halo pass into its owned
+    // pass, so a row holds its halo entries, then its owned ones.
+    const auto visit = [&](const auto& pass) {
+      raycut::detail::run_local_rows<typename std::decay_t<decltype(pass)>::Accumulator>(
+          *engine_, halo_engine(), boundary_, split_, static_cast<std::uint32_t>(owned_),
+          halo_shifts_, [&](const Engine& engine, const raycut::detail::RowMap& rows) {
+            raycut::detail::EngineAccess::list_rows(engine, rows, pass);
+          });
     };
-    visit(RowCounts{out.offsets.data()});
-    for (std::size_t i = 0; i < owned_; ++i) out.offsets[i + 1] += out.offsets[i];
+    std::vector<std::uint32_t> counts(owned_);
+    visit(raycut::detail::ListCount{counts.data()});
+    for (std::size_t i = 0; i < owned_; ++i) out.offsets[i + 1] = out.offsets[i] + counts[i];
     const std::uint64_t entries = out.offsets[owned_];
     out.sources.resize(entries);
     out.shifts.resize(3 * entries);
     if (options.distances) out.distances.resize(entries);
     if (options.vectors) out.vectors.resize(3 * entries);
-    visit(RowFill{&out});
+    const auto data = [](auto& v) { return v.empty() ? nullptr : v.data(); };
+    raycut::detail::ListFill fill{};
+    fill.half = false;  // oriented by global index afterwards
+    fill.offsets = out.offsets.data();
+    fill.indices = data(out.sources);
+    fill.shifts = data(out.shifts);
+    fill.distances = data(out.distances);
+    fill.vectors = data(out.vectors);
+    visit(fill);
     return out;
   }
   // The method's own list over all rows: the owned rows, the halos' shifts added to the

@@ -3,8 +3,9 @@
 // functors) as rows of the owned targets. A host method runs every job on one row schedule
 // (raycut/detail/row_pass.hpp): one engine of owned + halos, or with owned rows only two (the
 // owned particles; the boundary rows as queries over the halos), each owned row's pairs visited
-// through both and finished once, so nothing is merged after. The built-in kernels run it in the
-// method's own loop (Method::compute_rows), lists and functors through LocalPass. A GPU method
+// through both and finished once, so nothing is merged after. The built-in kernels and the lists
+// run it in the method's own loop (Method::compute_rows, Method::list_rows: the engine's own list
+// functors), a caller's functors through LocalPass (raycut/mpi/pairs.hpp). A GPU method
 // has one engine over owned + halos, all rows, and its own passes (the rows past the owned ones
 // are the halos', not read).
 #pragma once

@@ -273,6 +273,62 @@ TEST(Distributed, PeriodicBoxMatchesSingleProcess) {
       }
 }
 
+// The list's distances and vectors are those of its own entries: r = x_j + S . cell - x_i from
+// the owners' positions and the global shift, |r| for the distance, with halo sources (images of
+// single-domain axes sent as halos) and local images, for both row schemes.
+TEST(Distributed, ListDistancesAndVectorsMatchTheirEntries) {
+  const Box box = Box::orthorhombic(12, 12, 12);
+  const std::vector<float> xyz = lattice(10, 1.2, 0.15, 11);
+  const float cutoff = 2.0f;
+  const Reference ref = reference(xyz, box, cutoff);
+  for (bool owned_rows_only : {true, false})
+    for (bool local_images : {true, false}) {
+      const std::string what = std::string(owned_rows_only ? "owned rows" : "every local row") +
+                               (local_images ? ", local images" : ", images as halos");
+      DistributedOptions options;
+      options.owned_rows_only = owned_rows_only;
+      options.local_images = local_images;
+      DistributedEngine engine(MPI_COMM_WORLD, options);
+      build(engine, xyz, cutoff, box, Spread::strided);
+      const std::vector<float> all = gather_positions(engine, ref.n);
+      raycut::ListOptions list_options;
+      list_options.shifts = true;
+      list_options.distances = true;
+      list_options.vectors = true;
+      const raycut::mpi::DistributedList list = engine.neighbours(list_options);
+      ASSERT_EQ(list.distances.size(), list.indices.size()) << what;
+      ASSERT_EQ(list.vectors.size(), 3 * list.indices.size()) << what;
+      int failures = 0;
+      for (std::size_t t = 0; t < list.targets.size() && failures < 5; ++t) {
+        const std::uint64_t i = list.targets[t];
+        if (row_of(list, t) != ref.rows[i]) {
+          ADD_FAILURE() << what << ": row of particle " << i << " differs from the reference";
+          ++failures;
+        }
+        for (std::uint64_t e = list.offsets[t]; e < list.offsets[t + 1]; ++e) {
+          const std::uint64_t j = list.indices[e];
+          double r[3], r2 = 0;
+          for (int a = 0; a < 3; ++a) {
+            r[a] = static_cast<double>(all[3 * j + a]) + list.shifts[3 * e + a] * box.cell[a][a] -
+                   static_cast<double>(all[3 * i + a]);
+            r2 += r[a] * r[a];
+          }
+          bool ok =
+              std::abs(list.distances[e] - std::sqrt(r2)) <= 1e-5 && list.distances[e] < cutoff;
+          for (int a = 0; a < 3; ++a) ok = ok && std::abs(list.vectors[3 * e + a] - r[a]) <= 1e-5;
+          if (!ok && ++failures <= 5)
+            ADD_FAILURE() << what << ": entry (" << i << ", " << j << ") has distance "
+                          << list.distances[e] << " and vector (" << list.vectors[3 * e] << ", "
+                          << list.vectors[3 * e + 1] << ", " << list.vectors[3 * e + 2]
+                          << "), want " << std::sqrt(r2) << " and (" << r[0] << ", " << r[1] << ", "
+                          << r[2] << ")";
+        }
+      }
+      // Images as halos: at one rank too, so the halo sources' shifts are exercised.
+      EXPECT_EQ(engine.halos() > 0, world_size() > 1 || !local_images) << what;
+    }
+}
+
 // The scheme follows what each method declares (raycut::method_capabilities), not a probe: owned
 // rows only for host methods with query points and periodic boxes, local periodic axes for
 // methods with periodic boxes; and a host method's rows are the reference's either way.

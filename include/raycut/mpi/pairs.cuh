@@ -39,10 +39,10 @@ void for_each_pair(const DistributedEngine& engine, const F& f, cudaStream_t str
   // A device-resident engine runs all rows (one local engine over owned + halos).
   using Pass = detail::LocalPass<F, F>;  // f copied to the device
   const auto owned = static_cast<std::uint32_t>(engine.owned());
-  const raycut::detail::RowMap rows{raycut::detail::RowKind::all_rows, owned, nullptr, nullptr,
-                                    nullptr};
-  raycut::cuda::for_each_pair(engine.local_engine(), Pass{f, rows, engine.device_ids().halo_shifts},
-                              stream);
+  const raycut::detail::RowMap rows{
+      raycut::detail::RowKind::all_rows, owned, nullptr, nullptr, nullptr,
+      engine.device_ids().halo_shifts};
+  raycut::cuda::for_each_pair(engine.local_engine(), Pass{f, rows}, stream);
 }
 
 }  // namespace raycut::mpi::cuda

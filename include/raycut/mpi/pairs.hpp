@@ -37,25 +37,18 @@ struct LocalPass {
   using options = functor_options<option::init, option::accepts>;
 
   Held f;
-  raycut::detail::RowMap rows;
-  const std::int32_t* halo_shifts;  // 3 per halo
-
-  RAYCUT_HD Shift global(std::uint32_t j, const Shift& s) const {
-    if (j < rows.owned) return s;
-    const std::int32_t* h = halo_shifts + 3 * (j - rows.owned);
-    return {s.a + h[0], s.b + h[1], s.c + h[2]};
-  }
+  raycut::detail::RowMap rows;  // with the halos' shifts
 
   RAYCUT_HD Accumulator init(std::uint32_t i) const { return rows.init(f, i); }
   RAYCUT_HD bool accepts(std::uint32_t i, std::uint32_t j, const Shift& s) const {
     if (rows.halo_row(i)) return false;  // a halo's row: not the caller's
     const std::uint32_t k = rows.source(j);
-    return raycut::accepts(f, rows.row(i), k, global(k, s));
+    return raycut::accepts(f, rows.row(i), k, rows.global(k, s));
   }
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3 r, float r2,
                             const Shift& s) const {
     const std::uint32_t k = rows.source(j);
-    apply(f, acc, rows.row(i), k, r, r2, global(k, s));
+    apply(f, acc, rows.row(i), k, r, r2, rows.global(k, s));
   }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { rows.finish(f, i, acc); }
 };
@@ -68,9 +61,9 @@ void for_each_local_pair(const Engine& local, const Engine* halos,
                          const std::vector<std::uint32_t>& boundary, bool owned_rows_only,
                          std::uint32_t owned, const std::int32_t* halo_shifts, const F& f) {
   raycut::detail::run_local_rows<typename F::Accumulator>(
-      local, halos, boundary, owned_rows_only, owned,
+      local, halos, boundary, owned_rows_only, owned, halo_shifts,
       [&](const Engine& engine, const raycut::detail::RowMap& rows) {
-        raycut::for_each_pair(engine, LocalPass<F>{f, rows, halo_shifts});
+        raycut::for_each_pair(engine, LocalPass<F>{f, rows});
       });
 }
 
