@@ -29,6 +29,7 @@
 #include "raycut/engine.hpp"
 #include "raycut/error.hpp"
 #include "raycut/kernels.hpp"
+#include "raycut/tools/device_array.hpp"
 
 #if defined(RAYCUT_PY_CUDA)
 #include "device.hpp"
