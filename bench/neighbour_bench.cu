@@ -61,7 +61,9 @@
 #include "raycut/cuda/pairs.cuh"
 #include "raycut/engine.hpp"
 #include "raycut/kernels.hpp"
+#include "raycut/tools/device_array.hpp"
 #include "raycut/tools/generators.hpp"
+#include "raycut/tools/system_info.hpp"
 
 namespace neighbour_bench {
 

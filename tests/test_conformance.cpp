@@ -14,6 +14,7 @@
 
 #include "raycut/engine.hpp"
 #include "raycut/tools/compare.hpp"
+#include "raycut/tools/device_array.hpp"
 #include "raycut/tools/generators.hpp"
 
 namespace {

@@ -16,6 +16,7 @@
 
 #include "error_helpers.hpp"
 #include "raycut/engine.hpp"
+#include "raycut/tools/device_array.hpp"
 
 namespace {
 

@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstring>
+#include <numeric>
 #include <string>
 #include <vector>
 
@@ -14,6 +15,10 @@
 #include "raycut/pairs.hpp"
 #include "raycut/tools/generators.hpp"
 #include "user_functors.hpp"
+
+// tests/pairs_without_engine.cpp: for_each_pair compiled with <raycut/pairs.hpp> alone.
+std::vector<std::uint32_t> neighbour_counts_through_pairs_header(const raycut::Engine& engine,
+                                                                 std::size_t size);
 
 namespace {
 
@@ -316,6 +321,30 @@ TEST(Functors, LennardJonesShiftAtTheCutoff) {
 }
 
 // (f) raycut::for_each_pair runs on the host only: GPU methods refuse with Error(unsupported).
+// A translation unit that includes <raycut/pairs.hpp> without the Engine class runs a functor
+// on an engine built here: the counts are Kernel::count's, and an engine not built is refused.
+TEST(Functors, PairsHeaderNeedsOnlyADeclaredEngine) {
+  const raycut::PointCloud cloud = raycut::make_family("uniform", 500, 0.3f, 11);
+  for (const char* method : cpu_methods) {
+    SCOPED_TRACE(method);
+    Engine engine(method);
+    engine.build({cloud.xyz.data(), cloud.size(), MemorySpace::host}, 0.3f);
+    const std::vector<std::uint32_t> counts =
+        neighbour_counts_through_pairs_header(engine, cloud.size());
+    EXPECT_EQ(counts, engine.compute(Kernel::count).count);
+    EXPECT_GT(std::accumulate(counts.begin(), counts.end(), std::uint64_t{0}), 0u);
+
+    Engine unbuilt(method);
+    try {
+      neighbour_counts_through_pairs_header(unbuilt, 0);
+      ADD_FAILURE() << "no exception for an engine not built";
+    } catch (const raycut::Error& e) {
+      EXPECT_EQ(e.code(), raycut::ErrorCode::invalid_argument) << e.what();
+      EXPECT_NE(std::string(e.what()).find("before Engine::build"), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST(Functors, HostForEachPairRefusesGpuMethods) {
   const std::vector<float> xyz = {0, 0, 0, 0.5f, 0, 0, 0, 0.5f, 0};
   int tried = 0;

@@ -20,6 +20,7 @@
 #include "periodic_oracle.hpp"
 #include "raycut/cuda/pairs.cuh"
 #include "raycut/engine.hpp"
+#include "raycut/tools/device_array.hpp"
 #include "raycut/tools/generators.hpp"
 #include "user_functors.hpp"
 

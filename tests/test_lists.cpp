@@ -10,6 +10,7 @@
 
 #include "raycut/engine.hpp"
 #include "raycut/tools/compare.hpp"
+#include "raycut/tools/device_array.hpp"
 #include "raycut/tools/generators.hpp"
 
 #if defined(RAYCUT_TESTS_CUDA)

@@ -27,6 +27,7 @@
 #include "raycut/engine.hpp"
 #include "raycut/kernels.hpp"
 #include "raycut/pairs.hpp"
+#include "raycut/tools/device_array.hpp"
 
 namespace {
 

@@ -17,6 +17,7 @@
 
 #include "commands.hpp"
 #include "raycut/engine.hpp"
+#include "raycut/tools/device_array.hpp"
 #include "raycut/tools/files.hpp"
 #include "raycut/tools/generators.hpp"
 

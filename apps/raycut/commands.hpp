@@ -13,6 +13,7 @@
 #include "raycut/box.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/tools/generators.hpp"
+#include "raycut/tools/system_info.hpp"
 
 namespace raycut::cli {
 

@@ -24,6 +24,7 @@
 #include "mpi_session.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/mpi/distributed.hpp"
+#include "raycut/tools/device_array.hpp"
 #include "raycut/tools/files.hpp"
 
 namespace raycut::cli {

@@ -241,36 +241,6 @@ struct MethodDescription {
   std::string why_unavailable;
 };
 
-// A copy of a host float array in CUDA device memory, for callers without CUDA code of their own
-// (the benchmark, where positions start on the device; device-side kernel inputs). Throws
-// Error(unsupported) without CUDA and Error(out_of_memory) when it does not fit.
-class DeviceArray {
- public:
-  explicit DeviceArray(const std::vector<float>& values);
-  ~DeviceArray();
-  DeviceArray(DeviceArray&&) noexcept;
-  DeviceArray& operator=(DeviceArray&&) noexcept;
-  const float* data() const { return data_; }
-  float* data() { return data_; }
-  std::size_t size() const { return size_; }
-  // The array as (N,3) positions.
-  PositionsView view() const { return {data_, size_ / 3, MemorySpace::device}; }
-
- private:
-  float* data_ = nullptr;
-  std::size_t size_ = 0;  // floats
-};
-
-// What the results were measured on: for benchmark rows.
-struct SystemInfo {
-  std::string gpu;     // device name, or "none"
-  std::string driver;  // NVIDIA driver version, or "none"
-  std::string cuda;    // CUDA runtime version, e.g. "13.0", or "none"
-  std::string optix;   // OptiX headers version built against, or "none"
-  std::string cpu;     // CPU model and thread count
-};
-SystemInfo system_info();
-
 // Every method raycut knows, available or not, in a stable order.
 std::vector<MethodDescription> list_methods();
 // What "auto" picks on this machine.

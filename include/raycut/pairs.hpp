@@ -6,6 +6,10 @@
 //   raycut::for_each_pair(engine, Coulomb{q, energy.data()});
 //
 // Also the one CPU pair loop of the library's own methods (src/cpu/host_method.hpp).
+//
+// Engine is only declared here (detail/pair_pass.hpp): the traversal reaches a built engine
+// through detail::PairPassAccess, defined in the library, so this header and the CPU methods
+// including it do not depend on the Engine class. Callers include <raycut/engine.hpp> to build one.
 #pragma once
 
 #include <cstddef>
@@ -16,7 +20,7 @@
 #include "raycut/detail/host_threads.hpp"
 #include "raycut/detail/images.hpp"
 #include "raycut/detail/pair_pass.hpp"
-#include "raycut/engine.hpp"
+#include "raycut/error.hpp"
 #include "raycut/kernels.hpp"
 #include "raycut/predicate.hpp"
 
@@ -119,20 +123,6 @@ void run_host_pass(const PairPass& pass, const Walk& walk, const F& f) {
   });
 }
 
-// The traversal view of a built engine: what for_each_pair (here and in cuda/pairs.cuh) runs a
-// caller's functor through. Internal: it follows the methods' internals.
-struct PairPassAccess {
-  static PairPass of(const Engine& engine) { return engine.pair_pass(); }
-};
-
-// What methods without a pass for the caller's functors (OptiX) answer.
-inline Error no_pair_pass(const std::string& method) {
-  return Error(ErrorCode::unsupported,
-               "method '" + method +
-                   "' runs only its built-in kernels (OptiX programs are compiled ahead): use "
-                   "grid, grid-paper, brute-force-gpu or a CPU method for your functor");
-}
-
 // A HostPass's function-pointer walk as a walk callable.
 struct HostPassWalk {
   const HostPass& pass;
@@ -154,11 +144,10 @@ template <class F>
 void for_each_pair(const Engine& engine, const F& f) {
   static_assert(detail::check_functor<F>(), "raycut::for_each_pair: see the messages above");
   const detail::PairPass pass = detail::PairPassAccess::of(engine);
-  if (pass.kind == detail::PassKind::none && engine.size() == 0) return;
-  if (pass.kind == detail::PassKind::none) throw detail::no_pair_pass(engine.method());
+  if (pass.kind == detail::PassKind::none) return;  // an engine over no points
   if (pass.kind != detail::PassKind::host)
     throw Error(ErrorCode::unsupported,
-                "raycut::for_each_pair: method '" + engine.method() +
+                "raycut::for_each_pair: method '" + std::string(pass.method) +
                     "' works on the GPU: use raycut::cuda::for_each_pair from "
                     "<raycut/cuda/pairs.cuh>, compiled by nvcc");
   detail::run_host_pass(pass, detail::HostPassWalk{pass.host}, f);

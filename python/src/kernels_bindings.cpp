@@ -13,6 +13,7 @@
 #include "bindings.hpp"
 #include "errors.hpp"
 #include "raycut/kernels.hpp"
+#include "raycut/tools/device_array.hpp"
 
 namespace raycut_py {
 

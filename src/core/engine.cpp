@@ -484,8 +484,17 @@ detail::PairPass Engine::pair_pass() const {
     throw Error(ErrorCode::invalid_argument, "for_each_pair() called before Engine::build()");
   if (size_ == 0) return {};
   detail::PairPass pass = m.pair_pass();
+  if (pass.kind == detail::PassKind::none)
+    throw Error(ErrorCode::unsupported,
+                "method '" + method_ +
+                    "' runs only its built-in kernels (OptiX programs are compiled ahead): use "
+                    "grid, grid-paper, brute-force-gpu or a CPU method for your functor");
   pass.method = method_.c_str();
   return pass;
+}
+
+detail::PairPass detail::PairPassAccess::of(const Engine& engine) {
+  return engine.pair_pass();
 }
 
 // ---- list buffers ------------------------------------------------------------------------------

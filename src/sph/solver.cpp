@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "raycut/error.hpp"
+#include "raycut/tools/device_array.hpp"
 #include "sph/host_steps.hpp"
 #if defined(RAYCUT_HAVE_CUDA)
 #include "sph/device_steps.hpp"

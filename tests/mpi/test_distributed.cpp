@@ -30,6 +30,7 @@
 #include "periodic_oracle.hpp"
 #include "raycut/mpi/distributed.hpp"
 #include "raycut/mpi/pairs.hpp"
+#include "raycut/tools/device_array.hpp"
 
 namespace {
 

@@ -17,6 +17,7 @@
 #include "raycut/engine.hpp"
 #include "raycut/mpi/distributed.hpp"
 #include "raycut/mpi/pairs.cuh"
+#include "raycut/tools/device_array.hpp"
 
 namespace {
 

@@ -37,9 +37,8 @@ void for_each_pair(const Engine& engine, const F& f, cudaStream_t stream = nullp
   const detail::PairPass pass = raycut::detail::PairPassAccess::of(engine);
   if (!stream) stream = static_cast<cudaStream_t>(engine.stream());
   switch (pass.kind) {
-    case detail::PassKind::none:
-      if (engine.size() == 0) return;
-      throw detail::no_pair_pass(engine.method());
+    case detail::PassKind::none:  // an engine over no points
+      return;
     case detail::PassKind::host:
       raycut::for_each_pair(engine, f);
       return;

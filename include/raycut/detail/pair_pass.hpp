@@ -9,6 +9,10 @@
 
 #include "raycut/detail/cell_grid.hpp"
 
+namespace raycut {
+class Engine;
+}  // namespace raycut
+
 namespace raycut::detail {
 
 enum class PassKind {
@@ -167,6 +171,14 @@ struct PairPass {
   BruteForcePass brute_force;
   GridPaperPass grid_paper;
   GridPass grid;
+};
+
+// The traversal view of a built engine: what for_each_pair (pairs.hpp, cuda/pairs.cuh) runs a
+// caller's functor through. Kind none: an engine over no points. Throws Error(invalid_argument)
+// for an engine not built, and Error(unsupported) for a method without a pass for a caller's
+// functor (the OptiX methods).
+struct PairPassAccess {
+  static PairPass of(const Engine& engine);
 };
 
 }  // namespace raycut::detail

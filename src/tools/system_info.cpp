@@ -1,37 +1,15 @@
-// Device copies of positions for host-only callers, and what a benchmark ran on.
+// SystemInfo: the CPU from /proc, the GPU and runtime from the library's device services.
+#include "raycut/tools/system_info.hpp"
+
 #include <cctype>
 #include <fstream>
 #include <sstream>
 #include <string>
 #include <thread>
-#include <utility>
 
 #include "core/device_services.hpp"
-#include "raycut/engine.hpp"
 
 namespace raycut {
-
-DeviceArray::DeviceArray(const std::vector<float>& values) : size_(values.size()) {
-  const detail::DeviceServices* device = detail::device_services();
-  if (!device)
-    throw Error(ErrorCode::unsupported, "device arrays need CUDA; raycut was built without it");
-  if (size_ > 0)
-    data_ =
-        static_cast<float*>(device->upload(values.data(), values.size() * sizeof(float)).release());
-}
-
-DeviceArray::~DeviceArray() {
-  if (data_) detail::device_services()->free(data_);  // data_ was made by the same services
-}
-
-DeviceArray::DeviceArray(DeviceArray&& o) noexcept
-    : data_(std::exchange(o.data_, nullptr)), size_(std::exchange(o.size_, 0)) {}
-
-DeviceArray& DeviceArray::operator=(DeviceArray&& o) noexcept {
-  std::swap(data_, o.data_);
-  std::swap(size_, o.size_);
-  return *this;
-}
 
 namespace {
 
