@@ -16,6 +16,8 @@ The pair search reads the positions as float32 (the library's predicate decides 
 takes no gradient: ``vectors`` computes ``x[j] - x[i] + S @ cell`` from the caller's own arrays.
 Under ``jax.vmap`` (positions (B, N, 3), and a cell per system or one for all) the B systems
 are searched in one call as a batch of the library's, each with its own K slots and count.
+Systems of different sizes go in one ragged batch instead: ``batch`` (N,) gives each particle's
+system (sorted), with a cell per system; the pairs come back in one list with global indices.
 """
 from __future__ import annotations
 
@@ -29,14 +31,19 @@ import numpy as np
 from . import _arrays
 
 _TARGET = "raycut_neighbor_list"
+_RAGGED_TARGET = "raycut_ragged_neighbor_list"
 LIBRARY = _arrays.built_library("_jax_ffi", "pyraycut.jax's custom call is", "jax",
                                 "RAYCUT_BUILD_JAX")
-_handler = ctypes.cdll.LoadLibrary(LIBRARY).RaycutNeighborList
-jax.ffi.register_ffi_target(_TARGET, jax.ffi.pycapsule(_handler), platform="cpu")
+_library = ctypes.cdll.LoadLibrary(LIBRARY)
+jax.ffi.register_ffi_target(_TARGET, jax.ffi.pycapsule(_library.RaycutNeighborList),
+                            platform="cpu")
+jax.ffi.register_ffi_target(_RAGGED_TARGET,
+                            jax.ffi.pycapsule(_library.RaycutRaggedNeighborList), platform="cpu")
 
 
 def neighbor_list(positions: Any, cutoff: float, cell: Any = None, pbc: Any = None,
-                  max_pairs: Optional[int] = None, half: bool = False) -> tuple:
+                  max_pairs: Optional[int] = None, half: bool = False, batch: Any = None,
+                  num_systems: Optional[int] = None) -> tuple:
     """Every pair (i, j, S) with ``|x[j] - x[i] + S @ cell| < cutoff``, as pyraycut.neighbor_list
     finds them, in arrays of the static size ``max_pairs`` (K):
 
@@ -48,6 +55,13 @@ def neighbor_list(positions: Any, cutoff: float, cell: Any = None, pbc: Any = No
     ``positions`` (N, 3); ``cell`` (3, 3) (rows: lattice vectors) or 3 edge lengths, None: open;
     ``pbc`` 3 bools (default: all, with a cell). ``half``: each pair once. ``jax.vmap`` over
     positions (and cells) gives every system its own K slots and count, in one search.
+
+    Ragged batches (systems of different sizes, one search): ``batch`` (N,) int32, the system
+    index of each particle, sorted (torch_cluster's convention; may be traced under ``jit``);
+    ``cell`` (B, 3, 3) (or (B, 3) edges) per system, or one (3, 3) for all; ``pbc`` (B, 3) or 3
+    bools. B is static: the cell's leading axis, or ``num_systems`` when the cell is shared or
+    None. The outputs are one list as above, with global indices (padding ``i = j = N``); an
+    unsorted batch or a system index >= B is an error of the call.
     """
     if max_pairs is None or int(max_pairs) != max_pairs or max_pairs < 0:
         raise ValueError(f"pyraycut.jax.neighbor_list needs max_pairs, a whole number >= 0 (the "
@@ -55,6 +69,11 @@ def neighbor_list(positions: Any, cutoff: float, cell: Any = None, pbc: Any = No
     x = jnp.asarray(jax.lax.stop_gradient(positions), jnp.float32)
     if x.ndim != 2 or x.shape[1] != 3:
         raise ValueError(f"positions must have shape (N, 3), got {x.shape}")
+    if batch is not None:
+        return _ragged_neighbor_list(x, cutoff, cell, pbc, int(max_pairs), half, batch,
+                                     num_systems)
+    if num_systems is not None:
+        raise ValueError(f"num_systems={num_systems!r} needs batch (a ragged batch)")
     c = _cell(cell)
     c = jnp.zeros((3, 3), jnp.float32) if c is None else jax.lax.stop_gradient(c)
     if pbc is None:
@@ -70,6 +89,51 @@ def neighbor_list(positions: Any, cutoff: float, cell: Any = None, pbc: Any = No
     return tuple(call(x, c, flags, cutoff=np.float32(cutoff), half=np.int64(bool(half))))
 
 
+def _ragged_neighbor_list(x, cutoff, cell, pbc, k, half, batch, num_systems) -> tuple:
+    system_of = jnp.asarray(batch)
+    if system_of.shape != (x.shape[0],) or not jnp.issubdtype(system_of.dtype, jnp.integer):
+        raise ValueError(f"batch must be (N,) integers with N = {x.shape[0]} (the positions'), "
+                         f"got shape {system_of.shape} of {system_of.dtype}")
+    c = _cells(cell)
+    if c is not None and c.ndim == 3:
+        if num_systems is not None and num_systems != c.shape[0]:
+            raise ValueError(f"num_systems={num_systems!r} differs from the cell's {c.shape[0]} "
+                             f"systems (cell shape {c.shape})")
+        systems = c.shape[0]
+    elif num_systems is None or int(num_systems) != num_systems or num_systems < 0:
+        raise ValueError(f"a ragged batch with a shared cell (or none) needs num_systems, a whole "
+                         f"number >= 0 (the static B), got {num_systems!r}")
+    else:
+        systems = int(num_systems)
+    c = jnp.zeros((3, 3), jnp.float32) if c is None else jax.lax.stop_gradient(c)
+    c = jnp.broadcast_to(c, (systems, 3, 3))
+    if pbc is None:
+        flags = jnp.full((systems, 3), cell is not None)
+    else:
+        flags = jnp.asarray(pbc, bool)
+        if flags.shape not in ((3,), (systems, 3)):
+            raise ValueError(f"pbc must be 3 bools or ({systems}, 3) (one row per system), got "
+                             f"shape {flags.shape}")
+        flags = jnp.broadcast_to(flags, (systems, 3))
+    shapes = (jax.ShapeDtypeStruct((k,), jnp.int32), jax.ShapeDtypeStruct((k,), jnp.int32),
+              jax.ShapeDtypeStruct((k, 3), jnp.int32), jax.ShapeDtypeStruct((), jnp.int32))
+    call = jax.ffi.ffi_call(_RAGGED_TARGET, shapes)
+    return tuple(call(x, system_of.astype(jnp.int32), c, flags, cutoff=np.float32(cutoff),
+                      half=np.int64(bool(half))))
+
+
+def _cells(cell: Any) -> Any:
+    """One cell (3, 3), or a cell per system (B, 3, 3) (from (B, 3) edges); None: open."""
+    if cell is None:
+        return None
+    c = jnp.asarray(cell)
+    if c.ndim == 2 and c.shape != (3, 3) and c.shape[1] == 3:
+        return jax.vmap(jnp.diag)(c)
+    if c.ndim == 3 and c.shape[1:] == (3, 3):
+        return c
+    return _cell(c)
+
+
 def _cell(cell: Any) -> Any:
     if cell is None:
         return None
@@ -82,12 +146,22 @@ def _cell(cell: Any) -> Any:
     return c
 
 
-def vectors(positions: Any, i: Any, j: Any, shifts: Any, cell: Any = None) -> Any:
+def vectors(positions: Any, i: Any, j: Any, shifts: Any, cell: Any = None,
+            batch: Any = None) -> Any:
     """``r = x[j] - x[i] + S @ cell`` for the pairs of ``neighbor_list`` (0 for padding), in the
-    positions' dtype, differentiable with respect to positions and cell."""
+    positions' dtype, differentiable with respect to positions and cell. A ragged batch: pass
+    the same ``batch``, and ``cell`` (B, 3, 3) gives each pair its system's cell."""
     x = jnp.concatenate([positions, jnp.zeros((1, 3), positions.dtype)])  # padding: i = j = N
     r = x[j] - x[i]
-    c = _cell(cell)
+    c = _cell(cell) if batch is None else _cells(cell)
     if c is None:
         return r
-    return r + shifts.astype(r.dtype) @ c.astype(r.dtype)
+    if c.ndim == 2:
+        return r + shifts.astype(r.dtype) @ c.astype(r.dtype)
+    system_of = jnp.asarray(batch)
+    if system_of.shape != (positions.shape[0],):
+        raise ValueError(f"batch must have shape ({positions.shape[0]},) (one system index per "
+                         f"particle), got {system_of.shape}")
+    # Padding (i = N) reads system 0's cell; its shifts are 0.
+    pair_cells = c.astype(r.dtype)[jnp.concatenate([system_of, jnp.zeros((1,), system_of.dtype)])[i]]
+    return r + jnp.einsum("pk,pkl->pl", shifts.astype(r.dtype), pair_cells)

@@ -9,6 +9,10 @@
 // Results: i, j (K,) int32, S (K, 3) int32, count () int32 (per system under vmap): the first
 // min(count, K) pairs, then padding (i = j = N, S = 0). count > K: the list was cut (the caller
 // grows K).
+//
+// RaycutNeighborListRagged: a ragged batch, positions (N, 3) with batch (N,) int32 (the sorted
+// system index of each particle), cell (B, 3, 3) and pbc (B, 3); the same results over all
+// systems at once, with global indices (padding i = j = N).
 #include <algorithm>
 #include <cstdint>
 #include <string>
@@ -68,6 +72,37 @@ void write_systems(const raycut::NeighbourListBuffer& list, std::size_t systems,
   }
 }
 
+// Reads B cells (float32 or float64) and pbc flags into one box per system.
+ffi::Error read_boxes(const ffi::AnyBuffer& cell, const ffi::Buffer<ffi::PRED>& pbc,
+                      std::vector<raycut::Box>& boxes) {
+  if (cell.element_type() == ffi::F64) {
+    read_cells<double>(cell, boxes);
+  } else if (cell.element_type() == ffi::F32) {
+    read_cells<float>(cell, boxes);
+  } else {
+    return ffi::Error::InvalidArgument("raycut.jax.neighbor_list: cell must be float32 or float64");
+  }
+  for (std::size_t b = 0; b < boxes.size(); ++b)
+    for (int r = 0; r < 3; ++r) boxes[b].pbc[r] = pbc.typed_data()[3 * b + r];
+  return ffi::Error::Success();
+}
+
+// One engine build over all systems and the list (sorted by i, global indices) in work.list.
+ffi::Error search(const float* positions, std::size_t n, float cutoff, std::int64_t half,
+                  const raycut::Systems& systems, HostWork& work) {
+  try {
+    work.engine.build({positions, n, raycut::MemorySpace::host}, cutoff, systems);
+    raycut::ListOptions options;
+    options.half = half != 0;
+    options.shifts = true;
+    options.coo = true;
+    work.engine.neighbours(work.list, options);
+  } catch (const raycut::Error& e) {
+    return ffi::Error::InvalidArgument(std::string("raycut.jax.neighbor_list: ") + e.what());
+  }
+  return ffi::Error::Success();
+}
+
 // Leading axes (jax.vmap with vmap_method="broadcast_all") are a batch of B systems of N points
 // each, searched in one engine build (raycut::Systems offsets and one box per system), not a
 // loop.
@@ -88,15 +123,7 @@ ffi::Error neighbor_list(ffi::Buffer<ffi::F32> positions, ffi::AnyBuffer cell,
         "raycut.jax.neighbor_list: cell must be (..., 3, 3) and pbc (..., 3), with the "
         "positions' leading axes");
   std::vector<raycut::Box> boxes(systems);
-  if (cell.element_type() == ffi::F64) {
-    read_cells<double>(cell, boxes);
-  } else if (cell.element_type() == ffi::F32) {
-    read_cells<float>(cell, boxes);
-  } else {
-    return ffi::Error::InvalidArgument("raycut.jax.neighbor_list: cell must be float32 or float64");
-  }
-  for (std::size_t b = 0; b < systems; ++b)
-    for (int r = 0; r < 3; ++r) boxes[b].pbc[r] = pbc.typed_data()[3 * b + r];
+  if (ffi::Error error = read_boxes(cell, pbc, boxes); error.failure()) return error;
   raycut::Systems batch;
   if (systems == 1) {
     batch.box = boxes[0];
@@ -106,20 +133,70 @@ ffi::Error neighbor_list(ffi::Buffer<ffi::F32> positions, ffi::AnyBuffer cell,
     for (std::size_t b = 0; b <= systems; ++b) batch.offsets[b] = b * n;
   }
   HostWork& work = host_work();
-  try {
-    work.engine.build({positions.typed_data(), systems * n, raycut::MemorySpace::host}, cutoff,
-                      batch);
-    raycut::ListOptions options;
-    options.half = half != 0;
-    options.shifts = true;
-    options.coo = true;
-    work.engine.neighbours(work.list, options);
-  } catch (const raycut::Error& e) {
-    return ffi::Error::InvalidArgument(std::string("raycut.jax.neighbor_list: ") + e.what());
-  }
+  if (ffi::Error error = search(positions.typed_data(), systems * n, cutoff, half, batch, work);
+      error.failure())
+    return error;
   if (systems > 0)
     write_systems(work.list, systems, n, i->element_count() / systems, i->typed_data(),
                   j->typed_data(), shifts->typed_data(), count->typed_data());
+  return ffi::Error::Success();
+}
+
+// A ragged batch: particle p belongs to system batch[p] (sorted, each < B, B = the cells'
+// count), turned into the library's offsets, and the systems searched in one build.
+ffi::Error ragged_neighbor_list(ffi::Buffer<ffi::F32> positions, ffi::Buffer<ffi::S32> batch,
+                                ffi::AnyBuffer cell, ffi::Buffer<ffi::PRED> pbc, float cutoff,
+                                std::int64_t half, ffi::ResultBuffer<ffi::S32> i,
+                                ffi::ResultBuffer<ffi::S32> j, ffi::ResultBuffer<ffi::S32> shifts,
+                                ffi::ResultBuffer<ffi::S32> count) {
+  const auto dims = positions.dimensions();
+  if (dims.size() != 2 || dims[1] != 3)
+    return ffi::Error::InvalidArgument(
+        "raycut.jax.neighbor_list: positions must have shape (N, 3) with batch");
+  const auto n = static_cast<std::size_t>(dims[0]);
+  const std::size_t systems = cell.element_count() / 9;
+  if (batch.element_count() != n || cell.element_count() != 9 * systems ||
+      pbc.element_count() != 3 * systems)
+    return ffi::Error::InvalidArgument(
+        "raycut.jax.neighbor_list: batch must be (N,), cell (B, 3, 3) and pbc (B, 3), got batch "
+        "of " +
+        std::to_string(batch.element_count()) + " entries for N = " + std::to_string(n) + ", " +
+        std::to_string(cell.element_count()) + " cell entries and " +
+        std::to_string(pbc.element_count()) + " pbc entries");
+  raycut::Systems ragged;
+  ragged.offsets.assign(systems + 1, 0);
+  const std::int32_t* system_of = batch.typed_data();
+  for (std::size_t p = 0; p < n; ++p) {
+    const std::int32_t s = system_of[p];
+    if (s < 0 || static_cast<std::size_t>(s) >= systems)
+      return ffi::Error::InvalidArgument(
+          "raycut.jax.neighbor_list: batch[" + std::to_string(p) + "] = " + std::to_string(s) +
+          " is not a system index in [0, " + std::to_string(systems) + ") (B from the cell)");
+    if (p > 0 && s < system_of[p - 1])
+      return ffi::Error::InvalidArgument(
+          "raycut.jax.neighbor_list: batch must be sorted (non-decreasing), but batch[" +
+          std::to_string(p) + "] = " + std::to_string(s) + " < batch[" + std::to_string(p - 1) +
+          "] = " + std::to_string(system_of[p - 1]));
+    ++ragged.offsets[static_cast<std::size_t>(s) + 1];  // sizes, summed into offsets below
+  }
+  for (std::size_t s = 0; s < systems; ++s) ragged.offsets[s + 1] += ragged.offsets[s];
+  ragged.boxes.resize(systems);
+  if (ffi::Error error = read_boxes(cell, pbc, ragged.boxes); error.failure()) return error;
+  const std::size_t k = i->element_count();
+  if (n == 0) {  // no particles (B may be 0): no search, all padding
+    std::fill_n(i->typed_data(), k, 0);
+    std::fill_n(j->typed_data(), k, 0);
+    std::fill_n(shifts->typed_data(), 3 * k, 0);
+    *count->typed_data() = 0;
+    return ffi::Error::Success();
+  }
+  HostWork& work = host_work();
+  if (ffi::Error error = search(positions.typed_data(), n, cutoff, half, ragged, work);
+      error.failure())
+    return error;
+  // One system of N points in write_systems' terms: global indices, padding i = j = N.
+  write_systems(work.list, 1, n, k, i->typed_data(), j->typed_data(), shifts->typed_data(),
+                count->typed_data());
   return ffi::Error::Success();
 }
 
@@ -130,6 +207,20 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(RaycutNeighborList, neighbor_list,
                                   .Arg<ffi::Buffer<ffi::F32>>()   // positions (N, 3)
                                   .Arg<ffi::AnyBuffer>()          // cell (3, 3)
                                   .Arg<ffi::Buffer<ffi::PRED>>()  // pbc (3,)
+                                  .Attr<float>("cutoff")
+                                  .Attr<std::int64_t>("half")
+                                  .Ret<ffi::Buffer<ffi::S32>>()  // i (K,)
+                                  .Ret<ffi::Buffer<ffi::S32>>()  // j (K,)
+                                  .Ret<ffi::Buffer<ffi::S32>>()  // S (K, 3)
+                                  .Ret<ffi::Buffer<ffi::S32>>()  // count ()
+);
+
+XLA_FFI_DEFINE_HANDLER_SYMBOL(RaycutRaggedNeighborList, ragged_neighbor_list,
+                              ffi::Ffi::Bind()
+                                  .Arg<ffi::Buffer<ffi::F32>>()   // positions (N, 3)
+                                  .Arg<ffi::Buffer<ffi::S32>>()   // batch (N,)
+                                  .Arg<ffi::AnyBuffer>()          // cell (B, 3, 3)
+                                  .Arg<ffi::Buffer<ffi::PRED>>()  // pbc (B, 3)
                                   .Attr<float>("cutoff")
                                   .Attr<std::int64_t>("half")
                                   .Ret<ffi::Buffer<ffi::S32>>()  // i (K,)

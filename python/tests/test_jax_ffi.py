@@ -93,3 +93,116 @@ def test_vmap_is_one_batched_search_with_per_system_outputs():
         np.testing.assert_allclose(grads[b], jax.grad(energy)(jnp.asarray(xs[b]),
                                                                jnp.asarray(cells[b])),
                                    rtol=1e-5, atol=1e-5)
+
+
+# A ragged batch: 3 systems of 22, 0 and 1 particles, each with its own triclinic cell (the last
+# one small and a slab: the single particle meets its own images).
+RAGGED_SIZES = (22, 0, 1)
+RAGGED_CELLS = np.stack([CELL, 1.1 * CELL, 0.35 * TRICLINIC]).astype(np.float32)
+RAGGED_PBC = np.array([[True] * 3, [True] * 3, [True, True, False]])
+
+
+def ragged_system():
+    xs = [inside_cell(n, RAGGED_CELLS[b], RAGGED_PBC[b], seed=40 + b)
+          for b, n in enumerate(RAGGED_SIZES)]
+    batch = np.repeat(np.arange(len(RAGGED_SIZES), dtype=np.int32), RAGGED_SIZES)
+    return np.concatenate(xs).astype(np.float32), batch
+
+
+def ragged_reference(x, batch):
+    """The float64 oracle per system, in global indices: (inside, edge) sets of triples."""
+    inside, edge = set(), set()
+    offsets = np.concatenate([[0], np.cumsum(RAGGED_SIZES)])
+    for b in range(len(RAGGED_SIZES)):
+        part = x[offsets[b]:offsets[b + 1]]
+        assert np.all(batch[offsets[b]:offsets[b + 1]] == b)
+        if len(part) == 0:
+            continue
+        got = reference(part, part, CUTOFF, RAGGED_CELLS[b], tuple(RAGGED_PBC[b]))
+        for ours, theirs in zip((inside, edge), got):
+            ours |= {(i + offsets[b], j + offsets[b]) + tuple(S) for i, j, *S in theirs}
+    return inside, edge
+
+
+def test_ragged_batch_under_jit_matches_brute_force():
+    x, batch = ragged_system()
+    n_points = len(x)
+    listed = jax.jit(lambda x, b, c, p, half: rjax.neighbor_list(
+        x, CUTOFF, cell=c, pbc=p, batch=b, max_pairs=1500, half=half), static_argnums=4)
+    i, j, S, count = (np.asarray(a) for a in listed(x, batch, RAGGED_CELLS, RAGGED_PBC, False))
+    n = int(count)
+    assert 0 < n < 1500 and i.shape == (1500,) and S.shape == (1500, 3)
+    inside, edge = ragged_reference(x, batch)
+    found = triples(i[:n], j[:n], S[:n])
+    assert len(found) == n and found - edge == inside - edge
+    assert np.all(np.diff(i[:n]) >= 0) and np.all(batch[i[:n]] == batch[j[:n]])
+    assert any(a == b == n_points - 1 for a, b in zip(i[:n], j[:n]))  # the 1-particle images
+    assert np.all(i[n:] == n_points) and np.all(j[n:] == n_points) and not S[n:].any()
+    # Half: each pair once, every one of them in the full list.
+    hi, hj, hS, hcount = (np.asarray(a) for a in listed(x, batch, RAGGED_CELLS, RAGGED_PBC, True))
+    h = int(hcount)
+    assert 2 * h == n and triples(hi[:h], hj[:h], hS[:h]) <= found
+    # One short: count says the list was cut.
+    assert int(rjax.neighbor_list(x, CUTOFF, cell=RAGGED_CELLS, pbc=RAGGED_PBC, batch=batch,
+                                  max_pairs=n - 1)[3]) == n
+
+
+def test_ragged_batch_with_a_shared_cell_needs_num_systems():
+    x, batch = ragged_system()
+    with pytest.raises(ValueError, match="num_systems"):
+        rjax.neighbor_list(x, CUTOFF, cell=CELL, batch=batch, max_pairs=10)
+    with pytest.raises(ValueError, match="num_systems=2 differs"):
+        rjax.neighbor_list(x, CUTOFF, cell=RAGGED_CELLS, batch=batch, num_systems=2,
+                           max_pairs=10)
+    i, j, S, count = (np.asarray(a) for a in rjax.neighbor_list(
+        x, CUTOFF, cell=CELL, batch=batch, num_systems=3, max_pairs=1500))
+    n = int(count)
+    expected = {(a, b) + tuple(s) for a, b, s in zip(*[np.asarray(v) for v in rjax.neighbor_list(
+        x[:22], CUTOFF, cell=CELL, max_pairs=1500)[:3]]) if a < 22}
+    single = rjax.neighbor_list(x[22:], CUTOFF, cell=CELL, max_pairs=1500)
+    expected |= {(22, 22) + tuple(s) for s in np.asarray(single[2])[:int(single[3])]}
+    assert triples(i[:n], j[:n], S[:n]) == expected
+
+
+def test_ragged_batch_errors_from_the_handler():
+    x, batch = ragged_system()
+    call = jax.jit(lambda b: rjax.neighbor_list(x, CUTOFF, cell=RAGGED_CELLS, batch=b,
+                                                max_pairs=100)[3])
+    with pytest.raises(Exception, match="sorted"):
+        call(batch[::-1].copy()).block_until_ready()
+    with pytest.raises(Exception, match=r"batch\[22\] = 3 is not a system index in \[0, 3\)"):
+        call(np.where(batch == 2, 3, batch).astype(np.int32)).block_until_ready()
+    with pytest.raises(ValueError, match="batch must be"):
+        rjax.neighbor_list(x, CUTOFF, cell=RAGGED_CELLS, batch=batch[:-1], max_pairs=10)
+
+
+def ragged_energy(x, cells, batch):
+    i, j, S, count = rjax.neighbor_list(x, CUTOFF, cell=cells, pbc=RAGGED_PBC, batch=batch,
+                                        max_pairs=1500)
+    d = jnp.linalg.norm(rjax.vectors(x, i, j, S, cells, batch=batch)
+                        + (jnp.arange(len(i)) >= count)[:, None], axis=1)
+    e = (CUTOFF - d) ** 3 * jnp.cos(3 * d)
+    return jnp.sum(jnp.where(jnp.arange(len(i)) < count, e, 0.0))
+
+
+def test_grad_through_a_ragged_batch():
+    x, batch = ragged_system()
+    x, cells = jnp.asarray(x), jnp.asarray(RAGGED_CELLS)
+    gx, gc = jax.jit(jax.grad(ragged_energy, argnums=(0, 1)))(x, cells, batch)
+    assert float(jnp.abs(gx).max()) > 0 and float(jnp.abs(gc[2]).max()) > 0
+    assert not np.asarray(gc[1]).any()  # the empty system
+    # Each system's part is the gradient of its own energy (the single-system path).
+    for b, (lo, hi) in enumerate([(0, 22), (23, 23)]):
+        if b == 0:
+            one = jax.grad(energy, argnums=(0, 1))(x[lo:hi], cells[0])
+            np.testing.assert_allclose(gx[lo:hi], one[0], rtol=1e-4, atol=1e-4)
+            np.testing.assert_allclose(gc[0], one[1], rtol=1e-4, atol=1e-4)
+    h = 1e-3
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        u = jnp.asarray(rng.normal(size=x.shape), jnp.float32)
+        v = jnp.asarray(rng.normal(size=cells.shape), jnp.float32)
+        numeric = (ragged_energy(x + h * u, cells + h * v, batch)
+                   - ragged_energy(x - h * u, cells - h * v, batch)) / (2 * h)
+        analytic = jnp.sum(gx * u) + jnp.sum(gc * v)
+        assert abs(float(numeric) - float(analytic)) <= 2e-2 * max(1.0, abs(float(analytic)))
