@@ -163,5 +163,6 @@ def vectors(positions: Any, i: Any, j: Any, shifts: Any, cell: Any = None,
         raise ValueError(f"batch must have shape ({positions.shape[0]},) (one system index per "
                          f"particle), got {system_of.shape}")
     # Padding (i = N) reads system 0's cell; its shifts are 0.
-    pair_cells = c.astype(r.dtype)[jnp.concatenate([system_of, jnp.zeros((1,), system_of.dtype)])[i]]
+    pair_systems = jnp.concatenate([system_of, jnp.zeros((1,), system_of.dtype)])[i]
+    pair_cells = c.astype(r.dtype)[pair_systems]
     return r + jnp.einsum("pk,pkl->pl", shifts.astype(r.dtype), pair_cells)
