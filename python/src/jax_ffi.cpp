@@ -10,7 +10,7 @@
 // min(count, K) pairs, then padding (i = j = N, S = 0). count > K: the list was cut (the caller
 // grows K).
 //
-// RaycutNeighborListRagged: a ragged batch, positions (N, 3) with batch (N,) int32 (the sorted
+// RaycutRaggedNeighborList: a ragged batch, positions (N, 3) with batch (N,) int32 (the sorted
 // system index of each particle), cell (B, 3, 3) and pbc (B, 3); the same results over all
 // systems at once, with global indices (padding i = j = N).
 #include <algorithm>

@@ -162,6 +162,12 @@ def test_ragged_batch_with_a_shared_cell_needs_num_systems():
     single = rjax.neighbor_list(x[22:], CUTOFF, cell=CELL, max_pairs=1500)
     expected |= {(22, 22) + tuple(s) for s in np.asarray(single[2])[:int(single[3])]}
     assert triples(i[:n], j[:n], S[:n]) == expected
+    # Open systems (no cell): the float64 brute force per system, no pair across systems.
+    oi, oj, oS, ocount = (np.asarray(a) for a in rjax.neighbor_list(
+        x, CUTOFF, batch=batch, num_systems=3, max_pairs=1500))
+    m = int(ocount)
+    inside, edge = reference(x[:22], x[:22], CUTOFF)  # the 1-particle system has no pair
+    assert triples(oi[:m], oj[:m], oS[:m]) - edge == inside - edge and not oS.any()
     # No particles at all (B = 2): all padding, i = j = N = 0.
     ei, ej, _, ecount = rjax.neighbor_list(np.zeros((0, 3), np.float32), CUTOFF, cell=CELL,
                                            batch=np.zeros(0, np.int32), num_systems=2,
