@@ -1,0 +1,118 @@
+// Stream-ordered pair lists on the GPU, for the small systems and batches that machine-learned
+// potentials and MD step loops run every step: no host synchronisation, no allocation outside
+// the context's memory resource, a static capacity with the true count written on the device,
+// and a fixed order of pairs, so that a CUDA graph can capture a call and its replays equal the
+// eager results bit for bit (docs/streams.md). Host-only header: no CUDA types.
+//
+//   raycut::StaticPairBuffer pairs(capacity, ctx);
+//   raycut::list_pairs_small_systems(ctx, systems, cutoff, {}, pairs.view(n));
+//   // ... more work on ctx.stream; later, where the host may wait:
+//   std::int64_t count = raycut::read_pair_count(ctx, pairs.count());
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "raycut/context.hpp"
+
+namespace raycut {
+
+enum class Scalar { float32, float64 };
+
+// Particles and their periodic systems, every array in memory of the current CUDA device.
+struct DeviceSystems {
+  const void* positions = nullptr;  // (size, 3) row-major, `scalar`; may be unwrapped
+  Scalar scalar = Scalar::float32;  // of positions and cells
+  std::size_t size = 0;             // N
+  // (cell_count, 3, 3), rows the lattice vectors a, b, c, `scalar`; cell_count is 1 (every
+  // system) or one per system. Null: open systems.
+  const void* cells = nullptr;
+  std::size_t cell_count = 0;
+  // (pbc_count, 3): which rows repeat, 1 or one per system. Null with cells: all three.
+  const bool* pbc = nullptr;
+  std::size_t pbc_count = 0;
+  // (N,) the system of each particle, sorted (torch_geometric's `batch`); null: one system.
+  // Pairs never cross systems; indices stay global.
+  const std::int64_t* batch = nullptr;
+};
+
+struct PairOptions {
+  // Each pair once: of (i, j, S) and (j, i, -S), the one with i < j, or i == j and S
+  // lexicographically positive.
+  bool half = false;
+};
+
+// Where a pass writes its pairs: `capacity` entries of i, j (int64) and S (3 int32, or null),
+// and the true count (one int64), all device memory. Entries [count, capacity) are padding:
+// i = j = pad_index, S = 0. The pairs are valid iff 0 <= count <= capacity; a count above the
+// capacity says how many there are (the first `capacity` in the fixed order are written). A
+// negative count is bad input, named by read_pair_count: one of the codes below.
+struct StaticPairs {
+  std::int64_t* i = nullptr;
+  std::int64_t* j = nullptr;
+  std::int32_t* shifts = nullptr;
+  std::int64_t* count = nullptr;
+  std::size_t capacity = 0;
+  std::int64_t pad_index = 0;
+};
+
+// What a negative count says.
+inline constexpr std::int64_t count_non_finite_position = -1;
+inline constexpr std::int64_t count_unsorted_batch = -2;
+inline constexpr std::int64_t count_invalid_cell = -3;  // non-finite, or periodic rows dependent
+inline constexpr std::int64_t count_batch_out_of_range = -4;  // a system without its cell/pbc
+
+// Every pair (i, j, S) of the same system with r = x_j - x_i + S . cell, |r| < cutoff, except
+// (i, i, 0), decided in double precision from the positions as given (float32 or float64): the
+// float64 answer at every box size, with no band. Brute force within each system in one pass
+// (a warp per particle), so the work is the sum over systems of n_s^2 times the images a pair
+// has: the path for systems up to a few thousand particles (docs/streams.md gives the
+// crossover). Pairs come row by row (i ascending), then by j ascending, then by S
+// lexicographically.
+//
+// Queues everything on ctx.stream and returns without waiting. Host-side argument errors
+// (cutoff not finite and positive, null arrays, counts that do not fit) throw Error before any
+// work; errors in device data show as a negative count. Error(unsupported) without CUDA.
+void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, double cutoff,
+                              const PairOptions& options, const StaticPairs& out);
+
+// The count of a finished pass, read back to the host: the one call of this header that waits
+// (for ctx.stream). Throws Error(invalid_input) naming the problem for a negative count.
+std::int64_t read_pair_count(const Context& ctx, const std::int64_t* device_count);
+
+// i, j, S and count in device memory from a context's memory resource, freed with it.
+class StaticPairBuffer {
+ public:
+  StaticPairBuffer() = default;
+  StaticPairBuffer(std::size_t capacity, const Context& ctx);
+  ~StaticPairBuffer();
+  StaticPairBuffer(StaticPairBuffer&& o) noexcept;
+  StaticPairBuffer& operator=(StaticPairBuffer&& o) noexcept;
+  StaticPairBuffer(const StaticPairBuffer&) = delete;
+  StaticPairBuffer& operator=(const StaticPairBuffer&) = delete;
+
+  std::size_t capacity() const { return capacity_; }
+  bool allocated() const { return block_ != nullptr; }
+  std::int64_t* i() const;
+  std::int64_t* j() const;
+  std::int32_t* shifts() const;
+  std::int64_t* count() const;
+  // Where a pass writes, padding with `pad_index` (N, by convention).
+  StaticPairs view(std::int64_t pad_index) const;
+
+ private:
+  void release() noexcept;
+  void* block_ = nullptr;
+  std::size_t bytes_ = 0, capacity_ = 0;
+  Context ctx_;
+};
+
+// Exact sizing on top of static capacity: runs the pass, reads the count back, and when it
+// exceeds the buffer's capacity grows the buffer (to the count plus an eighth) and runs again.
+// Returns the count. The only helper that waits; a step loop that keeps the buffer pays for
+// growth once.
+std::int64_t list_pairs_small_systems_growing(const Context& ctx, const DeviceSystems& systems,
+                                              double cutoff, const PairOptions& options,
+                                              StaticPairBuffer& buffer);
+
+}  // namespace raycut

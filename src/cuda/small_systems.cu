@@ -1,0 +1,503 @@
+// The stream-ordered small-system pair list (raycut/device_pairs.hpp): brute force within each
+// system, a warp per particle, every distance in double. Four launches and a memset per call,
+// all on the context's stream: count per row, scan, fill, pad. No host synchronisation and no
+// allocation outside the context's memory resource, so a CUDA graph captures it.
+#include <cuda_runtime.h>
+#include <cub/device/device_scan.cuh>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <utility>
+
+#include "core/validation.hpp"
+#include "raycut/detail/cuda/check.cuh"
+#include "raycut/device_pairs.hpp"
+#include "raycut/error.hpp"
+
+namespace raycut {
+namespace {
+
+constexpr int warp_size = 32;
+constexpr int block_threads = 128;  // four rows per block
+constexpr unsigned all_lanes = 0xffffffffu;
+
+struct Input {
+  const void* xyz = nullptr;
+  std::int64_t n = 0;
+  const void* cells = nullptr;
+  std::int64_t cell_count = 0;
+  const bool* pbc = nullptr;
+  std::int64_t pbc_count = 0;
+  const std::int64_t* batch = nullptr;
+  double cutoff = 0, cutoff2 = 0;
+  bool half = false;
+};
+
+struct Output {
+  std::int64_t* i = nullptr;
+  std::int64_t* j = nullptr;
+  std::int32_t* shifts = nullptr;
+  std::int64_t* count = nullptr;
+  std::int64_t capacity = 0;
+  std::int64_t pad_index = 0;
+};
+
+// What a row needs to enumerate its pairs: its system's particles, and where periodic, the
+// lattice rows and the reciprocal vectors that bound each pair's images.
+struct Frame {
+  std::int64_t lo = 0, hi = 0;  // the row's system: particles [lo, hi)
+  bool periodic[3] = {false, false, false};
+  bool any_periodic = false;
+  double row[3][3] = {};  // lattice rows (periodic ones only used)
+  // g[a]: column a of the inverse of the basis (periodic rows, open ones completed by an
+  // orthonormal complement): f_a = d . g[a] is d's coordinate along row a, and for every image
+  // r = d + S . cell, r . g[a] = f_a + S_a, so |f_a + S_a| <= |r| |g[a]| < cutoff |g[a]|.
+  double g[3][3] = {};
+  double reach[3] = {};  // cutoff |g[a]| on periodic axes, 0 on open ones
+};
+
+template <class Real>
+__device__ double load(const void* p, std::int64_t k) {
+  return static_cast<double>(static_cast<const Real*>(p)[k]);
+}
+
+__device__ double dot(const double* a, const double* b) {
+  return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+// First index in [0, n) whose batch value is > value (upper) or >= value (lower).
+__device__ std::int64_t bound(const std::int64_t* batch, std::int64_t n, std::int64_t value,
+                              bool upper) {
+  std::int64_t lo = 0, hi = n;
+  while (lo < hi) {
+    const std::int64_t mid = lo + (hi - lo) / 2;
+    if (upper ? batch[mid] <= value : batch[mid] < value)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  return lo;
+}
+
+// The row's frame, or a negative count code (raycut/device_pairs.hpp) for bad input of this row.
+template <class Real>
+__device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
+  for (int k = 0; k < 3; ++k)
+    if (!isfinite(load<Real>(in.xyz, 3 * i + k))) return int(count_non_finite_position);
+  std::int64_t system = 0;
+  f.lo = 0;
+  f.hi = in.n;
+  if (in.batch) {
+    system = in.batch[i];
+    if (i + 1 < in.n && in.batch[i + 1] < system) return int(count_unsorted_batch);
+    f.lo = bound(in.batch, in.n, system, false);
+    f.hi = bound(in.batch, in.n, system, true);
+  }
+  if (!in.cells) return 0;
+  if (system < 0 || (in.cell_count > 1 && system >= in.cell_count) ||
+      (in.pbc_count > 1 && system >= in.pbc_count))
+    return int(count_batch_out_of_range);
+  const std::int64_t c = in.cell_count > 1 ? system : 0;
+  const std::int64_t p = in.pbc_count > 1 ? system : 0;
+  for (int a = 0; a < 3; ++a) {
+    f.periodic[a] = in.pbc ? in.pbc[3 * p + a] : true;
+    f.any_periodic = f.any_periodic || f.periodic[a];
+    for (int k = 0; k < 3; ++k) f.row[a][k] = load<Real>(in.cells, 9 * c + 3 * a + k);
+  }
+  if (!f.any_periodic) return 0;
+  // The basis: periodic rows as given, open ones replaced by unit vectors orthogonal to the rest
+  // (Gram-Schmidt), so that only the periodic rows decide the images.
+  double basis[3][3], q[3][3];
+  int filled = 0;
+  for (int a = 0; a < 3; ++a) {
+    if (!f.periodic[a]) continue;
+    double w[3] = {f.row[a][0], f.row[a][1], f.row[a][2]};
+    const double length = sqrt(dot(w, w));
+    if (!isfinite(length) || length == 0) return int(count_invalid_cell);
+    for (int m = 0; m < filled; ++m) {
+      const double along = dot(f.row[a], q[m]);
+      for (int k = 0; k < 3; ++k) w[k] -= along * q[m][k];
+    }
+    const double rest = sqrt(dot(w, w));
+    if (!(rest > 1e-9 * length)) return int(count_invalid_cell);
+    for (int k = 0; k < 3; ++k) {
+      q[filled][k] = w[k] / rest;
+      basis[a][k] = f.row[a][k];
+    }
+    ++filled;
+  }
+  for (int a = 0; a < 3; ++a) {
+    if (f.periodic[a]) continue;
+    double best[3] = {0, 0, 0}, best_length = -1;
+    for (int e = 0; e < 3; ++e) {
+      double w[3] = {e == 0 ? 1.0 : 0.0, e == 1 ? 1.0 : 0.0, e == 2 ? 1.0 : 0.0};
+      for (int m = 0; m < filled; ++m) {
+        const double along = dot(w, q[m]);
+        for (int k = 0; k < 3; ++k) w[k] -= along * q[m][k];
+      }
+      const double length = sqrt(dot(w, w));
+      if (length > best_length) {
+        best_length = length;
+        for (int k = 0; k < 3; ++k) best[k] = w[k];
+      }
+    }
+    for (int k = 0; k < 3; ++k) q[filled][k] = basis[a][k] = best[k] / best_length;
+    ++filled;
+  }
+  // The inverse by cofactors: basis . inverse = I, so column a of the inverse is g[a].
+  const double(&m)[3][3] = basis;
+  const double cof[3][3] = {
+      {m[1][1] * m[2][2] - m[1][2] * m[2][1], m[1][2] * m[2][0] - m[1][0] * m[2][2],
+       m[1][0] * m[2][1] - m[1][1] * m[2][0]},
+      {m[0][2] * m[2][1] - m[0][1] * m[2][2], m[0][0] * m[2][2] - m[0][2] * m[2][0],
+       m[0][1] * m[2][0] - m[0][0] * m[2][1]},
+      {m[0][1] * m[1][2] - m[0][2] * m[1][1], m[0][2] * m[1][0] - m[0][0] * m[1][2],
+       m[0][0] * m[1][1] - m[0][1] * m[1][0]}};
+  const double det = m[0][0] * cof[0][0] + m[0][1] * cof[0][1] + m[0][2] * cof[0][2];
+  if (!isfinite(det) || det == 0) return int(count_invalid_cell);
+  // inverse[k][a] = cof[a][k] / det, so g[a][k] = cof[a][k] / det.
+  for (int a = 0; a < 3; ++a) {
+    for (int k = 0; k < 3; ++k) f.g[a][k] = cof[a][k] / det;
+    f.reach[a] = f.periodic[a] ? in.cutoff * sqrt(dot(f.g[a], f.g[a])) : 0;
+  }
+  return 0;
+}
+
+// Calls visit(S) for every in-range image (i, j, S) of row i, in lexicographic order of S;
+// returns how many.
+template <class Real, class Visit>
+__device__ std::uint32_t for_each_image(const Input& in, const Frame& f, std::int64_t i,
+                                        std::int64_t j, Visit&& visit) {
+  double d[3];
+  for (int k = 0; k < 3; ++k) d[k] = load<Real>(in.xyz, 3 * j + k) - load<Real>(in.xyz, 3 * i + k);
+  if (!f.any_periodic) {
+    if (i == j || !(dot(d, d) < in.cutoff2)) return 0;
+    const int zero[3] = {0, 0, 0};
+    visit(zero);
+    return 1;
+  }
+  int first[3], last[3];
+  for (int a = 0; a < 3; ++a) {
+    if (!f.periodic[a]) {
+      first[a] = last[a] = 0;
+      continue;
+    }
+    const double fa = dot(d, f.g[a]);
+    // A margin far above the rounding of fa and reach; extra images are decided exactly below.
+    const double margin = 1e-9 * (1 + fabs(fa) + f.reach[a]);
+    first[a] = static_cast<int>(ceil(-fa - f.reach[a] - margin));
+    last[a] = static_cast<int>(floor(-fa + f.reach[a] + margin));
+  }
+  std::uint32_t hits = 0;
+  for (int sx = first[0]; sx <= last[0]; ++sx)
+    for (int sy = first[1]; sy <= last[1]; ++sy)
+      for (int sz = first[2]; sz <= last[2]; ++sz) {
+        if (i == j) {
+          if (sx == 0 && sy == 0 && sz == 0) continue;
+          // Half lists keep the self-image with S lexicographically positive.
+          if (in.half && !(sx > 0 || (sx == 0 && (sy > 0 || (sy == 0 && sz > 0))))) continue;
+        }
+        double r[3];
+        for (int k = 0; k < 3; ++k) {
+          r[k] = d[k];
+          if (f.periodic[0]) r[k] += sx * f.row[0][k];
+          if (f.periodic[1]) r[k] += sy * f.row[1][k];
+          if (f.periodic[2]) r[k] += sz * f.row[2][k];
+        }
+        if (dot(r, r) < in.cutoff2) {
+          const int s[3] = {sx, sy, sz};
+          visit(s);
+          ++hits;
+        }
+      }
+  return hits;
+}
+
+struct NoVisit {
+  __device__ void operator()(const int*) const {}
+};
+
+// The first source of row i: its system's first particle, or i itself for half lists.
+__device__ std::int64_t first_source(const Input& in, const Frame& f, std::int64_t i) {
+  return in.half ? i : f.lo;
+}
+
+template <class Real>
+__global__ void count_rows(Input in, unsigned long long* counts, int* status) {
+  const std::int64_t row = (std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x) / warp_size;
+  const int lane = threadIdx.x % warp_size;
+  if (row >= in.n) return;  // whole warps leave together
+  Frame f;
+  const int bad = make_frame<Real>(in, row, f);
+  if (bad) {
+    if (lane == 0) atomicMin(status, bad);
+    return;
+  }
+  unsigned long long c = 0;
+  for (std::int64_t j = first_source(in, f, row) + lane; j < f.hi; j += warp_size)
+    c += for_each_image<Real>(in, f, row, j, NoVisit{});
+  for (int offset = warp_size / 2; offset > 0; offset /= 2)
+    c += __shfl_down_sync(all_lanes, c, offset);
+  if (lane == 0) counts[row] = c;
+}
+
+template <class Real>
+__global__ void fill_rows(Input in, const unsigned long long* offsets, Output out) {
+  const std::int64_t row = (std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x) / warp_size;
+  const int lane = threadIdx.x % warp_size;
+  if (row >= in.n) return;
+  const unsigned long long start = offsets[row];
+  if (start >= static_cast<unsigned long long>(out.capacity) || offsets[row + 1] == start) return;
+  Frame f;
+  if (make_frame<Real>(in, row, f)) return;
+  unsigned long long written = start;
+  // Chunks of 32 sources in lockstep: each lane's hits go after the lower lanes' (a warp scan),
+  // so the order is j ascending whatever the scheduling.
+  for (std::int64_t base = first_source(in, f, row); base < f.hi; base += warp_size) {
+    const std::int64_t j = base + lane;
+    const std::uint32_t hits = j < f.hi ? for_each_image<Real>(in, f, row, j, NoVisit{}) : 0;
+    std::uint32_t before = hits;  // inclusive scan, then made exclusive
+    for (int offset = 1; offset < warp_size; offset *= 2) {
+      const std::uint32_t other = __shfl_up_sync(all_lanes, before, offset);
+      if (lane >= offset) before += other;
+    }
+    const std::uint32_t chunk = __shfl_sync(all_lanes, before, warp_size - 1);
+    unsigned long long at = written + before - hits;
+    if (hits)
+      for_each_image<Real>(in, f, row, j, [&](const int* s) {
+        if (at < static_cast<unsigned long long>(out.capacity)) {
+          out.i[at] = row;
+          out.j[at] = j;
+          if (out.shifts)
+            for (int k = 0; k < 3; ++k) out.shifts[3 * at + k] = s[k];
+        }
+        ++at;
+      });
+    written += chunk;
+    if (written >= static_cast<unsigned long long>(out.capacity)) return;
+  }
+}
+
+// The count (or the first error code), and padding from the count to the capacity.
+__global__ void finish(const unsigned long long* total, const int* status, Output out) {
+  const bool bad = *status < 0;
+  const unsigned long long pairs = bad ? 0 : *total;
+  const std::int64_t first = static_cast<std::int64_t>(
+      pairs < static_cast<unsigned long long>(out.capacity) ? pairs : out.capacity);
+  const std::int64_t thread = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (thread == 0) *out.count = bad ? std::int64_t(*status) : static_cast<std::int64_t>(pairs);
+  for (std::int64_t e = first + thread; e < out.capacity;
+       e += std::int64_t(gridDim.x) * blockDim.x) {
+    out.i[e] = out.j[e] = out.pad_index;
+    if (out.shifts)
+      for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = 0;
+  }
+}
+
+constexpr std::size_t align_up(std::size_t bytes) {
+  return (bytes + 255) / 256 * 256;
+}
+
+void* allocate(const Context& ctx, std::size_t bytes) {
+  if (ctx.memory) return ctx.memory->allocate(bytes, ctx.stream);
+  void* p = nullptr;
+  RAYCUT_CUDA_CHECK(cudaMallocAsync(&p, bytes, static_cast<cudaStream_t>(ctx.stream)));
+  return p;
+}
+
+void deallocate(const Context& ctx, void* p, std::size_t bytes) noexcept {
+  if (!p) return;
+  if (ctx.memory)
+    ctx.memory->deallocate(p, bytes, ctx.stream);
+  else
+    cudaFreeAsync(p, static_cast<cudaStream_t>(ctx.stream));
+}
+
+void require(bool ok, const std::string& what) {
+  if (!ok) throw Error(ErrorCode::invalid_argument, "list_pairs_small_systems: " + what);
+}
+
+}  // namespace
+
+void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, double cutoff,
+                              const PairOptions& options, const StaticPairs& out) {
+  detail::validate_cutoff_value(cutoff);
+  const std::size_t n = systems.size;
+  require(n < (std::size_t(1) << 32), "at most 2^32 - 1 particles, got " + std::to_string(n));
+  require(n == 0 || systems.positions,
+          "positions are null for " + std::to_string(n) + " particles");
+  require(!systems.cells || systems.cell_count >= 1, "cells given with cell_count 0");
+  require(!systems.pbc || systems.pbc_count >= 1, "pbc given with pbc_count 0");
+  require(!systems.pbc || systems.cells, "pbc without cells: periodic rows need their vectors");
+  require(systems.batch || (systems.cell_count <= 1 && systems.pbc_count <= 1),
+          "several cells or pbc rows but no batch: which system has which?");
+  require(out.count, "the count pointer is null");
+  require(out.capacity == 0 || (out.i && out.j),
+          "i or j is null for a capacity of " + std::to_string(out.capacity));
+  require(out.capacity < (std::size_t(1) << 62), "capacity out of range");
+
+  Input in;
+  in.xyz = systems.positions;
+  in.n = static_cast<std::int64_t>(n);
+  in.cells = systems.cells;
+  in.cell_count = static_cast<std::int64_t>(systems.cells ? systems.cell_count : 0);
+  in.pbc = systems.pbc;
+  in.pbc_count = static_cast<std::int64_t>(systems.pbc ? systems.pbc_count : 0);
+  in.batch = systems.batch;
+  in.cutoff = cutoff;
+  in.cutoff2 = cutoff * cutoff;
+  in.half = options.half;
+  Output o{out.i,        out.j, out.shifts, out.count, static_cast<std::int64_t>(out.capacity),
+           out.pad_index};
+
+  const auto stream = static_cast<cudaStream_t>(ctx.stream);
+  // Temporaries in one block: per-row counts (and a zero past them), offsets, the status word
+  // and the scan's storage.
+  std::size_t scan_bytes = 0;
+  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(
+      nullptr, scan_bytes, static_cast<unsigned long long*>(nullptr),
+      static_cast<unsigned long long*>(nullptr), static_cast<std::int64_t>(n + 1), stream));
+  const std::size_t counts_bytes = align_up((n + 1) * sizeof(unsigned long long) + sizeof(int));
+  const std::size_t offsets_bytes = align_up((n + 1) * sizeof(unsigned long long));
+  const std::size_t bytes = counts_bytes + offsets_bytes + align_up(scan_bytes);
+  char* block = static_cast<char*>(allocate(ctx, bytes));
+  auto* counts = reinterpret_cast<unsigned long long*>(block);
+  auto* status = reinterpret_cast<int*>(counts + n + 1);
+  auto* offsets = reinterpret_cast<unsigned long long*>(block + counts_bytes);
+  void* scan_storage = block + counts_bytes + offsets_bytes;
+  try {
+    RAYCUT_CUDA_CHECK(cudaMemsetAsync(counts, 0, counts_bytes, stream));
+    const unsigned rows_blocks =
+        static_cast<unsigned>((n * warp_size + block_threads - 1) / block_threads);
+    const bool wide = systems.scalar == Scalar::float64;
+    if (n > 0) {
+      if (wide)
+        count_rows<double><<<rows_blocks, block_threads, 0, stream>>>(in, counts, status);
+      else
+        count_rows<float><<<rows_blocks, block_threads, 0, stream>>>(in, counts, status);
+      RAYCUT_CUDA_CHECK_LAUNCH();
+    }
+    RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scan_storage, scan_bytes, counts, offsets,
+                                                    static_cast<std::int64_t>(n + 1), stream));
+    if (n > 0 && out.capacity > 0) {
+      if (wide)
+        fill_rows<double><<<rows_blocks, block_threads, 0, stream>>>(in, offsets, o);
+      else
+        fill_rows<float><<<rows_blocks, block_threads, 0, stream>>>(in, offsets, o);
+      RAYCUT_CUDA_CHECK_LAUNCH();
+    }
+    const std::size_t pad_blocks = std::min<std::size_t>((out.capacity + 255) / 256 + 1, 1024);
+    finish<<<static_cast<unsigned>(pad_blocks), 256, 0, stream>>>(offsets + n, status, o);
+    RAYCUT_CUDA_CHECK_LAUNCH();
+  } catch (...) {
+    deallocate(ctx, block, bytes);
+    throw;
+  }
+  deallocate(ctx, block, bytes);
+}
+
+std::int64_t read_pair_count(const Context& ctx, const std::int64_t* device_count) {
+  std::int64_t count = 0;
+  const auto stream = static_cast<cudaStream_t>(ctx.stream);
+  RAYCUT_CUDA_CHECK(
+      cudaMemcpyAsync(&count, device_count, sizeof count, cudaMemcpyDeviceToHost, stream));
+  RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
+  switch (count) {
+    case count_non_finite_position:
+      throw Error(ErrorCode::invalid_input, "a position is NaN or infinite");
+    case count_unsorted_batch:
+      throw Error(ErrorCode::invalid_input,
+                  "batch is not sorted: the particles of each system must be contiguous");
+    case count_invalid_cell:
+      throw Error(ErrorCode::invalid_input,
+                  "a cell has non-finite entries or linearly dependent periodic rows");
+    case count_batch_out_of_range:
+      throw Error(ErrorCode::invalid_input,
+                  "a batch value is negative or has no cell or pbc row (one per system)");
+    default:
+      if (count < 0)
+        throw Error(ErrorCode::internal, "unknown pair count code " + std::to_string(count));
+      return count;
+  }
+}
+
+namespace {
+// The block's layout: i, j, S and count, each 256-byte aligned.
+struct PairLayout {
+  std::size_t i = 0, j = 0, shifts = 0, count = 0, bytes = 0;
+  explicit PairLayout(std::size_t capacity) {
+    j = align_up(capacity * sizeof(std::int64_t));
+    shifts = j + align_up(capacity * sizeof(std::int64_t));
+    count = shifts + align_up(3 * capacity * sizeof(std::int32_t));
+    bytes = count + align_up(sizeof(std::int64_t));
+  }
+};
+}  // namespace
+
+StaticPairBuffer::StaticPairBuffer(std::size_t capacity, const Context& ctx)
+    : bytes_(PairLayout(capacity).bytes), capacity_(capacity), ctx_(ctx) {
+  block_ = allocate(ctx_, bytes_);
+}
+
+StaticPairBuffer::~StaticPairBuffer() {
+  release();
+}
+
+StaticPairBuffer::StaticPairBuffer(StaticPairBuffer&& o) noexcept
+    : block_(std::exchange(o.block_, nullptr)),
+      bytes_(std::exchange(o.bytes_, 0)),
+      capacity_(std::exchange(o.capacity_, 0)),
+      ctx_(o.ctx_) {}
+
+StaticPairBuffer& StaticPairBuffer::operator=(StaticPairBuffer&& o) noexcept {
+  if (this != &o) {
+    release();
+    block_ = std::exchange(o.block_, nullptr);
+    bytes_ = std::exchange(o.bytes_, 0);
+    capacity_ = std::exchange(o.capacity_, 0);
+    ctx_ = o.ctx_;
+  }
+  return *this;
+}
+
+void StaticPairBuffer::release() noexcept {
+  deallocate(ctx_, block_, bytes_);
+  block_ = nullptr;
+}
+
+std::int64_t* StaticPairBuffer::i() const {
+  return reinterpret_cast<std::int64_t*>(static_cast<char*>(block_) + PairLayout(capacity_).i);
+}
+std::int64_t* StaticPairBuffer::j() const {
+  return reinterpret_cast<std::int64_t*>(static_cast<char*>(block_) + PairLayout(capacity_).j);
+}
+std::int32_t* StaticPairBuffer::shifts() const {
+  return reinterpret_cast<std::int32_t*>(static_cast<char*>(block_) + PairLayout(capacity_).shifts);
+}
+std::int64_t* StaticPairBuffer::count() const {
+  return reinterpret_cast<std::int64_t*>(static_cast<char*>(block_) + PairLayout(capacity_).count);
+}
+
+StaticPairs StaticPairBuffer::view(std::int64_t pad_index) const {
+  if (!block_) throw Error(ErrorCode::invalid_argument, "StaticPairBuffer: no buffer (moved from)");
+  return StaticPairs{i(), j(), shifts(), count(), capacity_, pad_index};
+}
+
+std::int64_t list_pairs_small_systems_growing(const Context& ctx, const DeviceSystems& systems,
+                                              double cutoff, const PairOptions& options,
+                                              StaticPairBuffer& buffer) {
+  const auto pad = static_cast<std::int64_t>(systems.size);
+  if (!buffer.allocated()) buffer = StaticPairBuffer(0, ctx);
+  list_pairs_small_systems(ctx, systems, cutoff, options, buffer.view(pad));
+  std::int64_t count = read_pair_count(ctx, buffer.count());
+  if (static_cast<std::size_t>(count) > buffer.capacity()) {
+    buffer = StaticPairBuffer(static_cast<std::size_t>(count + count / 8), ctx);
+    list_pairs_small_systems(ctx, systems, cutoff, options, buffer.view(pad));
+    count = read_pair_count(ctx, buffer.count());
+  }
+  return count;
+}
+
+}  // namespace raycut

@@ -1,0 +1,323 @@
+// The stream-ordered small-system pair list (raycut/device_pairs.hpp) against the double oracle
+// of tests/periodic_oracle.hpp on every input family (open, cubic with several images per pair,
+// triclinic, partially periodic, unwrapped by a thousand boxes, boxes 10^4 and 10^6 times the
+// cutoff, float64, batches with a cell per system, half lists), and the contract around it:
+// static capacity short by one, the fixed order, bad device data, and a CUDA graph captured in
+// global mode (which fails on any synchronisation) replayed 1,000 steps bit for bit.
+#include <cuda_runtime.h>
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <cstring>
+#include <random>
+#include <vector>
+
+#include "periodic_oracle.hpp"
+#include "raycut/box.hpp"
+#include "raycut/device_pairs.hpp"
+#include "raycut/engine.hpp"
+#include "raycut/error.hpp"
+
+namespace {
+
+using raycut::Box;
+
+#define CUDA_OK(call) ASSERT_EQ((call), cudaSuccess) << #call
+
+bool have_gpu() {
+  return raycut::cuda_device_available();
+}
+
+// Device copies of host vectors, freed at scope end.
+struct DeviceVector {
+  void* p = nullptr;
+  std::size_t bytes = 0;
+  template <class T>
+  explicit DeviceVector(const std::vector<T>& v) : bytes(v.size() * sizeof(T)) {
+    if (cudaMalloc(&p, bytes ? bytes : 1) != cudaSuccess) throw std::runtime_error("cudaMalloc");
+    if (bytes) cudaMemcpy(p, v.data(), bytes, cudaMemcpyHostToDevice);
+  }
+  ~DeviceVector() { cudaFree(p); }
+  DeviceVector(const DeviceVector&) = delete;
+  DeviceVector& operator=(const DeviceVector&) = delete;
+};
+
+template <class T>
+std::vector<T> to_host(const T* device, std::size_t count) {
+  std::vector<T> v(count);
+  if (count) cudaMemcpy(v.data(), device, count * sizeof(T), cudaMemcpyDeviceToHost);
+  return v;
+}
+
+struct HostPairs {
+  std::int64_t count = 0;
+  std::vector<std::int64_t> i, j;
+  std::vector<std::int32_t> shifts;
+};
+
+// The pass on device copies of one batch: positions (Real), per-system boxes, batch values.
+template <class Real>
+HostPairs run_pass(const std::vector<Real>& xyz, const std::vector<Box>& boxes,
+                   const std::vector<std::int64_t>& batch, double cutoff, bool half,
+                   std::size_t capacity) {
+  const std::size_t n = xyz.size() / 3;
+  std::vector<Real> cells;
+  std::vector<std::uint8_t> pbc;
+  for (const Box& b : boxes)
+    for (int r = 0; r < 3; ++r) {
+      pbc.push_back(b.pbc[r]);
+      for (int k = 0; k < 3; ++k) cells.push_back(static_cast<Real>(b.cell[r][k]));
+    }
+  DeviceVector d_xyz(xyz), d_cells(cells), d_pbc(pbc), d_batch(batch);
+  raycut::DeviceSystems s;
+  s.positions = d_xyz.p;
+  s.scalar = sizeof(Real) == 8 ? raycut::Scalar::float64 : raycut::Scalar::float32;
+  s.size = n;
+  if (!boxes.empty()) {
+    s.cells = d_cells.p;
+    s.cell_count = boxes.size();
+    s.pbc = static_cast<const bool*>(d_pbc.p);
+    s.pbc_count = boxes.size();
+  }
+  s.batch = batch.empty() ? nullptr : static_cast<const std::int64_t*>(d_batch.p);
+  raycut::Context ctx;
+  raycut::StaticPairBuffer buffer(capacity, ctx);
+  raycut::list_pairs_small_systems(ctx, s, cutoff, {half}, buffer.view(std::int64_t(n)));
+  HostPairs out;
+  out.count = raycut::read_pair_count(ctx, buffer.count());
+  out.i = to_host(buffer.i(), capacity);
+  out.j = to_host(buffer.j(), capacity);
+  out.shifts = to_host(buffer.shifts(), 3 * capacity);
+  return out;
+}
+
+// Every system of the batch against its own oracle, with the band of exactness: 1e-6 relative.
+template <class Real>
+void expect_exact(const std::vector<Real>& xyz, const std::vector<Box>& boxes,
+                  const std::vector<std::int64_t>& batch, double cutoff, bool half,
+                  const char* family) {
+  SCOPED_TRACE(family);
+  const std::size_t n = xyz.size() / 3;
+  const HostPairs all = run_pass(xyz, boxes, batch, cutoff, half, 1 << 20);
+  ASSERT_GE(all.count, 0);
+  ASSERT_LE(all.count, 1 << 20);
+  std::size_t first = 0, listed = 0;
+  const std::size_t systems = batch.empty() ? 1 : std::size_t(batch.back()) + 1;
+  for (std::size_t s = 0; s < systems; ++s) {
+    std::size_t last = first;
+    while (last < n && (batch.empty() || batch[last] == std::int64_t(s))) ++last;
+    const Box box = boxes.empty() ? Box{} : boxes[boxes.size() == 1 ? 0 : s];
+    std::vector<Real> local(xyz.begin() + 3 * first, xyz.begin() + 3 * last);
+    const auto oracle = raycut_test::make_periodic_oracle<Real>(local, box, cutoff, 1e-6);
+    std::vector<std::int64_t> i, j;
+    std::vector<std::int32_t> shifts;
+    for (std::int64_t p = 0; p < all.count; ++p)
+      if (all.i[p] >= std::int64_t(first) && all.i[p] < std::int64_t(last)) {
+        EXPECT_GE(all.j[p], std::int64_t(first)) << "a pair crosses systems";
+        EXPECT_LT(all.j[p], std::int64_t(last)) << "a pair crosses systems";
+        i.push_back(all.i[p] - std::int64_t(first));
+        j.push_back(all.j[p] - std::int64_t(first));
+        shifts.insert(shifts.end(), &all.shifts[3 * p], &all.shifts[3 * p + 3]);
+      }
+    listed += i.size();
+    const auto check = raycut_test::check_periodic_pairs(oracle, i, j, shifts, half);
+    EXPECT_TRUE(check.ok) << "system " << s << ":\n" << check.problems;
+    first = last;
+  }
+  EXPECT_EQ(listed, std::size_t(all.count));
+  // Padding past the count.
+  for (std::size_t p = std::size_t(all.count); p < std::size_t(all.count) + 4; ++p) {
+    EXPECT_EQ(all.i[p], std::int64_t(n));
+    EXPECT_EQ(all.j[p], std::int64_t(n));
+    EXPECT_EQ(all.shifts[3 * p], 0);
+  }
+}
+
+std::vector<float> uniform(std::size_t n, double low, double high, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(low, high);
+  std::vector<float> xyz(3 * n);
+  for (float& v : xyz) v = static_cast<float>(u(rng));
+  return xyz;
+}
+
+Box cubic(double l) {
+  Box b;
+  for (int a = 0; a < 3; ++a) {
+    b.cell[a][a] = l;
+    b.pbc[a] = true;
+  }
+  return b;
+}
+
+TEST(DevicePairs, EveryFamilyAgainstTheDoubleOracle) {
+  if (!have_gpu()) GTEST_SKIP() << "no CUDA device";
+  for (bool half : {false, true}) {
+    SCOPED_TRACE(half ? "half" : "full");
+    expect_exact(uniform(300, 0, 6, 1), {}, {}, 1.2, half, "open");
+    // L < 2C: a pair has several images.
+    expect_exact(uniform(128, 0, 5.3, 2), {cubic(5.3)}, {}, 2.5, half, "cubic, several images");
+    Box tri;
+    tri.cell[0][0] = 6;
+    tri.cell[1][0] = 2.5;
+    tri.cell[1][1] = 5;
+    tri.cell[2][0] = -1.5;
+    tri.cell[2][1] = 1;
+    tri.cell[2][2] = 4.5;
+    tri.pbc[0] = tri.pbc[1] = tri.pbc[2] = true;
+    expect_exact(uniform(150, 0, 5, 3), {tri}, {}, 2.2, half, "triclinic");
+    Box slab = cubic(5);
+    slab.pbc[2] = false;
+    slab.cell[2][2] = 0;  // an open row may be anything, even zero
+    expect_exact(uniform(120, 0, 5, 4), {slab}, {}, 1.9, half, "slab (pbc T T F)");
+    Box wire = cubic(4);
+    wire.pbc[1] = wire.pbc[2] = false;
+    expect_exact(uniform(100, 0, 4, 5), {wire}, {}, 1.7, half, "wire (pbc T F F)");
+    // Unwrapped by up to a thousand boxes.
+    std::vector<float> far = uniform(100, 0, 5, 6);
+    std::mt19937 rng(7);
+    std::uniform_int_distribution<int> boxes(-1000, 1000);
+    for (float& v : far) v += 5.0f * boxes(rng);
+    expect_exact(far, {cubic(5)}, {}, 1.5, half, "unwrapped by 1000 boxes");
+    // Boxes far larger than the cutoff: 10^4 and 10^6 cutoffs wide, particles clustered near the
+    // faces so that pairs cross them.
+    for (double ratio : {1e4, 1e6}) {
+      const double l = ratio * 1.0;
+      std::vector<float> xyz = uniform(200, 0, 3, 8);
+      for (std::size_t k = 0; k < xyz.size(); k += 2) xyz[k] = static_cast<float>(l - xyz[k]);
+      expect_exact(xyz, {cubic(l)}, {}, 1.0, half, ratio < 1e5 ? "L/C 1e4" : "L/C 1e6");
+    }
+    // float64 positions and cell.
+    std::mt19937 rng64(9);
+    std::uniform_real_distribution<double> u(0, 4.7);
+    std::vector<double> xyz64(3 * 90);
+    for (double& v : xyz64) v = u(rng64);
+    expect_exact(xyz64, {cubic(4.7)}, {}, 1.6, half, "float64");
+    // A batch: systems of 0..40 particles, each with its own cell and pbc (an empty one too).
+    std::vector<float> batch_xyz;
+    std::vector<std::int64_t> batch;
+    std::vector<Box> cells;
+    const int sizes[] = {12, 1, 0, 40, 25, 3};
+    for (int s = 0; s < 6; ++s) {
+      Box b = cubic(3.0 + 0.4 * s);
+      b.pbc[s % 3] = s % 2 == 0;  // systems 1, 3 and 5 open along one axis each
+      cells.push_back(b);
+      const std::vector<float> part = uniform(sizes[s], 0, 3.0 + 0.4 * s, 10 + s);
+      batch_xyz.insert(batch_xyz.end(), part.begin(), part.end());
+      batch.insert(batch.end(), sizes[s], s);
+    }
+    expect_exact(batch_xyz, cells, batch, 1.4, half, "batch with a cell per system");
+  }
+}
+
+TEST(DevicePairs, CapacityShortByOneIsReportedAndTheRestIsExact) {
+  if (!have_gpu()) GTEST_SKIP() << "no CUDA device";
+  const std::vector<float> xyz = uniform(128, 0, 5.3, 11);
+  const HostPairs exact = run_pass(xyz, {cubic(5.3)}, {}, 2.5, false, 1 << 16);
+  ASSERT_GT(exact.count, 1);
+  const auto short_by_one = std::size_t(exact.count - 1);
+  const HostPairs cut = run_pass(xyz, {cubic(5.3)}, {}, 2.5, false, short_by_one);
+  EXPECT_EQ(cut.count, exact.count) << "the true count, above the capacity";
+  for (std::size_t p = 0; p < short_by_one; ++p) {
+    ASSERT_EQ(cut.i[p], exact.i[p]) << p;
+    ASSERT_EQ(cut.j[p], exact.j[p]) << p;
+    ASSERT_EQ(cut.shifts[3 * p + 2], exact.shifts[3 * p + 2]) << p;
+  }
+  // The growing helper starts from nothing and ends with every pair.
+  DeviceVector d_xyz(xyz);
+  std::vector<double> cell = {5.3, 0, 0, 0, 5.3, 0, 0, 0, 5.3};
+  std::vector<float> cellf(cell.begin(), cell.end());
+  DeviceVector d_cell(cellf);
+  raycut::DeviceSystems s;
+  s.positions = d_xyz.p;
+  s.size = 128;
+  s.cells = d_cell.p;
+  s.cell_count = 1;
+  raycut::Context ctx;
+  raycut::StaticPairBuffer grown;
+  EXPECT_EQ(raycut::list_pairs_small_systems_growing(ctx, s, 2.5, {}, grown), exact.count);
+  EXPECT_GE(grown.capacity(), std::size_t(exact.count));
+  EXPECT_EQ(to_host(grown.j(), exact.count),
+            std::vector<std::int64_t>(exact.j.begin(), exact.j.begin() + exact.count));
+}
+
+TEST(DevicePairs, BadDeviceDataIsNamedWhenTheCountIsRead) {
+  if (!have_gpu()) GTEST_SKIP() << "no CUDA device";
+  std::vector<float> xyz = uniform(50, 0, 3, 12);
+  xyz[3 * 17 + 1] = std::numeric_limits<float>::quiet_NaN();
+  try {
+    run_pass(xyz, {}, {}, 1.0, false, 100);
+    FAIL() << "NaN accepted";
+  } catch (const raycut::Error& e) {
+    EXPECT_EQ(e.code(), raycut::ErrorCode::invalid_input);
+    EXPECT_NE(std::string(e.what()).find("NaN"), std::string::npos) << e.what();
+  }
+  std::vector<std::int64_t> unsorted(50, 0);
+  unsorted[10] = 1;  // 0 .. 0 1 0 .. 0
+  EXPECT_THROW(run_pass(uniform(50, 0, 3, 13), {}, unsorted, 1.0, false, 100), raycut::Error);
+  Box flat = cubic(3);
+  flat.cell[2][0] = 3;  // row c = row a: dependent
+  flat.cell[2][2] = 0;
+  EXPECT_THROW(run_pass(uniform(50, 0, 3, 14), {flat}, {}, 1.0, false, 100), raycut::Error);
+  // Host-side arguments throw before any work.
+  raycut::Context ctx;
+  raycut::DeviceSystems none;
+  raycut::StaticPairBuffer buffer(4, ctx);
+  EXPECT_THROW(raycut::list_pairs_small_systems(ctx, none, 0.0, {}, buffer.view(0)), raycut::Error);
+  none.size = 3;  // positions null
+  EXPECT_THROW(raycut::list_pairs_small_systems(ctx, none, 1.0, {}, buffer.view(0)), raycut::Error);
+}
+
+// A step (positions copied in, the pass) captured in global mode, replayed 1,000 times over new
+// positions, against the eager pass on the same positions, bit for bit.
+TEST(DevicePairs, GraphCaptureReplaysBitForBit) {
+  if (!have_gpu()) GTEST_SKIP() << "no CUDA device";
+  constexpr std::size_t n = 100, capacity = 4000;
+  cudaStream_t stream;
+  CUDA_OK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
+  raycut::Context ctx{stream, nullptr};
+  std::vector<float> cellf = {4.9f, 0, 0, 0, 4.9f, 0, 0, 0, 4.9f};
+  DeviceVector d_cell(cellf), staging(std::vector<float>(3 * n)), work(std::vector<float>(3 * n));
+  raycut::DeviceSystems s;
+  s.positions = work.p;
+  s.size = n;
+  s.cells = d_cell.p;
+  s.cell_count = 1;
+  raycut::StaticPairBuffer replayed(capacity, ctx), eager(capacity, ctx);
+
+  cudaGraph_t graph;
+  CUDA_OK(cudaStreamBeginCapture(stream, cudaStreamCaptureModeGlobal));
+  CUDA_OK(
+      cudaMemcpyAsync(work.p, staging.p, 3 * n * sizeof(float), cudaMemcpyDeviceToDevice, stream));
+  raycut::list_pairs_small_systems(ctx, s, 2.0, {}, replayed.view(n));
+  CUDA_OK(cudaStreamEndCapture(stream, &graph));
+  cudaGraphExec_t exec;
+  CUDA_OK(cudaGraphInstantiate(&exec, graph, 0));
+
+  std::vector<float> xyz = uniform(n, 0, 4.9, 15);
+  std::mt19937 rng(16);
+  std::normal_distribution<float> kick(0, 0.05f);
+  for (int step = 0; step < 1000; ++step) {
+    for (float& v : xyz) v += kick(rng);
+    CUDA_OK(cudaMemcpyAsync(staging.p, xyz.data(), 3 * n * sizeof(float), cudaMemcpyHostToDevice,
+                            stream));
+    CUDA_OK(cudaGraphLaunch(exec, stream));
+    raycut::list_pairs_small_systems(ctx, s, 2.0, {}, eager.view(n));
+    const std::int64_t count = raycut::read_pair_count(ctx, eager.count());
+    ASSERT_LE(count, std::int64_t(capacity));
+    ASSERT_EQ(raycut::read_pair_count(ctx, replayed.count()), count) << "step " << step;
+    if (step % 100 == 0 || step == 999) {
+      ASSERT_EQ(to_host(replayed.i(), capacity), to_host(eager.i(), capacity)) << step;
+      ASSERT_EQ(to_host(replayed.j(), capacity), to_host(eager.j(), capacity)) << step;
+      ASSERT_EQ(to_host(replayed.shifts(), 3 * capacity), to_host(eager.shifts(), 3 * capacity));
+    }
+  }
+  cudaGraphExecDestroy(exec);
+  cudaGraphDestroy(graph);
+  replayed = {};
+  eager = {};
+  cudaStreamSynchronize(stream);
+  cudaStreamDestroy(stream);
+}
+
+}  // namespace
