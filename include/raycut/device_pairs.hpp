@@ -62,6 +62,15 @@ inline constexpr std::int64_t count_unsorted_batch = -2;
 inline constexpr std::int64_t count_invalid_cell = -3;  // non-finite, or periodic rows dependent
 inline constexpr std::int64_t count_batch_out_of_range = -4;  // a system without its cell/pbc
 
+// The small-system policy: the brute force within systems below beats a grid build (and its
+// host synchronisations) while systems hold at most this many particles on average. The
+// crossover was measured on an H200 (docs/streams.md); callers with larger systems use the
+// Engine.
+inline constexpr std::size_t small_system_limit = 2048;
+constexpr bool prefer_small_systems(std::size_t particles, std::size_t systems) {
+  return systems > 0 && particles <= small_system_limit * systems;
+}
+
 // Every pair (i, j, S) of the same system with r = x_j - x_i + S . cell, |r| < cutoff, except
 // (i, i, 0), decided in double precision from the positions as given (float32 or float64): the
 // float64 answer at every box size, with no band. Brute force within each system in one pass
