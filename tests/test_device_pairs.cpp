@@ -7,6 +7,7 @@
 #include <cuda_runtime.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <cstring>
 #include <random>
@@ -316,6 +317,70 @@ TEST(DevicePairs, GraphCaptureReplaysBitForBit) {
   cudaGraphDestroy(graph);
   replayed = {};
   eager = {};
+  cudaStreamSynchronize(stream);
+  cudaStreamDestroy(stream);
+}
+
+}  // namespace
+
+namespace {
+
+// A Verlet step captured in global mode: the displacement check, the rebuild only when needed,
+// the copy of the reference positions. Replayed over 300 steps of moving particles, the list
+// always holds every pair within the cutoff, and rebuilds happen some steps and not others.
+TEST(DevicePairs, VerletStepInAGraphRebuildsOnlyWhenNeeded) {
+  if (!have_gpu()) GTEST_SKIP() << "no CUDA device";
+  constexpr std::size_t n = 128;
+  constexpr double cutoff = 2.0, skin = 0.4;
+  cudaStream_t stream;
+  CUDA_OK(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking));
+  raycut::Context ctx{stream, nullptr};
+  std::vector<float> cellf = {5.3f, 0, 0, 0, 5.3f, 0, 0, 0, 5.3f};
+  std::vector<float> xyz = uniform(n, 0, 5.3, 21);
+  DeviceVector d_cell(cellf), work(xyz);
+  raycut::DeviceSystems s;
+  s.positions = work.p;
+  s.size = n;
+  s.cells = d_cell.p;
+  s.cell_count = 1;
+  {
+    raycut::DeviceVerletList verlet(ctx, cutoff, skin, 20000);
+    verlet.update(s);  // the first update rebuilds, outside the graph
+    cudaGraph_t graph;
+    CUDA_OK(cudaStreamBeginCapture(stream, cudaStreamCaptureModeGlobal));
+    verlet.update(s);
+    CUDA_OK(cudaStreamEndCapture(stream, &graph));
+    cudaGraphExec_t exec;
+    CUDA_OK(cudaGraphInstantiate(&exec, graph, 0));
+    std::mt19937 rng(22);
+    std::normal_distribution<float> kick(0, 0.02f);
+    int rebuilds = 0, steps = 300;
+    for (int step = 0; step < steps; ++step) {
+      for (float& v : xyz) v += kick(rng);
+      CUDA_OK(cudaMemcpyAsync(work.p, xyz.data(), xyz.size() * sizeof(float),
+                              cudaMemcpyHostToDevice, stream));
+      CUDA_OK(cudaGraphLaunch(exec, stream));
+      const std::int64_t count = raycut::read_pair_count(ctx, verlet.pairs().count());
+      ASSERT_LE(count, 20000);
+      rebuilds += to_host(verlet.rebuilt(), 1)[0];
+      // Every pair within the cutoff now is in the list (the list is a superset).
+      const auto oracle = raycut_test::make_periodic_oracle<float>(xyz, cubic(5.3), cutoff, 1e-6);
+      const auto i = to_host(verlet.pairs().i(), std::size_t(count));
+      const auto j = to_host(verlet.pairs().j(), std::size_t(count));
+      const auto sh = to_host(verlet.pairs().shifts(), 3 * std::size_t(count));
+      std::vector<raycut_test::PeriodicTriple> listed;
+      for (std::int64_t p = 0; p < count; ++p)
+        listed.push_back({i[p], j[p], sh[3 * p], sh[3 * p + 1], sh[3 * p + 2]});
+      std::sort(listed.begin(), listed.end());
+      for (const auto& t : oracle.in)
+        ASSERT_TRUE(std::binary_search(listed.begin(), listed.end(), t))
+            << "step " << step << ": missing " << raycut_test::triple_text(t);
+    }
+    EXPECT_GT(rebuilds, 0) << "the particles moved far enough to rebuild";
+    EXPECT_LT(rebuilds, steps / 2) << "a skin of " << skin << " should spare most rebuilds";
+    cudaGraphExecDestroy(exec);
+    cudaGraphDestroy(graph);
+  }
   cudaStreamSynchronize(stream);
   cudaStreamDestroy(stream);
 }

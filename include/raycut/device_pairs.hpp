@@ -40,6 +40,10 @@ struct PairOptions {
   // Each pair once: of (i, j, S) and (j, i, -S), the one with i < j, or i == j and S
   // lexicographically positive.
   bool half = false;
+  // A device int read by the pass's kernels: 0 leaves the outputs as they are (the pass does no
+  // work), anything else runs it. Null: always run. What lets a captured step rebuild a list only
+  // when needed (DeviceVerletList) without a conditional on the host.
+  const int* run_if = nullptr;
 };
 
 // Where a pass writes its pairs: `capacity` entries of i, j (int64) and S (3 int32, or null),
@@ -123,5 +127,42 @@ class StaticPairBuffer {
 std::int64_t list_pairs_small_systems_growing(const Context& ctx, const DeviceSystems& systems,
                                               double cutoff, const PairOptions& options,
                                               StaticPairBuffer& buffer);
+
+// A Verlet list on the stream-ordered path: the pairs within cutoff + skin, rebuilt only when
+// some particle has moved more than skin / 2 since the last rebuild (then no pair within the
+// cutoff can be missing). The check, the conditional rebuild and the copy of the reference
+// positions are kernels on the context's stream that read a device flag: update() never waits,
+// and a CUDA graph can capture it. Kernels that use the list filter by the cutoff themselves.
+// The first update() always rebuilds: run one before capturing a step.
+class DeviceVerletList {
+ public:
+  DeviceVerletList(const Context& ctx, double cutoff, double skin, std::size_t capacity,
+                   const PairOptions& options = {});
+  ~DeviceVerletList();
+  DeviceVerletList(const DeviceVerletList&) = delete;
+  DeviceVerletList& operator=(const DeviceVerletList&) = delete;
+
+  // New positions of the same systems (the same N after the first call).
+  void update(const DeviceSystems& systems);
+  // The list (valid iff 0 <= count <= capacity, as StaticPairs says).
+  const StaticPairBuffer& pairs() const { return pairs_; }
+  // A device int: 1 when the last update() rebuilt the list, else 0.
+  const int* rebuilt() const { return flag_; }
+  // Grows the list to `capacity` (waits for the stream); the next update() rebuilds.
+  void reserve(std::size_t capacity);
+  double cutoff() const { return cutoff_; }
+  double skin() const { return skin_; }
+
+ private:
+  Context ctx_;
+  double cutoff_ = 0, skin_ = 0;
+  PairOptions options_;
+  StaticPairBuffer pairs_;
+  int* flag_ = nullptr;        // device
+  void* reference_ = nullptr;  // positions at the last rebuild, device
+  std::size_t reference_bytes_ = 0, size_ = 0;
+  Scalar scalar_ = Scalar::float32;
+  bool first_ = true;
+};
 
 }  // namespace raycut

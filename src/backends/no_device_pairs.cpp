@@ -48,4 +48,16 @@ std::int64_t list_pairs_small_systems_growing(const Context&, const DeviceSystem
   no_cuda("list_pairs_small_systems_growing");
 }
 
+DeviceVerletList::DeviceVerletList(const Context&, double, double, std::size_t,
+                                   const PairOptions&) {
+  no_cuda("DeviceVerletList");
+}
+DeviceVerletList::~DeviceVerletList() = default;
+void DeviceVerletList::update(const DeviceSystems&) {
+  no_cuda("DeviceVerletList::update");
+}
+void DeviceVerletList::reserve(std::size_t) {
+  no_cuda("DeviceVerletList::reserve");
+}
+
 }  // namespace raycut

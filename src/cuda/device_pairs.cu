@@ -33,6 +33,7 @@ struct Input {
   const std::int64_t* batch = nullptr;
   double cutoff = 0, cutoff2 = 0;
   bool half = false;
+  const int* run_if = nullptr;  // PairOptions::run_if
 };
 
 struct Output {
@@ -228,7 +229,7 @@ template <class Real>
 __global__ void count_rows(Input in, unsigned long long* counts, int* status) {
   const std::int64_t row = (std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x) / warp_size;
   const int lane = threadIdx.x % warp_size;
-  if (row >= in.n) return;  // whole warps leave together
+  if (row >= in.n || (in.run_if && *in.run_if == 0)) return;  // whole warps leave together
   Frame f;
   const int bad = make_frame<Real>(in, row, f);
   if (bad) {
@@ -281,7 +282,9 @@ __global__ void fill_rows(Input in, const unsigned long long* offsets, Output ou
 }
 
 // The count (or the first error code), and padding from the count to the capacity.
-__global__ void finish(const unsigned long long* total, const int* status, Output out) {
+__global__ void finish(const unsigned long long* total, const int* status, const int* run_if,
+                       Output out) {
+  if (run_if && *run_if == 0) return;
   const bool bad = *status < 0;
   const unsigned long long pairs = bad ? 0 : *total;
   const std::int64_t first = static_cast<std::int64_t>(
@@ -349,6 +352,7 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
   in.cutoff = cutoff;
   in.cutoff2 = cutoff * cutoff;
   in.half = options.half;
+  in.run_if = options.run_if;
   Output o{out.i,        out.j, out.shifts, out.count, static_cast<std::int64_t>(out.capacity),
            out.pad_index};
 
@@ -389,7 +393,8 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
       RAYCUT_CUDA_CHECK_LAUNCH();
     }
     const std::size_t pad_blocks = std::min<std::size_t>((out.capacity + 255) / 256 + 1, 1024);
-    finish<<<static_cast<unsigned>(pad_blocks), 256, 0, stream>>>(offsets + n, status, o);
+    finish<<<static_cast<unsigned>(pad_blocks), 256, 0, stream>>>(offsets + n, status, in.run_if,
+                                                                  o);
     RAYCUT_CUDA_CHECK_LAUNCH();
   } catch (...) {
     deallocate(ctx, block, bytes);
@@ -498,6 +503,112 @@ std::int64_t list_pairs_small_systems_growing(const Context& ctx, const DeviceSy
     count = read_pair_count(ctx, buffer.count());
   }
   return count;
+}
+
+namespace {
+
+__global__ void set_flag(int* flag, int value) {
+  *flag = value;
+}
+
+// flag = 1 when some particle is more than `limit` from its reference place (double distances).
+template <class Real>
+__global__ void mark_moved(const Real* now, const Real* then, std::int64_t n, double limit2,
+                           int* flag) {
+  for (std::int64_t i = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x; i < n;
+       i += std::int64_t(gridDim.x) * blockDim.x) {
+    double d2 = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double d = double(now[3 * i + k]) - double(then[3 * i + k]);
+      d2 += d * d;
+    }
+    if (!(d2 <= limit2)) *flag = 1;  // racing writes of the same value; NaN counts as moved
+  }
+}
+
+// reference = now where the flag is set (after a rebuild).
+__global__ void copy_if_flag(const int* flag, const unsigned* now, unsigned* reference,
+                             std::size_t words) {
+  if (*flag == 0) return;
+  for (std::size_t w = std::size_t(blockIdx.x) * blockDim.x + threadIdx.x; w < words;
+       w += std::size_t(gridDim.x) * blockDim.x)
+    reference[w] = now[w];
+}
+
+unsigned grid_for(std::size_t items) {
+  return static_cast<unsigned>(
+      std::max<std::size_t>(std::min<std::size_t>((items + 255) / 256, 1024), 1));
+}
+
+}  // namespace
+
+DeviceVerletList::DeviceVerletList(const Context& ctx, double cutoff, double skin,
+                                   std::size_t capacity, const PairOptions& options)
+    : ctx_(ctx), cutoff_(cutoff), skin_(skin), options_(options) {
+  detail::validate_cutoff_value(cutoff);
+  if (!(skin >= 0) || !std::isfinite(cutoff + skin))
+    throw Error(ErrorCode::invalid_argument,
+                "DeviceVerletList: skin must be finite and >= 0, got " + std::to_string(skin));
+  pairs_ = StaticPairBuffer(capacity, ctx_);
+  flag_ = static_cast<int*>(allocate(ctx_, sizeof(int)));
+}
+
+DeviceVerletList::~DeviceVerletList() {
+  deallocate(ctx_, reference_, reference_bytes_);
+  deallocate(ctx_, flag_, sizeof(int));
+}
+
+void DeviceVerletList::reserve(std::size_t capacity) {
+  if (capacity <= pairs_.capacity()) return;
+  RAYCUT_CUDA_CHECK(cudaStreamSynchronize(static_cast<cudaStream_t>(ctx_.stream)));
+  pairs_ = StaticPairBuffer(capacity, ctx_);
+  first_ = true;
+}
+
+void DeviceVerletList::update(const DeviceSystems& systems) {
+  const auto stream = static_cast<cudaStream_t>(ctx_.stream);
+  const std::size_t element = systems.scalar == Scalar::float64 ? sizeof(double) : sizeof(float);
+  const std::size_t bytes = 3 * systems.size * element;
+  if (!first_ && (systems.size != size_ || systems.scalar != scalar_))
+    throw Error(ErrorCode::invalid_argument,
+                "DeviceVerletList::update: " + std::to_string(systems.size) +
+                    " particles, but the list was built over " + std::to_string(size_) +
+                    " (of the same type): make a new list for a new system");
+  if (first_) {
+    deallocate(ctx_, reference_, reference_bytes_);
+    reference_ = nullptr;
+    reference_bytes_ = bytes;
+    reference_ = allocate(ctx_, bytes ? bytes : 4);
+    size_ = systems.size;
+    scalar_ = systems.scalar;
+    set_flag<<<1, 1, 0, stream>>>(flag_, 1);
+  } else {
+    set_flag<<<1, 1, 0, stream>>>(flag_, 0);
+    const double limit = skin_ / 2;
+    const auto n = static_cast<std::int64_t>(size_);
+    if (n > 0) {
+      if (scalar_ == Scalar::float64)
+        mark_moved<<<grid_for(size_), 256, 0, stream>>>(
+            static_cast<const double*>(systems.positions), static_cast<const double*>(reference_),
+            n, limit * limit, flag_);
+      else
+        mark_moved<<<grid_for(size_), 256, 0, stream>>>(
+            static_cast<const float*>(systems.positions), static_cast<const float*>(reference_), n,
+            limit * limit, flag_);
+    }
+  }
+  RAYCUT_CUDA_CHECK_LAUNCH();
+  PairOptions options = options_;
+  options.run_if = flag_;
+  list_pairs_small_systems(ctx_, systems, cutoff_ + skin_, options,
+                           pairs_.view(static_cast<std::int64_t>(size_)));
+  if (bytes > 0) {
+    copy_if_flag<<<grid_for(bytes / 4), 256, 0, stream>>>(
+        flag_, static_cast<const unsigned*>(systems.positions), static_cast<unsigned*>(reference_),
+        bytes / 4);
+    RAYCUT_CUDA_CHECK_LAUNCH();
+  }
+  first_ = false;
 }
 
 }  // namespace raycut
