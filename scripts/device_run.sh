@@ -116,9 +116,12 @@ while [ $# -gt 0 ]; do
       for t in "raycut_functor_cuda_tests" \
         "raycut_tests --gtest_filter=Methods/Lists.*:Methods/Conformance.*grid_uniform_n4000*:Methods/Conformance.*grid_paper_lattice_k1_n1000*:Methods/Conformance.*brute_force_gpu_coincident_n1000*" \
         "raycut_grid_variant_tests --gtest_filter=*uniform*:*coincident*" \
-        "raycut_tests --gtest_filter=*Periodic*/grid:*Periodic*/brute_force_gpu:*Periodic*/grid_*:*Periodic*/brute_force_gpu_*"; do
+        "raycut_tests --gtest_filter=*Periodic*/grid:*Periodic*/brute_force_gpu:*Periodic*/grid_*:*Periodic*/brute_force_gpu_*" \
+        "raycut_tests --gtest_filter=*Coulomb*:*Functor*" \
+        "raycut_device_pairs_tests"; do
         name="${t%% *}"
         [[ "$t" == *Periodic* ]] && name="$name-periodic"
+        [[ "$t" == *Coulomb* ]] && name="$name-coulomb-functors"
         # shellcheck disable=SC2086
         compute-sanitizer --tool memcheck --error-exitcode 9 build/tests/$t \
           > "$res/memcheck-$name.log" 2>&1
