@@ -18,6 +18,7 @@
 #include "raycut/device_pairs.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/error.hpp"
+#include "raycut/tools/generators.hpp"
 
 namespace {
 
@@ -86,9 +87,12 @@ HostPairs run_pass(const std::vector<Real>& xyz, const std::vector<Box>& boxes,
   raycut::list_pairs_small_systems(ctx, s, cutoff, {half}, buffer.view(std::int64_t(n)));
   HostPairs out;
   out.count = raycut::read_pair_count(ctx, buffer.count());
-  out.i = to_host(buffer.i(), capacity);
-  out.j = to_host(buffer.j(), capacity);
-  out.shifts = to_host(buffer.shifts(), 3 * capacity);
+  // The pairs and a few padding entries past them.
+  const std::size_t copied =
+      std::min(capacity, std::size_t(std::max<std::int64_t>(out.count, 0)) + 8);
+  out.i = to_host(buffer.i(), copied);
+  out.j = to_host(buffer.j(), copied);
+  out.shifts = to_host(buffer.shifts(), 3 * copied);
   return out;
 }
 
@@ -384,5 +388,45 @@ TEST(DevicePairs, VerletStepInAGraphRebuildsOnlyWhenNeeded) {
   cudaStreamSynchronize(stream);
   cudaStreamDestroy(stream);
 }
+
+}  // namespace
+
+namespace {
+
+// The conformance families (raycut::family_names(), docs/methods.md "Test inputs"): open
+// systems of 0 to 2,000 particles, through the small-system path with static capacity, against
+// the double oracle; then the same with the capacity one short of the count.
+class DevicePairsFamilies : public ::testing::TestWithParam<std::string> {};
+
+TEST_P(DevicePairsFamilies, StaticCapacityMatchesTheOracle) {
+  if (!have_gpu()) GTEST_SKIP() << "no CUDA device";
+  const std::string family = GetParam();
+  for (std::size_t n : {0, 1, 2, 700, 2000}) {
+    SCOPED_TRACE(family + " n=" + std::to_string(n));
+    const raycut::PointCloud cloud = raycut::make_family(family, n, 1.0f, 42 + n);
+    for (bool half : {false, true})
+      expect_exact(cloud.xyz, {}, {}, cloud.cutoff, half, family.c_str());
+    const HostPairs exact = run_pass(cloud.xyz, {}, {}, cloud.cutoff, false, 1 << 20);
+    if (exact.count < 1) continue;
+    const HostPairs cut =
+        run_pass(cloud.xyz, {}, {}, cloud.cutoff, false, std::size_t(exact.count - 1));
+    EXPECT_EQ(cut.count, exact.count) << "overflow by one is reported with the true count";
+  }
+}
+
+std::vector<std::string> unscaled_families() {
+  std::vector<std::string> out;
+  for (const auto& family : raycut::family_names())  // tiny-/huge-scale rescale their cutoff
+    if (raycut::make_family(family, 1, 1.0f, 0).cutoff == 1.0f) out.push_back(family);
+  return out;
+}
+
+INSTANTIATE_TEST_SUITE_P(Families, DevicePairsFamilies, ::testing::ValuesIn(unscaled_families()),
+                         [](const auto& info) {
+                           std::string name = info.param;
+                           for (char& ch : name)
+                             if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
+                           return name;
+                         });
 
 }  // namespace
