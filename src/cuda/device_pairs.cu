@@ -36,15 +36,6 @@ struct Input {
   const int* run_if = nullptr;  // PairOptions::run_if
 };
 
-struct Output {
-  std::int64_t* i = nullptr;
-  std::int64_t* j = nullptr;
-  std::int32_t* shifts = nullptr;
-  std::int64_t* count = nullptr;
-  std::int64_t capacity = 0;
-  std::int64_t pad_index = 0;
-};
-
 // What a row needs to enumerate its pairs: its system's particles, and where periodic, the
 // lattice rows and the reciprocal vectors that bound each pair's images.
 struct Frame {
@@ -245,7 +236,7 @@ __global__ void count_rows(Input in, unsigned long long* counts, int* status) {
 }
 
 template <class Real>
-__global__ void fill_rows(Input in, const unsigned long long* offsets, Output out) {
+__global__ void fill_rows(Input in, const unsigned long long* offsets, StaticPairs out) {
   const std::int64_t row = (std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x) / warp_size;
   const int lane = threadIdx.x % warp_size;
   if (row >= in.n) return;
@@ -283,16 +274,16 @@ __global__ void fill_rows(Input in, const unsigned long long* offsets, Output ou
 
 // The count (or the first error code), and padding from the count to the capacity.
 __global__ void finish(const unsigned long long* total, const int* status, const int* run_if,
-                       Output out) {
+                       StaticPairs out) {
   if (run_if && *run_if == 0) return;
   const bool bad = *status < 0;
   const unsigned long long pairs = bad ? 0 : *total;
+  const auto capacity = static_cast<std::int64_t>(out.capacity);
   const std::int64_t first = static_cast<std::int64_t>(
-      pairs < static_cast<unsigned long long>(out.capacity) ? pairs : out.capacity);
+      pairs < static_cast<unsigned long long>(capacity) ? pairs : capacity);
   const std::int64_t thread = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (thread == 0) *out.count = bad ? std::int64_t(*status) : static_cast<std::int64_t>(pairs);
-  for (std::int64_t e = first + thread; e < out.capacity;
-       e += std::int64_t(gridDim.x) * blockDim.x) {
+  for (std::int64_t e = first + thread; e < capacity; e += std::int64_t(gridDim.x) * blockDim.x) {
     out.i[e] = out.j[e] = out.pad_index;
     if (out.shifts)
       for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = 0;
@@ -387,9 +378,9 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
                                                     static_cast<std::int64_t>(n + 1), stream));
     if (n > 0 && out.capacity > 0) {
       if (wide)
-        fill_rows<double><<<rows_blocks, block_threads, 0, stream>>>(in, offsets, o);
+        fill_rows<double><<<rows_blocks, block_threads, 0, stream>>>(in, offsets, out);
       else
-        fill_rows<float><<<rows_blocks, block_threads, 0, stream>>>(in, offsets, o);
+        fill_rows<float><<<rows_blocks, block_threads, 0, stream>>>(in, offsets, out);
       RAYCUT_CUDA_CHECK_LAUNCH();
     }
     const std::size_t pad_blocks = std::min<std::size_t>((out.capacity + 255) / 256 + 1, 1024);
