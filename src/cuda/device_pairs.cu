@@ -344,8 +344,6 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
   in.cutoff2 = cutoff * cutoff;
   in.half = options.half;
   in.run_if = options.run_if;
-  Output o{out.i,        out.j, out.shifts, out.count, static_cast<std::int64_t>(out.capacity),
-           out.pad_index};
 
   const auto stream = static_cast<cudaStream_t>(ctx.stream);
   // Temporaries in one block: per-row counts (and a zero past them), offsets, the status word
@@ -385,7 +383,7 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
     }
     const std::size_t pad_blocks = std::min<std::size_t>((out.capacity + 255) / 256 + 1, 1024);
     finish<<<static_cast<unsigned>(pad_blocks), 256, 0, stream>>>(offsets + n, status, in.run_if,
-                                                                  o);
+                                                                  out);
     RAYCUT_CUDA_CHECK_LAUNCH();
   } catch (...) {
     deallocate(ctx, block, bytes);
