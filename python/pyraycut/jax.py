@@ -49,7 +49,8 @@ jax.ffi.register_ffi_target(_TARGET, jax.ffi.pycapsule(_library.RaycutNeighborLi
                             platform="cpu")
 jax.ffi.register_ffi_target(_RAGGED_TARGET,
                             jax.ffi.pycapsule(_library.RaycutRaggedNeighborList), platform="cpu")
-# The CUDA handlers, exported only by a library built with CUDA.
+# The CUDA handlers, exported only by a library built with CUDA: HAS_CUDA says whether the custom
+# call also runs on CUDA GPUs.
 HAS_CUDA = hasattr(_library, "RaycutNeighborListCuda")
 if HAS_CUDA:
     jax.ffi.register_ffi_target(_TARGET, jax.ffi.pycapsule(_library.RaycutNeighborListCuda),
@@ -72,7 +73,8 @@ def neighbor_list(positions: Any, cutoff: float, cell: Any = None, pbc: Any = No
 
     ``positions`` (N, 3); ``cell`` (3, 3) (rows: lattice vectors) or 3 edge lengths, None: open;
     ``pbc`` 3 bools (default: all, with a cell). ``half``: each pair once. ``jax.vmap`` over
-    positions (and cells) gives every system its own K slots and count, in one search.
+    positions (and cells) gives every system its own K slots and count (in one search on the
+    CPU; one pass per system on a GPU).
 
     Ragged batches (systems of different sizes, one search): ``batch`` (N,) int32, the system
     index of each particle, sorted (torch_cluster's convention; may be traced under ``jit``);
