@@ -21,6 +21,7 @@
 #include <climits>
 #include <cstddef>
 #include <cstdint>
+#include <exception>
 #include <optional>
 #include <string>
 
@@ -195,6 +196,8 @@ ffi::Error neighbor_list(cudaStream_t stream, ffi::ScratchAllocator scratch_allo
     return launched("writing the int32 results");
   } catch (const raycut::Error& e) {
     return failed(e);
+  } catch (const std::exception& e) {  // nothing may cross into XLA as an exception
+    return ffi::Error::Internal(std::string("raycut.jax.neighbor_list: ") + e.what());
   }
 }
 
@@ -256,6 +259,8 @@ ffi::Error ragged_neighbor_list(cudaStream_t stream, ffi::ScratchAllocator scrat
     return launched("writing the int32 results");
   } catch (const raycut::Error& e) {
     return failed(e);
+  } catch (const std::exception& e) {  // nothing may cross into XLA as an exception
+    return ffi::Error::Internal(std::string("raycut.jax.neighbor_list: ") + e.what());
   }
 }
 
