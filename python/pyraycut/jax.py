@@ -1,7 +1,7 @@
-"""raycut's neighbour list inside JAX programs: an XLA FFI custom call on the CPU
-(python/src/jax_ffi.cpp, pyraycut/_jax_ffi.so) with static-capacity outputs, so that it runs under
-``jax.jit``; vectors and distances come from ``vectors``, in JAX, so ``jax.grad`` flows to
-positions and cell.
+"""raycut's neighbour list inside JAX programs: an XLA FFI custom call (python/src/jax_ffi.cpp,
+pyraycut/_jax_ffi.so) with static-capacity outputs, so that it runs under ``jax.jit``; vectors and
+distances come from ``vectors``, in JAX, so ``jax.grad`` flows to positions and cell. It runs on
+the CPU, and on CUDA GPUs when the library was built with CUDA (python/src/jax_ffi_cuda.cu).
 
 >>> import jax, jax.numpy as jnp, pyraycut.jax
 >>> @jax.jit
@@ -18,6 +18,16 @@ Under ``jax.vmap`` (positions (B, N, 3), and a cell per system or one for all) t
 are searched in one call as a batch of the library's, each with its own K slots and count.
 Systems of different sizes go in one ragged batch instead: ``batch`` (N,) gives each particle's
 system (sorted), with a cell per system; the pairs come back in one list with global indices.
+
+On a CUDA GPU the same call runs the library's stream-ordered small-system pass
+(raycut::list_pairs_small_systems: brute force within each system, decided in double precision)
+on XLA's stream, with XLA's scratch memory, and never waits for the GPU. Under ``jax.vmap`` it
+runs one pass per system, so that every system's count is exact. Bad data that only the GPU sees
+is not an error of the call there: the count comes back negative instead (-1: a non-finite
+position, -2: an unsorted ``batch``, -3: a degenerate periodic cell, -4: a ``batch`` index outside
+[0, B)), with the pairs all padding. The pass suits systems of up to a few thousand particles;
+larger ones take it too (correct, slower than the library's grids, which synchronise with the
+host and so cannot run inside an XLA program yet).
 """
 from __future__ import annotations
 
@@ -39,6 +49,15 @@ jax.ffi.register_ffi_target(_TARGET, jax.ffi.pycapsule(_library.RaycutNeighborLi
                             platform="cpu")
 jax.ffi.register_ffi_target(_RAGGED_TARGET,
                             jax.ffi.pycapsule(_library.RaycutRaggedNeighborList), platform="cpu")
+# The CUDA handlers, exported only by a library built with CUDA: HAS_CUDA says whether the custom
+# call also runs on CUDA GPUs.
+HAS_CUDA = hasattr(_library, "RaycutNeighborListCuda")
+if HAS_CUDA:
+    jax.ffi.register_ffi_target(_TARGET, jax.ffi.pycapsule(_library.RaycutNeighborListCuda),
+                                platform="CUDA")
+    jax.ffi.register_ffi_target(_RAGGED_TARGET,
+                                jax.ffi.pycapsule(_library.RaycutRaggedNeighborListCuda),
+                                platform="CUDA")
 
 
 def neighbor_list(positions: Any, cutoff: float, cell: Any = None, pbc: Any = None,
@@ -54,14 +73,19 @@ def neighbor_list(positions: Any, cutoff: float, cell: Any = None, pbc: Any = No
 
     ``positions`` (N, 3); ``cell`` (3, 3) (rows: lattice vectors) or 3 edge lengths, None: open;
     ``pbc`` 3 bools (default: all, with a cell). ``half``: each pair once. ``jax.vmap`` over
-    positions (and cells) gives every system its own K slots and count, in one search.
+    positions (and cells) gives every system its own K slots and count (in one search on the
+    CPU; one pass per system on a GPU).
 
     Ragged batches (systems of different sizes, one search): ``batch`` (N,) int32, the system
     index of each particle, sorted (torch_cluster's convention; may be traced under ``jit``);
     ``cell`` (B, 3, 3) (or (B, 3) edges) per system, or one (3, 3) for all; ``pbc`` (B, 3) or 3
     bools. B is static: the cell's leading axis, or ``num_systems`` when the cell is shared or
     None. The outputs are one list as above, with global indices (padding ``i = j = N``); an
-    unsorted batch or a system index >= B is an error of the call.
+    unsorted batch or a system index >= B is an error of the call on the CPU, and a negative
+    ``count`` on a GPU (the module's docstring lists the codes).
+
+    On a CUDA GPU the search is the library's stream-ordered small-system pass, for systems of
+    up to a few thousand particles; larger systems run it too, correctly but more slowly.
     """
     if max_pairs is None or int(max_pairs) != max_pairs or max_pairs < 0:
         raise ValueError(f"pyraycut.jax.neighbor_list needs max_pairs, a whole number >= 0 (the "

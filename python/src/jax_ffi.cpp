@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "jax_ffi_shapes.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/error.hpp"
 #include "xla/ffi/api/ffi.h"
@@ -110,18 +111,12 @@ ffi::Error neighbor_list(ffi::Buffer<ffi::F32> positions, ffi::AnyBuffer cell,
                          ffi::Buffer<ffi::PRED> pbc, float cutoff, std::int64_t half,
                          ffi::ResultBuffer<ffi::S32> i, ffi::ResultBuffer<ffi::S32> j,
                          ffi::ResultBuffer<ffi::S32> shifts, ffi::ResultBuffer<ffi::S32> count) {
-  const auto dims = positions.dimensions();
-  if (dims.size() < 2 || dims[dims.size() - 1] != 3)
-    return ffi::Error::InvalidArgument(
-        "raycut.jax.neighbor_list: positions must have shape (..., N, 3)");
-  const auto n = static_cast<std::size_t>(dims[dims.size() - 2]);
-  std::size_t systems = 1;
-  for (std::size_t a = 0; a + 2 < dims.size(); ++a) systems *= static_cast<std::size_t>(dims[a]);
-  if (cell.element_count() != 9 * systems || pbc.element_count() != 3 * systems ||
-      count->element_count() != systems || i->element_count() % std::max<std::size_t>(systems, 1))
-    return ffi::Error::InvalidArgument(
-        "raycut.jax.neighbor_list: cell must be (..., 3, 3) and pbc (..., 3), with the "
-        "positions' leading axes");
+  std::size_t systems = 0, n = 0;
+  if (ffi::Error error = raycut_jax::batched_shapes(positions.dimensions(), cell.element_count(),
+                                                    pbc.element_count(), count->element_count(),
+                                                    i->element_count(), systems, n);
+      error.failure())
+    return error;
   std::vector<raycut::Box> boxes(systems);
   if (ffi::Error error = read_boxes(cell, pbc, boxes); error.failure()) return error;
   raycut::Systems batch;
@@ -149,20 +144,12 @@ ffi::Error ragged_neighbor_list(ffi::Buffer<ffi::F32> positions, ffi::Buffer<ffi
                                 std::int64_t half, ffi::ResultBuffer<ffi::S32> i,
                                 ffi::ResultBuffer<ffi::S32> j, ffi::ResultBuffer<ffi::S32> shifts,
                                 ffi::ResultBuffer<ffi::S32> count) {
-  const auto dims = positions.dimensions();
-  if (dims.size() != 2 || dims[1] != 3)
-    return ffi::Error::InvalidArgument(
-        "raycut.jax.neighbor_list: positions must have shape (N, 3) with batch");
-  const auto n = static_cast<std::size_t>(dims[0]);
-  const std::size_t systems = cell.element_count() / 9;
-  if (batch.element_count() != n || cell.element_count() != 9 * systems ||
-      pbc.element_count() != 3 * systems)
-    return ffi::Error::InvalidArgument(
-        "raycut.jax.neighbor_list: batch must be (N,), cell (B, 3, 3) and pbc (B, 3), got batch "
-        "of " +
-        std::to_string(batch.element_count()) + " entries for N = " + std::to_string(n) + ", " +
-        std::to_string(cell.element_count()) + " cell entries and " +
-        std::to_string(pbc.element_count()) + " pbc entries");
+  std::size_t n = 0, systems = 0;
+  if (ffi::Error error =
+          raycut_jax::ragged_shapes(positions.dimensions(), batch.element_count(),
+                                    cell.element_count(), pbc.element_count(), n, systems);
+      error.failure())
+    return error;
   raycut::Systems ragged;
   ragged.offsets.assign(systems + 1, 0);
   const std::int32_t* system_of = batch.typed_data();
