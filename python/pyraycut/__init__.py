@@ -655,10 +655,12 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     always computed in PyTorch, in the positions' dtype (docs/python.md). ``max_pairs`` (those
     tensors only): outputs of that static size, the pairs first, then padding (i = j = N, S = 0,
     d = 0); a list that does not fit raises ``CapacityError`` in eager mode on the CPU. CUDA
-    tensors (method "auto" or "grid") take the operator's CUDA kernel where it is built; with
-    ``max_pairs`` and small systems that call never waits for the GPU (CUDA graphs capture it),
-    so nothing is checked on the host: use ``torch.ops.raycut.neighbor_list`` for the count, and
-    ``check_pair_count`` where the host may wait (docs/python.md, "Static capacity on CUDA").
+    tensors (method "auto" or "grid") take the operator's CUDA kernel, where it is built, with
+    ``max_pairs`` and under torch.compile (eager calls without ``max_pairs`` keep the zero-copy
+    path above). With ``max_pairs`` and small systems that call never waits for the GPU (CUDA
+    graphs capture it), so nothing is checked on the host: use ``torch.ops.raycut.neighbor_list``
+    for the count, and ``check_pair_count`` where the host may wait (docs/python.md, "Static
+    capacity on CUDA").
 
     >>> i, j, S = pyraycut.neighbor_list("ijS", x, 3.0, cell=[10.0, 10.0, 10.0], pbc=True)
     >>> i, j = pyraycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
@@ -763,7 +765,7 @@ def _torch_ops_route(x: Any, method: str, max_pairs: Optional[int]) -> bool:
     """Whether a call goes through the PyTorch operators (pyraycut._torch.routes)."""
     if _arrays.framework_of(x) == "torch":
         ops = _torch_ops()
-        if ops is not None and ops.routes(x, method):
+        if ops is not None and ops.routes(x, method, max_pairs):
             return True
     if max_pairs is not None:
         raise ValueError(f"max_pairs is for PyTorch tensors through the operators (built with "

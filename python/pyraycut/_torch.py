@@ -83,15 +83,19 @@ def _fake_pairs(like: torch.Tensor, max_pairs: Optional[int]) -> tuple:
 _CUDA_KERNEL = torch._C._dispatch_has_kernel_for_dispatch_key("raycut::neighbor_list", "CUDA")
 
 
-def routes(x: Any, method: str) -> bool:
+def routes(x: Any, method: str, max_pairs: Optional[int] = None) -> bool:
     """Whether a call on ``x`` goes through the operators: PyTorch tensors on a device they have
     a kernel for, with the method that kernel runs (the CPU cell list, the CUDA grid) or
-    ``"auto"``."""
+    ``"auto"``. CUDA tensors take the operator where only it serves: static capacity
+    (``max_pairs``, the stream-ordered pass for small systems) and tracing (torch.compile);
+    other eager calls keep the extension's zero-copy path (the library's own device buffers
+    wrapped, no copy into torch's)."""
     if not isinstance(x, torch.Tensor):
         return False
     if x.device.type == "cpu":
         return method in ("auto", "cell-list")
-    return x.device.type == "cuda" and _CUDA_KERNEL and method in ("auto", "grid")
+    return (x.device.type == "cuda" and _CUDA_KERNEL and method in ("auto", "grid") and
+            (max_pairs is not None or torch.compiler.is_compiling()))
 
 
 def _cell(cell: Any, like: torch.Tensor) -> Optional[torch.Tensor]:
