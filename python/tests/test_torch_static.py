@@ -271,6 +271,18 @@ def test_large_systems_go_through_the_engine():
 
 
 @cuda
+@pytest.mark.parametrize("name", ["cube", "batch"])
+def test_without_max_pairs_the_engine_lists_the_exact_pairs(name):
+    """No max_pairs: the engine's grid on CUDA (exact size), float32 on both sides."""
+    case = CASES[name]()
+    want = triples(*torch.ops.raycut.neighbor_list(*case.on("cpu", torch.float32), False,
+                                                   None)[:3], 10**9)
+    i, j, s, count = torch.ops.raycut.neighbor_list(*case.on("cuda", torch.float32), False, None)
+    assert i.is_cuda and len(i) == int(count) == len(want)
+    assert triples(i, j, s, len(i)) == want
+
+
+@cuda
 def test_torch_compile_fullgraph():
     if not hasattr(torch, "compile"):
         pytest.skip("torch.compile is not available")
