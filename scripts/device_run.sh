@@ -18,7 +18,8 @@
 #   sph          the article's SPH run with every GPU method, and the validation scenarios
 #   grid-suites  both suites with grid and grid-paper beside the paper's grid (no regression)
 #   memcheck     compute-sanitizer on the functor, list, grid-variant and periodic GPU tests
-#   python       the Python package built with the device's Python, and its tests
+#   python       the Python package built with the device's Python (the PyTorch operators with
+#                their CUDA kernel: RAYCUT_TORCH_CUDA=ON), and its tests
 #   python-bench bench/python_lists.py (beside neighbour_bench's periodic list rows, run first)
 #                and bench/python_overhead.py: python-lists.csv/.md, python-overhead.csv
 #                (docs/python.md)
@@ -48,6 +49,7 @@ build_python() {
   [ -n "${python_built:-}" ] && return
   python_built=1
   BUILD_DIR=build scripts/configure.sh -DRAYCUT_BUILD_PYTHON=ON -DPython_EXECUTABLE="$py" \
+    -DRAYCUT_TORCH_CUDA=ON \
     > "$res/python-build.log" 2>&1 || tail -20 "$res/python-build.log"
 }
 

@@ -65,6 +65,7 @@ __all__ = [
     "KERNEL_CATALOGUE",
     "VerletList",
     "auto_method",
+    "check_pair_count",
     "clear_engine_cache",
     "cuda_available",
     "load_torch_ops",
@@ -653,7 +654,13 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     ``torch.compile(fullgraph=True)``, ``torch.export`` and AOTInductor; ``d`` and ``D`` are then
     always computed in PyTorch, in the positions' dtype (docs/python.md). ``max_pairs`` (those
     tensors only): outputs of that static size, the pairs first, then padding (i = j = N, S = 0,
-    d = 0); a list that does not fit raises ``CapacityError`` in eager mode.
+    d = 0); a list that does not fit raises ``CapacityError`` in eager mode on the CPU. CUDA
+    tensors (method "auto" or "grid") take the operator's CUDA kernel, where it is built, with
+    ``max_pairs`` and under torch.compile (eager calls without ``max_pairs`` keep the zero-copy
+    path above). With ``max_pairs`` and small systems that call never waits for the GPU (CUDA
+    graphs capture it), so nothing is checked on the host: use ``torch.ops.raycut.neighbor_list``
+    for the count, and ``check_pair_count`` where the host may wait (docs/python.md, "Static
+    capacity on CUDA").
 
     >>> i, j, S = pyraycut.neighbor_list("ijS", x, 3.0, cell=[10.0, 10.0, 10.0], pbc=True)
     >>> i, j = pyraycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
@@ -758,13 +765,40 @@ def _torch_ops_route(x: Any, method: str, max_pairs: Optional[int]) -> bool:
     """Whether a call goes through the PyTorch operators (pyraycut._torch.routes)."""
     if _arrays.framework_of(x) == "torch":
         ops = _torch_ops()
-        if ops is not None and ops.routes(x, method):
+        if ops is not None and ops.routes(x, method, max_pairs):
             return True
     if max_pairs is not None:
-        raise ValueError(f"max_pairs is for PyTorch CPU tensors with method 'auto' or "
-                         f"'cell-list' (the operators, built with torch), got "
+        raise ValueError(f"max_pairs is for PyTorch tensors through the operators (built with "
+                         f"torch): CPU tensors with method 'auto' or 'cell-list', CUDA tensors "
+                         f"with 'auto' or 'grid' where the CUDA kernel is built; got "
                          f"{_arrays.framework_of(x)} input with method={method!r}")
     return False
+
+
+# What a negative pair count of a static-capacity list says (raycut/device_pairs.hpp's codes):
+# bad device data, found where the list was built without reading anything back.
+_BAD_COUNT = {
+    -1: "a position is NaN or infinite",
+    -2: "batch is not sorted: the particles of each system must be contiguous",
+    -3: "a cell has non-finite entries or linearly dependent periodic rows",
+    -4: "a batch value is negative or has no cell or pbc row (one per system)",
+}
+
+
+def check_pair_count(count: Any, max_pairs: int) -> int:
+    """The pair count of a static-capacity list (``torch.ops.raycut.neighbor_list(...,
+    max_pairs=K)``'s ``count``), checked: returns it when the list is complete (0 <= count <=
+    max_pairs), raises ``CapacityError`` when it was cut (count > max_pairs: that many pairs
+    exist) and ``ValueError`` naming the bad input for a negative count. Reading a CUDA count
+    waits for the GPU: call this where the host may wait, not in a captured or compiled step."""
+    found = int(count)
+    if found < 0:
+        raise ValueError(f"bad input to the pair list (count {found}): "
+                         f"{_BAD_COUNT.get(found, 'unknown code')}")
+    if found > max_pairs:
+        raise CapacityError(f"max_pairs = {max_pairs} is too small: {found} pairs were found "
+                            f"(grow max_pairs to at least {found})")
+    return found
 
 
 def _host_cell(cell: Any) -> Any:

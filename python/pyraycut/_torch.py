@@ -10,7 +10,9 @@ operators and registers their fake implementations (the output shapes that torch
 torch.export trace with: an unbacked size for the exact pair count, ``max_pairs`` otherwise).
 
 Everything below runs under Dynamo's tracing too: torch operations and Python only, no NumPy
-and no reads of tensor values except in eager mode (the capacity check).
+and no reads of tensor values except in eager mode on the CPU (the capacity check). CUDA calls
+with ``max_pairs`` read nothing back either: the operator's small-system pass queues its work on
+the current stream without waiting, so the whole call can be captured in a CUDA graph.
 """
 from __future__ import annotations
 
@@ -20,7 +22,7 @@ import torch
 
 from . import _arrays
 from . import _systems
-from ._raycut import CapacityError
+from . import check_pair_count
 
 LIBRARY = _arrays.built_library("_torch_ops", "raycut's PyTorch operators are", "torch",
                                 "RAYCUT_BUILD_TORCH")
@@ -76,20 +78,24 @@ def _fake_pairs(like: torch.Tensor, max_pairs: Optional[int]) -> tuple:
             like.new_empty((size, 3), dtype=torch.int32), like.new_empty((), dtype=torch.int64))
 
 
-# The CUDA kernel is built on request only (RAYCUT_TORCH_CUDA): without it CUDA tensors take the
-# extension's path.
+# The CUDA kernel is built where raycut has CUDA and torch is a CUDA build (RAYCUT_TORCH_CUDA):
+# without it CUDA tensors take the extension's path.
 _CUDA_KERNEL = torch._C._dispatch_has_kernel_for_dispatch_key("raycut::neighbor_list", "CUDA")
 
 
-def routes(x: Any, method: str) -> bool:
+def routes(x: Any, method: str, max_pairs: Optional[int] = None) -> bool:
     """Whether a call on ``x`` goes through the operators: PyTorch tensors on a device they have
     a kernel for, with the method that kernel runs (the CPU cell list, the CUDA grid) or
-    ``"auto"``."""
+    ``"auto"``. CUDA tensors take the operator where only it serves: static capacity
+    (``max_pairs``, the stream-ordered pass for small systems) and tracing (torch.compile);
+    other eager calls keep the extension's zero-copy path (the library's own device buffers
+    wrapped, no copy into torch's)."""
     if not isinstance(x, torch.Tensor):
         return False
     if x.device.type == "cpu":
         return method in ("auto", "cell-list")
-    return x.device.type == "cuda" and _CUDA_KERNEL and method in ("auto", "grid")
+    return (x.device.type == "cuda" and _CUDA_KERNEL and method in ("auto", "grid") and
+            (max_pairs is not None or torch.compiler.is_compiling()))
 
 
 def _cell(cell: Any, like: torch.Tensor) -> Optional[torch.Tensor]:
@@ -108,18 +114,34 @@ def _cell(cell: Any, like: torch.Tensor) -> Optional[torch.Tensor]:
     return c
 
 
-def _pbc(pbc: Any) -> Optional[torch.Tensor]:
+def _any_true(values: Any) -> bool:
+    """Whether host flags (a bool, a nested sequence of them, or an array) hold a True, read in
+    Python so that no tensor value is read under tracing."""
+    if hasattr(values, "tolist"):
+        values = values.tolist()
+    if isinstance(values, (list, tuple)):
+        return any(_any_true(v) for v in values)
+    return bool(values)
+
+
+def _pbc(pbc: Any, cell: Optional[torch.Tensor], like: torch.Tensor) -> Optional[torch.Tensor]:
+    """pbc as a bool tensor on the positions' device (one bool is made there: a CUDA call then
+    copies nothing from the host). Host values without a cell are checked here and dropped when
+    all False, so that the operator never has to read a device tensor to check them."""
     if pbc is None:
         return None
-    if isinstance(pbc, torch.Tensor):
-        flags = pbc.to(torch.bool)
-    elif isinstance(pbc, bool):
-        flags = torch.full((3,), pbc, dtype=torch.bool)
+    if cell is None and not isinstance(pbc, torch.Tensor):
+        if _any_true(pbc):
+            raise ValueError("pbc without a cell: periodic axes need their lattice vectors (pass "
+                             "cell, rows a, b, c)")
+        return None
+    if isinstance(pbc, bool):
+        flags = torch.full((3,), pbc, dtype=torch.bool, device=like.device)
     else:
-        flags = torch.as_tensor(pbc).to(torch.bool)
+        flags = torch.as_tensor(pbc).to(device=like.device, dtype=torch.bool)
     if flags.dim() == 0:
         flags = flags.expand(3)
-    return flags.cpu()
+    return flags
 
 
 def _index(batch: Any, name: str) -> Optional[torch.Tensor]:
@@ -132,13 +154,12 @@ def _index(batch: Any, name: str) -> Optional[torch.Tensor]:
 
 
 def _check_capacity(count: torch.Tensor, max_pairs: Optional[int]) -> None:
-    """In eager mode, a list cut short by max_pairs raises (compiled code reads ``count``)."""
-    if max_pairs is None or torch.compiler.is_compiling():
+    """In eager mode on the host, a list cut short by max_pairs raises (compiled code reads
+    ``count``). A CUDA count stays on the device: reading it would wait for the GPU, which
+    static capacity is there to avoid (the caller reads it where it may wait)."""
+    if max_pairs is None or torch.compiler.is_compiling() or count.device.type != "cpu":
         return
-    found = int(count)
-    if found > max_pairs:
-        raise CapacityError(f"max_pairs = {max_pairs} is too small: {found} pairs were found "
-                            f"(grow max_pairs to at least {found})")
+    check_pair_count(count, max_pairs)
 
 
 def _padded(x: torch.Tensor) -> torch.Tensor:
@@ -187,8 +208,8 @@ def neighbor_list(letters: str, positions: torch.Tensor, cutoff: float, cell: An
     c = _cell(cell, positions)
     b = _index(batch, "batch")
     i, j, shifts, count = torch.ops.raycut.neighbor_list(
-        positions.detach(), float(cutoff), None if c is None else c.detach(), _pbc(pbc), b,
-        bool(half), max_pairs)
+        positions.detach(), float(cutoff), None if c is None else c.detach(),
+        _pbc(pbc, c, positions), b, bool(half), max_pairs)
     _check_capacity(count, max_pairs)
     return _quantities(
         letters, i, j, shifts,
@@ -206,8 +227,8 @@ def radius(letters: str, points: torch.Tensor, queries: Any, cutoff: float, cell
     bq = _index(batch_queries, "batch_queries")
     i, j, shifts, count = torch.ops.raycut.radius(
         points.detach(), queries.detach().to(points.dtype), float(cutoff),
-        None if c is None else c.detach(), _pbc(pbc), _index(batch_points, "batch_points"), bq,
-        max_pairs)
+        None if c is None else c.detach(), _pbc(pbc, c, points),
+        _index(batch_points, "batch_points"), bq, max_pairs)
     _check_capacity(count, max_pairs)
     return _quantities(
         letters, i, j, shifts,

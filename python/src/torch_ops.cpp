@@ -10,7 +10,9 @@
 // of points, S = 0), otherwise the exact pair count.
 //
 // Kernels: the CPU cell list; with RAYCUT_TORCH_CUDA (raycut built with CUDA, torch with CUDA)
-// also the CUDA grid on the tensors' device and current stream.
+// also the CUDA grid on the tensors' device and current stream, and for neighbor_list with
+// max_pairs on small systems (raycut::prefer_small_systems) the stream-ordered pass of
+// raycut/device_pairs.hpp, which never waits on the host (a CUDA graph captures it).
 //
 // Built as its own shared library (pyraycut/_torch_ops.so), against the classic C++ API of the
 // torch it is built with: docs/python.md says why.
@@ -18,8 +20,12 @@
 #include <torch/library.h>
 
 #ifdef RAYCUT_TORCH_CUDA
+#include <c10/cuda/CUDACachingAllocator.h>
 #include <c10/cuda/CUDAGuard.h>
 #include <c10/cuda/CUDAStream.h>
+
+#include "raycut/context.hpp"
+#include "raycut/device_pairs.hpp"
 #endif
 
 #include <algorithm>
@@ -58,12 +64,54 @@ using Pairs = std::tuple<at::Tensor, at::Tensor, at::Tensor, at::Tensor>;
 // (N, 3) float32 or float64 points as the engine searches them: float32, C-contiguous, on their
 // device. float64 CPU positions also go to the engine as they are (run's `wide`), which decides
 // in double what the float rounding could (docs/limits.md, "float64 positions").
-at::Tensor search_points(const at::Tensor& x, const char* name) {
+void check_points(const at::Tensor& x, const char* name) {
   TORCH_CHECK_VALUE(x.dim() == 2 && x.size(1) == 3, name, " must have shape (N, 3), got ",
                     x.sizes());
   TORCH_CHECK_VALUE(x.scalar_type() == at::kFloat || x.scalar_type() == at::kDouble, name,
                     " must be float32 or float64, got ", x.scalar_type());
+}
+at::Tensor search_points(const at::Tensor& x, const char* name) {
+  check_points(x, name);
   return x.to(at::kFloat).contiguous();
+}
+
+// The shape and dtype checks of cell, pbc and batch: host metadata only, never their values.
+void check_cell(const at::Tensor& c) {
+  TORCH_CHECK_VALUE(c.is_floating_point(), "cell must be float32 or float64, got ",
+                    c.scalar_type());
+  TORCH_CHECK_VALUE((c.dim() == 2 || c.dim() == 3) && c.size(-1) == 3 && c.size(-2) == 3,
+                    "cell must have shape (3, 3) (rows: lattice vectors a, b, c) or (B, 3, 3) "
+                    "(one per system of a batch), got ",
+                    c.sizes());
+}
+void check_pbc_type(const at::Tensor& pbc) {
+  TORCH_CHECK_VALUE(pbc.scalar_type() == at::kBool, "pbc must be bool, got ", pbc.scalar_type());
+}
+void check_pbc(const at::Tensor& pbc) {
+  check_pbc_type(pbc);
+  TORCH_CHECK_VALUE((pbc.dim() == 1 || pbc.dim() == 2) && pbc.size(-1) == 3,
+                    "pbc must have shape (3,) or (B, 3) (one row per system), got ", pbc.sizes());
+}
+void check_system_counts(std::int64_t cells, std::int64_t flags) {
+  const std::int64_t count = std::max(cells, flags);
+  TORCH_CHECK_VALUE((cells == count || cells == 1) && (flags == count || flags == 1), "cell gives ",
+                    cells, " systems but pbc ", flags);
+}
+void check_batch(const at::Tensor& b, std::int64_t n, const char* name) {
+  TORCH_CHECK_VALUE(!b.is_floating_point() && !b.is_complex() && b.scalar_type() != at::kBool, name,
+                    " must be integers (the system of each particle), got ", b.scalar_type());
+  TORCH_CHECK_VALUE(b.dim() == 1 && b.size(0) == n, name,
+                    " must have one system index per particle, shape (", n, ",), got shape ",
+                    b.sizes());
+}
+void check_systems_are_told(std::int64_t systems, bool has_index, const char* index_name) {
+  TORCH_CHECK_VALUE(systems <= 1 || has_index, "cell/pbc give ", systems,
+                    " systems (shape (B, 3, 3) / (B, 3)) but no ", index_name,
+                    " says which particles belong to which");
+}
+void check_max_pairs(std::int64_t max_pairs) {
+  TORCH_CHECK_VALUE(max_pairs >= 0, "max_pairs must be >= 0 (the static number of pairs), got ",
+                    max_pairs);
 }
 
 // cell (3, 3) or (B, 3, 3) and pbc (3,) or (B, 3) as raycut boxes: one for every system, or
@@ -72,8 +120,7 @@ std::vector<raycut::Box> boxes_of(const std::optional<at::Tensor>& cell,
                                   const std::optional<at::Tensor>& pbc) {
   if (!cell) {
     if (pbc) {
-      TORCH_CHECK_VALUE(pbc->scalar_type() == at::kBool, "pbc must be bool, got ",
-                        pbc->scalar_type());
+      check_pbc_type(*pbc);
       TORCH_CHECK_VALUE(!pbc->any().item<bool>(),
                         "pbc without a cell: periodic axes need their lattice vectors (pass "
                         "cell, rows a, b, c)");
@@ -81,26 +128,15 @@ std::vector<raycut::Box> boxes_of(const std::optional<at::Tensor>& cell,
     return {};
   }
   const at::Tensor& c = *cell;
-  TORCH_CHECK_VALUE(c.is_floating_point(), "cell must be float32 or float64, got ",
-                    c.scalar_type());
-  TORCH_CHECK_VALUE((c.dim() == 2 || c.dim() == 3) && c.size(-1) == 3 && c.size(-2) == 3,
-                    "cell must have shape (3, 3) (rows: lattice vectors a, b, c) or (B, 3, 3) "
-                    "(one per system of a batch), got ",
-                    c.sizes());
+  check_cell(c);
   const at::Tensor cells = c.reshape({-1, 3, 3}).to(at::kDouble).cpu().contiguous();
   at::Tensor flags = at::ones({1, 3}, at::kBool);
   if (pbc) {
-    TORCH_CHECK_VALUE(pbc->scalar_type() == at::kBool, "pbc must be bool, got ",
-                      pbc->scalar_type());
-    TORCH_CHECK_VALUE((pbc->dim() == 1 || pbc->dim() == 2) && pbc->size(-1) == 3,
-                      "pbc must have shape (3,) or (B, 3) (one row per system), got ",
-                      pbc->sizes());
+    check_pbc(*pbc);
     flags = pbc->reshape({-1, 3}).cpu().contiguous();
   }
+  check_system_counts(cells.size(0), flags.size(0));
   const std::int64_t count = std::max(cells.size(0), flags.size(0));
-  TORCH_CHECK_VALUE((cells.size(0) == count || cells.size(0) == 1) &&
-                        (flags.size(0) == count || flags.size(0) == 1),
-                    "cell gives ", cells.size(0), " systems but pbc ", flags.size(0));
   const double* cell_data = cells.data_ptr<double>();
   const bool* flag_data = flags.data_ptr<bool>();
   std::vector<raycut::Box> boxes(static_cast<std::size_t>(count));
@@ -120,11 +156,7 @@ std::vector<raycut::Box> boxes_of(const std::optional<at::Tensor>& cell,
 at::Tensor system_index(const std::optional<at::Tensor>& batch, std::int64_t n, const char* name) {
   if (!batch) return at::Tensor();
   const at::Tensor& b = *batch;
-  TORCH_CHECK_VALUE(!b.is_floating_point() && !b.is_complex() && b.scalar_type() != at::kBool, name,
-                    " must be integers (the system of each particle), got ", b.scalar_type());
-  TORCH_CHECK_VALUE(b.dim() == 1 && b.size(0) == n, name,
-                    " must have one system index per particle, shape (", n, ",), got shape ",
-                    b.sizes());
+  check_batch(b, n, name);
   at::Tensor index = b.to(at::kLong).cpu().contiguous();
   const std::int64_t* v = index.data_ptr<std::int64_t>();
   for (std::int64_t k = 0; k < n; ++k) {
@@ -166,9 +198,7 @@ raycut::Systems systems_of(std::vector<raycut::Box> boxes, const at::Tensor& ind
   raycut::Systems systems;
   const bool per_system = boxes.size() > 1;
   if (!index.defined() && !query_index.defined()) {
-    TORCH_CHECK_VALUE(!per_system, "cell/pbc give ", boxes.size(),
-                      " systems (shape (B, 3, 3) / (B, 3)) but no ", index_name,
-                      " says which particles belong to which");
+    check_systems_are_told(static_cast<std::int64_t>(boxes.size()), false, index_name);
     if (!boxes.empty()) systems.box = boxes[0];
     return systems;
   }
@@ -239,8 +269,7 @@ Pairs pair_tensors(const raycut::NeighbourListBuffer& list, std::optional<std::i
   const auto found = static_cast<std::int64_t>(list.pairs());
   std::int64_t size = found;
   if (max_pairs) {
-    TORCH_CHECK_VALUE(*max_pairs >= 0, "max_pairs must be >= 0 (the static number of pairs), got ",
-                      *max_pairs);
+    check_max_pairs(*max_pairs);
     size = *max_pairs;
   }
   const at::Tensor count = at::scalar_tensor(found, at::kLong);
@@ -306,10 +335,114 @@ Pairs run(const at::Tensor& x, double cutoff, const raycut::Systems& systems, bo
   return pair_tensors(list, max_pairs, pad_i, pad_j, device);
 }
 
+#ifdef RAYCUT_TORCH_CUDA
+// raycut's temporaries from PyTorch's caching allocator, on the stream they are used on: freed
+// blocks are reused by later work on that stream only, and a CUDA graph capture takes them from
+// its private pool.
+class CachingAllocatorMemory final : public raycut::MemoryResource {
+ public:
+  void* allocate(std::size_t bytes, void* cuda_stream) override {
+    return c10::cuda::CUDACachingAllocator::raw_alloc_with_stream(
+        bytes, static_cast<cudaStream_t>(cuda_stream));
+  }
+  void deallocate(void* p, std::size_t, void*) noexcept override {
+    c10::cuda::CUDACachingAllocator::raw_delete(p);
+  }
+};
+
+// Whether a neighbor_list call takes the stream-ordered small-system pass: static capacity, CUDA
+// tensors, systems small enough by raycut's policy. The number of systems is what the host
+// knows: B of a (B, 3, 3) cell, else 1 (the batch's is data-dependent and is never read back).
+// pbc without a cell stays on the engine, which checks that no axis is periodic.
+bool takes_small_systems_pass(const at::Tensor& positions, const std::optional<at::Tensor>& cell,
+                              const std::optional<at::Tensor>& pbc,
+                              std::optional<std::int64_t> max_pairs) {
+  if (!max_pairs || !positions.is_cuda() || (pbc && !cell)) return false;
+  const std::int64_t systems = cell && cell->dim() == 3 ? cell->size(0) : 1;
+  return raycut::prefer_small_systems(static_cast<std::size_t>(positions.size(0)),
+                                      static_cast<std::size_t>(systems));
+}
+
+// The small-system pass on the positions' device and current stream, into tensors that torch
+// allocates: nothing here reads device data or waits, so bad values (NaN, an unsorted batch,
+// a singular cell, a system without its cell) show as a negative count
+// (raycut/device_pairs.hpp's codes), and a list past max_pairs as a count above it. Positions as
+// given (float32 or float64, decided in double); cell in their dtype; pbc bool and batch int64 on
+// the device (tensors elsewhere are copied there, which waits).
+Pairs small_systems_pairs(const at::Tensor& positions, double cutoff,
+                          const std::optional<at::Tensor>& cell,
+                          const std::optional<at::Tensor>& pbc,
+                          const std::optional<at::Tensor>& batch, bool half,
+                          std::int64_t max_pairs) {
+  check_max_pairs(max_pairs);
+  const at::Device device = positions.device();
+  const c10::cuda::CUDAGuard guard(device);
+  const at::Tensor x = positions.contiguous();
+  const std::int64_t n = x.size(0);
+  const auto on_device = at::TensorOptions().device(device);
+
+  raycut::DeviceSystems systems;
+  systems.positions = x.data_ptr();
+  systems.scalar =
+      x.scalar_type() == at::kDouble ? raycut::Scalar::float64 : raycut::Scalar::float32;
+  systems.size = static_cast<std::size_t>(n);
+  at::Tensor cells, flags, index;  // kept alive until the pass is queued
+  std::int64_t cell_count = 1, flag_count = 1;
+  if (cell) {
+    check_cell(*cell);
+    cells = cell->to(device, x.scalar_type()).reshape({-1, 3, 3}).contiguous();
+    cell_count = cells.size(0);
+    systems.cells = cells.data_ptr();
+    systems.cell_count = static_cast<std::size_t>(cell_count);
+  }
+  if (pbc) {
+    check_pbc(*pbc);
+    flags = pbc->to(device, at::kBool).reshape({-1, 3}).contiguous();
+    flag_count = flags.size(0);
+    systems.pbc = flags.data_ptr<bool>();
+    systems.pbc_count = static_cast<std::size_t>(flag_count);
+  }
+  check_system_counts(cell_count, flag_count);
+  check_systems_are_told(std::max(cell_count, flag_count), batch.has_value(), "batch");
+  if (batch) {
+    check_batch(*batch, n, "batch");
+    index = batch->to(device, at::kLong).contiguous();
+    systems.batch = index.data_ptr<std::int64_t>();
+  }
+
+  at::Tensor i = at::empty({max_pairs}, on_device.dtype(at::kLong));
+  at::Tensor j = at::empty({max_pairs}, on_device.dtype(at::kLong));
+  at::Tensor shifts = at::empty({max_pairs, 3}, on_device.dtype(at::kInt));
+  at::Tensor count = at::empty({}, on_device.dtype(at::kLong));
+  raycut::StaticPairs out;
+  out.i = i.data_ptr<std::int64_t>();
+  out.j = j.data_ptr<std::int64_t>();
+  out.shifts = shifts.data_ptr<std::int32_t>();
+  out.count = count.data_ptr<std::int64_t>();
+  out.capacity = static_cast<std::size_t>(max_pairs);
+  out.pad_index = n;
+  raycut::PairOptions options;
+  options.half = half;
+  CachingAllocatorMemory memory;
+  const raycut::Context ctx{c10::cuda::getCurrentCUDAStream(device.index()).stream(), &memory};
+  try {
+    raycut::list_pairs_small_systems(ctx, systems, cutoff, options, out);
+  } catch (const raycut::Error& e) {
+    rethrow(e);
+  }
+  return {i, j, shifts, count};
+}
+#endif
+
 Pairs neighbor_list(const at::Tensor& positions, double cutoff,
                     const std::optional<at::Tensor>& cell, const std::optional<at::Tensor>& pbc,
                     const std::optional<at::Tensor>& batch, bool half,
                     std::optional<std::int64_t> max_pairs) {
+#ifdef RAYCUT_TORCH_CUDA
+  check_points(positions, "positions");
+  if (takes_small_systems_pass(positions, cell, pbc, max_pairs))
+    return small_systems_pairs(positions, cutoff, cell, pbc, batch, half, *max_pairs);
+#endif
   const at::Tensor x = search_points(positions, "positions");
   const std::int64_t n = x.size(0);
   const raycut::Systems systems =
@@ -412,7 +545,8 @@ TORCH_LIBRARY_IMPL(raycut, CPU, m) {
 
 #ifdef RAYCUT_TORCH_CUDA
 // The same kernels on CUDA tensors: the grid on the tensors' device and current stream (the
-// boxes and batch offsets are read on the host).
+// boxes and batch offsets are read on the host), or for neighbor_list with max_pairs on small
+// systems the stream-ordered pass that reads nothing back (takes_small_systems_pass).
 TORCH_LIBRARY_IMPL(raycut, CUDA, m) {
   m.impl("neighbor_list", &neighbor_list);
   m.impl("radius", &radius);

@@ -1,0 +1,322 @@
+"""torch.ops.raycut.neighbor_list with max_pairs on CUDA tensors: the stream-ordered small-system
+pass (no host synchronisation, CUDA-graph capturable) against the CPU operator's pairs, capacity
+overflow, bad data as a negative count, sync-debug mode, CUDA graphs, a side stream and
+torch.compile. Skipped without a GPU or without the operators' CUDA kernel; the count checks
+of pyraycut.check_pair_count run everywhere."""
+import importlib.util
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch", reason="PyTorch is not installed")
+import pyraycut  # noqa: E402
+
+try:
+    pyraycut.load_torch_ops()
+    OPS = True
+except ImportError:
+    OPS = False
+
+CUDA_KERNEL = (OPS and torch.cuda.is_available() and
+               torch._C._dispatch_has_kernel_for_dispatch_key("raycut::neighbor_list", "CUDA"))
+cuda = pytest.mark.skipif(not CUDA_KERNEL, reason="needs a GPU and the operators' CUDA kernel "
+                          "(RAYCUT_TORCH_CUDA)")
+
+
+def rng(seed):
+    return np.random.default_rng(seed)
+
+
+class Case:
+    """Positions, cutoff, cell, pbc and batch on the host, in the dtype the test asks for."""
+
+    def __init__(self, x, cutoff, cell=None, pbc=None, batch=None):
+        self.x, self.cutoff, self.cell, self.pbc, self.batch = x, cutoff, cell, pbc, batch
+
+    def on(self, device, dtype):
+        def move(t, kind=None):
+            return None if t is None else torch.as_tensor(t, dtype=kind).to(device)
+        return (move(self.x, dtype), self.cutoff, move(self.cell, dtype),
+                move(self.pbc, torch.bool), move(self.batch, torch.int64))
+
+
+def cube():
+    """A periodic cube (N=128, L=5.3, C=2.5), positions partly outside the box (unwrapped)."""
+    x = rng(1).random((128, 3)) * 6.0 - 0.35
+    return Case(x, 2.5, 5.3 * np.eye(3))
+
+
+def triclinic():
+    """A skewed cell thinner than twice the cutoff: pairs through several images, own images."""
+    cell = np.array([[4.0, 0.0, 0.0], [1.3, 3.7, 0.0], [0.6, -0.9, 2.1]])
+    x = rng(2).random((96, 3)) @ cell
+    return Case(x, 2.5, cell)
+
+
+def slab():
+    """pbc (True, True, False): periodic in a and b, open along c."""
+    cell = np.diag([4.5, 5.0, 7.0])
+    x = rng(3).random((100, 3)) * [4.5, 5.0, 9.0]
+    return Case(x, 2.2, cell, np.array([True, True, False]))
+
+
+def batched():
+    """Three systems with their own (B, 3, 3) cells and pbc rows, the middle one empty."""
+    cells = np.stack([np.diag([5.0, 5.5, 6.0]),
+                      np.diag([4.0, 4.0, 4.0]),
+                      np.array([[4.2, 0.0, 0.0], [1.0, 4.0, 0.0], [0.0, 0.8, 4.4]])])
+    pbc = np.array([[True, True, True], [True, True, True], [True, False, True]])
+    sizes = [60, 0, 70]
+    batch = np.repeat(np.arange(3), sizes)
+    frac = rng(4).random((sum(sizes), 3))
+    x = np.einsum("nk,nkl->nl", frac, cells[batch])
+    return Case(x, 2.3, cells, pbc, batch)
+
+
+CASES = {"cube": cube, "triclinic": triclinic, "slab": slab, "batch": batched}
+
+
+def reference(case, dtype, half):
+    """The CPU operator's pairs on the same numbers: the positions and cell as the CUDA call
+    holds them (rounded to dtype), given to the CPU in float64, where every pair is decided in
+    double, as the small-system pass decides it."""
+    x, cutoff, cell, pbc, batch = case.on("cpu", dtype)
+    i, j, s, count = torch.ops.raycut.neighbor_list(
+        x.double(), cutoff, None if cell is None else cell.double(), pbc, batch, half, None)
+    assert int(count) == len(i)
+    return triples(i, j, s, len(i))
+
+
+def triples(i, j, s, count):
+    i, j, s = i[:count].cpu().tolist(), j[:count].cpu().tolist(), s[:count].cpu().tolist()
+    found = [(a, b, *shift) for a, b, shift in zip(i, j, s)]
+    assert len(set(found)) == len(found), "a pair listed twice"
+    return set(found)
+
+
+def static(case, dtype, half, max_pairs, device="cuda"):
+    x, cutoff, cell, pbc, batch = case.on(device, dtype)
+    return torch.ops.raycut.neighbor_list(x, cutoff, cell, pbc, batch, half, max_pairs)
+
+
+def check_layout(out, n, max_pairs):
+    """Static shapes and dtypes on the GPU, rows ascending, padding (N, N, 0) after the count."""
+    i, j, s, count = out
+    assert i.is_cuda and j.is_cuda and s.is_cuda and count.is_cuda
+    assert i.shape == (max_pairs,) and j.shape == (max_pairs,) and s.shape == (max_pairs, 3)
+    assert (i.dtype, j.dtype, s.dtype, count.dtype) == (torch.int64, torch.int64, torch.int32,
+                                                        torch.int64)
+    assert count.dim() == 0
+    found = min(int(count), max_pairs)
+    assert bool((i[:found][1:] >= i[:found][:-1]).all()), "rows not ascending"
+    assert bool((i[found:] == n).all()) and bool((j[found:] == n).all())
+    assert bool((s[found:] == 0).all())
+
+
+@cuda
+@pytest.mark.parametrize("half", [False, True])
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_static_pass_equals_the_cpu_operator(name, dtype, half):
+    case = CASES[name]()
+    want = reference(case, dtype, half)
+    assert want, "the case has pairs"
+    max_pairs = len(want) + 17
+    out = static(case, dtype, half, max_pairs)
+    check_layout(out, len(case.x), max_pairs)
+    i, j, s, count = out
+    assert int(count) == len(want)
+    assert triples(i, j, s, int(count)) == want
+
+
+@cuda
+def test_several_images_of_one_pair_are_listed():
+    case = triclinic()
+    i, j, s, count = static(case, torch.float64, False, 200_000)
+    pairs = triples(i, j, s, int(count))
+    per_pair = {}
+    for a, b, *shift in pairs:
+        per_pair.setdefault((a, b), set()).add(tuple(shift))
+    assert max(len(v) for v in per_pair.values()) > 1
+    assert any(a == b for a, b, *_ in pairs), "own images of a thin cell"
+
+
+@cuda
+def test_capacity_short_by_one_reports_the_true_count():
+    case = cube()
+    want = reference(case, torch.float32, False)
+    full = static(case, torch.float32, False, len(want) + 5)
+    short = static(case, torch.float32, False, len(want) - 1)
+    check_layout(short, len(case.x), len(want) - 1)
+    i, j, s, count = short
+    assert int(count) == len(want) > len(want) - 1  # not cut silently: the count says so
+    # The pairs that fit are the first of the fixed order, all of them real pairs.
+    for cut, whole in zip(short[:3], full[:3]):
+        assert torch.equal(cut, whole[:len(want) - 1])
+    assert triples(i, j, s, len(want) - 1) <= want
+    with pytest.raises(pyraycut.CapacityError, match="max_pairs = %d" % (len(want) - 1)):
+        pyraycut.check_pair_count(count, len(want) - 1)
+    assert pyraycut.check_pair_count(full[3], len(want) + 5) == len(want)
+
+
+@cuda
+def test_bad_data_is_a_negative_count_not_a_raise():
+    case = batched()
+    x, cutoff, cell, pbc, batch = case.on("cuda", torch.float32)
+    nan = x.clone()
+    nan[7, 1] = float("nan")
+    count = torch.ops.raycut.neighbor_list(nan, cutoff, cell, pbc, batch, False, 5000)[3]
+    assert int(count) == -1
+    with pytest.raises(ValueError, match="NaN"):
+        pyraycut.check_pair_count(count, 5000)
+    unsorted = batch.flip(0)
+    count = torch.ops.raycut.neighbor_list(x, cutoff, cell, pbc, unsorted, False, 5000)[3]
+    assert int(count) == -2
+    beyond = batch.clone()
+    beyond[-5:] = 3  # no fourth cell
+    count = torch.ops.raycut.neighbor_list(x, cutoff, cell, pbc, beyond, False, 5000)[3]
+    assert int(count) == -4
+
+
+@cuda
+def test_no_host_synchronisation():
+    case = batched()
+    x, cutoff, cell, pbc, batch = case.on("cuda", torch.float32)
+    max_pairs = len(reference(case, torch.float32, False)) + 10
+    cube_x = torch.as_tensor(cube().x, dtype=torch.float32).to("cuda")
+    torch.cuda.synchronize()
+    torch.cuda.set_sync_debug_mode("error")
+    try:
+        ops = torch.ops.raycut.neighbor_list(x, cutoff, cell, pbc, batch, True, max_pairs)
+        i, j, d = pyraycut.neighbor_list("ijd", x, cutoff, cell=cell, pbc=pbc, batch=batch,
+                                         max_pairs=max_pairs)
+        open_x = x[:60]
+        pyraycut.neighbor_list("ij", open_x, cutoff, pbc=False, max_pairs=max_pairs)
+        pyraycut.neighbor_list("ijS", cube_x, 2.5, cell=5.3 * torch.eye(3, device="cuda"),
+                               pbc=True, max_pairs=max_pairs)
+    finally:
+        torch.cuda.set_sync_debug_mode(0)
+    full = torch.ops.raycut.neighbor_list(x, cutoff, cell, pbc, batch, False, max_pairs)
+    assert torch.equal(i, full[0]) and torch.equal(j, full[1])
+    assert int(ops[3]) * 2 == int(full[3])  # the half list holds each pair once
+    real = i < len(x)
+    assert bool((d[real] < cutoff * (1 + 1e-6)).all()) and bool((d[~real] == 0).all())
+
+
+@cuda
+@pytest.mark.parametrize("name", ["cube", "batch"])
+def test_cuda_graph_replays_equal_eager_bit_for_bit(name):
+    case = CASES[name]()
+    x, cutoff, cell, pbc, batch = case.on("cuda", torch.float32)
+    max_pairs = len(reference(case, torch.float32, False)) * 2
+    captured_x = x.clone()
+
+    def call(positions):
+        return torch.ops.raycut.neighbor_list(positions, cutoff, cell, pbc, batch, False,
+                                              max_pairs)
+
+    side = torch.cuda.Stream()  # warm up off the capture, as torch.cuda.graphs asks
+    side.wait_stream(torch.cuda.current_stream())
+    with torch.cuda.stream(side):
+        for _ in range(2):
+            call(captured_x)
+    torch.cuda.current_stream().wait_stream(side)
+    graph = torch.cuda.CUDAGraph()
+    with torch.cuda.graph(graph):
+        captured = call(captured_x)
+    generator = torch.Generator(device="cuda").manual_seed(5)
+    counts = set()
+    for step in range(3):
+        moved = x + 0.15 * torch.randn(x.shape, device="cuda", generator=generator)
+        captured_x.copy_(moved)
+        graph.replay()
+        torch.cuda.synchronize()
+        eager = call(moved)
+        for replayed, direct in zip(captured, eager):
+            assert torch.equal(replayed, direct), step
+        counts.add(int(eager[3]))
+    assert len(counts) > 1, "the pair count changed from step to step"
+
+
+@cuda
+def test_non_default_stream():
+    case = batched()
+    want = reference(case, torch.float64, False)
+    x, cutoff, cell, pbc, batch = case.on("cuda", torch.float64)
+    side = torch.cuda.Stream()
+    side.wait_stream(torch.cuda.current_stream())
+    with torch.cuda.stream(side):
+        # Positions written late on the side stream: a pass queued anywhere else would read
+        # them before they are there.
+        torch.cuda._sleep(50_000_000)
+        moved = x.clone()
+        i, j, s, count = torch.ops.raycut.neighbor_list(moved, cutoff, cell, pbc, batch, False,
+                                                        len(want) + 3)
+    torch.cuda.current_stream().wait_stream(side)
+    assert int(count) == len(want)
+    assert triples(i, j, s, int(count)) == want
+
+
+@cuda
+def test_large_systems_go_through_the_engine():
+    """Above raycut::prefer_small_systems the engine's grid lists the same pairs."""
+    # float32 on both sides: the engine's float32 predicate, the same on the CPU and the GPU.
+    x = torch.as_tensor(rng(6).random((6000, 3)) * 30.0, dtype=torch.float32)
+    cell = 30.0 * torch.eye(3)
+    i, j, s, count = torch.ops.raycut.neighbor_list(x, 1.2, cell, None, None, False, None)
+    out = torch.ops.raycut.neighbor_list(x.cuda(), 1.2, cell.cuda(), None, None, False,
+                                         len(i) + 100)
+    assert int(out[3]) == len(i)
+    assert triples(*out[:3], len(i)) == triples(i, j, s, len(i))
+
+
+@cuda
+@pytest.mark.parametrize("name", ["cube", "batch"])
+def test_without_max_pairs_the_engine_lists_the_exact_pairs(name):
+    """No max_pairs: the engine's grid on CUDA (exact size), float32 on both sides."""
+    case = CASES[name]()
+    want = triples(*torch.ops.raycut.neighbor_list(*case.on("cpu", torch.float32), False,
+                                                   None)[:3], 10**9)
+    i, j, s, count = torch.ops.raycut.neighbor_list(*case.on("cuda", torch.float32), False, None)
+    assert i.is_cuda and len(i) == int(count) == len(want)
+    assert triples(i, j, s, len(i)) == want
+
+
+@cuda
+def test_torch_compile_fullgraph():
+    if not hasattr(torch, "compile"):
+        pytest.skip("torch.compile is not available")
+    case = cube()
+    x, cutoff, cell, pbc, _ = case.on("cuda", torch.float32)
+    max_pairs = len(reference(case, torch.float32, False)) + 50
+
+    def energy(positions):
+        i, d = pyraycut.neighbor_list("id", positions, cutoff, cell=cell, pbc=True,
+                                      max_pairs=max_pairs)
+        real = i < positions.shape[0]  # padding: i = N
+        return torch.where(real, torch.exp(-d), 0.0).sum()
+
+    backend = "inductor" if importlib.util.find_spec("triton") else "aot_eager"
+    compiled = torch.compile(energy, fullgraph=True, backend=backend)
+    for scale in (1.0, 1.01):
+        moved = x * scale
+        assert torch.allclose(compiled(moved), energy(moved), rtol=1e-5)
+
+
+def test_check_pair_count_names_bad_input_and_overflow():
+    assert pyraycut.check_pair_count(torch.tensor(12), 12) == 12
+    with pytest.raises(pyraycut.CapacityError, match="at least 13"):
+        pyraycut.check_pair_count(torch.tensor(13), 12)
+    for code, words in ((-1, "NaN"), (-2, "not sorted"), (-3, "cell"), (-4, "no cell")):
+        with pytest.raises(ValueError, match=words):
+            pyraycut.check_pair_count(torch.tensor(code), 12)
+
+
+@pytest.mark.skipif(not OPS, reason="the PyTorch operators are not built")
+def test_host_pbc_without_a_cell():
+    x = torch.rand(50, 3)
+    with pytest.raises(ValueError, match="pbc without a cell"):
+        pyraycut.neighbor_list("ij", x, 0.3, pbc=[True, False, False])
+    i, j = pyraycut.neighbor_list("ij", x, 0.3, pbc=False)
+    want_i, want_j = pyraycut.neighbor_list("ij", x, 0.3)
+    assert torch.equal(i, want_i) and torch.equal(j, want_j)
