@@ -528,7 +528,7 @@ def _put_back(key: Any, engine: Engine) -> None:
         _ENGINES[key] = engine
 
 
-_QUANTITIES = "ijdDS"
+_QUANTITIES = "ijdDSc"
 
 
 def _points(x: Any) -> Optional[int]:
@@ -542,11 +542,11 @@ def _points(x: Any) -> Optional[int]:
 
 def _letters(quantities: Any) -> str:
     if not isinstance(quantities, str) or not quantities:
-        raise ValueError("quantities must be a non-empty string of the letters i, j, d, D, S")
+        raise ValueError("quantities must be a non-empty string of the letters i, j, d, D, S, c")
     for letter in quantities:
         if letter not in _QUANTITIES:
             raise ValueError(f"unknown quantity {letter!r} in {quantities!r} (known: i, j, d, D, "
-                             "S)")
+                             "S, c)")
     return quantities
 
 
@@ -618,7 +618,11 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     - ``"d"``: distances ``|r_ij|`` (float32; float64 for float64 positions on the host,
       computed in float64 from them);
     - ``"D"``: vectors ``r_ij = x_j - x_i + S @ cell`` (P, 3) float32 (float64 likewise);
-    - ``"S"``: image shifts S (P, 3) int32 (zeros on open axes and without a cell).
+    - ``"S"``: image shifts S (P, 3) int32 (zeros on open axes and without a cell);
+    - ``"c"``: the pair count, a 0-d int64 tensor on the positions' device (PyTorch tensors that
+      go through the operator: CPU ones, and CUDA ones with ``max_pairs``): with ``max_pairs``
+      the list is valid iff 0 <= c <= max_pairs. Asking for it is taking
+      charge of the check: raycut then reads nothing back (see below).
 
     ``cutoff``: one number, or per atom or per pair as ASE takes them: a sequence of N radii
     (pair (i, j) within ``r_i + r_j``), ``{(Z1, Z2): rc}`` (pair cutoffs by species; pairs of
@@ -654,13 +658,12 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     ``torch.compile(fullgraph=True)``, ``torch.export`` and AOTInductor; ``d`` and ``D`` are then
     always computed in PyTorch, in the positions' dtype (docs/python.md). ``max_pairs`` (those
     tensors only): outputs of that static size, the pairs first, then padding (i = j = N, S = 0,
-    d = 0); a list that does not fit raises ``CapacityError`` in eager mode on the CPU. CUDA
-    tensors (method "auto" or "grid") take the operator's CUDA kernel, where it is built, with
-    ``max_pairs`` and under torch.compile (eager calls without ``max_pairs`` keep the zero-copy
-    path above). With ``max_pairs`` and small systems that call never waits for the GPU (CUDA
-    graphs capture it), so nothing is checked on the host: use ``torch.ops.raycut.neighbor_list``
-    for the count, and ``check_pair_count`` where the host may wait (docs/python.md, "Static
-    capacity on CUDA").
+    d = 0); a list that does not fit raises ``CapacityError`` in eager mode, unless ``"c"`` is
+    among the quantities: then the caller checks the count (``check_pair_count`` where the host
+    may wait), and a CUDA call on small systems never waits for the GPU (CUDA graphs capture it;
+    docs/python.md, "Static capacity on CUDA"). CUDA tensors (method "auto" or "grid") take the
+    operator's CUDA kernel, where it is built, with ``max_pairs`` and under torch.compile (eager
+    calls without ``max_pairs`` keep the zero-copy path above).
 
     >>> i, j, S = pyraycut.neighbor_list("ijS", x, 3.0, cell=[10.0, 10.0, 10.0], pbc=True)
     >>> i, j = pyraycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
@@ -676,6 +679,9 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     if _torch_ops_route(positions, method, max_pairs):
         return _torch_ops().neighbor_list(letters, positions, cutoff, cell, pbc, batch, half,
                                           max_pairs)
+    if "c" in letters:
+        raise ValueError("the quantity 'c' (the pair count) comes with PyTorch tensors through "
+                         "torch.ops.raycut (CPU tensors, or CUDA tensors with max_pairs)")
     grad = _requires_grad(positions) or (_arrays.framework_of(positions) == "torch"
                                          and _requires_grad(cell))
     search = _search_input(positions, grad)
@@ -721,6 +727,9 @@ def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any 
     if _torch_ops_route(points, method, max_pairs):
         return _torch_ops().radius(letters, points, queries, cutoff, cell, pbc, batch_points,
                                    batch_queries, max_pairs)
+    if "c" in letters:
+        raise ValueError("the quantity 'c' (the pair count) comes with PyTorch tensors through "
+                         "torch.ops.raycut (CPU tensors, or CUDA tensors with max_pairs)")
     torch_in = _arrays.framework_of(points) == "torch"
     grad = torch_in and (_requires_grad(points) or _requires_grad(queries) or
                          _requires_grad(cell))

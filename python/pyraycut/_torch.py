@@ -153,11 +153,11 @@ def _index(batch: Any, name: str) -> Optional[torch.Tensor]:
     return b.to(torch.int64)
 
 
-def _check_capacity(count: torch.Tensor, max_pairs: Optional[int]) -> None:
-    """In eager mode on the host, a list cut short by max_pairs raises (compiled code reads
-    ``count``). A CUDA count stays on the device: reading it would wait for the GPU, which
-    static capacity is there to avoid (the caller reads it where it may wait)."""
-    if max_pairs is None or torch.compiler.is_compiling() or count.device.type != "cpu":
+def _check_capacity(count: torch.Tensor, max_pairs: Optional[int], letters: str) -> None:
+    """In eager mode, a list cut short by max_pairs raises, unless the caller asked for the count
+    ("c") and so checks it where it may wait: on CUDA reading it waits for the GPU, which static
+    capacity is there to avoid. Compiled code reads ``count`` itself."""
+    if max_pairs is None or "c" in letters or torch.compiler.is_compiling():
         return
     check_pair_count(count, max_pairs)
 
@@ -187,9 +187,9 @@ def _vectors(sources: torch.Tensor, targets: torch.Tensor, i: torch.Tensor, j: t
     return _systems.add_shifts(torch, vectors, shifts, cell, pair_systems)
 
 
-def _quantities(letters: str, i, j, shifts, vectors_of) -> Any:
+def _quantities(letters: str, i, j, shifts, count, vectors_of) -> Any:
     vectors = vectors_of() if ("d" in letters or "D" in letters) else None
-    found = {"i": i, "j": j, "S": shifts, "D": vectors}
+    found = {"i": i, "j": j, "S": shifts, "D": vectors, "c": count}
     if "d" in letters:
         found["d"] = torch.linalg.vector_norm(vectors, dim=1)
     out = tuple(found[letter] for letter in letters)
@@ -210,9 +210,9 @@ def neighbor_list(letters: str, positions: torch.Tensor, cutoff: float, cell: An
     i, j, shifts, count = torch.ops.raycut.neighbor_list(
         positions.detach(), float(cutoff), None if c is None else c.detach(),
         _pbc(pbc, c, positions), b, bool(half), max_pairs)
-    _check_capacity(count, max_pairs)
+    _check_capacity(count, max_pairs, letters)
     return _quantities(
-        letters, i, j, shifts,
+        letters, i, j, shifts, count,
         lambda: _vectors(positions, positions, i, j, shifts, c, b, max_pairs is not None))
 
 
@@ -229,8 +229,8 @@ def radius(letters: str, points: torch.Tensor, queries: Any, cutoff: float, cell
         points.detach(), queries.detach().to(points.dtype), float(cutoff),
         None if c is None else c.detach(), _pbc(pbc, c, points),
         _index(batch_points, "batch_points"), bq, max_pairs)
-    _check_capacity(count, max_pairs)
+    _check_capacity(count, max_pairs, letters)
     return _quantities(
-        letters, i, j, shifts,
+        letters, i, j, shifts, count,
         lambda: _vectors(points, queries.to(points.dtype), i, j, shifts, c, bq,
                          max_pairs is not None))

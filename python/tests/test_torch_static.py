@@ -188,11 +188,12 @@ def test_no_host_synchronisation():
     torch.cuda.set_sync_debug_mode("error")
     try:
         ops = torch.ops.raycut.neighbor_list(x, cutoff, cell, pbc, batch, True, max_pairs)
-        i, j, d = pyraycut.neighbor_list("ijd", x, cutoff, cell=cell, pbc=pbc, batch=batch,
-                                         max_pairs=max_pairs)
+        # Asking for the count ("c") takes charge of the check: nothing is read back.
+        i, j, d, count = pyraycut.neighbor_list("ijdc", x, cutoff, cell=cell, pbc=pbc,
+                                                batch=batch, max_pairs=max_pairs)
         open_x = x[:60]
-        pyraycut.neighbor_list("ij", open_x, cutoff, pbc=False, max_pairs=max_pairs)
-        pyraycut.neighbor_list("ijS", cube_x, 2.5, cell=5.3 * torch.eye(3, device="cuda"),
+        pyraycut.neighbor_list("ijc", open_x, cutoff, pbc=False, max_pairs=max_pairs)
+        pyraycut.neighbor_list("ijSc", cube_x, 2.5, cell=5.3 * torch.eye(3, device="cuda"),
                                pbc=True, max_pairs=max_pairs)
     finally:
         torch.cuda.set_sync_debug_mode(0)
@@ -320,3 +321,26 @@ def test_host_pbc_without_a_cell():
     i, j = pyraycut.neighbor_list("ij", x, 0.3, pbc=False)
     want_i, want_j = pyraycut.neighbor_list("ij", x, 0.3)
     assert torch.equal(i, want_i) and torch.equal(j, want_j)
+
+
+@cuda
+def test_without_the_count_an_overflow_raises_and_with_it_the_count_says_so():
+    """Never silent: without "c" the eager call checks the count (one read-back) and raises;
+    with "c" the caller gets the true count above max_pairs."""
+    case = cube()
+    x, cutoff, cell, pbc, batch = case.on("cuda", torch.float32)
+    pairs = len(reference(case, torch.float32, False))
+    with pytest.raises(pyraycut.CapacityError, match=f"{pairs} pairs"):
+        pyraycut.neighbor_list("ij", x, cutoff, cell=cell, pbc=pbc, max_pairs=pairs - 1)
+    i, count = pyraycut.neighbor_list("ic", x, cutoff, cell=cell, pbc=pbc, max_pairs=pairs - 1)
+    assert count.device.type == "cuda" and int(count) == pairs and i.shape == (pairs - 1,)
+
+
+def test_the_count_letter_comes_with_the_operator():
+    x = torch.rand(10, 3)
+    with pytest.raises(ValueError, match="'c'"):
+        pyraycut.neighbor_list("ijc", x.numpy(), 0.5)
+    i, count = pyraycut.neighbor_list("ic", x, 0.5)
+    assert count.dim() == 0 and int(count) == len(i)
+    i, count = pyraycut.neighbor_list("ic", x, 0.5, max_pairs=200)
+    assert count.dim() == 0 and int(count) == int((i < 10).sum())
