@@ -350,14 +350,13 @@ class CachingAllocatorMemory final : public raycut::MemoryResource {
   }
 };
 
-// Whether a neighbor_list call takes the stream-ordered small-system pass: static capacity, CUDA
-// tensors, systems small enough by raycut's policy. The number of systems is what the host
+// Whether a neighbor_list call takes the stream-ordered small-system pass: CUDA tensors, systems
+// small enough by raycut's policy. The number of systems is what the host
 // knows: B of a (B, 3, 3) cell, else 1 (the batch's is data-dependent and is never read back).
 // pbc without a cell stays on the engine, which checks that no axis is periodic.
 bool takes_small_systems_pass(const at::Tensor& positions, const std::optional<at::Tensor>& cell,
-                              const std::optional<at::Tensor>& pbc,
-                              std::optional<std::int64_t> max_pairs) {
-  if (!max_pairs || !positions.is_cuda() || (pbc && !cell)) return false;
+                              const std::optional<at::Tensor>& pbc) {
+  if (!positions.is_cuda() || (pbc && !cell)) return false;
   const std::int64_t systems = cell && cell->dim() == 3 ? cell->size(0) : 1;
   return raycut::prefer_small_systems(static_cast<std::size_t>(positions.size(0)),
                                       static_cast<std::size_t>(systems));
@@ -432,6 +431,31 @@ Pairs small_systems_pairs(const at::Tensor& positions, double cutoff,
   }
   return {i, j, shifts, count};
 }
+
+// Exact sizing on the small-system pass: one pass into a capacity guessed from this thread's
+// last list on the device, one read-back of the count (which also raises for bad input), and a
+// second pass only when the guess was short. The outputs are the first `count` entries.
+Pairs exact_small_systems_pairs(const at::Tensor& positions, double cutoff,
+                                const std::optional<at::Tensor>& cell,
+                                const std::optional<at::Tensor>& pbc,
+                                const std::optional<at::Tensor>& batch, bool half) {
+  thread_local std::map<int, std::int64_t> last_count;
+  std::int64_t& guess = last_count[positions.device().index()];
+  const std::int64_t capacity = std::max<std::int64_t>(1024, guess + guess / 4);
+  Pairs pairs = small_systems_pairs(positions, cutoff, cell, pbc, batch, half, capacity);
+  const raycut::Context ctx{c10::cuda::getCurrentCUDAStream(positions.device().index()).stream()};
+  std::int64_t count = 0;
+  try {
+    count = raycut::read_pair_count(ctx, std::get<3>(pairs).data_ptr<std::int64_t>());
+  } catch (const raycut::Error& e) {
+    rethrow(e);
+  }
+  guess = count;
+  if (count > capacity)
+    pairs = small_systems_pairs(positions, cutoff, cell, pbc, batch, half, count);
+  auto& [i, j, shifts, found] = pairs;
+  return {i.narrow(0, 0, count), j.narrow(0, 0, count), shifts.narrow(0, 0, count), found};
+}
 #endif
 
 Pairs neighbor_list(const at::Tensor& positions, double cutoff,
@@ -440,8 +464,11 @@ Pairs neighbor_list(const at::Tensor& positions, double cutoff,
                     std::optional<std::int64_t> max_pairs) {
 #ifdef RAYCUT_TORCH_CUDA
   check_points(positions, "positions");
-  if (takes_small_systems_pass(positions, cell, pbc, max_pairs))
-    return small_systems_pairs(positions, cutoff, cell, pbc, batch, half, *max_pairs);
+  if (takes_small_systems_pass(positions, cell, pbc)) {
+    if (max_pairs)
+      return small_systems_pairs(positions, cutoff, cell, pbc, batch, half, *max_pairs);
+    return exact_small_systems_pairs(positions, cutoff, cell, pbc, batch, half);
+  }
 #endif
   const at::Tensor x = search_points(positions, "positions");
   const std::int64_t n = x.size(0);
