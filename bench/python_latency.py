@@ -157,20 +157,26 @@ def profile_counts(torch, call: Callable[[], object], sync: Callable[[], None],
     return f"{kernels / calls:g}", f"{syncs / calls:g}"
 
 
-def open_output(path: str):
-    """The CSV writer for --output: appended to when the file holds the same columns."""
-    if os.path.exists(path) and os.path.getsize(path) > 0:
-        with open(path, newline="") as f:
-            header = next(csv.reader(f), [])
-        if header != COLUMNS:
-            raise SystemExit(f"--output: {path!r} holds other columns ({','.join(header)}); "
-                             f"expected {','.join(COLUMNS)}")
-        f = open(path, "a", newline="")
-        return f, csv.DictWriter(f, COLUMNS)
-    f = open(path, "w", newline="")
-    writer = csv.DictWriter(f, COLUMNS)
-    writer.writeheader()
-    return f, writer
+def appends_to(path: str) -> bool:
+    """Whether --output already holds rows of these columns (then rows are appended to it).
+    Exits naming the file when it holds other columns."""
+    if not (os.path.exists(path) and os.path.getsize(path) > 0):
+        return False
+    with open(path, newline="") as f:
+        header = next(csv.reader(f), [])
+    if header != COLUMNS:
+        raise SystemExit(f"--output: {path!r} holds other columns ({','.join(header)}); "
+                         f"expected {','.join(COLUMNS)}")
+    return True
+
+
+def write_rows(path: str, rows: list[dict]) -> None:
+    append = appends_to(path)
+    with open(path, "a" if append else "w", newline="") as f:
+        writer = csv.DictWriter(f, COLUMNS)
+        if not append:
+            writer.writeheader()
+        writer.writerows(rows)
 
 
 def main(argv: Optional[list[str]] = None) -> list[dict]:
@@ -198,6 +204,8 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
         parser.error(f"--reps must be >= 1, got {args.reps}")
     if args.profile_calls < 1:
         parser.error(f"--profile-calls must be >= 1, got {args.profile_calls}")
+    if args.output:
+        appends_to(args.output)  # refused before measuring, not after
 
     try:
         import torch
@@ -253,9 +261,7 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
                   f"kernels {kernels or '-':>5}  syncs {syncs or '-':>5}  ({count} pairs)",
                   flush=True)
     if args.output:
-        f, writer = open_output(args.output)
-        with f:
-            writer.writerows(rows)
+        write_rows(args.output, rows)
         print(f"wrote {len(rows)} rows to {args.output}")
     return rows
 
