@@ -425,19 +425,26 @@ int run(const Options& o) {
   for (const Workload& w : workloads(o)) {
     std::printf("lj-pbc %zu x %zu:\n", w.systems, w.per_system);
     std::fflush(stdout);
-    DeviceWorkload d(w, o.seed);
-    std::int64_t small_count = -1;
-    if (o.all || w.forced_small || raycut::prefer_small_systems(w.particles(), w.systems))
-      small_count = measure_small(w, d, stream, o, rows, checks);
-    else
-      std::printf("  small path skipped (prefer_small_systems is false; --all measures it)\n");
-    const std::uint64_t engine_count = measure_engine(w, d, stream, o, rows);
-    // The engine decides in float32 and the small path in double: a pair exactly at the cutoff
-    // could differ in principle, so a difference is reported, not failed.
-    if (small_count >= 0 && engine_count != static_cast<std::uint64_t>(small_count))
-      std::printf("  note: the engine lists %llu pairs, the small path %lld\n",
-                  static_cast<unsigned long long>(engine_count),
-                  static_cast<long long>(small_count));
+    // A failing workload is reported and the others still measured (a sticky CUDA error
+    // fails the rest too: exit 1 either way).
+    try {
+      DeviceWorkload d(w, o.seed);
+      std::int64_t small_count = -1;
+      if (o.all || w.forced_small || raycut::prefer_small_systems(w.particles(), w.systems))
+        small_count = measure_small(w, d, stream, o, rows, checks);
+      else
+        std::printf("  small path skipped (prefer_small_systems is false; --all measures it)\n");
+      const std::uint64_t engine_count = measure_engine(w, d, stream, o, rows);
+      // The engine decides in float32 and the small path in double: a pair exactly at the
+      // cutoff could differ in principle, so a difference is reported, not failed.
+      if (small_count >= 0 && engine_count != static_cast<std::uint64_t>(small_count))
+        std::printf("  note: the engine lists %llu pairs, the small path %lld\n",
+                    static_cast<unsigned long long>(engine_count),
+                    static_cast<long long>(small_count));
+    } catch (const std::exception& e) {
+      checks.expect(false, "lj-pbc " + std::to_string(w.systems) + " x " +
+                               std::to_string(w.per_system) + ": " + e.what());
+    }
     std::fflush(stdout);
   }
   check_cuda(cudaStreamDestroy(stream), "cudaStreamDestroy");
