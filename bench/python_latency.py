@@ -246,9 +246,13 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
             return pyraycut.neighbor_list("ijS", x, CUTOFF, cell=cell, pbc=True, batch=batch,
                                           max_pairs=max_pairs)
 
-        if len(static()[0]) != max_pairs:
-            raise SystemExit(f"python_latency: max_pairs={max_pairs} gave "
-                             f"{len(static()[0])} entries, not the static size")
+        try:
+            entries = len(static()[0])
+        except ValueError as e:  # max_pairs needs the operators (built with torch)
+            raise SystemExit(f"python_latency: max_pairs on {args.device} tensors: {e}") from None
+        if entries != max_pairs:
+            raise SystemExit(f"python_latency: max_pairs={max_pairs} gave {entries} entries, "
+                             f"not the static size")
         for capacity, call in (("static", static), ("exact", exact)):
             us = median_us_per_call(call, sync, args.reps, args.min_loop_ms)
             kernels, syncs = (profile_counts(torch, call, sync, args.profile_calls) if cuda
