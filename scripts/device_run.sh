@@ -4,7 +4,7 @@
 # sessions ran, in one place.
 #
 #   scripts/device_run.sh [tests REGEX] [bench] [lists] [periodic] [sph] [python] [python-bench]
-#                         [mpi] [mpi-scaling] [memcheck] [grid-suites]   results: ${OUT:-/tmp/raycut-out}/results.tgz
+#                         [mpi] [mpi-scaling] [memcheck] [grid-suites] [latency]   results: ${OUT:-/tmp/raycut-out}/results.tgz
 #
 #   tests REGEX  ctest -R REGEX (e.g. "GridVariants|grid_|Sph"; "." for everything, ~6 min)
 #   bench        both suites, every GPU method, plus the paper's grid when its source is in
@@ -17,6 +17,11 @@
 #                periodic.csv/.md (with lists.csv's tables too when the lists step ran before)
 #   sph          the article's SPH run with every GPU method, and the validation scenarios
 #   grid-suites  both suites with grid and grid-paper beside the paper's grid (no regression)
+#   latency      call latency of small systems and batches (docs/benchmarks.md, "Latency of small
+#                systems"): build/bench/raycut_latency_bench --crossover (static pair list eager
+#                and from a CUDA graph, the engine), bench/python_latency.py --crossover
+#                (pyraycut.neighbor_list on torch CUDA tensors, the Python package built first),
+#                bench/plot_latency.py: latency-cpp.csv, latency-python.csv, latency.png
 #   memcheck     compute-sanitizer on the functor, list, grid-variant and periodic GPU tests
 #   python       the Python package built with the device's Python (the PyTorch operators with
 #                their CUDA kernel: RAYCUT_TORCH_CUDA=ON), and its tests
@@ -112,6 +117,26 @@ while [ $# -gt 0 ]; do
       else
         echo "build/bench/neighbour_bench was not built (needs CUDA and CLI11)"
       fi
+      ;;
+    latency)
+      if [ -x build/bench/raycut_latency_bench ]; then
+        build/bench/raycut_latency_bench --crossover --output "$res/latency-cpp.csv" \
+          > "$res/latency-cpp.log" 2>&1
+        echo "raycut_latency_bench exit $?"
+        awk '/^workload /{f=1} f' "$res/latency-cpp.log"
+      else
+        echo "build/bench/raycut_latency_bench was not built (needs CUDA)"
+      fi
+      build_python
+      PYTHONPATH="$PWD/build/python" "$py" bench/python_latency.py --crossover \
+        --output "$res/latency-python.csv" > "$res/latency-python.log" 2>&1
+      echo "python_latency exit $?"
+      grep -E "^lj-pbc|python_latency" "$res/latency-python.log" | head -30
+      csvs=()
+      for csv in "$res/latency-cpp.csv" "$res/latency-python.csv"; do
+        [ -f "$csv" ] && csvs+=("$csv")
+      done
+      [ ${#csvs[@]} -gt 0 ] && "$py" bench/plot_latency.py "${csvs[@]}" --png "$res/latency.png"
       ;;
     memcheck)
       # compute-sanitizer on the pair-pass paths: user functors, lists, the grid's variants.

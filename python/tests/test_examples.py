@@ -147,3 +147,89 @@ def test_torch_aoti_runner_without_python(tmp_path):
     bad = subprocess.run([str(build / "torch_aoti_runner"), learned_package,
                           pyraycut.load_torch_ops(), "3", "nan"], capture_output=True, text=True)
     assert bad.returncode == 2 and "expected energy must be a finite number, got nan" in bad.stderr
+
+
+LATENCY_HEADER = ("workload,systems,n_per_system,interface,mode,capacity,us_per_call,kernels,"
+                  "syncs,gpu,driver,cuda\n")
+
+
+def test_plot_latency_reads_groups_and_plots(tmp_path):
+    """bench/plot_latency.py on hand-written rows of both benches: one line per (interface,
+    mode, capacity), single systems and batches apart, the machine in the title, a PNG."""
+    plot = load_bench("plot_latency")
+    cpp = tmp_path / "cpp.csv"
+    cpp.write_text(LATENCY_HEADER +
+                   "lj-pbc,1,1000,cpp,eager,static,40.5,3,0,NVIDIA H200,580.1,13.0\n"
+                   "lj-pbc,1,128,cpp,eager,static,20.0,3,0,NVIDIA H200,580.1,13.0\n"
+                   "lj-pbc,1,128,cpp,graph,static,8.25,3,0,NVIDIA H200,580.1,13.0\n"
+                   "lj-pbc,32,100,cpp,eager,exact,900,,,NVIDIA H200,580.1,13.0\n")
+    python = tmp_path / "python.csv"
+    python.write_text(LATENCY_HEADER +
+                      "lj-pbc,1,128,python-torch,eager,exact,350.0,12,4,NVIDIA H200,580.1,12.8\n")
+    rows = plot.read_rows([str(cpp), str(python)])
+    assert [r["particles"] for r in rows] == [1000, 128, 128, 3200, 128]
+    lines = plot.series(rows)
+    assert set(lines) == {("cpp", "eager", "static"), ("cpp", "graph", "static"),
+                          ("cpp", "eager", "exact"), ("python-torch", "eager", "exact")}
+    assert lines[("cpp", "eager", "static")]["single"] == [(128, 20.0), (1000, 40.5)]
+    assert lines[("cpp", "eager", "exact")] == {"single": [], "batch": [(3200, 900.0)]}
+    title = plot.title(rows)
+    assert "NVIDIA H200, driver 580.1, CUDA 13.0" in title and "CUDA 12.8" in title
+    pytest.importorskip("matplotlib", reason="matplotlib is not installed (the plot needs it)")
+    png = tmp_path / "latency.png"
+    plot.main([str(cpp), str(python), "--png", str(png)])
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_plot_latency_refuses_bad_csv(tmp_path):
+    plot = load_bench("plot_latency")
+    wrong = tmp_path / "wrong.csv"
+    wrong.write_text("workload,systems\nlj-pbc,1\n")
+    with pytest.raises(ValueError, match="wrong.csv: missing columns n_per_system"):
+        plot.read_rows([str(wrong)])
+    bad = tmp_path / "bad.csv"
+    bad.write_text(LATENCY_HEADER + "lj-pbc,1,128,cpp,eager,static,fast,3,0,g,d,c\n")
+    with pytest.raises(ValueError, match="bad.csv, line 2"):
+        plot.read_rows([str(bad)])
+
+
+def test_python_latency_counts_kernels_and_syncs():
+    """What the profiler's events count as: kernels on the device (not copies or memsets),
+    synchronisations (the runtime's waits and device-to-host copies)."""
+    bench = load_bench("python_latency")
+    events = [("grid_count_kernel", True), ("Memcpy DtoH (Device -> Pageable)", True),
+              ("Memcpy HtoD (Pageable -> Device)", True), ("Memset (Device)", True),
+              ("void cub::DeviceScanKernel<...>", True), ("cudaStreamSynchronize", False),
+              ("cudaDeviceSynchronize", False), ("cudaLaunchKernel", False),
+              ("cudaMemcpyAsync", False), ("aten::empty", False)]
+    assert bench.count_profile(events) == (2, 3)
+    assert bench.count_profile([]) == (0, 0)
+
+
+def test_python_latency_runs_tiny_on_the_cpu(tmp_path, capsys):
+    """bench/python_latency.py with PyTorch CPU tensors: both capacities of each workload, the
+    CSV's columns, and a second run appending to the same file."""
+    pytest.importorskip("torch", reason="PyTorch is not installed")
+    import pyraycut
+
+    if pyraycut._torch_ops() is None:
+        pytest.skip("raycut's PyTorch operators are not built (the build's Python had no torch)")
+    bench = load_bench("python_latency")
+    out = tmp_path / "latency.csv"
+    args = ["--device", "cpu", "--sizes", "64", "--batches", "3x40", "--reps", "2",
+            "--min-loop-ms", "0.05", "--output", str(out)]
+    rows = bench.main(args)
+    assert [(r["systems"], r["n_per_system"], r["capacity"]) for r in rows] == [
+        (1, 64, "static"), (1, 64, "exact"), (3, 40, "static"), (3, 40, "exact")]
+    assert all(r["interface"] == "python-torch" and r["mode"] == "eager" for r in rows)
+    assert all(float(r["us_per_call"]) > 0 for r in rows)
+    text = out.read_text()
+    assert text.startswith(LATENCY_HEADER) and text.count("\n") == 5
+    bench.main(args[:5] + ["none"] + args[6:])  # appended: 2 rows, no second header
+    text = out.read_text()
+    assert text.count("\n") == 7 and text.count("workload,") == 1
+    other = tmp_path / "other.csv"
+    other.write_text("a,b\n1,2\n")
+    with pytest.raises(SystemExit, match="holds other columns"):
+        bench.main(args[:-1] + [str(other)])
+    assert "wrote 4 rows" in capsys.readouterr().out
