@@ -46,6 +46,8 @@ res="$(mktemp -d)"
 mkdir -p "$out"
 export PATH="/usr/local/cuda/bin:$PATH"
 start=$(date +%s)
+# Stopped by a time limit (timeout sends TERM): what was measured so far still comes back.
+trap 'tar czf "$out/results.tgz" -C "$res" --exclude cudaLJ .; exit 124' TERM
 step() { echo "[$(($(date +%s) - start)) s] $*"; }
 # The Python package in the same build tree, with the device's Python (torch, cupy, jax there);
 # once per run.
