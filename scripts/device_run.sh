@@ -42,12 +42,12 @@
 set -uo pipefail
 cd "$(dirname "$0")/.." || exit 1
 out="${OUT:-/tmp/raycut-out}"
-res="$(mktemp -d)"
-mkdir -p "$out"
+# RAYCUT_RESULTS_DIR: write the results there directly (the device tool's $OUT/...), so that a
+# run stopped by a time limit still hands back what it measured.
+res="${RAYCUT_RESULTS_DIR:-$(mktemp -d)}"
+mkdir -p "$out" "$res"
 export PATH="/usr/local/cuda/bin:$PATH"
 start=$(date +%s)
-# Stopped by a time limit (timeout sends TERM): what was measured so far still comes back.
-trap 'tar czf "$out/results.tgz" -C "$res" --exclude cudaLJ .; exit 124' TERM
 step() { echo "[$(($(date +%s) - start)) s] $*"; }
 # The Python package in the same build tree, with the device's Python (torch, cupy, jax there);
 # once per run.
