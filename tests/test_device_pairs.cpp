@@ -13,6 +13,7 @@
 #include <random>
 #include <vector>
 
+#include "cuda/device_pairs_host.hpp"
 #include "periodic_oracle.hpp"
 #include "raycut/box.hpp"
 #include "raycut/device_pairs.hpp"
@@ -57,11 +58,25 @@ struct HostPairs {
   std::vector<std::int32_t> shifts;
 };
 
-// The pass on device copies of one batch: positions (Real), per-system boxes, batch values.
+// Where a test runs the pass: on the GPU, or its enumeration on the host
+// (detail::list_pairs_small_systems_on_host: the same arithmetic, order and codes), which
+// machines without a GPU run.
+enum class Where { host, device };
+
+void PrintTo(Where w, std::ostream* os) {
+  *os << (w == Where::host ? "host" : "device");
+}
+
+bool available(Where where) {
+  return where == Where::host || have_gpu();
+}
+
+// The pass over one batch: positions (Real), per-system boxes, batch values. The count as
+// written (negative codes included), the pairs and a few padding entries past them.
 template <class Real>
 HostPairs run_pass(const std::vector<Real>& xyz, const std::vector<Box>& boxes,
                    const std::vector<std::int64_t>& batch, double cutoff, bool half,
-                   std::size_t capacity) {
+                   std::size_t capacity, Where where = Where::device) {
   const std::size_t n = xyz.size() / 3;
   std::vector<Real> cells;
   std::vector<std::uint8_t> pbc;
@@ -70,24 +85,36 @@ HostPairs run_pass(const std::vector<Real>& xyz, const std::vector<Box>& boxes,
       pbc.push_back(b.pbc[r]);
       for (int k = 0; k < 3; ++k) cells.push_back(static_cast<Real>(b.cell[r][k]));
     }
-  DeviceVector d_xyz(xyz), d_cells(cells), d_pbc(pbc), d_batch(batch);
   raycut::DeviceSystems s;
-  s.positions = d_xyz.p;
   s.scalar = sizeof(Real) == 8 ? raycut::Scalar::float64 : raycut::Scalar::float32;
   s.size = n;
-  if (!boxes.empty()) {
-    s.cells = d_cells.p;
-    s.cell_count = boxes.size();
-    s.pbc = static_cast<const bool*>(d_pbc.p);
-    s.pbc_count = boxes.size();
+  auto describe = [&](const void* x, const void* c, const void* p, const void* b) {
+    s.positions = x;
+    if (!boxes.empty()) {
+      s.cells = c;
+      s.cell_count = boxes.size();
+      s.pbc = static_cast<const bool*>(p);
+      s.pbc_count = boxes.size();
+    }
+    s.batch = batch.empty() ? nullptr : static_cast<const std::int64_t*>(b);
+  };
+  HostPairs out;
+  if (where == Where::host) {
+    describe(xyz.data(), cells.data(), pbc.data(), batch.data());
+    out.i.resize(capacity);
+    out.j.resize(capacity);
+    out.shifts.resize(3 * capacity);
+    raycut::StaticPairs to{out.i.data(), out.j.data(), out.shifts.data(),
+                           &out.count,   capacity,     std::int64_t(n)};
+    raycut::detail::list_pairs_small_systems_on_host(s, cutoff, {half}, to);
+    return out;
   }
-  s.batch = batch.empty() ? nullptr : static_cast<const std::int64_t*>(d_batch.p);
+  DeviceVector d_xyz(xyz), d_cells(cells), d_pbc(pbc), d_batch(batch);
+  describe(d_xyz.p, d_cells.p, d_pbc.p, d_batch.p);
   raycut::Context ctx;
   raycut::StaticPairBuffer buffer(capacity, ctx);
   raycut::list_pairs_small_systems(ctx, s, cutoff, {half}, buffer.view(std::int64_t(n)));
-  HostPairs out;
-  out.count = raycut::read_pair_count(ctx, buffer.count());
-  // The pairs and a few padding entries past them.
+  out.count = to_host(buffer.count(), 1)[0];
   const std::size_t copied =
       std::min(capacity, std::size_t(std::max<std::int64_t>(out.count, 0)) + 8);
   out.i = to_host(buffer.i(), copied);
@@ -100,10 +127,10 @@ HostPairs run_pass(const std::vector<Real>& xyz, const std::vector<Box>& boxes,
 template <class Real>
 void expect_exact(const std::vector<Real>& xyz, const std::vector<Box>& boxes,
                   const std::vector<std::int64_t>& batch, double cutoff, bool half,
-                  const char* family) {
+                  const char* family, Where where) {
   SCOPED_TRACE(family);
   const std::size_t n = xyz.size() / 3;
-  const HostPairs all = run_pass(xyz, boxes, batch, cutoff, half, 1 << 20);
+  const HostPairs all = run_pass(xyz, boxes, batch, cutoff, half, 1 << 20, where);
   ASSERT_GE(all.count, 0);
   ASSERT_LE(all.count, 1 << 20);
   std::size_t first = 0, listed = 0;
@@ -155,13 +182,17 @@ Box cubic(double l) {
   return b;
 }
 
-TEST(DevicePairs, EveryFamilyAgainstTheDoubleOracle) {
-  if (!have_gpu()) GTEST_SKIP() << "no CUDA device";
+class DevicePairsOn : public ::testing::TestWithParam<Where> {};
+
+TEST_P(DevicePairsOn, EveryFamilyAgainstTheDoubleOracle) {
+  const Where where = GetParam();
+  if (!available(where)) GTEST_SKIP() << "no CUDA device";
   for (bool half : {false, true}) {
     SCOPED_TRACE(half ? "half" : "full");
-    expect_exact(uniform(300, 0, 6, 1), {}, {}, 1.2, half, "open");
+    expect_exact(uniform(300, 0, 6, 1), {}, {}, 1.2, half, "open", where);
     // L < 2C: a pair has several images.
-    expect_exact(uniform(128, 0, 5.3, 2), {cubic(5.3)}, {}, 2.5, half, "cubic, several images");
+    expect_exact(uniform(128, 0, 5.3, 2), {cubic(5.3)}, {}, 2.5, half, "cubic, several images",
+                 where);
     Box tri;
     tri.cell[0][0] = 6;
     tri.cell[1][0] = 2.5;
@@ -170,34 +201,34 @@ TEST(DevicePairs, EveryFamilyAgainstTheDoubleOracle) {
     tri.cell[2][1] = 1;
     tri.cell[2][2] = 4.5;
     tri.pbc[0] = tri.pbc[1] = tri.pbc[2] = true;
-    expect_exact(uniform(150, 0, 5, 3), {tri}, {}, 2.2, half, "triclinic");
+    expect_exact(uniform(150, 0, 5, 3), {tri}, {}, 2.2, half, "triclinic", where);
     Box slab = cubic(5);
     slab.pbc[2] = false;
     slab.cell[2][2] = 0;  // an open row may be anything, even zero
-    expect_exact(uniform(120, 0, 5, 4), {slab}, {}, 1.9, half, "slab (pbc T T F)");
+    expect_exact(uniform(120, 0, 5, 4), {slab}, {}, 1.9, half, "slab (pbc T T F)", where);
     Box wire = cubic(4);
     wire.pbc[1] = wire.pbc[2] = false;
-    expect_exact(uniform(100, 0, 4, 5), {wire}, {}, 1.7, half, "wire (pbc T F F)");
+    expect_exact(uniform(100, 0, 4, 5), {wire}, {}, 1.7, half, "wire (pbc T F F)", where);
     // Unwrapped by up to a thousand boxes.
     std::vector<float> far = uniform(100, 0, 5, 6);
     std::mt19937 rng(7);
     std::uniform_int_distribution<int> boxes(-1000, 1000);
     for (float& v : far) v += 5.0f * boxes(rng);
-    expect_exact(far, {cubic(5)}, {}, 1.5, half, "unwrapped by 1000 boxes");
+    expect_exact(far, {cubic(5)}, {}, 1.5, half, "unwrapped by 1000 boxes", where);
     // Boxes far larger than the cutoff: 10^4 and 10^6 cutoffs wide, particles clustered near the
     // faces so that pairs cross them.
     for (double ratio : {1e4, 1e6}) {
       const double l = ratio * 1.0;
       std::vector<float> xyz = uniform(200, 0, 3, 8);
       for (std::size_t k = 0; k < xyz.size(); k += 2) xyz[k] = static_cast<float>(l - xyz[k]);
-      expect_exact(xyz, {cubic(l)}, {}, 1.0, half, ratio < 1e5 ? "L/C 1e4" : "L/C 1e6");
+      expect_exact(xyz, {cubic(l)}, {}, 1.0, half, ratio < 1e5 ? "L/C 1e4" : "L/C 1e6", where);
     }
     // float64 positions and cell.
     std::mt19937 rng64(9);
     std::uniform_real_distribution<double> u(0, 4.7);
     std::vector<double> xyz64(3 * 90);
     for (double& v : xyz64) v = u(rng64);
-    expect_exact(xyz64, {cubic(4.7)}, {}, 1.6, half, "float64");
+    expect_exact(xyz64, {cubic(4.7)}, {}, 1.6, half, "float64", where);
     // A batch: systems of 0..40 particles, each with its own cell and pbc (an empty one too).
     std::vector<float> batch_xyz;
     std::vector<std::int64_t> batch;
@@ -211,23 +242,25 @@ TEST(DevicePairs, EveryFamilyAgainstTheDoubleOracle) {
       batch_xyz.insert(batch_xyz.end(), part.begin(), part.end());
       batch.insert(batch.end(), sizes[s], s);
     }
-    expect_exact(batch_xyz, cells, batch, 1.4, half, "batch with a cell per system");
+    expect_exact(batch_xyz, cells, batch, 1.4, half, "batch with a cell per system", where);
   }
 }
 
-TEST(DevicePairs, CapacityShortByOneIsReportedAndTheRestIsExact) {
-  if (!have_gpu()) GTEST_SKIP() << "no CUDA device";
+TEST_P(DevicePairsOn, CapacityShortByOneIsReportedAndTheRestIsExact) {
+  const Where where = GetParam();
+  if (!available(where)) GTEST_SKIP() << "no CUDA device";
   const std::vector<float> xyz = uniform(128, 0, 5.3, 11);
-  const HostPairs exact = run_pass(xyz, {cubic(5.3)}, {}, 2.5, false, 1 << 16);
+  const HostPairs exact = run_pass(xyz, {cubic(5.3)}, {}, 2.5, false, 1 << 16, where);
   ASSERT_GT(exact.count, 1);
   const auto short_by_one = std::size_t(exact.count - 1);
-  const HostPairs cut = run_pass(xyz, {cubic(5.3)}, {}, 2.5, false, short_by_one);
+  const HostPairs cut = run_pass(xyz, {cubic(5.3)}, {}, 2.5, false, short_by_one, where);
   EXPECT_EQ(cut.count, exact.count) << "the true count, above the capacity";
   for (std::size_t p = 0; p < short_by_one; ++p) {
     ASSERT_EQ(cut.i[p], exact.i[p]) << p;
     ASSERT_EQ(cut.j[p], exact.j[p]) << p;
     ASSERT_EQ(cut.shifts[3 * p + 2], exact.shifts[3 * p + 2]) << p;
   }
+  if (where == Where::host) return;
   // The growing helper starts from nothing and ends with every pair.
   DeviceVector d_xyz(xyz);
   std::vector<double> cell = {5.3, 0, 0, 0, 5.3, 0, 0, 0, 5.3};
@@ -246,32 +279,78 @@ TEST(DevicePairs, CapacityShortByOneIsReportedAndTheRestIsExact) {
             std::vector<std::int64_t>(exact.j.begin(), exact.j.begin() + exact.count));
 }
 
-TEST(DevicePairs, BadDeviceDataIsNamedWhenTheCountIsRead) {
+TEST_P(DevicePairsOn, BadDataGivesItsCountCodeAndOnlyPadding) {
+  const Where where = GetParam();
+  if (!available(where)) GTEST_SKIP() << "no CUDA device";
+  std::vector<float> xyz = uniform(50, 0, 3, 12);
+  xyz[3 * 17 + 1] = std::numeric_limits<float>::quiet_NaN();
+  const HostPairs nan = run_pass(xyz, {}, {}, 1.0, false, 100, where);
+  EXPECT_EQ(nan.count, raycut::count_non_finite_position);
+  EXPECT_EQ(nan.i[0], 50) << "bad input: every entry is padding";
+  std::vector<std::int64_t> unsorted(50, 0);
+  unsorted[10] = 1;  // 0 .. 0 1 0 .. 0
+  EXPECT_EQ(run_pass(uniform(50, 0, 3, 13), {}, unsorted, 1.0, false, 100, where).count,
+            raycut::count_unsorted_batch);
+  Box flat = cubic(3);
+  flat.cell[2][0] = 3;  // row c = row a: dependent
+  flat.cell[2][2] = 0;
+  EXPECT_EQ(run_pass(uniform(50, 0, 3, 14), {flat}, {}, 1.0, false, 100, where).count,
+            raycut::count_invalid_cell);
+  std::vector<std::int64_t> beyond(50, 0);
+  beyond[49] = 3;  // two cells for systems 0 and 1, a particle in system 3
+  EXPECT_EQ(
+      run_pass(uniform(50, 0, 3, 15), {cubic(3), cubic(3)}, beyond, 1.0, false, 100, where).count,
+      raycut::count_batch_out_of_range);
+}
+
+TEST(DevicePairs, ReadPairCountNamesBadDataAndHostArgumentsFailEarly) {
   if (!have_gpu()) GTEST_SKIP() << "no CUDA device";
   std::vector<float> xyz = uniform(50, 0, 3, 12);
   xyz[3 * 17 + 1] = std::numeric_limits<float>::quiet_NaN();
+  DeviceVector d_xyz(xyz);
+  raycut::DeviceSystems s;
+  s.positions = d_xyz.p;
+  s.size = 50;
+  raycut::Context ctx;
+  raycut::StaticPairBuffer pairs(100, ctx);
+  raycut::list_pairs_small_systems(ctx, s, 1.0, {}, pairs.view(50));
   try {
-    run_pass(xyz, {}, {}, 1.0, false, 100);
+    raycut::read_pair_count(ctx, pairs.count());
     FAIL() << "NaN accepted";
   } catch (const raycut::Error& e) {
     EXPECT_EQ(e.code(), raycut::ErrorCode::invalid_input);
     EXPECT_NE(std::string(e.what()).find("NaN"), std::string::npos) << e.what();
   }
-  std::vector<std::int64_t> unsorted(50, 0);
-  unsorted[10] = 1;  // 0 .. 0 1 0 .. 0
-  EXPECT_THROW(run_pass(uniform(50, 0, 3, 13), {}, unsorted, 1.0, false, 100), raycut::Error);
-  Box flat = cubic(3);
-  flat.cell[2][0] = 3;  // row c = row a: dependent
-  flat.cell[2][2] = 0;
-  EXPECT_THROW(run_pass(uniform(50, 0, 3, 14), {flat}, {}, 1.0, false, 100), raycut::Error);
   // Host-side arguments throw before any work.
-  raycut::Context ctx;
   raycut::DeviceSystems none;
   raycut::StaticPairBuffer buffer(4, ctx);
   EXPECT_THROW(raycut::list_pairs_small_systems(ctx, none, 0.0, {}, buffer.view(0)), raycut::Error);
   none.size = 3;  // positions null
   EXPECT_THROW(raycut::list_pairs_small_systems(ctx, none, 1.0, {}, buffer.view(0)), raycut::Error);
 }
+
+TEST(DevicePairs, HostArgumentsAreCheckedBeforeAnyWork) {
+  raycut::DeviceSystems none;
+  std::int64_t i[4], j[4], count = 7;
+  const raycut::StaticPairs out{i, j, nullptr, &count, 4, 0};
+  for (double cutoff : {0.0, -1.0, std::numeric_limits<double>::infinity(), 1e-50})
+    EXPECT_THROW(raycut::detail::list_pairs_small_systems_on_host(none, cutoff, {}, out),
+                 raycut::Error)
+        << cutoff;
+  none.size = 3;  // positions null
+  EXPECT_THROW(raycut::detail::list_pairs_small_systems_on_host(none, 1.0, {}, out), raycut::Error);
+  none.positions = i;
+  raycut::StaticPairs no_count = out;
+  no_count.count = nullptr;
+  EXPECT_THROW(raycut::detail::list_pairs_small_systems_on_host(none, 1.0, {}, no_count),
+               raycut::Error);
+  EXPECT_EQ(count, 7) << "nothing written";
+}
+
+INSTANTIATE_TEST_SUITE_P(Where, DevicePairsOn, ::testing::Values(Where::host, Where::device),
+                         [](const auto& info) {
+                           return std::string(info.param == Where::host ? "host" : "device");
+                         });
 
 // A step (positions copied in, the pass) captured in global mode, replayed 1,000 times over new
 // positions, against the eager pass on the same positions, bit for bit.
@@ -394,22 +473,22 @@ TEST(DevicePairs, VerletStepInAGraphRebuildsOnlyWhenNeeded) {
 namespace {
 
 // The conformance families (raycut::family_names(), docs/methods.md "Test inputs"): open
-// systems of 0 to 2,000 particles, through the small-system path with static capacity, against
+// systems of 0 to 900 particles, through the small-system path with static capacity, against
 // the double oracle; then the same with the capacity one short of the count.
-class DevicePairsFamilies : public ::testing::TestWithParam<std::string> {};
+class DevicePairsFamilies : public ::testing::TestWithParam<std::tuple<std::string, Where>> {};
 
 TEST_P(DevicePairsFamilies, StaticCapacityMatchesTheOracle) {
-  if (!have_gpu()) GTEST_SKIP() << "no CUDA device";
-  const std::string family = GetParam();
-  for (std::size_t n : {0, 1, 2, 700, 2000}) {
+  const auto& [family, where] = GetParam();
+  if (!available(where)) GTEST_SKIP() << "no CUDA device";
+  for (std::size_t n : {0, 1, 2, 300, 900}) {  // coincident: n^2 pairs, within the capacity
     SCOPED_TRACE(family + " n=" + std::to_string(n));
     const raycut::PointCloud cloud = raycut::make_family(family, n, 1.0f, 42 + n);
     for (bool half : {false, true})
-      expect_exact(cloud.xyz, {}, {}, cloud.cutoff, half, family.c_str());
-    const HostPairs exact = run_pass(cloud.xyz, {}, {}, cloud.cutoff, false, 1 << 20);
+      expect_exact(cloud.xyz, {}, {}, cloud.cutoff, half, family.c_str(), where);
+    const HostPairs exact = run_pass(cloud.xyz, {}, {}, cloud.cutoff, false, 1 << 20, where);
     if (exact.count < 1) continue;
     const HostPairs cut =
-        run_pass(cloud.xyz, {}, {}, cloud.cutoff, false, std::size_t(exact.count - 1));
+        run_pass(cloud.xyz, {}, {}, cloud.cutoff, false, std::size_t(exact.count - 1), where);
     EXPECT_EQ(cut.count, exact.count) << "overflow by one is reported with the true count";
   }
 }
@@ -421,9 +500,13 @@ std::vector<std::string> unscaled_families() {
   return out;
 }
 
-INSTANTIATE_TEST_SUITE_P(Families, DevicePairsFamilies, ::testing::ValuesIn(unscaled_families()),
+INSTANTIATE_TEST_SUITE_P(Families, DevicePairsFamilies,
+                         ::testing::Combine(::testing::ValuesIn(unscaled_families()),
+                                            ::testing::Values(Where::host, Where::device)),
                          [](const auto& info) {
-                           std::string name = info.param;
+                           std::string name =
+                               std::get<0>(info.param) +
+                               (std::get<1>(info.param) == Where::host ? "_host" : "_device");
                            for (char& ch : name)
                              if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
                            return name;

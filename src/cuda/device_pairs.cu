@@ -12,6 +12,7 @@
 #include <utility>
 
 #include "core/validation.hpp"
+#include "cuda/device_pairs_host.hpp"
 #include "raycut/detail/cuda/check.cuh"
 #include "raycut/device_pairs.hpp"
 #include "raycut/error.hpp"
@@ -51,17 +52,17 @@ struct Frame {
 };
 
 template <class Real>
-__device__ double load(const void* p, std::int64_t k) {
+__host__ __device__ double load(const void* p, std::int64_t k) {
   return static_cast<double>(static_cast<const Real*>(p)[k]);
 }
 
-__device__ double dot(const double* a, const double* b) {
+__host__ __device__ double dot(const double* a, const double* b) {
   return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
 }
 
 // First index in [0, n) whose batch value is > value (upper) or >= value (lower).
-__device__ std::int64_t bound(const std::int64_t* batch, std::int64_t n, std::int64_t value,
-                              bool upper) {
+__host__ __device__ std::int64_t bound(const std::int64_t* batch, std::int64_t n,
+                                       std::int64_t value, bool upper) {
   std::int64_t lo = 0, hi = n;
   while (lo < hi) {
     const std::int64_t mid = lo + (hi - lo) / 2;
@@ -75,7 +76,7 @@ __device__ std::int64_t bound(const std::int64_t* batch, std::int64_t n, std::in
 
 // The row's frame, or a negative count code (raycut/device_pairs.hpp) for bad input of this row.
 template <class Real>
-__device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
+__host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
   for (int k = 0; k < 3; ++k)
     if (!isfinite(load<Real>(in.xyz, 3 * i + k))) return int(count_non_finite_position);
   std::int64_t system = 0;
@@ -160,8 +161,8 @@ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
 // Calls visit(S) for every in-range image (i, j, S) of row i, in lexicographic order of S;
 // returns how many.
 template <class Real, class Visit>
-__device__ std::uint32_t for_each_image(const Input& in, const Frame& f, std::int64_t i,
-                                        std::int64_t j, Visit&& visit) {
+__host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f, std::int64_t i,
+                                                 std::int64_t j, Visit&& visit) {
   double d[3];
   for (int k = 0; k < 3; ++k) d[k] = load<Real>(in.xyz, 3 * j + k) - load<Real>(in.xyz, 3 * i + k);
   if (!f.any_periodic) {
@@ -208,11 +209,11 @@ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f, std::in
 }
 
 struct NoVisit {
-  __device__ void operator()(const int*) const {}
+  __host__ __device__ void operator()(const int*) const {}
 };
 
 // The first source of row i: its system's first particle, or i itself for half lists.
-__device__ std::int64_t first_source(const Input& in, const Frame& f, std::int64_t i) {
+__host__ __device__ std::int64_t first_source(const Input& in, const Frame& f, std::int64_t i) {
   return in.half ? i : f.lo;
 }
 
@@ -313,10 +314,9 @@ void require(bool ok, const std::string& what) {
   if (!ok) throw Error(ErrorCode::invalid_argument, "list_pairs_small_systems: " + what);
 }
 
-}  // namespace
-
-void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, double cutoff,
-                              const PairOptions& options, const StaticPairs& out) {
+// The pass's arguments, checked on the host (before any work).
+Input make_input(const DeviceSystems& systems, double cutoff, const PairOptions& options,
+                 const StaticPairs& out) {
   detail::validate_cutoff_value(cutoff);
   const std::size_t n = systems.size;
   require(n < (std::size_t(1) << 32), "at most 2^32 - 1 particles, got " + std::to_string(n));
@@ -344,6 +344,48 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
   in.cutoff2 = cutoff * cutoff;
   in.half = options.half;
   in.run_if = options.run_if;
+  return in;
+}
+
+// The same enumeration, row after row on the host, in the same order and with the same codes:
+// what lets a machine without a GPU test the pass's arithmetic (cuda/device_pairs_host.hpp).
+template <class Real>
+void host_pass(const Input& in, const StaticPairs& out) {
+  std::uint64_t written = 0;
+  int status = 0;
+  for (std::int64_t row = 0; row < in.n; ++row) {
+    if (in.run_if && *in.run_if == 0) return;
+    Frame f;
+    if (const int bad = make_frame<Real>(in, row, f)) {
+      status = std::min(status, bad);
+      continue;
+    }
+    for (std::int64_t j = first_source(in, f, row); j < f.hi; ++j)
+      for_each_image<Real>(in, f, row, j, [&](const int* s) {
+        if (written < out.capacity) {
+          out.i[written] = row;
+          out.j[written] = j;
+          if (out.shifts)
+            for (int k = 0; k < 3; ++k) out.shifts[3 * written + k] = s[k];
+        }
+        ++written;
+      });
+  }
+  const std::uint64_t kept = status < 0 ? 0 : std::min<std::uint64_t>(written, out.capacity);
+  for (std::uint64_t e = kept; e < out.capacity; ++e) {
+    out.i[e] = out.j[e] = out.pad_index;
+    if (out.shifts)
+      for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = 0;
+  }
+  *out.count = status < 0 ? std::int64_t(status) : static_cast<std::int64_t>(written);
+}
+
+}  // namespace
+
+void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, double cutoff,
+                              const PairOptions& options, const StaticPairs& out) {
+  const Input in = make_input(systems, cutoff, options, out);
+  const std::size_t n = systems.size;
 
   const auto stream = static_cast<cudaStream_t>(ctx.stream);
   // Temporaries in one block: per-row counts (and a zero past them), offsets, the status word
@@ -599,5 +641,16 @@ void DeviceVerletList::update(const DeviceSystems& systems) {
   }
   first_ = false;
 }
+
+namespace detail {
+void list_pairs_small_systems_on_host(const DeviceSystems& systems, double cutoff,
+                                      const PairOptions& options, const StaticPairs& out) {
+  const Input in = make_input(systems, cutoff, options, out);
+  if (systems.scalar == Scalar::float64)
+    host_pass<double>(in, out);
+  else
+    host_pass<float>(in, out);
+}
+}  // namespace detail
 
 }  // namespace raycut
