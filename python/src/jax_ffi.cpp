@@ -190,28 +190,7 @@ ffi::Error ragged_neighbor_list(ffi::Buffer<ffi::F32> positions, ffi::Buffer<ffi
 }  // namespace
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(RaycutNeighborList, neighbor_list,
-                              ffi::Ffi::Bind()
-                                  .Arg<ffi::Buffer<ffi::F32>>()   // positions (N, 3)
-                                  .Arg<ffi::AnyBuffer>()          // cell (3, 3)
-                                  .Arg<ffi::Buffer<ffi::PRED>>()  // pbc (3,)
-                                  .Attr<float>("cutoff")
-                                  .Attr<std::int64_t>("half")
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // i (K,)
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // j (K,)
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // S (K, 3)
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // count ()
-);
+                              raycut_jax::neighbor_list_signature(ffi::Ffi::Bind()));
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(RaycutRaggedNeighborList, ragged_neighbor_list,
-                              ffi::Ffi::Bind()
-                                  .Arg<ffi::Buffer<ffi::F32>>()   // positions (N, 3)
-                                  .Arg<ffi::Buffer<ffi::S32>>()   // batch (N,)
-                                  .Arg<ffi::AnyBuffer>()          // cell (B, 3, 3)
-                                  .Arg<ffi::Buffer<ffi::PRED>>()  // pbc (B, 3)
-                                  .Attr<float>("cutoff")
-                                  .Attr<std::int64_t>("half")
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // i (K,)
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // j (K,)
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // S (K, 3)
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // count ()
-);
+                              raycut_jax::ragged_neighbor_list_signature(ffi::Ffi::Bind()));

@@ -266,33 +266,12 @@ ffi::Error ragged_neighbor_list(cudaStream_t stream, ffi::ScratchAllocator scrat
 
 }  // namespace
 
-XLA_FFI_DEFINE_HANDLER_SYMBOL(RaycutNeighborListCuda, neighbor_list,
-                              ffi::Ffi::Bind()
-                                  .Ctx<ffi::PlatformStream<cudaStream_t>>()
-                                  .Ctx<ffi::ScratchAllocator>()
-                                  .Arg<ffi::Buffer<ffi::F32>>()   // positions (..., N, 3)
-                                  .Arg<ffi::AnyBuffer>()          // cell (..., 3, 3)
-                                  .Arg<ffi::Buffer<ffi::PRED>>()  // pbc (..., 3)
-                                  .Attr<float>("cutoff")
-                                  .Attr<std::int64_t>("half")
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // i (..., K)
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // j (..., K)
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // S (..., K, 3)
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // count (...)
-);
+XLA_FFI_DEFINE_HANDLER_SYMBOL(
+    RaycutNeighborListCuda, neighbor_list,
+    raycut_jax::neighbor_list_signature(
+        ffi::Ffi::Bind().Ctx<ffi::PlatformStream<cudaStream_t>>().Ctx<ffi::ScratchAllocator>()));
 
-XLA_FFI_DEFINE_HANDLER_SYMBOL(RaycutRaggedNeighborListCuda, ragged_neighbor_list,
-                              ffi::Ffi::Bind()
-                                  .Ctx<ffi::PlatformStream<cudaStream_t>>()
-                                  .Ctx<ffi::ScratchAllocator>()
-                                  .Arg<ffi::Buffer<ffi::F32>>()   // positions (N, 3)
-                                  .Arg<ffi::Buffer<ffi::S32>>()   // batch (N,)
-                                  .Arg<ffi::AnyBuffer>()          // cell (B, 3, 3)
-                                  .Arg<ffi::Buffer<ffi::PRED>>()  // pbc (B, 3)
-                                  .Attr<float>("cutoff")
-                                  .Attr<std::int64_t>("half")
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // i (K,)
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // j (K,)
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // S (K, 3)
-                                  .Ret<ffi::Buffer<ffi::S32>>()  // count ()
-);
+XLA_FFI_DEFINE_HANDLER_SYMBOL(
+    RaycutRaggedNeighborListCuda, ragged_neighbor_list,
+    raycut_jax::ragged_neighbor_list_signature(
+        ffi::Ffi::Bind().Ctx<ffi::PlatformStream<cudaStream_t>>().Ctx<ffi::ScratchAllocator>()));

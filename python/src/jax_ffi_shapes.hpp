@@ -5,6 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <utility>
 
 #include "xla/ffi/api/ffi.h"
 
@@ -51,6 +52,40 @@ inline ffi::Error ragged_shapes(const ffi::AnyBuffer::Dimensions& positions,
         std::to_string(cell_entries) + " cell entries and " + std::to_string(pbc_entries) +
         " pbc entries");
   return ffi::Error::Success();
+}
+
+// The targets' signatures after what a platform adds in front (CUDA: its stream and scratch
+// allocator; the CPU: nothing): the same arguments, attributes and results everywhere.
+// Both end with the attributes cutoff and half, and the results i, j (K,), S (K, 3) and count
+// (with vmap's leading axes in front of each).
+template <class Binding>
+auto with_attributes_and_results(Binding binding) {
+  return std::move(binding)
+      .template Attr<float>("cutoff")
+      .template Attr<std::int64_t>("half")
+      .template Ret<ffi::Buffer<ffi::S32>>()
+      .template Ret<ffi::Buffer<ffi::S32>>()
+      .template Ret<ffi::Buffer<ffi::S32>>()
+      .template Ret<ffi::Buffer<ffi::S32>>();
+}
+
+// RaycutNeighborList: positions (..., N, 3), cell (..., 3, 3), pbc (..., 3).
+template <class Binding>
+auto neighbor_list_signature(Binding binding) {
+  return with_attributes_and_results(std::move(binding)
+                                         .template Arg<ffi::Buffer<ffi::F32>>()
+                                         .template Arg<ffi::AnyBuffer>()
+                                         .template Arg<ffi::Buffer<ffi::PRED>>());
+}
+
+// RaycutRaggedNeighborList: positions (N, 3), batch (N,), cell (B, 3, 3), pbc (B, 3).
+template <class Binding>
+auto ragged_neighbor_list_signature(Binding binding) {
+  return with_attributes_and_results(std::move(binding)
+                                         .template Arg<ffi::Buffer<ffi::F32>>()
+                                         .template Arg<ffi::Buffer<ffi::S32>>()
+                                         .template Arg<ffi::AnyBuffer>()
+                                         .template Arg<ffi::Buffer<ffi::PRED>>());
 }
 
 }  // namespace raycut_jax
