@@ -34,23 +34,10 @@ inline bool in_range_exact(const ExactImages& e, std::size_t i, std::size_t k, V
   const PointImage& pk = e.image[k];
   if (pk.source == not_a_source) return false;
   const PointImage& pi = e.image[i];
-  double xi[3], xj[3];
-  const float* qi = pi.source == not_a_source ? e.queries + 3 * i : nullptr;
-  for (int c = 0; c < 3; ++c) {
-    xi[c] = qi            ? qi[c]
-            : e.sources64 ? e.sources64[3 * std::size_t{pi.source} + c]
-                          : e.sources[3 * std::size_t{pi.source} + c];
-    xj[c] = e.sources64 ? e.sources64[3 * std::size_t{pk.source} + c]
-                        : e.sources[3 * std::size_t{pk.source} + c];
-  }
-  const double* cell = e.cells + 9 * std::size_t{e.system ? e.system[i] : 0};
-  double s[3];
+  double s[3], d[3];
   for (int a = 0; a < 3; ++a)
     s[a] = static_cast<double>(std::int64_t{pk.shift[a]} - std::int64_t{pi.shift[a]});
-  double d[3];
-  for (int c = 0; c < 3; ++c)
-    d[c] = (xj[c] - xi[c]) + ((s[0] * cell[c] + s[1] * cell[3 + c]) + s[2] * cell[6 + c]);
-  if (!(d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < e.cutoff_squared)) return false;
+  if (!(exact_pair_vector(e, i, pk.source, s, d) < e.cutoff_squared)) return false;
   r = {static_cast<float>(d[0]), static_cast<float>(d[1]), static_cast<float>(d[2])};
   r2 = squared_distance(r.x, r.y, r.z);
   return true;

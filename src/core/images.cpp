@@ -8,6 +8,7 @@
 #include "core/method.hpp"
 #include "core/validation.hpp"
 #include "raycut/box.hpp"
+#include "raycut/detail/images.hpp"
 #include "raycut/host_memory.hpp"
 
 namespace raycut::detail {
@@ -88,19 +89,16 @@ double rounding_bound(double extent) {
   return 2 * std::ldexp(extent, -24);
 }
 
-// The float band [in, out) of r2 around C^2 where the float predicate may misjudge a pair: C^2
-// give or take the largest error of a float r2 near the cutoff when each coordinate is off by up
-// to `rounding` (r_f = p_k - p_i: 2 rounding per component plus its own relative rounding; r2
-// in three roundings; the float C^2 in one), with a factor 2 to spare; rounded outwards.
+// The float band [in, out) of r2 around C^2 where the float predicate may misjudge a pair
+// (float_band_slack), rounded outwards.
 void set_float_band(ExactImages& exact, double cutoff, double rounding) {
-  constexpr double u = 0x1p-24;
-  const double slack =
-      2 * (7 * cutoff * rounding + 6 * u * cutoff * cutoff + 12 * rounding * rounding);
+  const double slack = float_band_slack(cutoff, rounding);
   const double c2 = cutoff * cutoff;
   const auto in = static_cast<float>(c2 - slack), out = static_cast<float>(c2 + slack);
   exact.float_in = static_cast<double>(in) <= c2 - slack ? in : std::nextafter(in, 0.0f);
   exact.float_out = static_cast<double>(out) >= c2 + slack ? out : std::nextafter(out, INFINITY);
   exact.cutoff_squared = c2;
+  exact.rounding = rounding;
   exact.exact_vectors = rounding > std::ldexp(cutoff, -16);
 }
 

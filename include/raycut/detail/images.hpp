@@ -7,6 +7,7 @@
 // filters nothing runs as on an open cloud when every point is some particle's image.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 
 #include "raycut/detail/pair_pass.hpp"
@@ -54,6 +55,33 @@ RAYCUT_HD bool resolve(const F& f, const Images& images, const typename Images::
     j = k;
   }
   return in && accepts(f, i, j, s);
+}
+
+// The caller's pair vector r = (x_j - x_i) + S . cell in double (ExactImages), for target point
+// i (a particle or a query point), source particle j and shift s; returns |r|^2 in double.
+// Exactly antisymmetric in (i, j, S) and (j, i, -S): IEEE rounding is symmetric.
+RAYCUT_HD double exact_pair_vector(const ExactImages& e, std::size_t i, std::uint32_t j,
+                                   const double s[3], double r[3]) {
+  const PointImage& pi = e.image[i];
+  const float* qi = pi.source == not_a_source ? e.queries + 3 * i : nullptr;
+  const double* cell = e.cells + 9 * std::size_t{e.system ? e.system[i] : 0};
+  for (int c = 0; c < 3; ++c) {
+    const double xi = qi            ? qi[c]
+                      : e.sources64 ? e.sources64[3 * std::size_t{pi.source} + c]
+                                    : e.sources[3 * std::size_t{pi.source} + c];
+    const double xj =
+        e.sources64 ? e.sources64[3 * std::size_t{j} + c] : e.sources[3 * std::size_t{j} + c];
+    r[c] = (xj - xi) + ((s[0] * cell[c] + s[1] * cell[3 + c]) + s[2] * cell[6 + c]);
+  }
+  return r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+}
+
+// The largest error of a float r2 near cutoff^2 when each coordinate of both points is off by
+// up to `rounding` (r_f = p_k - p_i: 2 roundings per component plus its own relative rounding;
+// r2 in three roundings; the float cutoff^2 in one), with a factor 2 to spare.
+RAYCUT_HD double float_band_slack(double cutoff, double rounding) {
+  constexpr double u = 0x1p-24;
+  return 2 * (7 * cutoff * rounding + 6 * u * cutoff * cutoff + 12 * rounding * rounding);
 }
 
 // Whether functor F needs the image tables: it reads j or S, or filters pairs.

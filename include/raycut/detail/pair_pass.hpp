@@ -42,6 +42,8 @@ struct ExactImages {
   // A float r2 below float_in is in for certain, at or above float_out out for certain. Cells
   // at least sqrt(float_out) wide offer every pair in range.
   float float_in = 0, float_out = 0;
+  // How far a float point may lie from its real position, per coordinate (float_band_slack).
+  double rounding = 0;
   // Boxes so large that float r is off by more than 2^-16 C: every pair's r from the double
   // vector (rounded once), not only the band's.
   bool exact_vectors = false;
