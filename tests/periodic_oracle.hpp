@@ -31,6 +31,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -52,7 +53,10 @@ struct PeriodicOracle {
   bool pbc[3] = {};
   double cutoff = 0;
   double band = 1e-5;
-  double in_below2 = 0, out_above2 = 0;        // (C (1 - band))^2, (C (1 + band))^2
+  double in_below2 = 0, out_above2 = 0;  // (C (1 - band))^2, (C (1 + band))^2
+  // Per-pair cutoffs (raycut::PairCutoffs): (i, j, S) in range iff d < pair_cutoff(i, j), each
+  // with its own band; `cutoff` is then the largest, where the enumeration reaches.
+  std::function<double(std::int64_t, std::int64_t)> pair_cutoff;
   std::vector<PeriodicTriple> in, band_pairs;  // full list: sorted, every orientation
 
   std::size_t size() const { return xyz.size() / 3; }  // targets (rows)
@@ -78,7 +82,13 @@ struct PeriodicOracle {
       if (!pbc[k] && t[2 + k] != 0) return ImageClass::out;
     if (!query && t[0] == t[1] && t[2] == 0 && t[3] == 0 && t[4] == 0) return ImageClass::out;
     const double d2 = squared_distance(t);
-    return d2 < in_below2 ? ImageClass::in : d2 > out_above2 ? ImageClass::out : ImageClass::band;
+    double below2 = in_below2, above2 = out_above2;
+    if (pair_cutoff) {
+      const double c = pair_cutoff(t[0], t[1]);
+      below2 = (c * (1 - band)) * (c * (1 - band));
+      above2 = (c * (1 + band)) * (c * (1 + band));
+    }
+    return d2 < below2 ? ImageClass::in : d2 > above2 ? ImageClass::out : ImageClass::band;
   }
 };
 
@@ -207,6 +217,20 @@ PeriodicOracle make_periodic_oracle(const std::vector<Real>& xyz, const BoxLike&
   PeriodicOracle o;
   o.xyz.assign(xyz.begin(), xyz.end());
   periodic_detail::set_box(o, box, cutoff, band);
+  periodic_detail::enumerate(o);
+  return o;
+}
+
+// Per-pair cutoffs: pair (i, j) within pair_cutoff(i, j), at most `largest`.
+template <class Real, class BoxLike>
+PeriodicOracle make_pair_cutoff_oracle(
+    const std::vector<Real>& xyz, const BoxLike& box,
+    std::function<double(std::int64_t, std::int64_t)> pair_cutoff, double largest,
+    double band = 1e-5) {
+  PeriodicOracle o;
+  o.xyz.assign(xyz.begin(), xyz.end());
+  periodic_detail::set_box(o, box, largest, band);
+  o.pair_cutoff = std::move(pair_cutoff);
   periodic_detail::enumerate(o);
   return o;
 }

@@ -111,6 +111,20 @@ struct NeighbourList {
   std::vector<std::int64_t> rows, columns;
 };
 
+// Per-pair cutoffs, as ASE's neighbor_list takes them: pair (i, j, S) is listed only when
+// |r_ij| < c_ij, its own cutoff, decided in double (exactly, from the caller's positions, where
+// the search is: docs/limits.md). Either radii, c_ij = r_i + r_j (ASE's natural_cutoffs), or a
+// species per particle and a symmetric kinds x kinds table, c_ij = table[s_i * kinds + s_j].
+// Every c_ij must be finite, >= 0 and at most the engine's cutoff (the search runs there).
+// Host memory, read during the call; not with query sets.
+struct PairCutoffs {
+  const double* radii = nullptr;           // N, one per particle; or null
+  const std::uint32_t* species = nullptr;  // N, each < kinds; with `table`
+  const double* table = nullptr;           // kinds * kinds, symmetric
+  std::uint32_t kinds = 0;
+  bool active() const { return radii != nullptr || table != nullptr; }
+};
+
 // What a neighbour list holds (docs/periodic.md, "Semantics", for shifts and half lists).
 struct ListOptions {
   // Each pair once: of (i, j, S) and (j, i, -S), the one with i < j, or i == j and S
@@ -123,6 +137,8 @@ struct ListOptions {
   // neighbor_list and PyTorch Geometric's edge_index), written by the list pass itself, in place
   // of the uint32 indices() (null then). The offsets are there all the same.
   bool coo = false;
+  // Per-pair cutoffs, read during the call (null: every pair within the engine's cutoff).
+  const PairCutoffs* cutoffs = nullptr;
 };
 
 namespace detail {

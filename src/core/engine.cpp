@@ -420,6 +420,12 @@ void Engine::neighbours(NeighbourListBuffer& list, const ListOptions& options) {
     throw Error(ErrorCode::invalid_argument, "Engine::neighbours() called before build()");
   if (!list.storage_ || list.storage_->space() != m.space()) list.storage_ = m.make_list_storage();
   if (options.half && queries_) throw half_with_queries();
+  if (options.cutoffs && options.cutoffs->active()) {
+    if (queries_)
+      throw Error(ErrorCode::invalid_argument,
+                  "per-pair cutoffs: not with query points (they pair particles with each other)");
+    detail::validate_pair_cutoffs(*options.cutoffs, size_, cutoff_);
+  }
   if (size_ == 0) {
     list.storage_->set_empty(options);
     return;

@@ -6,22 +6,60 @@
 #include <cmath>
 #include <cstdint>
 
+#include "raycut/detail/images.hpp"
 #include "raycut/kernels.hpp"
 #include "raycut/predicate.hpp"
 
 namespace raycut::detail {
 
-// Half lists keep, of (i, j, S) and (j, i, -S), the one with i < j, or i == j and S
-// lexicographically positive (a self-image; (i, i, 0) never reaches a functor).
-struct HalfFilter {
-  using options = functor_options<option::accepts>;
-  bool half;
-  RAYCUT_HD bool accepts(std::uint32_t i, std::uint32_t j, const Shift& s) const {
-    return !half || i < j || (i == j && s.positive());
+// Per-pair cutoffs (ListOptions::cutoffs) in the method's memory space: pair (i, j, S) is kept
+// iff |r| < c_ij. The pass's float r2 decides where it is certainly on one side of c_ij^2; the
+// band where its rounding could matter is decided in double from the caller's positions
+// (ExactImages, where the pass has them: host points with images), so a pair is the float64
+// answer and (i, j, S), (j, i, -S) are decided alike. Without ExactImages, r is the difference
+// of the float positions themselves, exactly antisymmetric, and is compared with c_ij in double.
+struct PairCutoffFilter {
+  const double* radius = nullptr;          // by particle: c_ij = r_i + r_j
+  const std::uint32_t* species = nullptr;  // by particle, with `table`
+  const double* table = nullptr;           // kinds x kinds: c_ij = table[s_i * kinds + s_j]
+  std::uint32_t kinds = 0;
+  ExactImages exact;  // exact.image null: none
+  RAYCUT_HD bool active() const { return radius != nullptr || table != nullptr; }
+  RAYCUT_HD double cutoff(std::uint32_t i, std::uint32_t j) const {
+    return radius ? radius[i] + radius[j] : table[species[i] * kinds + species[j]];
+  }
+  RAYCUT_HD bool keeps(std::uint32_t i, std::uint32_t j, const Shift& s, float r2) const {
+    if (!active()) return true;
+    const double c = cutoff(i, j), c2 = c * c;
+    if (!exact.image) return static_cast<double>(r2) < c2;
+    const double slack = float_band_slack(c, exact.rounding);
+    if (r2 < c2 - slack) return true;
+    if (r2 >= c2 + slack) return false;
+    const double shift[3] = {static_cast<double>(s.a), static_cast<double>(s.b),
+                             static_cast<double>(s.c)};
+    double r[3];
+    return exact_pair_vector(exact, i, j, shift, r) < c2;
   }
 };
 
-// The full list's count reads no source (no lookup with images); the half list's filters.
+// What a list keeps of the pairs the pass offers. Half lists keep, of (i, j, S) and
+// (j, i, -S), the one with i < j, or i == j and S lexicographically positive (a self-image;
+// (i, i, 0) never reaches a functor); per-pair cutoffs keep the pairs within their own.
+struct ListFilter {
+  using options = functor_options<option::accepts>;
+  bool half = false;
+  PairCutoffFilter cutoffs;
+  RAYCUT_HD bool accepts(std::uint32_t i, std::uint32_t j, const Shift& s) const {
+    return !half || i < j || (i == j && s.positive());
+  }
+  RAYCUT_HD bool within(std::uint32_t i, std::uint32_t j, const Shift& s, float r2) const {
+    return cutoffs.keeps(i, j, s, r2);
+  }
+  // Whether the count must read j and S (else ListCount, the open traversal's count).
+  bool filters() const { return half || cutoffs.active(); }
+};
+
+// The full list's count reads no source (no lookup with images); a filtered list's reads them.
 struct ListCount {
   using Accumulator = std::uint32_t;
   using options = functor_options<option::combine>;
@@ -31,17 +69,26 @@ struct ListCount {
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { counts[i] = acc; }
 };
 
-struct HalfListCount : HalfFilter {
+struct FilteredListCount : ListFilter {
   using Accumulator = std::uint32_t;
   using options = functor_options<option::accepts, option::combine>;
   std::uint32_t* counts;
-  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float,
-                            const Shift&) const {
-    ++acc;
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3, float r2,
+                            const Shift& s) const {
+    if (within(i, j, s, r2)) ++acc;
   }
   RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { counts[i] = acc; }
 };
+
+// A list's count pass: ListCount, or FilteredListCount where the list filters pairs.
+template <class Run>
+void count_list(const ListFilter& filter, std::uint32_t* counts, Run&& run) {
+  if (filter.filters())
+    run(FilteredListCount{filter, counts});
+  else
+    run(ListCount{counts});
+}
 
 // |r| in float, equal to the length of the vector r itself to float precision: sqrtf of the
 // predicate's r2 where r2 is far from underflow (the usual case, no extra work), else from r
@@ -57,7 +104,7 @@ RAYCUT_HD float pair_distance(Vec3 r, float r2) {
 }
 
 // Row i written from offsets[i]; distances, vectors and shifts where asked (null otherwise).
-struct ListFill : HalfFilter {
+struct ListFill : ListFilter {
   using Accumulator = std::uint64_t;  // the next entry of the row
   using options = functor_options<option::accepts, option::init, option::emits_entries>;
   const std::uint64_t* offsets;
@@ -70,6 +117,7 @@ struct ListFill : HalfFilter {
   RAYCUT_HD Accumulator init(std::uint32_t i) const { return offsets[i]; }
   RAYCUT_HD void operator()(Accumulator& slot, std::uint32_t i, std::uint32_t j, Vec3 r, float r2,
                             const Shift& s) const {
+    if (!within(i, j, s, r2)) return;
     if (columns) {
       rows[slot] = i;
       columns[slot] = j;
@@ -100,7 +148,7 @@ struct PaddedOverflow {
 
 // Row i of the [N, K] matrix: its first K neighbours, then `n` (an invalid index) to the end;
 // counts[i] the true count, and the overflow recorded, never hidden.
-struct PaddedFill : HalfFilter {
+struct PaddedFill : ListFilter {
   using Accumulator = std::uint32_t;  // the row's next entry (its count so far)
   using options = functor_options<option::accepts, option::emits_entries>;
   std::uint32_t k;
@@ -109,8 +157,9 @@ struct PaddedFill : HalfFilter {
   std::uint32_t* counts;
   std::int32_t* shifts;  // 3 per entry, or null; padding entries get S = 0
   PaddedOverflow* overflow;
-  RAYCUT_HD void operator()(Accumulator& count, std::uint32_t i, std::uint32_t j, Vec3, float,
+  RAYCUT_HD void operator()(Accumulator& count, std::uint32_t i, std::uint32_t j, Vec3, float r2,
                             const Shift& s) const {
+    if (!within(i, j, s, r2)) return;
     if (count < k) {
       const std::uint64_t e = std::uint64_t{i} * k + count;
       indices[e] = j;

@@ -48,7 +48,25 @@ std::uint64_t* HostListStorage::prepare_offsets(std::size_t targets,
   return offsets_.data();
 }
 
-ListFill HostListStorage::prepare_fill(std::uint64_t entries, bool half) {
+PairCutoffFilter pair_cutoff_filter(const PairCutoffs& cutoffs, const double* radius,
+                                    const std::uint32_t* species, const double* table) {
+  PairCutoffFilter filter;
+  if (cutoffs.radii) {
+    filter.radius = radius;
+  } else if (cutoffs.table) {
+    filter.species = species;
+    filter.table = table;
+    filter.kinds = cutoffs.kinds;
+  }
+  return filter;
+}
+
+PairCutoffFilter HostListStorage::stage_cutoffs(const PairCutoffs* cutoffs, std::size_t) {
+  if (!cutoffs) return {};
+  return pair_cutoff_filter(*cutoffs, cutoffs->radii, cutoffs->species, cutoffs->table);
+}
+
+ListFill HostListStorage::prepare_fill(std::uint64_t entries, const ListFilter& filter) {
   pairs = entries;
   // Sized on demand (no shrinking: the buffers are reused by the next fill). What grows is
   // checked against the memory budget first: with overcommit a resize that does not fit is
@@ -78,7 +96,7 @@ ListFill HostListStorage::prepare_fill(std::uint64_t entries, bool half) {
                 "not enough host memory for " + what + ": " + format_bytes(more) + " more");
   }
   publish();
-  return {{half},
+  return {filter,
           offsets_.data(),
           options.coo ? nullptr : indices_.data(),
           options.distances ? distances_.data() : nullptr,
@@ -121,7 +139,7 @@ PaddedFill HostPaddedStorage::prepare(std::size_t targets, std::uint32_t width, 
   indices = data_or_null(indices_);
   counts = data_or_null(counts_);
   shifts = with_shifts ? data_or_null(shifts_) : nullptr;
-  return {{half},          width,          padding,
+  return {{half, {}},      width,          padding,
           indices_.data(), counts_.data(), with_shifts ? shifts_.data() : nullptr,
           overflow};
 }

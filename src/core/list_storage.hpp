@@ -25,6 +25,9 @@ class ListStorage {
   virtual NeighbourList to_host() const = 0;
   // The list of N = 0: offsets = {0}.
   virtual void set_empty(const ListOptions& options) = 0;
+  // Validated per-pair cutoffs (or null) as the pass reads them, in this storage's memory space
+  // (device storage uploads them into buffers kept with the list).
+  virtual PairCutoffFilter stage_cutoffs(const PairCutoffs* cutoffs, std::size_t n) = 0;
 
   std::size_t n = 0;
   std::uint64_t pairs = 0;
@@ -37,6 +40,11 @@ class ListStorage {
   const std::int64_t* rows = nullptr;     // ListOptions::coo
   const std::int64_t* columns = nullptr;  // ListOptions::coo
 };
+
+// The filter over per-pair cutoffs whose arrays, in the pass's memory space, are `radius`,
+// `species` and `table` (null where `cutoffs` has none).
+PairCutoffFilter pair_cutoff_filter(const PairCutoffs& cutoffs, const double* radius,
+                                    const std::uint32_t* species, const double* table);
 
 // The bytes one list entry takes with these options.
 double bytes_per_entry(const ListOptions& options);
@@ -67,9 +75,10 @@ class HostListStorage final : public ListStorage {
   std::size_t bytes() const override;
   NeighbourList to_host() const override;
   void set_empty(const ListOptions& options) override;
+  PairCutoffFilter stage_cutoffs(const PairCutoffs* cutoffs, std::size_t n) override;
   // Sizes the arrays for n targets and `pairs` entries (offsets already hold the scan) and
-  // returns the fill functor writing them.
-  ListFill prepare_fill(std::uint64_t pairs, bool half);
+  // returns the fill functor writing them, keeping what `filter` keeps.
+  ListFill prepare_fill(std::uint64_t pairs, const ListFilter& filter);
   // Only the offsets, for n targets (the count pass writes n counts into offsets + 1).
   std::uint64_t* prepare_offsets(std::size_t n, const ListOptions& options);
 

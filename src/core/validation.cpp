@@ -1,5 +1,6 @@
 #include "core/validation.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -34,6 +35,54 @@ void validate_cutoff_value(double cutoff) {
                     number(min_cutoff) + ", " + number(max_cutoff) +
                     "]: beyond it the squared cutoff is not a normal float and the float "
                     "predicate would be wrong (scale your coordinates and cutoff into it)");
+}
+
+namespace {
+// The first of `count` values that is not finite and >= 0, or count.
+std::size_t first_bad_cutoff(const double* values, std::size_t count) {
+  for (std::size_t k = 0; k < count; ++k)
+    if (!std::isfinite(values[k]) || values[k] < 0) return k;
+  return count;
+}
+}  // namespace
+
+void validate_pair_cutoffs(const PairCutoffs& cutoffs, std::size_t n, double search) {
+  const auto refuse = [](const std::string& why) {
+    throw Error(ErrorCode::invalid_argument, "per-pair cutoffs: " + why);
+  };
+  if (cutoffs.radii && (cutoffs.table || cutoffs.species))
+    refuse("give radii or a species table, not both");
+  double largest = 0;
+  if (cutoffs.radii) {
+    if (const std::size_t k = first_bad_cutoff(cutoffs.radii, n); k < n)
+      refuse("radius " + std::to_string(k) + " is " + number(cutoffs.radii[k]) +
+             " (finite and >= 0 accepted)");
+    for (std::size_t i = 0; i < n; ++i) largest = std::max(largest, 2 * cutoffs.radii[i]);
+  } else {
+    const std::size_t kinds = cutoffs.kinds;
+    if (kinds == 0) refuse("a species table needs kinds >= 1, got 0");
+    if (!cutoffs.species && n > 0) refuse("a species table needs the species of the particles");
+    for (std::size_t i = 0; i < n; ++i)
+      if (cutoffs.species[i] >= kinds)
+        refuse("particle " + std::to_string(i) + " has species " +
+               std::to_string(cutoffs.species[i]) + ", outside the table's [0, " +
+               std::to_string(kinds) + ")");
+    if (const std::size_t k = first_bad_cutoff(cutoffs.table, kinds * kinds); k < kinds * kinds)
+      refuse("table[" + std::to_string(k / kinds) + "][" + std::to_string(k % kinds) + "] is " +
+             number(cutoffs.table[k]) + " (finite and >= 0 accepted)");
+    for (std::size_t a = 0; a < kinds; ++a)
+      for (std::size_t b = 0; b < a; ++b)
+        if (cutoffs.table[a * kinds + b] != cutoffs.table[b * kinds + a])
+          refuse("the table is not symmetric: [" + std::to_string(a) + "][" + std::to_string(b) +
+                 "] = " + number(cutoffs.table[a * kinds + b]) + ", [" + std::to_string(b) + "][" +
+                 std::to_string(a) + "] = " + number(cutoffs.table[b * kinds + a]));
+    for (std::size_t k = 0; k < kinds * kinds; ++k) largest = std::max(largest, cutoffs.table[k]);
+  }
+  if (largest > search)
+    refuse("a pair cutoff of " + number(largest) + " exceeds the engine's cutoff " +
+           number(search) + ", where the search runs (build at the largest pair cutoff" +
+           (cutoffs.radii ? ": 2 max r_i with radii, since a particle pairs with its images" : "") +
+           ")");
 }
 
 std::size_t first_non_finite_host(const float* xyz, std::size_t n) {

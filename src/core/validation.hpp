@@ -22,6 +22,12 @@ void validate_cutoff(float cutoff);
 // The same check on a cutoff given in double, before it is rounded to float.
 void validate_cutoff_value(double cutoff);
 
+// Throws Error(invalid_argument) unless `cutoffs` (ListOptions::cutoffs) fits n particles: radii
+// or species with a symmetric kinds x kinds table, not both; species below kinds; each value
+// finite and >= 0; every pair's cutoff at most `search` (the engine's cutoff: 2 max r_i for
+// radii, since a particle pairs with its own images). Names the value and what is accepted.
+void validate_pair_cutoffs(const PairCutoffs& cutoffs, std::size_t n, double search);
+
 // Index of the first particle with a non-finite coordinate in host memory, or n if none.
 std::size_t first_non_finite_host(const float* xyz, std::size_t n);
 

@@ -75,13 +75,12 @@ class HostMethod : public Method {
     require_host_memory(4.0 * static_cast<double>(n_),
                         "the row counts of a neighbour list of " + std::to_string(n_) + " rows");
     std::vector<std::uint32_t> counts(n_);
-    if (options.half)
-      run(HalfListCount{{true}, counts.data()});
-    else
-      run(ListCount{counts.data()});
+    ListFilter filter{options.half, list.stage_cutoffs(options.cutoffs, n_)};
+    if (exact_) filter.cutoffs.exact = *exact_;
+    count_list(filter, counts.data(), [&](const auto& f) { run(f); });
     offsets[0] = 0;
     for (std::size_t i = 0; i < n_; ++i) offsets[i + 1] = offsets[i] + counts[i];
-    run(list.prepare_fill(offsets[n_], options.half));
+    run(list.prepare_fill(offsets[n_], filter));
   }
 
   void padded_neighbours(PaddedStorage& storage, std::uint32_t k, bool half, bool shifts) override {

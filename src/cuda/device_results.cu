@@ -154,7 +154,23 @@ std::uint64_t DeviceListStorage::scan_counts(cudaStream_t stream) {
   return total;
 }
 
-ListFill DeviceListStorage::prepare_fill(std::uint64_t entries) {
+PairCutoffFilter DeviceListStorage::stage_cutoffs(const PairCutoffs* cutoffs, std::size_t n) {
+  const auto upload = [](auto& buffer, const auto* values, std::size_t count) {
+    buffer.resize(std::max<std::size_t>(count, 1));
+    if (values && count > 0)
+      RAYCUT_CUDA_CHECK(
+          cudaMemcpy(buffer.data(), values, count * sizeof *values, cudaMemcpyHostToDevice));
+    return buffer.data();
+  };
+  if (!cutoffs || !cutoffs->active()) return {};
+  const PairCutoffs& c = *cutoffs;
+  const std::size_t entries = std::size_t{c.kinds} * c.kinds;
+  return pair_cutoff_filter(c, upload(radii_, c.radii, c.radii ? n : 0),
+                            upload(species_, c.species, c.species ? n : 0),
+                            upload(table_, c.table, c.table ? entries : 0));
+}
+
+ListFill DeviceListStorage::prepare_fill(std::uint64_t entries, const ListFilter& filter) {
   pairs = entries;
   const double per_pair = bytes_per_entry(options);
   const double held = static_cast<double>(indices_.bytes() + distances_.bytes() + vectors_.bytes() +
@@ -176,7 +192,7 @@ ListFill DeviceListStorage::prepare_fill(std::uint64_t entries) {
   if (options.vectors) vectors_.resize(std::max<std::uint64_t>(3 * entries, 1));
   if (options.shifts) shifts_.resize(std::max<std::uint64_t>(3 * entries, 1));
   publish();
-  return {{options.half},
+  return {filter,
           offsets_.data(),
           options.coo ? nullptr : indices_.data(),
           options.distances ? distances_.data() : nullptr,
@@ -235,7 +251,7 @@ PaddedFill DevicePaddedStorage::prepare(std::size_t targets, std::uint32_t width
   shifts = with_shifts ? shifts_.data() : nullptr;
   overflow_.resize(1);
   RAYCUT_CUDA_CHECK(cudaMemsetAsync(overflow_.data(), 0, sizeof(PaddedOverflow), stream));
-  return {{half},          width,          padding,
+  return {{half, {}},      width,          padding,
           indices_.data(), counts_.data(), with_shifts ? shifts_.data() : nullptr,
           overflow_.data()};
 }

@@ -81,11 +81,12 @@ class DeviceListStorage final : public ListStorage {
   std::size_t bytes() const override;
   NeighbourList to_host() const override;
   void set_empty(const ListOptions& options) override;
+  PairCutoffFilter stage_cutoffs(const PairCutoffs* cutoffs, std::size_t n) override;
 
   std::uint32_t* prepare_counts(std::size_t n, const ListOptions& options);
   // offsets = exclusive scan of the counts (offsets[n] = total), then the total read back.
   std::uint64_t scan_counts(cudaStream_t stream);
-  ListFill prepare_fill(std::uint64_t pairs);
+  ListFill prepare_fill(std::uint64_t pairs, const ListFilter& filter);
 
  private:
   void publish();
@@ -97,6 +98,8 @@ class DeviceListStorage final : public ListStorage {
   PooledBuffer<std::int32_t> shifts_;
   PooledBuffer<std::int64_t> rows_, columns_;  // ListOptions::coo
   PooledBuffer<unsigned char> scan_temp_;
+  PooledBuffer<double> radii_, table_;  // ListOptions::cutoffs
+  PooledBuffer<std::uint32_t> species_;
 };
 
 class DevicePaddedStorage final : public PaddedStorage {
@@ -158,11 +161,9 @@ class GpuMethod : public Method {
                          Run&& run) {
     auto& list = static_cast<DeviceListStorage&>(storage);
     std::uint32_t* counts = list.prepare_counts(n, options);
-    if (options.half)
-      run(HalfListCount{{true}, counts});
-    else
-      run(ListCount{counts});
-    run(list.prepare_fill(list.scan_counts(stream_)));
+    const ListFilter filter{options.half, list.stage_cutoffs(options.cutoffs, n)};
+    count_list(filter, counts, run);
+    run(list.prepare_fill(list.scan_counts(stream_), filter));
   }
   template <class Run>
   void device_padded(PaddedStorage& storage, std::size_t n, std::uint32_t k, bool half, bool shifts,

@@ -514,6 +514,10 @@ void DistributedEngine::halo_fields(const float* owned, std::size_t width, float
 // relative to the positions it was given): r = (x_j + S_halo . cell) + S_local . cell - x_i.
 DistributedList DistributedEngine::neighbours(const ListOptions& options) {
   check_built("neighbours");
+  if (options.cutoffs && options.cutoffs->active())
+    throw Error(ErrorCode::unsupported,
+                "DistributedEngine::neighbours: per-pair cutoffs are not taken here (each rank's "
+                "particles are a subset); list at the largest cutoff and filter the rows");
   const std::vector<std::int32_t>& halo_shifts = this->halo_shifts();
   const detail::LocalList local = passes_->neighbours(options, halo_shifts);
   const std::vector<std::uint64_t>& halo_ids = this->halo_ids();

@@ -21,7 +21,7 @@ struct FunctorList {};
 template <class... Specs>
 FunctorList<decltype(Specs::make(std::declval<const KernelOptions&>(), 0.0f,
                                  std::declval<const KernelOutputs&>()))...,
-            ListCount, HalfListCount, ListFill, PaddedFill>
+            ListCount, FilteredListCount, ListFill, PaddedFill>
     ray_functors_of(KernelList<Specs...>);
 using RayFunctors = decltype(ray_functors_of(BuiltinKernels{}));
 
