@@ -184,12 +184,12 @@ class Engine:
         methods only, -1 otherwise)."""
         return self._engine.timings()
 
-    def _call(self, like: _arrays.Like, function, *args):
-        """function(*args) on the caller's CUDA device and stream (one lookup per API call: at
-        1,000 particles each costs a visible share of the call)."""
+    def _call(self, like: _arrays.Like, function, *args, **kwargs):
+        """function(*args, **kwargs) on the caller's CUDA device and stream (one lookup per API
+        call: at 1,000 particles each costs a visible share of the call)."""
         with _arrays.device_context(like):
             self._engine.set_stream(_arrays.stream_of(like))
-            return function(*args)
+            return function(*args, **kwargs)
 
     def build(self, positions: Any, cutoff: float, *, cell: Any = None, pbc: Any = None,
               batch: Any = None, queries: Any = None, batch_queries: Any = None) -> None:
@@ -351,11 +351,13 @@ class Engine:
         out = (_arrays.output(indices, like), _arrays.output(counts, like), report)
         return out + (_arrays.output(s, like),) if shifts else out
 
-    def _pairs(self, half: bool, distances: bool, vectors: bool, shifts: bool = False) -> tuple:
+    def _pairs(self, half: bool, distances: bool, vectors: bool, shifts: bool = False,
+               cutoffs: Optional[dict] = None) -> tuple:
+        """COO pairs; ``cutoffs``: per-pair cutoffs (``_cutoffs.PairCutoffs.arrays()``)."""
         self._no_half_with_queries(half)
         like = self._like
         out = self._call(like, self._engine.pairs, bool(half), bool(distances), bool(vectors),
-                         like.host, bool(shifts))
+                         like.host, bool(shifts), **(cutoffs or {}))
         return tuple(_arrays.output(a, like) for a in out)
 
 
@@ -566,10 +568,12 @@ def _search_input(x: Any, grad: bool) -> Any:
 
 
 def _pair_quantities(letters: str, engine: Engine, half: bool, grad: bool, sources: Any,
-                     targets: Any, cell: Any, wide: Optional[np.ndarray] = None) -> Any:
+                     targets: Any, cell: Any, wide: Optional[np.ndarray] = None,
+                     cutoffs: Optional[dict] = None) -> Any:
     """The letters of the built engine's pairs, in the order asked. On the autograd path ``d``
     and ``D`` are computed in PyTorch from i, j and S (docs/python.md); from ``wide``, the
-    caller's float64 host positions, they are computed in float64 from i, j and S."""
+    caller's float64 host positions, they are computed in float64 from i, j and S.
+    ``cutoffs``: per-pair cutoffs, as ``Engine._pairs`` takes them."""
     batch = engine._batch
     periodic = batch.boxes is not None and batch.boxes.periodic
     metric = "d" in letters or "D" in letters
@@ -577,7 +581,7 @@ def _pair_quantities(letters: str, engine: Engine, half: bool, grad: bool, sourc
     recompute = grad or (wide is not None and metric)
     i, j, d, v, shifts = engine._pairs(half, "d" in letters and not recompute,
                                        "D" in letters and not recompute,
-                                       "S" in letters or (recompute and periodic))
+                                       "S" in letters or (recompute and periodic), cutoffs)
     rows = batch.query_offsets if batch.query_offsets is not None else batch.offsets
     if grad:
         import torch
@@ -627,9 +631,10 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     ``cutoff``: one number, or per atom or per pair as ASE takes them: a sequence of N radii
     (pair (i, j) within ``r_i + r_j``), ``{(Z1, Z2): rc}`` (pair cutoffs by species; pairs of
     species not listed have none) or ``{Z: r}`` (a radius per species), the species given by
-    ``numbers`` (N,) integers. Those search at the largest pair cutoff and keep the pairs with
-    ``d < cutoff(i, j)`` (``d`` the float32 distance), filtered with NumPy on the host (NumPy
-    positions only for now: NotImplementedError otherwise).
+    ``numbers`` (N,) integers. Those search at the largest pair cutoff, and the list pass itself
+    keeps the pairs with ``|r_ij| < cutoff(i, j)`` (on the device for device positions), decided
+    in double from the positions as given on the CPU methods (docs/limits.md). Any framework;
+    not with ``max_pairs``.
 
     ``positions``: (N, 3) float32 (NumPy: any float, converted), wrapped into the cell or not
     (S refers to the positions as given). ``cell``: the box, rows the lattice vectors a, b, c
@@ -669,14 +674,16 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     >>> i, j = pyraycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
     """
     letters = _letters(quantities)
+    pair_cutoffs = None
     if _cutoffs.is_varying(cutoff):
-        if _arrays.framework_of(positions) != "numpy":
-            raise NotImplementedError("per-atom and per-pair cutoffs take NumPy positions (the "
-                                      "filter runs on the host for now)")
-        n = _points(_arrays.to_host(positions))
-        return _cutoffs.filtered(letters, cutoff, n, numbers, lambda asked, search: neighbor_list(
-            asked, positions, search, cell, pbc, batch, half, method))
-    if _torch_ops_route(positions, method, max_pairs):
+        if max_pairs is not None:
+            raise ValueError("per-atom and per-pair cutoffs: not with max_pairs (the static-"
+                             "capacity operator takes one cutoff)")
+        n = _points(positions)
+        cutoffs = _cutoffs.PairCutoffs(
+            cutoff, n if n is not None else _points(_arrays.to_host(positions)), numbers)
+        cutoff, pair_cutoffs = cutoffs.search_cutoff(), cutoffs.arrays()
+    elif _torch_ops_route(positions, method, max_pairs):
         return _torch_ops().neighbor_list(letters, positions, cutoff, cell, pbc, batch, half,
                                           max_pairs)
     if "c" in letters:
@@ -691,7 +698,8 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     engine.build(search, cutoff, cell=_host_cell(cell), pbc=pbc, batch=batch)
     engine._like = like  # the caller's dtype: x may be its float32 conversion
     wide = _arrays.float64_host(search) if engine._wide and not grad else None
-    out = _pair_quantities(letters, engine, half, grad, positions, positions, cell, wide)
+    out = _pair_quantities(letters, engine, half, grad, positions, positions, cell, wide,
+                           pair_cutoffs)
     _put_back(key, engine)
     return out
 

@@ -1,12 +1,11 @@
 """Per-atom and per-pair cutoffs, as ASE's ``neighbor_list`` takes them: the search runs at the
-largest pair cutoff, then a vectorised NumPy filter keeps the pairs within their own cutoff.
+largest pair cutoff, and the list pass itself keeps the pairs within their own cutoff (decided in
+double, on the device for device positions: ``raycut::PairCutoffs``).
 
 - a sequence of N radii (ASE's ``natural_cutoffs``): pair (i, j) within ``r_i + r_j``;
 - ``{(Z1, Z2): rc}``: pair cutoffs by species (symmetric; a pair of species not listed has no
   neighbours, as in ASE); keys are atomic numbers or, with ASE installed, symbols;
 - ``{Z: r}``: a radius per species, pair (i, j) within ``r_Zi + r_Zj``.
-
-The filter runs on the host, on the pair arrays of the search (not yet inside the device pass).
 """
 from __future__ import annotations
 
@@ -47,7 +46,7 @@ def _value(value: Any, what: str) -> float:
 
 class PairCutoffs:
     """The cutoff of every pair of an N-particle system: ``search`` (the largest, where the
-    neighbour search runs) and ``of(i, j)`` (float64 per pair)."""
+    neighbour search runs), ``of(i, j)`` (float64 per pair) and the arrays the list pass reads."""
 
     def __init__(self, cutoff: Any, n: int, numbers: Optional[Any]) -> None:
         self._radius = None  # (N,) radii: pair cutoff r_i + r_j
@@ -111,17 +110,23 @@ class PairCutoffs:
             return self._radius[i] + self._radius[j]
         return self._table[self._kind[i], self._kind[j]]
 
+    def search_cutoff(self) -> float:
+        """Where the engine searches: the largest pair cutoff rounded up to a float32, so that the
+        search offers every pair the list pass may keep (1 when every cutoff is 0: any positive
+        value gives arrays of the right types and shapes)."""
+        if self.search <= 0:
+            return 1.0
+        c = np.float32(self.search)
+        return float(c if float(c) >= self.search else np.nextafter(c, np.float32(np.inf)))
 
-def filtered(letters: str, cutoff: Any, n: int, numbers: Optional[Any], find: Any) -> Any:
-    """The letters of the pairs within their own cutoff: ``find(asked, search_cutoff)`` returns
-    the arrays of the letters ``asked`` (host NumPy) at the largest cutoff; those are filtered
-    on their distance ``d`` (kept where ``d < cutoff(i, j)``, compared in float64)."""
-    cutoffs = PairCutoffs(cutoff, n, numbers)
-    # Every cutoff 0 leaves no pair; the search still runs (at 1, any positive value would do)
-    # for arrays of the right types and shapes.
-    search = cutoffs.search if cutoffs.search > 0 else 1.0
-    found = find("ijd" + letters, search)
-    i, j, d = (np.asarray(a) for a in found[:3])
-    keep = d.astype(np.float64) < cutoffs.of(i, j)
-    out = tuple(a[keep] for a in found[3:])
-    return out[0] if len(out) == 1 else out
+    def arrays(self) -> dict:
+        """The keyword arguments of the extension's list call: ``radii`` (N,) float64, or
+        ``species`` (N,) uint32 with the flattened ``table`` of the species present."""
+        if self._radius is not None:
+            if len(self._radius) == 0:
+                return {}  # no particles: no pairs to keep
+            return {"radii": np.ascontiguousarray(self._radius, dtype=np.float64)}
+        if self._table.size == 0:
+            return {}
+        return {"species": np.ascontiguousarray(self._kind, dtype=np.uint32),
+                "table": np.ascontiguousarray(self._table, dtype=np.float64).reshape(-1)}

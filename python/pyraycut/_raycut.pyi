@@ -58,7 +58,8 @@ class Engine:
                    shifts: bool = False
                    ) -> tuple[Any, Any, Optional[Any], Optional[Any], Optional[Any]]: ...
     def pairs(self, half: bool, distances: bool, vectors: bool, to_host: bool,
-              shifts: bool = False
+              shifts: bool = False, radii: Optional[Any] = None, species: Optional[Any] = None,
+              table: Optional[Any] = None
               ) -> tuple[Any, Any, Optional[Any], Optional[Any], Optional[Any]]: ...
     def padded(self, k: int, raise_on_overflow: bool, to_host: bool,
                shifts: bool = ..., half: bool = ...) -> tuple[Any, Any, dict[str, Any], Any]: ...

@@ -23,8 +23,8 @@ with ``positions``, ``cell`` and ``pbc`` works (``cell`` may be absent for open 
 Per-atom and per-pair cutoffs are taken as ASE takes them: a list of radii (``natural_cutoffs``:
 pair (i, j) within ``r_i + r_j``), ``{(Z1, Z2): rc}`` (species pairs not listed have no
 neighbours) or ``{Z: r}`` (a radius per species), Z from ``atoms.numbers``. The search runs at
-the largest pair cutoff, then the pairs are filtered on their float64 distance with NumPy on the
-host (not yet inside the device pass).
+the largest pair cutoff, and the list pass keeps each pair within its own cutoff, decided in
+double from the float64 positions as given.
 
 Also here: ``NeighborList``, a drop-in for ``ase.neighborlist.NeighborList``, and
 ``LennardJones``, an ASE calculator equal to ``ase.calculators.lj.LennardJones``, and
@@ -146,13 +146,18 @@ def neighbor_list(quantities: str, atoms: Any, cutoff: Any, self_interaction: bo
     message), and for bad cutoffs (naming them).
     """
     _letters(quantities)
-    if _cutoffs.is_varying(cutoff):
-        n = len(_system(atoms)[0])
-        numbers = getattr(atoms, "numbers", None)
-        return _cutoffs.filtered(quantities, cutoff, n, numbers, lambda asked, search:
-                                 neighbor_list(asked, atoms, search, self_interaction, method))
     positions, cell, pbc = _system(atoms)
-    if pbc.any():
+    varying = _cutoffs.is_varying(cutoff)
+    numbers = getattr(atoms, "numbers", None)
+    if varying:
+        # Per-atom or per-pair cutoffs: decided by the list pass in double from the float64
+        # positions as given (S then refers to them, as ASE's does).
+        i, j, S = _neighbor_list("ijS", positions, cutoff, cell=cell if pbc.any() else None,
+                                 pbc=pbc if pbc.any() else None, method=method, numbers=numbers)
+        i = np.asarray(i, dtype=np.intp)
+        j = np.asarray(j, dtype=np.intp)
+        S = np.asarray(S, dtype=np.int64)
+    elif pbc.any():
         wrapped, n = _wrap(positions, cell, pbc)
         i, j, S = _neighbor_list("ijS", _centred_float32(wrapped), cutoff, cell=cell, pbc=pbc,
                                  method=method)
@@ -167,6 +172,8 @@ def neighbor_list(quantities: str, atoms: Any, cutoff: Any, self_interaction: bo
         S = np.zeros((len(i), 3), dtype=np.int64)
     if self_interaction and len(positions):
         own = np.arange(len(positions), dtype=np.intp)
+        if varying:  # (i, i, 0) at distance 0: kept where 0 < its cutoff, as ASE does
+            own = own[_cutoffs.PairCutoffs(cutoff, len(positions), numbers).of(own, own) > 0]
         i = np.concatenate([i, own])
         j = np.concatenate([j, own])
         S = np.concatenate([S, np.zeros((len(own), 3), np.int64)])

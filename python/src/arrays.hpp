@@ -59,6 +59,8 @@ raycut::PositionsView positions_view(const FloatInput& in);
 using HostCells = nb::ndarray<const double, nb::ndim<3>, nb::c_contig, nb::device::cpu>;
 using HostFlags = nb::ndarray<const bool, nb::ndim<2>, nb::c_contig, nb::device::cpu>;
 using HostOffsets = nb::ndarray<const std::uint64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using HostDoubles = nb::ndarray<const double, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+using HostSpecies = nb::ndarray<const std::uint32_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
 // The caller's float64 positions on the host, beside their float32 rounding: the engine decides
 // in double what that rounding could (raycut::Float64Positions).
 using HostPositions64 = nb::ndarray<const double, nb::ndim<2>, nb::c_contig, nb::device::cpu>;

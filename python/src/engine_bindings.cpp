@@ -6,6 +6,7 @@
 #include <nanobind/stl/vector.h>
 
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -23,12 +24,52 @@ namespace {
 
 // The list of `engine`'s positions where the method works (a new buffer: earlier results stay
 // valid).
+// Per-pair cutoffs as Python gives them: radii (N,) float64, or species (N,) uint32 with a
+// flattened kinds x kinds float64 table (all None: one cutoff).
+struct PyPairCutoffs {
+  std::optional<HostDoubles> radii;
+  std::optional<HostSpecies> species;
+  std::optional<HostDoubles> table;
+
+  // The library's view for an engine of n particles; sizes checked here, values by the engine.
+  std::optional<raycut::PairCutoffs> view(std::size_t n) const {
+    if (!radii && !species && !table) return std::nullopt;
+    raycut::PairCutoffs c;
+    if (radii) {
+      if (radii->shape(0) != n)
+        value_error("per-pair cutoffs: " + std::to_string(radii->shape(0)) + " radii for " +
+                    std::to_string(n) + " particles (one per particle)");
+      c.radii = radii->data();
+    }
+    if (species || table) {
+      if (!species || !table)
+        value_error("per-pair cutoffs: a species table needs both species and table");
+      if (species->shape(0) != n)
+        value_error("per-pair cutoffs: " + std::to_string(species->shape(0)) + " species for " +
+                    std::to_string(n) + " particles (one per particle)");
+      const auto kinds =
+          static_cast<std::uint32_t>(std::llround(std::sqrt(static_cast<double>(table->shape(0)))));
+      if (std::size_t{kinds} * kinds != table->shape(0))
+        value_error("per-pair cutoffs: the table holds " + std::to_string(table->shape(0)) +
+                    " values, not kinds x kinds");
+      c.species = species->data();
+      c.table = table->data();
+      c.kinds = kinds;
+    }
+    return c;
+  }
+};
+
+// The list of `engine`'s positions where the method works (a new buffer: earlier results stay
+// valid).
 std::shared_ptr<raycut::NeighbourListBuffer> fill_list(PyEngine& e, bool half, bool distances,
-                                                       bool vectors, bool shifts,
-                                                       bool coo = false) {
+                                                       bool vectors, bool shifts, bool coo = false,
+                                                       const PyPairCutoffs& given = {}) {
   auto list = std::make_shared<raycut::NeighbourListBuffer>();
   Exclusive hold(e.mutex);
-  e.engine.neighbours(*list, raycut::ListOptions{half, distances, vectors, shifts, coo});
+  const std::optional<raycut::PairCutoffs> cutoffs = given.view(e.engine.size());
+  e.engine.neighbours(*list, raycut::ListOptions{half, distances, vectors, shifts, coo,
+                                                 cutoffs ? &*cutoffs : nullptr});
   return list;
 }
 
@@ -89,9 +130,12 @@ nb::tuple neighbours(PyEngine& engine, bool half, bool distances, bool vectors, 
 // COO pairs (i int64 [P], j int64 [P], d [P] or None, D [P, 3] or None, S int32 [P, 3] or
 // None): ASE's "ijdDS", written as COO by the list pass itself (ListOptions::coo).
 nb::tuple pairs(PyEngine& engine, bool half, bool distances, bool vectors, bool to_host,
-                bool shifts) {
-  const ListArrays a =
-      arrays_of(fill_list(engine, half, distances, vectors, shifts, /*coo=*/true), to_host);
+                bool shifts, const std::optional<HostDoubles>& radii,
+                const std::optional<HostSpecies>& species,
+                const std::optional<HostDoubles>& table) {
+  const ListArrays a = arrays_of(
+      fill_list(engine, half, distances, vectors, shifts, /*coo=*/true, {radii, species, table}),
+      to_host);
   const std::size_t count = a.pairs;
   return nb::make_tuple(a.optional(true, a.rows, {count}), a.optional(true, a.columns, {count}),
                         a.optional(distances, a.distances, {count}),
@@ -202,7 +246,8 @@ void bind_engine(nb::module_& m) {
       .def("neighbours", &neighbours, nb::arg("half"), nb::arg("distances"), nb::arg("vectors"),
            nb::arg("to_host"), nb::arg("shifts") = false)
       .def("pairs", &pairs, nb::arg("half"), nb::arg("distances"), nb::arg("vectors"),
-           nb::arg("to_host"), nb::arg("shifts") = false)
+           nb::arg("to_host"), nb::arg("shifts") = false, nb::arg("radii") = nb::none(),
+           nb::arg("species") = nb::none(), nb::arg("table") = nb::none())
       .def("padded", &padded, nb::arg("k"), nb::arg("raise_on_overflow"), nb::arg("to_host"),
            nb::arg("shifts") = false, nb::arg("half") = false)
       .def("timings",

@@ -326,3 +326,36 @@ def test_pair_cutoffs_of_absent_species_do_not_widen_the_search():
     ours = pyraycut.ase.neighbor_list("ij", atoms, {(6, 6): 1.6, (1, 6): 1.2, (92, 92): 50.0})
     theirs = ase_neighbor_list("ij", atoms, {(6, 6): 1.6, (1, 6): 1.2, (92, 92): 50.0})
     assert sorted(zip(*ours)) == sorted(zip(*(a.tolist() for a in theirs))) != []
+
+
+def test_varying_cutoffs_in_the_pass_take_every_framework_and_huge_boxes():
+    """Per-pair cutoffs run in the list pass: PyTorch tensors are taken as NumPy arrays are, and a
+    box 10^4 cutoffs wide with pairs placed within 1e-6 of their own cutoff gives ASE's pairs
+    (decided in double from the float64 positions)."""
+    rng = np.random.default_rng(11)
+    length = 2.0e4
+    base = rng.random((40, 3)) * length
+    radii_of = {1: 0.35, 6: 0.8, 8: 0.7}
+    z = rng.choice([1, 6, 8], 40)
+    partner_z = rng.choice([1, 6, 8], 40)
+    own = np.array([radii_of[a] + radii_of[b] for a, b in zip(z, partner_z)])
+    direction = rng.normal(size=(40, 3))
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    offset = rng.choice([-1, 1], 40) * 10.0 ** rng.uniform(-7, -5, 40)
+    partner = base + (own * (1 + offset))[:, None] * direction
+    atoms = Atoms(numbers=np.concatenate([z, partner_z]),
+                  positions=np.concatenate([base, partner]), cell=np.eye(3) * length, pbc=True)
+    cutoff = {k: v for k, v in radii_of.items()}
+    ours = pyraycut.ase.neighbor_list("ijS", atoms, cutoff)
+    theirs = ase_neighbor_list("ijS", atoms, [radii_of[int(a)] for a in atoms.numbers])
+    np.testing.assert_array_equal(triples(*ours), triples(*theirs))
+    assert 0 < len(ours[0]) < 80  # about half the partners are in
+
+    torch = pytest.importorskip("torch")
+    x = torch.tensor(atoms.positions)
+    i, j, S = pyraycut.neighbor_list("ijS", x, cutoff, cell=atoms.cell[:], pbc=True,
+                                     numbers=atoms.numbers)
+    assert isinstance(i, torch.Tensor)
+    np.testing.assert_array_equal(triples(i.numpy(), j.numpy(), S.numpy()), triples(*theirs))
+    with pytest.raises(ValueError, match="not with max_pairs"):
+        pyraycut.neighbor_list("ij", x, cutoff, numbers=atoms.numbers, max_pairs=100)
