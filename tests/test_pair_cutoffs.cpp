@@ -331,7 +331,7 @@ TEST(PairCutoffsRefusals, NameTheValueAndTheRange) {
   c.radii = nan.data();
   EXPECT_NE(message(c).find("radius 2 is nan"), std::string::npos);
   c.radii = large.data();
-  EXPECT_NE(message(c).find("a pair cutoff of 2.02 exceeds the engine's cutoff 2"),
+  EXPECT_NE(message(c).find("a pair cutoff of 2.02 exceeds the engine's cutoff 2,"),
             std::string::npos);
   c.radii = fine.data();
   EXPECT_EQ(message(c), "accepted");  // 2 max r_i = 2: the engine's cutoff itself

@@ -14,6 +14,7 @@
 #include <cstdint>
 
 #include "raycut/context.hpp"
+#include "raycut/static_pairs.hpp"
 
 namespace raycut {
 
@@ -45,26 +46,6 @@ struct PairOptions {
   // when needed (DeviceVerletList) without a conditional on the host.
   const int* run_if = nullptr;
 };
-
-// Where a pass writes its pairs: `capacity` entries of i, j (int64) and S (3 int32, or null),
-// and the true count (one int64), all device memory. Entries [count, capacity) are padding:
-// i = j = pad_index, S = 0. The pairs are valid iff 0 <= count <= capacity; a count above the
-// capacity says how many there are (the first `capacity` in the fixed order are written). A
-// negative count is bad input, named by read_pair_count: one of the codes below.
-struct StaticPairs {
-  std::int64_t* i = nullptr;
-  std::int64_t* j = nullptr;
-  std::int32_t* shifts = nullptr;
-  std::int64_t* count = nullptr;
-  std::size_t capacity = 0;
-  std::int64_t pad_index = 0;
-};
-
-// What a negative count says.
-inline constexpr std::int64_t count_non_finite_position = -1;
-inline constexpr std::int64_t count_unsorted_batch = -2;
-inline constexpr std::int64_t count_invalid_cell = -3;  // non-finite, or periodic rows dependent
-inline constexpr std::int64_t count_batch_out_of_range = -4;  // a system without its cell/pbc
 
 // The small-system policy: the brute force within systems below beats a grid build (and its
 // host synchronisations) while systems hold at most this many particles on average. The

@@ -17,6 +17,7 @@
 #include "raycut/box.hpp"
 #include "raycut/error.hpp"
 #include "raycut/kernels.hpp"
+#include "raycut/static_pairs.hpp"
 
 namespace raycut {
 
@@ -343,6 +344,14 @@ class Engine {
   void neighbours(NeighbourListBuffer& list, const ListOptions& options = {});
   // The same, copied to the host.
   NeighbourList neighbours(const ListOptions& options = {});
+  // The pairs (i, j[, S]) as COO entries into a static capacity (`out`, in the memory where the
+  // method works: Engine::space()), rows in ascending order: the count pass, a scan and the fill
+  // pass, with no read-back and no allocation that grows with the pairs. out.count gets the
+  // true count (valid iff <= out.capacity); entries past it are padding (i = j =
+  // out.pad_index, S = 0). GPU methods queue it on the engine's stream and return without
+  // waiting. ListOptions: half and cutoffs (S when out.shifts is set); distances, vectors and
+  // coo are refused (compute D from i, j and S; the entries are COO).
+  void neighbours(const StaticPairs& out, const ListOptions& options = {});
   // The padded [N, K] matrix in one pass (PaddedOptions says what). Overflowing rows are
   // reported, never truncated silently. A matrix beyond the memory budget
   // (raycut/host_memory.hpp; on the GPU the free device memory) is Error(out_of_memory) before
@@ -358,6 +367,8 @@ class Engine {
   float cutoff() const { return cutoff_; }
 
  private:
+  // Throws for list options this build cannot take (half with queries, bad per-pair cutoffs).
+  void check_list_options(const ListOptions& options) const;
   friend struct detail::EngineAccess;
   friend struct detail::PairPassAccess;
   // What include/raycut/pairs.hpp and include/raycut/cuda/pairs.cuh run a user's functor

@@ -419,6 +419,16 @@ void Engine::neighbours(NeighbourListBuffer& list, const ListOptions& options) {
   if (!built_)
     throw Error(ErrorCode::invalid_argument, "Engine::neighbours() called before build()");
   if (!list.storage_ || list.storage_->space() != m.space()) list.storage_ = m.make_list_storage();
+  check_list_options(options);
+  if (size_ == 0) {
+    list.storage_->set_empty(options);
+    return;
+  }
+  m.neighbours(*list.storage_, options);
+  m.synchronize();
+}
+
+void Engine::check_list_options(const ListOptions& options) const {
   if (options.half && queries_) throw half_with_queries();
   if (options.cutoffs && options.cutoffs->active()) {
     if (queries_)
@@ -426,12 +436,21 @@ void Engine::neighbours(NeighbourListBuffer& list, const ListOptions& options) {
                   "per-pair cutoffs: not with query points (they pair particles with each other)");
     detail::validate_pair_cutoffs(*options.cutoffs, size_, cutoff_);
   }
-  if (size_ == 0) {
-    list.storage_->set_empty(options);
-    return;
-  }
-  m.neighbours(*list.storage_, options);
-  m.synchronize();
+}
+
+void Engine::neighbours(const StaticPairs& out, const ListOptions& options) {
+  detail::Method& m = impl("neighbours");
+  if (!built_)
+    throw Error(ErrorCode::invalid_argument, "Engine::neighbours() called before build()");
+  if (options.distances || options.vectors || options.coo)
+    throw Error(ErrorCode::invalid_argument,
+                "a static-capacity list holds i, j and S as COO entries: distances, vectors and "
+                "coo are not options of it (compute D = x_j - x_i + S . cell from them)");
+  if (!out.i || !out.j || !out.count || (out.capacity > 0 && !out.i))
+    throw Error(ErrorCode::invalid_argument,
+                "a static-capacity list needs its i, j and count arrays (null given)");
+  check_list_options(options);
+  m.static_neighbours(out, options, size_);
 }
 
 NeighbourList Engine::neighbours(const ListOptions& options) {

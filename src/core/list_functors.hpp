@@ -114,10 +114,16 @@ struct ListFill : ListFilter {
   std::int32_t* shifts;
   std::int64_t* rows;  // COO (ListOptions::coo): i and j as int64, in place of `indices`
   std::int64_t* columns;
+  // Entries at or past it are counted, not written (a static-capacity list: StaticPairs).
+  std::uint64_t capacity = ~std::uint64_t{0};
   RAYCUT_HD Accumulator init(std::uint32_t i) const { return offsets[i]; }
   RAYCUT_HD void operator()(Accumulator& slot, std::uint32_t i, std::uint32_t j, Vec3 r, float r2,
                             const Shift& s) const {
     if (!within(i, j, s, r2)) return;
+    if (slot >= capacity) {
+      ++slot;
+      return;
+    }
     if (columns) {
       rows[slot] = i;
       columns[slot] = j;

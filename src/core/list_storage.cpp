@@ -61,9 +61,21 @@ PairCutoffFilter pair_cutoff_filter(const PairCutoffs& cutoffs, const double* ra
   return filter;
 }
 
-PairCutoffFilter HostListStorage::stage_cutoffs(const PairCutoffs* cutoffs, std::size_t) {
+PairCutoffFilter host_cutoff_filter(const PairCutoffs* cutoffs) {
   if (!cutoffs) return {};
   return pair_cutoff_filter(*cutoffs, cutoffs->radii, cutoffs->species, cutoffs->table);
+}
+
+PairCutoffFilter HostListStorage::stage_cutoffs(const PairCutoffs* cutoffs, std::size_t) {
+  return host_cutoff_filter(cutoffs);
+}
+
+void finish_static_pairs(const StaticPairs& out, std::uint64_t total) {
+  *out.count = static_cast<std::int64_t>(total);
+  for (std::uint64_t e = std::min<std::uint64_t>(total, out.capacity); e < out.capacity; ++e) {
+    out.i[e] = out.j[e] = out.pad_index;
+    if (out.shifts) out.shifts[3 * e] = out.shifts[3 * e + 1] = out.shifts[3 * e + 2] = 0;
+  }
 }
 
 ListFill HostListStorage::prepare_fill(std::uint64_t entries, const ListFilter& filter) {

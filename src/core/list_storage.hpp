@@ -46,6 +46,13 @@ class ListStorage {
 PairCutoffFilter pair_cutoff_filter(const PairCutoffs& cutoffs, const double* radius,
                                     const std::uint32_t* species, const double* table);
 
+// The filter over per-pair cutoffs (or null) given in host memory, read there.
+PairCutoffFilter host_cutoff_filter(const PairCutoffs* cutoffs);
+
+// A static-capacity list's end in host memory: the true count, then padding from it (or from
+// the capacity) to the capacity.
+void finish_static_pairs(const StaticPairs& out, std::uint64_t total);
+
 // The bytes one list entry takes with these options.
 double bytes_per_entry(const ListOptions& options);
 

@@ -88,6 +88,10 @@ class Method {
   virtual std::unique_ptr<PaddedStorage> make_padded_storage() const = 0;
   virtual void neighbours(ListStorage& list, const ListOptions& options) = 0;
   virtual void padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half, bool shifts) = 0;
+  // A list of n targets into a static capacity (Engine::neighbours(StaticPairs)): no read-back;
+  // n = 0 writes the count and the padding only.
+  virtual void static_neighbours(const StaticPairs& out, const ListOptions& options,
+                                 std::size_t n) = 0;
 
   // The traversal a caller's functor runs through (kind none: the method cannot run one).
   virtual PairPass pair_pass() const { return {}; }

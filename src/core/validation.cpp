@@ -78,9 +78,15 @@ void validate_pair_cutoffs(const PairCutoffs& cutoffs, std::size_t n, double sea
                  std::to_string(a) + "] = " + number(cutoffs.table[b * kinds + a]));
     for (std::size_t k = 0; k < kinds * kinds; ++k) largest = std::max(largest, cutoffs.table[k]);
   }
+  // Full precision: the two may differ only in the rounding of the engine's float cutoff.
+  const auto exact_number = [](double value) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%.9g", value);
+    return std::string(buf);
+  };
   if (largest > search)
-    refuse("a pair cutoff of " + number(largest) + " exceeds the engine's cutoff " +
-           number(search) + ", where the search runs (build at the largest pair cutoff" +
+    refuse("a pair cutoff of " + exact_number(largest) + " exceeds the engine's cutoff " +
+           exact_number(search) + ", where the search runs (build at the largest pair cutoff" +
            (cutoffs.radii ? ": 2 max r_i with radii, since a particle pairs with its images" : "") +
            ")");
 }

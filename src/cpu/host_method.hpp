@@ -71,16 +71,21 @@ class HostMethod : public Method {
   void neighbours(ListStorage& storage, const ListOptions& options) override {
     auto& list = static_cast<HostListStorage&>(storage);
     std::uint64_t* offsets = list.prepare_offsets(n_, options);
-    // The count pass writes counts[i] at offsets[i + 1], then a running sum makes the offsets.
-    require_host_memory(4.0 * static_cast<double>(n_),
-                        "the row counts of a neighbour list of " + std::to_string(n_) + " rows");
-    std::vector<std::uint32_t> counts(n_);
-    ListFilter filter{options.half, list.stage_cutoffs(options.cutoffs, n_)};
-    if (exact_) filter.cutoffs.exact = *exact_;
-    count_list(filter, counts.data(), [&](const auto& f) { run(f); });
-    offsets[0] = 0;
-    for (std::size_t i = 0; i < n_; ++i) offsets[i + 1] = offsets[i] + counts[i];
+    const ListFilter filter = list_filter(options);
+    count_rows(filter, offsets);
     run(list.prepare_fill(offsets[n_], filter));
+  }
+
+  void static_neighbours(const StaticPairs& out, const ListOptions& options,
+                         std::size_t n) override {
+    if (n == 0) return finish_static_pairs(out, 0);
+    std::vector<std::uint64_t> offsets(n_ + 1);
+    const ListFilter filter = list_filter(options);
+    count_rows(filter, offsets.data());
+    ListFill fill{filter, offsets.data(), nullptr, nullptr, nullptr, out.shifts, out.i, out.j};
+    fill.capacity = out.capacity;
+    run(fill);
+    finish_static_pairs(out, offsets[n_]);
   }
 
   void padded_neighbours(PaddedStorage& storage, std::uint32_t k, bool half, bool shifts) override {
@@ -110,6 +115,23 @@ class HostMethod : public Method {
           i, [&](std::size_t j, const float* xj) { sink(context, j, xj); });
     };
     return pass;
+  }
+
+  // What a list keeps: its half orientation and per-pair cutoffs (decided in double with the
+  // points' images, ExactImages).
+  ListFilter list_filter(const ListOptions& options) const {
+    ListFilter filter{options.half, host_cutoff_filter(options.cutoffs)};
+    if (exact_) filter.cutoffs.exact = *exact_;
+    return filter;
+  }
+  // The count pass into offsets[1 .. n], then their running sum: offsets[i] is row i's first.
+  void count_rows(const ListFilter& filter, std::uint64_t* offsets) const {
+    require_host_memory(4.0 * static_cast<double>(n_),
+                        "the row counts of a neighbour list of " + std::to_string(n_) + " rows");
+    std::vector<std::uint32_t> counts(n_);
+    count_list(filter, counts.data(), [&](const auto& f) { run(f); });
+    offsets[0] = 0;
+    for (std::size_t i = 0; i < n_; ++i) offsets[i + 1] = offsets[i] + counts[i];
   }
 
   // The visiting order of targets; a method whose candidates lie in cell order gives its own.

@@ -140,7 +140,7 @@ struct CountOrZero {
 };
 }  // namespace
 
-std::uint64_t DeviceListStorage::scan_counts(cudaStream_t stream) {
+void DeviceListStorage::scan(cudaStream_t stream) {
   const auto input = thrust::make_transform_iterator(thrust::counting_iterator<std::size_t>(0),
                                                      CountOrZero{counts_.data(), n});
   std::size_t temp_bytes = 0;
@@ -149,9 +149,37 @@ std::uint64_t DeviceListStorage::scan_counts(cudaStream_t stream) {
   scan_temp_.resize(std::max<std::size_t>(temp_bytes, 1));
   RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scan_temp_.data(), temp_bytes, input,
                                                   offsets_.data(), n + 1, stream));
+}
+
+std::uint64_t DeviceListStorage::scan_counts(cudaStream_t stream) {
+  scan(stream);
   std::uint64_t total = 0;
   read_back(&total, offsets_.data() + n, sizeof total, stream);
   return total;
+}
+
+namespace {
+__global__ void finish_static_pairs_kernel(const std::uint64_t* total, StaticPairs out) {
+  const std::uint64_t count = total ? *total : 0;
+  const std::uint64_t first = count < out.capacity ? count : out.capacity;
+  const std::uint64_t start = blockIdx.x * std::uint64_t{blockDim.x} + threadIdx.x;
+  if (start == 0) *out.count = static_cast<std::int64_t>(count);
+  for (std::uint64_t e = first + start; e < out.capacity;
+       e += std::uint64_t{gridDim.x} * blockDim.x) {
+    out.i[e] = out.j[e] = out.pad_index;
+    if (out.shifts) out.shifts[3 * e] = out.shifts[3 * e + 1] = out.shifts[3 * e + 2] = 0;
+  }
+}
+}  // namespace
+
+void finish_static_pairs_on_device(const std::uint64_t* total, const StaticPairs& out,
+                                   cudaStream_t stream) {
+  constexpr unsigned threads = 256;
+  const std::uint64_t wanted = (out.capacity + threads - 1) / threads;
+  const auto blocks =
+      static_cast<unsigned>(std::max<std::uint64_t>(1, std::min<std::uint64_t>(wanted, 4096)));
+  finish_static_pairs_kernel<<<blocks, threads, 0, stream>>>(total, out);
+  RAYCUT_CUDA_CHECK_LAUNCH();
 }
 
 PairCutoffFilter DeviceListStorage::stage_cutoffs(const PairCutoffs* cutoffs, std::size_t n) {

@@ -84,8 +84,11 @@ class DeviceListStorage final : public ListStorage {
   PairCutoffFilter stage_cutoffs(const PairCutoffs* cutoffs, std::size_t n) override;
 
   std::uint32_t* prepare_counts(std::size_t n, const ListOptions& options);
-  // offsets = exclusive scan of the counts (offsets[n] = total), then the total read back.
+  // offsets = exclusive scan of the counts (offsets[n] = total), queued on `stream`.
+  void scan(cudaStream_t stream);
+  // scan(), then the total read back.
   std::uint64_t scan_counts(cudaStream_t stream);
+  std::uint64_t* offsets_data() { return offsets_.data(); }
   ListFill prepare_fill(std::uint64_t pairs, const ListFilter& filter);
 
  private:
@@ -101,6 +104,11 @@ class DeviceListStorage final : public ListStorage {
   PooledBuffer<double> radii_, table_;  // ListOptions::cutoffs
   PooledBuffer<std::uint32_t> species_;
 };
+
+// A static-capacity list's end, queued on `stream`: the count from *total (device; null: 0),
+// then padding from it (or from the capacity) to the capacity.
+void finish_static_pairs_on_device(const std::uint64_t* total, const StaticPairs& out,
+                                   cudaStream_t stream);
 
 class DevicePaddedStorage final : public PaddedStorage {
  public:
@@ -165,6 +173,26 @@ class GpuMethod : public Method {
     count_list(filter, counts, run);
     run(list.prepare_fill(list.scan_counts(stream_), filter));
   }
+  // The static-capacity list of every GPU method: the same passes, the scan and the end on the
+  // stream, nothing read back (the count, offsets and cutoffs in static_scratch_).
+  template <class Run>
+  void device_static_neighbours(const StaticPairs& out, const ListOptions& options, std::size_t n,
+                                Run&& run) {
+    if (n > 0) {
+      DeviceListStorage& list = static_scratch_;
+      std::uint32_t* counts = list.prepare_counts(n, options);
+      const ListFilter filter{options.half, list.stage_cutoffs(options.cutoffs, n)};
+      count_list(filter, counts, run);
+      list.scan(stream_);
+      ListFill fill{filter,  list.offsets_data(), nullptr, nullptr,
+                    nullptr, out.shifts,          out.i,   out.j};
+      fill.capacity = out.capacity;
+      run(fill);
+      finish_static_pairs_on_device(list.offsets_data() + n, out, stream_);
+    } else {
+      finish_static_pairs_on_device(nullptr, out, stream_);
+    }
+  }
   template <class Run>
   void device_padded(PaddedStorage& storage, std::size_t n, std::uint32_t k, bool half, bool shifts,
                      Run&& run) {
@@ -175,6 +203,7 @@ class GpuMethod : public Method {
 
   cudaStream_t stream_ = nullptr;
   DeviceResults results_;
+  DeviceListStorage static_scratch_;
   EventTimer build_timer_, compute_timer_;
 };
 
@@ -194,6 +223,10 @@ class CudaPairMethod : public GpuMethod {
   }
   void padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half, bool shifts) override {
     device_padded(list, self().size(), k, half, shifts, [&](const auto& f) { self().run(f); });
+  }
+  void static_neighbours(const StaticPairs& out, const ListOptions& options,
+                         std::size_t n) override {
+    device_static_neighbours(out, options, n, [&](const auto& f) { self().run(f); });
   }
 
  private:

@@ -211,4 +211,9 @@ void RayTracingMethod::padded_neighbours(PaddedStorage& list, std::uint32_t k, b
   device_padded(list, n_, k, half, shifts, [&](const auto& f) { launch(f); });
 }
 
+void RayTracingMethod::static_neighbours(const StaticPairs& out, const ListOptions& options,
+                                         std::size_t n) {
+  device_static_neighbours(out, options, n, [&](const auto& f) { launch(f); });
+}
+
 }  // namespace raycut::detail::optix

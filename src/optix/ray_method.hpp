@@ -27,6 +27,8 @@ class RayTracingMethod : public cuda::GpuMethod {
   void compute(Kernel kernel, const KernelOptions& options) override;
   void neighbours(ListStorage& list, const ListOptions& options) override;
   void padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half, bool shifts) override;
+  void static_neighbours(const StaticPairs& out, const ListOptions& options,
+                         std::size_t n) override;
 
  protected:
   RayTracingMethod(bool sorted, const PipelineSpec& programs);

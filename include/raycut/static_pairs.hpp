@@ -1,0 +1,32 @@
+// A pair list of static capacity: what the stream-ordered calls write (docs/streams.md), in the
+// memory where the pass works, with the true count beside the pairs so that nothing has to be
+// read back before the next operation is queued.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace raycut {
+
+// Where a pass writes its pairs: `capacity` entries of i, j (int64) and S (3 int32, or null),
+// and the true count (one int64), all in the pass's memory (device memory for the GPU paths,
+// host memory for an Engine on a CPU method). Entries [count, capacity) are padding:
+// i = j = pad_index, S = 0. The pairs are valid iff 0 <= count <= capacity; a count above the
+// capacity says how many there are (the first `capacity` in the fixed order are written). A
+// negative count is bad input, named by read_pair_count: one of the codes below.
+struct StaticPairs {
+  std::int64_t* i = nullptr;
+  std::int64_t* j = nullptr;
+  std::int32_t* shifts = nullptr;
+  std::int64_t* count = nullptr;
+  std::size_t capacity = 0;
+  std::int64_t pad_index = 0;
+};
+
+// What a negative count says (the small-system pass, which checks its data on the device).
+inline constexpr std::int64_t count_non_finite_position = -1;
+inline constexpr std::int64_t count_unsorted_batch = -2;
+inline constexpr std::int64_t count_invalid_cell = -3;  // non-finite, or periodic rows dependent
+inline constexpr std::int64_t count_batch_out_of_range = -4;  // a system without its cell/pbc
+
+}  // namespace raycut

@@ -1,0 +1,234 @@
+// Engine::neighbours into a static capacity (StaticPairs): the same pairs, in the same order, as
+// the exactly sized list (each row's entries as its CSR row holds them, rows ascending), the true
+// count beside them, padding after them, nothing written past the capacity; open clouds,
+// periodic boxes, half lists and per-pair cutoffs, on every method (GPU methods write device
+// memory through raycut::StaticPairBuffer and are skipped without a GPU).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "raycut/device_pairs.hpp"
+#include "raycut/engine.hpp"
+#include "raycut/tools/generators.hpp"
+
+#if defined(RAYCUT_TESTS_CUDA)
+#include "cuda/runtime.hpp"  // copy(), read_back(): device pairs written and read back
+#endif
+
+namespace {
+
+using raycut::Engine;
+using raycut::ListOptions;
+using raycut::MemorySpace;
+
+std::vector<std::string> every_method() {
+  std::vector<std::string> names;
+  for (const auto& m : raycut::list_methods()) names.push_back(m.name);
+  return names;
+}
+
+std::string why_unavailable(const std::string& method) {
+  for (const auto& m : raycut::list_methods())
+    if (m.name == method) return m.available ? "" : m.why_unavailable;
+  return "not built";
+}
+
+// A static list read back: i, j, S of every slot (capacity), the count, and whatever lies in
+// the `guard` slots past the capacity (a write there is a bug).
+struct Read {
+  std::vector<std::int64_t> i, j;
+  std::vector<std::int32_t> shifts;
+  std::int64_t count = -99;
+};
+
+constexpr std::int64_t sentinel = -7;
+constexpr std::size_t guard = 16;
+
+// Runs the static list on `engine` with `capacity`, in the method's memory, and reads it back.
+Read run_static(Engine& engine, std::size_t capacity, ListOptions options, bool shifts) {
+  const std::size_t slots = capacity + guard;
+  Read r;
+  if (engine.space() == MemorySpace::host) {
+    r.i.assign(slots, sentinel);
+    r.j.assign(slots, sentinel);
+    r.shifts.assign(3 * slots, static_cast<std::int32_t>(sentinel));
+    raycut::StaticPairs out{r.i.data(), r.j.data(), shifts ? r.shifts.data() : nullptr,
+                            &r.count,   capacity,   static_cast<std::int64_t>(engine.sources())};
+    engine.neighbours(out, options);
+    if (!shifts) r.shifts.clear();
+    return r;
+  }
+#if defined(RAYCUT_TESTS_CUDA)
+  raycut::Context ctx;
+  ctx.stream = engine.stream();
+  raycut::StaticPairBuffer buffer(slots, ctx);
+  // The guard slots: filled with the sentinel, and the list told of `capacity` only.
+  std::vector<std::int64_t> fill(slots, sentinel);
+  std::vector<std::int32_t> fill_shifts(3 * slots, static_cast<std::int32_t>(sentinel));
+  raycut::detail::cuda::copy(buffer.i(), fill.data(), slots * sizeof(std::int64_t));
+  raycut::detail::cuda::copy(buffer.j(), fill.data(), slots * sizeof(std::int64_t));
+  raycut::detail::cuda::copy(buffer.shifts(), fill_shifts.data(), 3 * slots * 4);
+  raycut::StaticPairs out = buffer.view(static_cast<std::int64_t>(engine.sources()));
+  out.capacity = capacity;
+  if (!shifts) out.shifts = nullptr;
+  engine.neighbours(out, options);  // queued on the engine's stream: read back after it
+  r.i.resize(slots);
+  r.j.resize(slots);
+  raycut::detail::cuda::read_back(r.i.data(), buffer.i(), slots * 8, ctx.stream);
+  raycut::detail::cuda::read_back(r.j.data(), buffer.j(), slots * 8, ctx.stream);
+  raycut::detail::cuda::read_back(&r.count, buffer.count(), 8, ctx.stream);
+  if (shifts) {
+    r.shifts.resize(3 * slots);
+    raycut::detail::cuda::read_back(r.shifts.data(), buffer.shifts(), 3 * slots * 4, ctx.stream);
+  }
+#else
+  ADD_FAILURE() << "a device method without CUDA";
+#endif
+  return r;
+}
+
+// The exactly sized list's entries as COO rows: the reference order.
+struct Expected {
+  std::vector<std::int64_t> i, j;
+  std::vector<std::int32_t> shifts;
+};
+Expected exact(Engine& engine, ListOptions options, bool shifts) {
+  options.shifts = shifts;
+  const raycut::NeighbourList list = engine.neighbours(options);
+  Expected e;
+  for (std::size_t row = 0; row + 1 < list.offsets.size(); ++row)
+    for (std::uint64_t p = list.offsets[row]; p < list.offsets[row + 1]; ++p) {
+      e.i.push_back(static_cast<std::int64_t>(row));
+      e.j.push_back(list.indices[p]);
+      if (shifts) e.shifts.insert(e.shifts.end(), &list.shifts[3 * p], &list.shifts[3 * p] + 3);
+    }
+  return e;
+}
+
+// Every slot of a static list against the exact list: the first min(count, capacity) entries
+// equal, padding after them, the guard untouched, the count the exact one.
+void expect_static_equals(const Read& r, const Expected& e, std::size_t capacity, std::int64_t pad,
+                          const std::string& what) {
+  const std::size_t total = e.i.size(), written = std::min(total, capacity);
+  ASSERT_EQ(r.count, static_cast<std::int64_t>(total)) << what;
+  for (std::size_t k = 0; k < capacity + guard; ++k) {
+    const std::int64_t want_i = k < written ? e.i[k] : k < capacity ? pad : sentinel;
+    const std::int64_t want_j = k < written ? e.j[k] : k < capacity ? pad : sentinel;
+    ASSERT_EQ(r.i[k], want_i) << what << ": slot " << k << " of capacity " << capacity;
+    ASSERT_EQ(r.j[k], want_j) << what << ": slot " << k << " of capacity " << capacity;
+    if (r.shifts.empty()) continue;
+    for (int c = 0; c < 3; ++c) {
+      const std::int32_t want = k < written    ? e.shifts[3 * k + c]
+                                : k < capacity ? 0
+                                               : static_cast<std::int32_t>(sentinel);
+      ASSERT_EQ(r.shifts[3 * k + c], want) << what << ": S of slot " << k;
+    }
+  }
+}
+
+class StaticLists : public ::testing::TestWithParam<std::string> {
+ protected:
+  void SetUp() override {
+    if (const std::string why = why_unavailable(GetParam()); !why.empty())
+      GTEST_SKIP() << GetParam() << ": " << why;
+  }
+  // Capacities around the count: short by one, exact, with room, and none.
+  static std::vector<std::size_t> capacities(std::size_t count) {
+    return {count > 0 ? count - 1 : 0, count, count + 37, 0};
+  }
+};
+
+TEST_P(StaticLists, OpenCloudEqualsTheExactList) {
+  const raycut::PointCloud cloud = raycut::make_family("uniform", 1500, 1.0f, 3);
+  Engine engine(GetParam());
+  engine.build({cloud.xyz.data(), cloud.size(), MemorySpace::host}, 1.0f);
+  for (const bool half : {false, true}) {
+    const ListOptions options{.half = half};
+    const Expected e = exact(engine, options, false);
+    ASSERT_GT(e.i.size(), 1000u);
+    for (const std::size_t capacity : capacities(e.i.size()))
+      expect_static_equals(run_static(engine, capacity, options, false), e, capacity,
+                           static_cast<std::int64_t>(cloud.size()),
+                           std::string(half ? "half" : "full") + " list");
+  }
+}
+
+TEST_P(StaticLists, PeriodicBoxWithShiftsAndPerPairCutoffs) {
+  if (!raycut::method_capabilities(GetParam()).periodic_boxes)
+    GTEST_SKIP() << GetParam() << " takes no periodic box";
+  // A triclinic box thinner than twice the cutoff: self-images and several images per pair.
+  raycut::Box box;
+  box.cell[0][0] = 3.0;
+  box.cell[1][0] = 0.8;
+  box.cell[1][1] = 2.7;
+  box.cell[2][1] = -0.5;
+  box.cell[2][2] = 2.4;
+  box.pbc[0] = box.pbc[1] = box.pbc[2] = true;
+  const raycut::PointCloud cloud = raycut::make_family("uniform", 60, 1.0f, 11);
+  std::vector<float> xyz = cloud.xyz;
+  for (std::size_t p = 0; p < xyz.size(); p += 3)  // spread over the box, some outside it
+    for (int c = 0; c < 3; ++c) xyz[p + c] = 4.0f * xyz[p + c] - 0.5f;
+  std::vector<double> radius(cloud.size());
+  for (std::size_t p = 0; p < radius.size(); ++p) radius[p] = 0.35 + 0.1 * (p % 4);
+  raycut::PairCutoffs cutoffs;
+  cutoffs.radii = radius.data();
+  Engine engine(GetParam());
+  engine.build({xyz.data(), cloud.size(), MemorySpace::host}, 1.31f, box);
+  for (const bool half : {false, true})
+    for (const bool own : {false, true}) {
+      const ListOptions options{.half = half, .cutoffs = own ? &cutoffs : nullptr};
+      const Expected e = exact(engine, options, true);
+      ASSERT_GT(e.i.size(), 100u);
+      for (const std::size_t capacity : capacities(e.i.size()))
+        expect_static_equals(
+            run_static(engine, capacity, options, true), e, capacity,
+            static_cast<std::int64_t>(cloud.size()),
+            std::string(half ? "half" : "full") + (own ? ", per-pair cutoffs" : ""));
+    }
+}
+
+TEST_P(StaticLists, EmptyBuildWritesTheCountAndPadding) {
+  Engine engine(GetParam());
+  const float none[3] = {0, 0, 0};
+  engine.build({none, 0, MemorySpace::host}, 1.0f);
+  expect_static_equals(run_static(engine, 5, {}, false), Expected{}, 5, 0, "N = 0");
+}
+
+INSTANTIATE_TEST_SUITE_P(Methods, StaticLists, ::testing::ValuesIn(every_method()),
+                         [](const auto& info) {
+                           std::string name = info.param;
+                           std::replace(name.begin(), name.end(), '-', '_');
+                           return name;
+                         });
+
+TEST(StaticListsRefusals, NameWhatIsWrong) {
+  const std::vector<float> xyz = {0, 0, 0, 0.5f, 0, 0};
+  Engine engine("cell-list");
+  engine.build({xyz.data(), 2, MemorySpace::host}, 1.0f);
+  std::vector<std::int64_t> i(4), j(4);
+  std::int64_t count = 0;
+  const raycut::StaticPairs out{i.data(), j.data(), nullptr, &count, 4, 2};
+  const auto message = [&](const raycut::StaticPairs& o, const ListOptions& options) {
+    try {
+      engine.neighbours(o, options);
+    } catch (const raycut::Error& e) {
+      EXPECT_EQ(e.code(), raycut::ErrorCode::invalid_argument);
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  EXPECT_NE(message(out, {.distances = true}).find("distances, vectors and coo are not options"),
+            std::string::npos);
+  raycut::StaticPairs no_count = out;
+  no_count.count = nullptr;
+  EXPECT_NE(message(no_count, {}).find("needs its i, j and count"), std::string::npos);
+  EXPECT_EQ(message(out, {}), "accepted");
+  EXPECT_EQ(count, 2);
+  EXPECT_EQ(i, (std::vector<std::int64_t>{0, 1, 2, 2}));
+  EXPECT_EQ(j, (std::vector<std::int64_t>{1, 0, 2, 2}));
+}
+
+}  // namespace
