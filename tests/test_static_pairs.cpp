@@ -224,7 +224,14 @@ TEST(StaticListsRefusals, NameWhatIsWrong) {
             std::string::npos);
   raycut::StaticPairs no_count = out;
   no_count.count = nullptr;
-  EXPECT_NE(message(no_count, {}).find("needs its i, j and count"), std::string::npos);
+  EXPECT_NE(message(no_count, {}).find("needs its count, and its i and j arrays"),
+            std::string::npos);
+  raycut::StaticPairs none{nullptr, nullptr, nullptr, &count, 0, 2};
+  EXPECT_EQ(message(none, {}), "accepted");  // capacity 0: the count only
+  EXPECT_EQ(count, 2);
+  raycut::StaticPairs no_i = out;
+  no_i.i = nullptr;
+  EXPECT_NE(message(no_i, {}).find("unless the capacity is 0"), std::string::npos);
   EXPECT_EQ(message(out, {}), "accepted");
   EXPECT_EQ(count, 2);
   EXPECT_EQ(i, (std::vector<std::int64_t>{0, 1, 2, 2}));

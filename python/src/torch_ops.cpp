@@ -324,6 +324,22 @@ Pairs run(const at::Tensor& x, double cutoff, const raycut::Systems& systems, bo
     else
       work.engine.build({x.data_ptr<float>(), static_cast<std::size_t>(x.size(0)), space},
                         static_cast<float>(cutoff), systems);
+    if (max_pairs && pad_i == pad_j) {
+      // Static capacity: the list pass writes the output tensors and the count itself, with no
+      // list in between and nothing read back.
+      check_max_pairs(*max_pairs);
+      const auto on = at::TensorOptions().device(device);
+      at::Tensor i = at::empty({*max_pairs}, on.dtype(at::kLong));
+      at::Tensor j = at::empty({*max_pairs}, on.dtype(at::kLong));
+      at::Tensor shifts = at::empty({*max_pairs, 3}, on.dtype(at::kInt));
+      at::Tensor count = at::empty({}, on.dtype(at::kLong));
+      work.engine.neighbours(
+          raycut::StaticPairs{i.data_ptr<std::int64_t>(), j.data_ptr<std::int64_t>(),
+                              shifts.data_ptr<std::int32_t>(), count.data_ptr<std::int64_t>(),
+                              static_cast<std::size_t>(*max_pairs), pad_i},
+          raycut::ListOptions{.half = half});
+      return {i, j, shifts, count};
+    }
     raycut::ListOptions options;
     options.half = half;
     options.shifts = true;

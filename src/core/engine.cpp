@@ -446,9 +446,10 @@ void Engine::neighbours(const StaticPairs& out, const ListOptions& options) {
     throw Error(ErrorCode::invalid_argument,
                 "a static-capacity list holds i, j and S as COO entries: distances, vectors and "
                 "coo are not options of it (compute D = x_j - x_i + S . cell from them)");
-  if (!out.i || !out.j || !out.count || (out.capacity > 0 && !out.i))
+  if (!out.count || (out.capacity > 0 && (!out.i || !out.j)))
     throw Error(ErrorCode::invalid_argument,
-                "a static-capacity list needs its i, j and count arrays (null given)");
+                "a static-capacity list needs its count, and its i and j arrays unless the "
+                "capacity is 0 (null given)");
   check_list_options(options);
   m.static_neighbours(out, options, size_);
 }
