@@ -66,10 +66,6 @@ PairCutoffFilter host_cutoff_filter(const PairCutoffs* cutoffs) {
   return pair_cutoff_filter(*cutoffs, cutoffs->radii, cutoffs->species, cutoffs->table);
 }
 
-PairCutoffFilter HostListStorage::stage_cutoffs(const PairCutoffs* cutoffs, std::size_t) {
-  return host_cutoff_filter(cutoffs);
-}
-
 void finish_static_pairs(const StaticPairs& out, std::uint64_t total) {
   *out.count = static_cast<std::int64_t>(total);
   for (std::uint64_t e = std::min<std::uint64_t>(total, out.capacity); e < out.capacity; ++e) {

@@ -25,9 +25,6 @@ class ListStorage {
   virtual NeighbourList to_host() const = 0;
   // The list of N = 0: offsets = {0}.
   virtual void set_empty(const ListOptions& options) = 0;
-  // Validated per-pair cutoffs (or null) as the pass reads them, in this storage's memory space
-  // (device storage uploads them into buffers kept with the list).
-  virtual PairCutoffFilter stage_cutoffs(const PairCutoffs* cutoffs, std::size_t n) = 0;
 
   std::size_t n = 0;
   std::uint64_t pairs = 0;
@@ -82,7 +79,6 @@ class HostListStorage final : public ListStorage {
   std::size_t bytes() const override;
   NeighbourList to_host() const override;
   void set_empty(const ListOptions& options) override;
-  PairCutoffFilter stage_cutoffs(const PairCutoffs* cutoffs, std::size_t n) override;
   // Sizes the arrays for n targets and `pairs` entries (offsets already hold the scan) and
   // returns the fill functor writing them, keeping what `filter` keeps.
   ListFill prepare_fill(std::uint64_t pairs, const ListFilter& filter);

@@ -182,12 +182,15 @@ void finish_static_pairs_on_device(const std::uint64_t* total, const StaticPairs
   RAYCUT_CUDA_CHECK_LAUNCH();
 }
 
-PairCutoffFilter DeviceListStorage::stage_cutoffs(const PairCutoffs* cutoffs, std::size_t n) {
-  const auto upload = [](auto& buffer, const auto* values, std::size_t count) {
+PairCutoffFilter DeviceListStorage::stage_cutoffs(const PairCutoffs* cutoffs, std::size_t n,
+                                                  void* stream) {
+  // On the stream: a list pass of the previous call that may still read the buffers runs first
+  // (the copy from pageable memory is staged at once, so the caller's arrays are free after).
+  const auto upload = [stream](auto& buffer, const auto* values, std::size_t count) {
     buffer.resize(std::max<std::size_t>(count, 1));
     if (values && count > 0)
-      RAYCUT_CUDA_CHECK(
-          cudaMemcpy(buffer.data(), values, count * sizeof *values, cudaMemcpyHostToDevice));
+      RAYCUT_CUDA_CHECK(cudaMemcpyAsync(buffer.data(), values, count * sizeof *values,
+                                        cudaMemcpyHostToDevice, static_cast<cudaStream_t>(stream)));
     return buffer.data();
   };
   if (!cutoffs || !cutoffs->active()) return {};

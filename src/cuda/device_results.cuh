@@ -81,7 +81,9 @@ class DeviceListStorage final : public ListStorage {
   std::size_t bytes() const override;
   NeighbourList to_host() const override;
   void set_empty(const ListOptions& options) override;
-  PairCutoffFilter stage_cutoffs(const PairCutoffs* cutoffs, std::size_t n) override;
+  // Validated per-pair cutoffs (or null) as the pass reads them: uploaded into buffers kept
+  // with the list, ordered on `stream`.
+  PairCutoffFilter stage_cutoffs(const PairCutoffs* cutoffs, std::size_t n, void* stream);
 
   std::uint32_t* prepare_counts(std::size_t n, const ListOptions& options);
   // offsets = exclusive scan of the counts (offsets[n] = total), queued on `stream`.
@@ -169,7 +171,7 @@ class GpuMethod : public Method {
                          Run&& run) {
     auto& list = static_cast<DeviceListStorage&>(storage);
     std::uint32_t* counts = list.prepare_counts(n, options);
-    const ListFilter filter{options.half, list.stage_cutoffs(options.cutoffs, n)};
+    const ListFilter filter{options.half, list.stage_cutoffs(options.cutoffs, n, stream_)};
     count_list(filter, counts, run);
     run(list.prepare_fill(list.scan_counts(stream_), filter));
   }
@@ -181,7 +183,7 @@ class GpuMethod : public Method {
     if (n > 0) {
       DeviceListStorage& list = static_scratch_;
       std::uint32_t* counts = list.prepare_counts(n, options);
-      const ListFilter filter{options.half, list.stage_cutoffs(options.cutoffs, n)};
+      const ListFilter filter{options.half, list.stage_cutoffs(options.cutoffs, n, stream_)};
       count_list(filter, counts, run);
       list.scan(stream_);
       ListFill fill{filter,  list.offsets_data(), nullptr, nullptr,
