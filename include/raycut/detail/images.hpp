@@ -76,6 +76,24 @@ RAYCUT_HD bool resolve(const F& f, const Images& images, const typename Images::
   return in && accepts(f, i, j, s);
 }
 
+// Double products and sums rounded one by one, on the device as on the host (built with
+// -ffp-contract=off; nvcc would fuse a * b + c): the CPU and CUDA passes then decide every band
+// pair, and round its r, bit for bit alike.
+RAYCUT_HD double mul_rn(double a, double b) {
+#if defined(__CUDA_ARCH__)
+  return __dmul_rn(a, b);
+#else
+  return a * b;
+#endif
+}
+RAYCUT_HD double add_rn(double a, double b) {
+#if defined(__CUDA_ARCH__)
+  return __dadd_rn(a, b);
+#else
+  return a + b;
+#endif
+}
+
 // The caller's pair vector r = (x_j - x_i) + S . cell in double (ExactImages), for target point
 // i (a particle or a query point), source particle j and shift s; returns |r|^2 in double.
 // Exactly antisymmetric in (i, j, S) and (j, i, -S): IEEE rounding is symmetric.
@@ -90,9 +108,11 @@ RAYCUT_HD double exact_pair_vector(const ExactImages& e, std::size_t i, std::uin
                                     : e.sources[3 * std::size_t{pi.source} + c];
     const double xj =
         e.sources64 ? e.sources64[3 * std::size_t{j} + c] : e.sources[3 * std::size_t{j} + c];
-    r[c] = (xj - xi) + ((s[0] * cell[c] + s[1] * cell[3 + c]) + s[2] * cell[6 + c]);
+    const double shift =
+        add_rn(add_rn(mul_rn(s[0], cell[c]), mul_rn(s[1], cell[3 + c])), mul_rn(s[2], cell[6 + c]));
+    r[c] = add_rn(xj - xi, shift);
   }
-  return r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+  return add_rn(add_rn(mul_rn(r[0], r[0]), mul_rn(r[1], r[1])), mul_rn(r[2], r[2]));
 }
 
 // Candidate point k of target point i with images, decided in double from the caller's
