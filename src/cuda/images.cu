@@ -379,11 +379,14 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
 
-  // The caller's positions, kept for the band's decisions (ExactImages).
-  sources_.resize(std::max<std::uint64_t>(3 * n, 1));
-  if (n > 0)
-    RAYCUT_CUDA_CHECK(cudaMemcpyAsync(sources_.data(), sources, 3 * n * sizeof(float),
-                                      cudaMemcpyDeviceToDevice, stream));
+  // The caller's positions, kept for the band's decisions (ExactImages): the float64 ones when
+  // given (uploaded above), else the float sources.
+  if (!float64) {
+    sources_.resize(std::max<std::uint64_t>(3 * n, 1));
+    if (n > 0)
+      RAYCUT_CUDA_CHECK(cudaMemcpyAsync(sources_.data(), sources, 3 * n * sizeof(float),
+                                        cudaMemcpyDeviceToDevice, stream));
+  }
   if (with_queries) {
     queries_.resize(std::max<std::uint64_t>(3 * targets, 1));
     if (targets > 0)
@@ -393,7 +396,7 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
   float extent;
   std::memcpy(&extent, &found.extent, sizeof extent);
   exact_ = {};
-  exact_.sources = sources_.data();
+  exact_.sources = float64 ? nullptr : sources_.data();
   exact_.sources64 = float64;
   exact_.queries = with_queries ? queries_.data() : nullptr;
   exact_.image = image_.data();
