@@ -3,18 +3,22 @@
 // cell) or a radix sort; the compact
 // table; reach 1 to 3) against the CPU brute force. The conformance suite runs `grid` with its
 // automatic choices, which at its sizes always take the grouped kernel; this file makes every path
-// meet the oracle.
+// meet the oracle. With periodic images, every path against the CPU cell list, whose pairs are
+// exact at every box size (tests/test_periodic_exact.cpp): the float band decided in double.
 #include <cuda_runtime.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstdint>
 #include <iterator>
+#include <random>
 #include <string>
 #include <tuple>
 #include <vector>
 
+#include "core/images.hpp"
 #include "cuda/grid_policy.hpp"
+#include "cuda/images.hpp"
 #include "cuda/methods.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/tools/compare.hpp"
@@ -147,6 +151,84 @@ INSTANTIATE_TEST_SUITE_P(
         if (c == '-') c = '_';
       return name;
     });
+
+// A skewed periodic box L = ratio (cutoff 1) holding random points, each with a partner within
+// 1e-7 to 1e-2 of the cutoff (so the band is met at every ratio), some moved by whole boxes.
+struct PeriodicCase {
+  raycut::Box box;
+  std::vector<float> xyz;
+};
+PeriodicCase periodic_case(double ratio, std::uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  PeriodicCase c;
+  for (int k = 0; k < 3; ++k) {
+    c.box.cell[k][k] = ratio * (0.8 + 0.4 * unit(rng));
+    for (int m = 0; m < k; ++m) c.box.cell[k][m] = 0.3 * ratio * (2 * unit(rng) - 1);
+    c.box.pbc[k] = true;
+  }
+  for (int p = 0; p < 1500; ++p) {
+    double base[3] = {0, 0, 0}, dir[3], norm = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double f = unit(rng) < 0.3 ? 1 - 1e-9 * unit(rng) : unit(rng);  // many on a face
+      for (int d = 0; d < 3; ++d) base[d] += f * c.box.cell[k][d];
+    }
+    for (double& v : dir) {
+      v = 2 * unit(rng) - 1;
+      norm += v * v;
+    }
+    norm = std::sqrt(norm);
+    const double distance = 1 + (unit(rng) < 0.5 ? -1 : 1) * std::pow(10.0, -7 + 5 * unit(rng));
+    const int moved = unit(rng) < 0.2 ? (unit(rng) < 0.5 ? -2 : 2) : 0;  // boxes along a
+    for (int d = 0; d < 3; ++d)
+      c.xyz.push_back(static_cast<float>(base[d] + moved * c.box.cell[0][d]));
+    for (int d = 0; d < 3; ++d)
+      c.xyz.push_back(static_cast<float>(base[d] + distance * dir[d] / norm));
+  }
+  return c;
+}
+
+class GridVariantsPeriodic : public ::testing::TestWithParam<int> {};
+
+TEST_P(GridVariantsPeriodic, MatchTheExactCellList) {
+  int devices = 0;
+  if (cudaGetDeviceCount(&devices) != cudaSuccess || devices == 0) GTEST_SKIP() << "no CUDA device";
+  const Variant& v = variants[GetParam()];
+  const float cutoff = 1.0f;
+  for (const double ratio : {3.0, 1e3, 1e5}) {
+    const PeriodicCase c = periodic_case(ratio, 17 + static_cast<std::uint64_t>(ratio));
+    const std::size_t n = c.xyz.size() / 3;
+    raycut::Engine oracle("cell-list");
+    oracle.build({c.xyz.data(), n, raycut::MemorySpace::host}, cutoff, c.box);
+    const auto want_count = oracle.compute(Kernel::count).count;
+    const raycut::NeighbourList want_list = oracle.neighbours({.shifts = true});
+
+    float* xyz = nullptr;
+    ASSERT_EQ(cudaMalloc(&xyz, c.xyz.size() * sizeof(float)), cudaSuccess);
+    cudaMemcpy(xyz, c.xyz.data(), c.xyz.size() * sizeof(float), cudaMemcpyHostToDevice);
+    const raycut::detail::ImagePlan plan =
+        raycut::detail::plan_images(raycut::Systems::periodic(c.box), n, cutoff);
+    auto images = raycut::detail::cuda::make_device_image_points();
+    images->expand(plan, xyz, nullptr, nullptr);
+    auto grid = raycut::detail::cuda::make_grid_with(v.policy);
+    grid->build_points(images->points(), cutoff);
+    grid->compute(Kernel::count, {});
+    const auto got_count = grid->results().count;
+    auto storage = grid->make_list_storage();
+    grid->neighbours(*storage, {.shifts = true});
+    const raycut::NeighbourList got_list = storage->to_host();
+    cudaFree(xyz);
+
+    const auto diff = raycut::compare_neighbours(got_list, want_list);
+    ASSERT_TRUE(diff.equal()) << v.name << ", L / C " << ratio << ": " << diff.first_difference;
+    ASSERT_EQ(got_count, want_count) << v.name << ", L / C " << ratio;
+    EXPECT_GT(want_list.indices.size(), 0u) << "L / C " << ratio << ": no pairs to compare";
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(Grid, GridVariantsPeriodic,
+                         ::testing::Range(0, static_cast<int>(std::size(variants))),
+                         [](const auto& info) { return std::string(variants[info.param].name); });
 
 }  // namespace
 

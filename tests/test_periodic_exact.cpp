@@ -4,7 +4,10 @@
 // duplicates, points on faces and corners, and pairs placed within 1e-7 to 1e-2 of the cutoff
 // across the box's faces. Every listed (i, j, S) must be the oracle's answer outside a band of
 // 1e-6 relative around the cutoff; the full list must be symmetric ((i, j, S) listed iff
-// (j, i, -S) is, band pairs included) and the half list exactly its half-orientation part.
+// (j, i, -S) is, band pairs included), the half list exactly its half-orientation part, and the
+// count kernel (a functor that reads neither j nor S: the open traversal) must count each full
+// row. Every method that takes boxes, CPU and CUDA; methods not available here (no GPU) are
+// skipped with the reason.
 //
 // A fixed list of seeds runs every time, plus one fresh seed, printed on failure
 // (RAYCUT_FUZZ_SEED=<seed> replays one case).
@@ -28,9 +31,26 @@ namespace {
 
 using raycut_test::PeriodicTriple;
 
-// The CPU methods that take boxes. The CUDA methods decide image pairs in float still (their
-// band grows with L / C, docs/limits.md): not fuzzed here until they decide exactly too.
-const std::vector<std::string> exact_methods = {"brute-force", "cell-list"};
+// The methods that take boxes.
+const std::vector<std::string> exact_methods = {"brute-force", "cell-list", "brute-force-gpu",
+                                                "grid"};
+
+// Why `method` cannot run here; empty when it can.
+std::string unavailable(const std::string& method) {
+  for (const auto& m : raycut::list_methods())
+    if (m.name == method)
+      return m.available ? "" : (m.why_unavailable.empty() ? "not available" : m.why_unavailable);
+  ADD_FAILURE() << method << " is not in list_methods()";
+  return "not in list_methods()";
+}
+
+class PeriodicExact : public ::testing::TestWithParam<std::string> {
+ protected:
+  void SetUp() override {
+    const std::string why = unavailable(GetParam());
+    if (!why.empty()) GTEST_SKIP() << GetParam() << ": " << why;
+  }
+};
 
 struct FuzzCase {
   std::uint64_t seed = 0;
@@ -175,35 +195,41 @@ std::string run_case(const FuzzCase& c, const std::string& method, bool float64)
     failures += "the half list (" + std::to_string(h.size()) +
                 " entries) is not the half orientation of the full list (" +
                 std::to_string(expected_half.size()) + ")\n";
+  // The count kernel reads neither j nor S: it runs the open traversal, with the same decision.
+  const std::vector<std::uint32_t> counts = engine.compute(raycut::Kernel::count).count;
+  for (std::size_t i = 0; i + 1 < full.offsets.size(); ++i)
+    if (counts.at(i) != full.offsets[i + 1] - full.offsets[i])
+      failures += "count kernel: row " + std::to_string(i) + " counts " +
+                  std::to_string(counts[i]) + ", the full list holds " +
+                  std::to_string(full.offsets[i + 1] - full.offsets[i]) + "\n";
   return failures;
 }
 
-void run_seed(std::uint64_t seed) {
+void run_seed(const std::string& method, std::uint64_t seed) {
   const FuzzCase c = make_case(seed);
-  for (const std::string& method : exact_methods)
-    for (const bool float64 : {false, true}) {
-      const std::string failures = run_case(c, method, float64);
-      EXPECT_TRUE(failures.empty())
-          << method << (float64 ? ", float64 positions" : "") << ", " << c.description
-          << " (replay with RAYCUT_FUZZ_SEED=" << seed << "):\n"
-          << failures.substr(0, 2000);
-    }
+  for (const bool float64 : {false, true}) {
+    const std::string failures = run_case(c, method, float64);
+    EXPECT_TRUE(failures.empty()) << method << (float64 ? ", float64 positions" : "") << ", "
+                                  << c.description << " (replay with RAYCUT_FUZZ_SEED=" << seed
+                                  << "):\n"
+                                  << failures.substr(0, 2000);
+  }
 }
 
-TEST(PeriodicExact, FuzzFixedSeeds) {
+TEST_P(PeriodicExact, FuzzFixedSeeds) {
   if (const char* replay = std::getenv("RAYCUT_FUZZ_SEED")) {
-    run_seed(std::strtoull(replay, nullptr, 10));
+    run_seed(GetParam(), std::strtoull(replay, nullptr, 10));
     return;
   }
   for (std::uint64_t seed = 1; seed <= 300; ++seed) {
-    run_seed(seed);
+    run_seed(GetParam(), seed);
     if (HasFailure()) return;  // the first failing seed says enough
   }
 }
 
 // Batches: three random systems in one build, each in its own box (and its own frame), each
 // system's rows checked against its own oracle, and no pair across systems.
-TEST(PeriodicExact, FuzzBatches) {
+TEST_P(PeriodicExact, FuzzBatches) {
   for (std::uint64_t seed = 1000; seed < 1060; ++seed) {
     const FuzzCase cases[3] = {make_case(seed), make_case(seed + 7919), make_case(seed + 104729)};
     std::vector<float> xyz;
@@ -219,93 +245,90 @@ TEST(PeriodicExact, FuzzBatches) {
       systems.boxes.push_back(c.box);
     }
     const auto c32 = static_cast<float>(cutoff);
-    for (const std::string& method : exact_methods) {
-      raycut::Engine engine(method);
-      engine.build({xyz.data(), xyz.size() / 3, raycut::MemorySpace::host}, c32, systems);
-      const raycut::NeighbourList list = engine.neighbours({.shifts = true});
-      for (std::size_t s = 0; s < 3; ++s) {
-        const std::uint64_t first = systems.offsets[s], last = systems.offsets[s + 1];
-        std::vector<std::uint32_t> i, j;
-        std::vector<std::int32_t> shifts;
-        for (std::uint64_t r = first; r < last; ++r)
-          for (std::uint64_t p = list.offsets[r]; p < list.offsets[r + 1]; ++p) {
-            ASSERT_TRUE(list.indices[p] >= first && list.indices[p] < last)
-                << method << ", seed " << seed << ": a pair across systems";
-            i.push_back(static_cast<std::uint32_t>(r - first));
-            j.push_back(static_cast<std::uint32_t>(list.indices[p] - first));
-            shifts.insert(shifts.end(), &list.shifts[3 * p], &list.shifts[3 * p + 3]);
-          }
-        const raycut_test::PeriodicOracle oracle = raycut_test::make_periodic_oracle(
-            cases[s].xyz, cases[s].box, static_cast<double>(c32), 1e-6);
-        const raycut_test::PeriodicCheck check =
-            raycut_test::check_periodic_pairs(oracle, i, j, shifts, false);
-        ASSERT_TRUE(check.ok) << method << ", batch of seed " << seed << ", system " << s << " ("
-                              << cases[s].description << "):\n"
-                              << check.problems;
-      }
+    const std::string& method = GetParam();
+    raycut::Engine engine(method);
+    engine.build({xyz.data(), xyz.size() / 3, raycut::MemorySpace::host}, c32, systems);
+    const raycut::NeighbourList list = engine.neighbours({.shifts = true});
+    for (std::size_t s = 0; s < 3; ++s) {
+      const std::uint64_t first = systems.offsets[s], last = systems.offsets[s + 1];
+      std::vector<std::uint32_t> i, j;
+      std::vector<std::int32_t> shifts;
+      for (std::uint64_t r = first; r < last; ++r)
+        for (std::uint64_t p = list.offsets[r]; p < list.offsets[r + 1]; ++p) {
+          ASSERT_TRUE(list.indices[p] >= first && list.indices[p] < last)
+              << method << ", seed " << seed << ": a pair across systems";
+          i.push_back(static_cast<std::uint32_t>(r - first));
+          j.push_back(static_cast<std::uint32_t>(list.indices[p] - first));
+          shifts.insert(shifts.end(), &list.shifts[3 * p], &list.shifts[3 * p + 3]);
+        }
+      const raycut_test::PeriodicOracle oracle = raycut_test::make_periodic_oracle(
+          cases[s].xyz, cases[s].box, static_cast<double>(c32), 1e-6);
+      const raycut_test::PeriodicCheck check =
+          raycut_test::check_periodic_pairs(oracle, i, j, shifts, false);
+      ASSERT_TRUE(check.ok) << method << ", batch of seed " << seed << ", system " << s << " ("
+                            << cases[s].description << "):\n"
+                            << check.problems;
     }
   }
 }
 
-TEST(PeriodicExact, FuzzFreshSeed) {
+TEST_P(PeriodicExact, FuzzFreshSeed) {
   const std::uint64_t seed = std::random_device{}() | (std::uint64_t{std::random_device{}()} << 32);
   SCOPED_TRACE("fresh seed " + std::to_string(seed));
-  run_seed(seed);
+  run_seed(GetParam(), seed);
 }
 
 // The case the float decision got wrong: a pair across the face of a box 10^4 cutoffs wide, at
 // 3.8e-4 inside the cutoff. The image of particle 0, 0.3004 + 10^4, rounds to 10000.30078125 in
 // float, exactly 1 from particle 1: the float predicate listed the pair in row 0 (no image
 // rounded there) and not in row 1.
-TEST(PeriodicExact, PairAcrossTheFaceOfAHugeBoxAtTheCutoff) {
-  for (const std::string& method : exact_methods) {
-    raycut::Box box;
-    const double length = 1e4;
-    for (int k = 0; k < 3; ++k) {
-      box.cell[k][k] = length;
-      box.pbc[k] = true;
-    }
-    const float a = 0.3004f, b = 9999.30078125f;
-    const double d = static_cast<double>(a) + length - static_cast<double>(b);
-    const std::vector<float> xyz = {a, 5000, 5000, b, 5000, 5000};
-    raycut::Engine engine(method);
-    engine.build({xyz.data(), 2, raycut::MemorySpace::host}, 1.0f, box);
-    const raycut::NeighbourList list = engine.neighbours({.vectors = true, .shifts = true});
-    ASSERT_LT(d, 1.0);
-    ASSERT_EQ(list.indices.size(), 2u) << method << " at d = " << d;
-    ASSERT_EQ(list.offsets[1], 1u) << method;
-    // r in double, rounded once: not off by the box's float rounding.
-    EXPECT_EQ(list.vectors[0], static_cast<float>(-d)) << method;
-    EXPECT_EQ(list.vectors[3], static_cast<float>(d)) << method;
-    EXPECT_EQ(list.shifts[0], -1) << method;
-    EXPECT_EQ(list.shifts[3], 1) << method;
+TEST_P(PeriodicExact, PairAcrossTheFaceOfAHugeBoxAtTheCutoff) {
+  const std::string& method = GetParam();
+  raycut::Box box;
+  const double length = 1e4;
+  for (int k = 0; k < 3; ++k) {
+    box.cell[k][k] = length;
+    box.pbc[k] = true;
   }
+  const float a = 0.3004f, b = 9999.30078125f;
+  const double d = static_cast<double>(a) + length - static_cast<double>(b);
+  const std::vector<float> xyz = {a, 5000, 5000, b, 5000, 5000};
+  raycut::Engine engine(method);
+  engine.build({xyz.data(), 2, raycut::MemorySpace::host}, 1.0f, box);
+  const raycut::NeighbourList list = engine.neighbours({.vectors = true, .shifts = true});
+  ASSERT_LT(d, 1.0);
+  ASSERT_EQ(list.indices.size(), 2u) << method << " at d = " << d;
+  ASSERT_EQ(list.offsets[1], 1u) << method;
+  // r in double, rounded once: not off by the box's float rounding.
+  EXPECT_EQ(list.vectors[0], static_cast<float>(-d)) << method;
+  EXPECT_EQ(list.vectors[3], static_cast<float>(d)) << method;
+  EXPECT_EQ(list.shifts[0], -1) << method;
+  EXPECT_EQ(list.shifts[3], 1) << method;
 }
 
 // float64 positions in an open cloud far from the origin: the two points round to floats 1.0
 // apart (spacing 0.0625 at 1e6) while they are 1 - 1e-9 apart, so the float search alone says
 // "no pair". The float64 build lists the pair, with r from the doubles; update() keeps that.
-TEST(PeriodicExact, Float64OpenCloudFarFromTheOrigin) {
+TEST_P(PeriodicExact, Float64OpenCloudFarFromTheOrigin) {
   const std::vector<double> xyz = {1e6 + 0.01, 0, 0, 1e6 + 1.01 - 1e-9, 0, 0};
-  for (const std::string& method : exact_methods) {
-    raycut::Engine engine(method);
-    engine.build(raycut::Float64Positions{xyz.data(), 2}, 1.0f);
-    raycut::NeighbourList list = engine.neighbours({.vectors = true});
-    ASSERT_EQ(list.indices.size(), 2u) << method;
-    EXPECT_EQ(list.vectors[0], static_cast<float>(xyz[3] - xyz[0])) << method;
-    std::vector<double> moved = xyz;
-    moved[3] += 2e-9;  // now 1 + 1e-9 apart: out
-    engine.update(raycut::Float64Positions{moved.data(), 2});
-    EXPECT_EQ(engine.neighbours().indices.size(), 0u) << method;
-    // The same positions as float32: their rounding decides (1.0 apart: no pair).
-    const std::vector<float> rounded(xyz.begin(), xyz.end());
-    engine.build({rounded.data(), 2, raycut::MemorySpace::host}, 1.0f);
-    EXPECT_EQ(engine.neighbours().indices.size(), 0u) << method;
-  }
+  const std::string& method = GetParam();
+  raycut::Engine engine(method);
+  engine.build(raycut::Float64Positions{xyz.data(), 2}, 1.0f);
+  raycut::NeighbourList list = engine.neighbours({.vectors = true});
+  ASSERT_EQ(list.indices.size(), 2u) << method;
+  EXPECT_EQ(list.vectors[0], static_cast<float>(xyz[3] - xyz[0])) << method;
+  std::vector<double> moved = xyz;
+  moved[3] += 2e-9;  // now 1 + 1e-9 apart: out
+  engine.update(raycut::Float64Positions{moved.data(), 2});
+  EXPECT_EQ(engine.neighbours().indices.size(), 0u) << method;
+  // The same positions as float32: their rounding decides (1.0 apart: no pair).
+  const std::vector<float> rounded(xyz.begin(), xyz.end());
+  engine.build({rounded.data(), 2, raycut::MemorySpace::host}, 1.0f);
+  EXPECT_EQ(engine.neighbours().indices.size(), 0u) << method;
 }
 
-TEST(PeriodicExact, Float64RefusesWhatFloatCannotHold) {
-  raycut::Engine engine("cell-list");
+TEST_P(PeriodicExact, Float64RefusesWhatFloatCannotHold) {
+  raycut::Engine engine(GetParam());
   const std::vector<double> huge = {0, 0, 0, 1e39, 0, 0};
   try {
     engine.build(raycut::Float64Positions{huge.data(), 2}, 1.0f);
@@ -316,5 +339,12 @@ TEST(PeriodicExact, Float64RefusesWhatFloatCannotHold) {
   const std::vector<double> nan = {0, 0, std::nan(""), 0, 0, 0};
   EXPECT_THROW(engine.build(raycut::Float64Positions{nan.data(), 2}, 1.0f), raycut::Error);
 }
+
+INSTANTIATE_TEST_SUITE_P(Methods, PeriodicExact, ::testing::ValuesIn(exact_methods),
+                         [](const auto& info) {
+                           std::string name = info.param;
+                           std::replace(name.begin(), name.end(), '-', '_');
+                           return name;
+                         });
 
 }  // namespace

@@ -27,46 +27,21 @@
 namespace raycut {
 namespace detail {
 
-// Candidate point k of target point i with images, decided in double from the caller's
-// positions (ExactImages): in range iff |r|^2 < C^2 for r = (x_j - x_i) + S . cell, and then r
-// and r2 are that vector rounded to float. A query point is never a source.
-inline bool in_range_exact(const ExactImages& e, std::size_t i, std::size_t k, Vec3& r, float& r2) {
-  const PointImage& pk = e.image[k];
-  if (pk.source == not_a_source) return false;
-  const PointImage& pi = e.image[i];
-  double s[3], d[3];
-  for (int a = 0; a < 3; ++a)
-    s[a] = static_cast<double>(std::int64_t{pk.shift[a]} - std::int64_t{pi.shift[a]});
-  if (!(exact_pair_vector(e, i, pk.source, s, d) < e.cutoff_squared)) return false;
-  r = {static_cast<float>(d[0]), static_cast<float>(d[1]), static_cast<float>(d[2])};
-  r2 = squared_distance(r.x, r.y, r.z);
-  return true;
-}
-
-// Calls on_pair(j, r, r2) for every in-range candidate j != i of target i, r = x_j - x_i.
-// walk(i, f) calls f(j, xyz_j) for every candidate source j of target i, each at most once.
-// With `exact` (points with images), candidates in its float band are decided by
-// in_range_exact (every candidate in range, in boxes that need exact vectors).
-template <class Walk, class OnPair>
-void for_each_in_range(std::size_t i, const float* xyz, float cutoff_squared, const Walk& walk,
-                       OnPair&& on_pair, const ExactImages* exact = nullptr) {
+// Calls on_pair(j, r, r2) for every in-range candidate j != i of target i, r = x_j - x_i, by
+// the predicate of policy `images` (in_range_of: with images, candidates in the float band are
+// decided in double). walk(i, f) calls f(j, xyz_j) for every candidate source j of target i,
+// each at most once.
+template <class Images, class Walk, class OnPair>
+void for_each_in_range(const Images& images, std::size_t i, const float* xyz, float cutoff_squared,
+                       const Walk& walk, OnPair&& on_pair) {
   const float xi = xyz[3 * i], yi = xyz[3 * i + 1], zi = xyz[3 * i + 2];
-  if (exact) {
-    const float sure_in = exact->exact_vectors ? 0.0f : exact->float_in;
-    const float sure_out = exact->float_out;
-    walk(i, [&](std::size_t j, const float* xj) {
-      if (j == i) return;
-      Vec3 r{xj[0] - xi, xj[1] - yi, xj[2] - zi};
-      float r2 = squared_distance(r.x, r.y, r.z);
-      if (r2 < sure_in || (r2 < sure_out && in_range_exact(*exact, i, j, r, r2))) on_pair(j, r, r2);
-    });
-    return;
-  }
   walk(i, [&](std::size_t j, const float* xj) {
     if (j == i) return;
-    const Vec3 r{xj[0] - xi, xj[1] - yi, xj[2] - zi};
-    const float r2 = squared_distance(r.x, r.y, r.z);
-    if (in_range(r2, cutoff_squared)) on_pair(j, r, r2);
+    Vec3 r{xj[0] - xi, xj[1] - yi, xj[2] - zi};
+    float r2 = squared_distance(r.x, r.y, r.z);
+    if (in_range_of(images, cutoff_squared, static_cast<std::uint32_t>(i),
+                    static_cast<std::uint32_t>(j), r, r2))
+      on_pair(j, r, r2);
   });
 }
 
@@ -75,21 +50,19 @@ void for_each_in_range(std::size_t i, const float* xyz, float cutoff_squared, co
 // points become the caller's sources and shifts through `images` (detail/images.hpp).
 template <class Walk, class F, class Images = NoImages>
 void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk& walk, const F& f,
-              const Images& images = {}, const std::uint32_t* order = nullptr,
-              const ExactImages* exact = nullptr) {
+              const Images& images = {}, const std::uint32_t* order = nullptr) {
   static_assert(check_functor<F>());
   const auto visit = [&](const std::uint32_t i) {
     typename F::Accumulator acc = initial_state(f, i);
     const typename Images::Target ti = images.target(i);
-    for_each_in_range(
-        i, xyz, cutoff_squared, walk,
-        [&](std::size_t point, Vec3 r, float r2) {
-          const auto k = static_cast<std::uint32_t>(point);
-          std::uint32_t j;
-          Shift s{};
-          if (resolve(f, images, ti, true, i, k, k, j, s)) apply(f, acc, i, j, r, r2, s);
-        },
-        exact);
+    for_each_in_range(images, i, xyz, cutoff_squared, walk,
+                      [&](std::size_t point, Vec3 r, float r2) {
+                        const auto k = static_cast<std::uint32_t>(point);
+                        std::uint32_t j;
+                        Shift s{};
+                        if (resolve(f, images, ti, true, i, k, k, j, s))
+                          apply(f, acc, i, j, r, r2, s);
+                      });
     f.finish(i, acc);
   };
   if (order) {
@@ -105,8 +78,7 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const Walk&
 template <class Walk, class F>
 void run_host_pass(const PairPass& pass, const Walk& walk, const F& f) {
   with_images<F>(pass, [&](const auto& images) {
-    run_host(pass.n, pass.host.xyz, pass.cutoff_squared, walk, f, images, pass.host.order,
-             pass.host.exact);
+    run_host(pass.n, pass.host.xyz, pass.cutoff_squared, walk, f, images, pass.host.order);
   });
 }
 

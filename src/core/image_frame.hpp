@@ -105,6 +105,26 @@ RAYCUT_HD void system_origin(ImageFrame& frame, const Real* first) {
   }
 }
 
+// The largest |coordinate| of the wrapped point w and of every image for_each_image emits for
+// it, without computing them (each coordinate is linear in n, so its extremes lie at corners of
+// the box of kept offsets), in double: the float points are within half an ulp of it.
+RAYCUT_HD double image_extent(const ImageFrame& frame, const WrappedPoint& w) {
+  int lo[3], hi[3];
+  for (int k = 0; k < 3; ++k) image_span(frame, w, k, lo[k], hi[k]);
+  double extent = 0;
+  for (int d = 0; d < 3; ++d) {
+    double low = w.x[d] - frame.origin[d], high = low;
+    for (int k = 0; k < 3; ++k) {
+      const double a = lo[k] * frame.cell[k][d], b = hi[k] * frame.cell[k][d];
+      low += a < b ? a : b;
+      high += a < b ? b : a;
+    }
+    const double m = fabs(low) > fabs(high) ? fabs(low) : fabs(high);
+    extent = extent > m ? extent : m;
+  }
+  return extent;
+}
+
 // How many images for_each_image emits, without computing them.
 RAYCUT_HD std::uint64_t image_count(const ImageFrame& frame, const WrappedPoint& w,
                                     bool with_self) {

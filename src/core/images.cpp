@@ -82,26 +82,6 @@ class HostImagePoints final : public ImagePoints {
   ExactImages exact_;
 };
 
-// How far a point may lie from its real frame position: the float rounding of a coordinate of
-// magnitude up to `extent` (half an ulp, <= 2^-24 extent), doubled for the double arithmetic
-// before it (x - W . cell, far below a float ulp for any position the int32 shifts allow).
-double rounding_bound(double extent) {
-  return 2 * std::ldexp(extent, -24);
-}
-
-// The float band [in, out) of r2 around C^2 where the float predicate may misjudge a pair
-// (float_band_slack), rounded outwards.
-void set_float_band(ExactImages& exact, double cutoff, double rounding) {
-  const double slack = float_band_slack(cutoff, rounding);
-  const double c2 = cutoff * cutoff;
-  const auto in = static_cast<float>(c2 - slack), out = static_cast<float>(c2 + slack);
-  exact.float_in = static_cast<double>(in) <= c2 - slack ? in : std::nextafter(in, 0.0f);
-  exact.float_out = static_cast<double>(out) >= c2 + slack ? out : std::nextafter(out, INFINITY);
-  exact.cutoff_squared = c2;
-  exact.rounding = rounding;
-  exact.exact_vectors = rounding > std::ldexp(cutoff, -16);
-}
-
 template <class Real>
 [[noreturn]] void refuse_wrap(std::size_t index, const Real* x, const char* what) {
   refuse(std::string(what) + " " + std::to_string(index) + " at (" + std::to_string(x[0]) + ", " +
@@ -247,6 +227,27 @@ ImagePlan plan_images(const Systems& systems, std::size_t sources, double cutoff
   plan.own_frames = count > 1;
   plan.cutoff = cutoff;
   return plan;
+}
+
+double rounding_bound(double extent) {
+  return 2 * std::ldexp(extent, -24);
+}
+
+void set_float_band(ExactImages& exact, double cutoff, double rounding) {
+  const double slack = float_band_slack(cutoff, rounding);
+  const double c2 = cutoff * cutoff;
+  const auto in = static_cast<float>(c2 - slack), out = static_cast<float>(c2 + slack);
+  exact.exact_vectors = rounding > std::ldexp(cutoff, -16);
+  exact.float_in = exact.exact_vectors                     ? 0.0f
+                   : static_cast<double>(in) <= c2 - slack ? in
+                                                           : std::nextafter(in, 0.0f);
+  exact.float_out = static_cast<double>(out) >= c2 + slack ? out : std::nextafter(out, INFINITY);
+  exact.cutoff_squared = c2;
+  exact.rounding = rounding;
+}
+
+double band_reach(const ExactImages& exact) {
+  return std::sqrt(static_cast<double>(exact.float_out)) * (1 + 1e-6);
 }
 
 std::string too_many_points(std::uint64_t points, std::size_t targets) {

@@ -60,12 +60,11 @@ class ImagePoints {
  protected:
   // What points() hands the method after an expansion into these arrays.
   void publish(const ImagePlan& plan, const float* xyz, std::size_t size, const PointImage* image,
-               const std::uint32_t* system, const ExactImages* exact = nullptr) {
-    points_.exact = exact;
+               const std::uint32_t* system, const ExactImages* exact) {
     points_.xyz = xyz;
     points_.size = size;
     points_.targets = plan.target_count();
-    points_.images = {image, nullptr, !plan.has_queries()};
+    points_.images = {image, nullptr, !plan.has_queries(), exact};
     points_.systems = plan.systems();
     points_.system = plan.systems() > 1 ? system : nullptr;
   }
@@ -74,6 +73,24 @@ class ImagePoints {
  private:
   Points points_;
 };
+
+// The float band of points with images (ExactImages), set the same way by the host and the
+// device expansions.
+//
+// How far a float point may lie from its real position when its coordinates are at most
+// `extent` in magnitude: the float rounding (half an ulp, <= 2^-24 extent), doubled for the
+// double arithmetic before it (x - W . cell, far below a float ulp for any position the int32
+// shifts allow).
+double rounding_bound(double extent);
+// exact's band [float_in, float_out) of r2 around C^2 where the float predicate may misjudge a
+// pair (float_band_slack), rounded outwards to floats; its cutoff_squared, rounding and
+// exact_vectors (points off by more than 2^-16 C: every pair from the double vector, and
+// float_in 0).
+void set_float_band(ExactImages& exact, double cutoff, double rounding);
+// The radius within which a search must offer candidates for the band decision to see every
+// pair it may take: sqrt(float_out), with a margin above the float rounding of a distance.
+// Cells at least this wide (CPU cell list, GPU grid).
+double band_reach(const ExactImages& exact);
 
 // The expansion on the host (positions in host memory).
 std::unique_ptr<ImagePoints> make_host_image_points();

@@ -22,8 +22,9 @@ constexpr double host_build_bytes_per_point = 80;
 
 // What a method builds over when there are images, batches or query points (the engine makes
 // it, src/core/images.hpp): points [0, targets) are the targets; every point is a candidate
-// source, mapped by `images` to the caller's source and shift. Pointers in the method's memory
-// space, owned by the engine and valid until the next build.
+// source, mapped by `images` to the caller's source and shift (images.exact: what decides the
+// pairs of the float band in double). Pointers in the method's memory space, owned by the engine
+// and valid until the next build.
 struct Points {
   const float* xyz = nullptr;  // (size, 3)
   std::size_t size = 0;
@@ -31,8 +32,6 @@ struct Points {
   ImageTables images;
   const std::uint32_t* system = nullptr;  // per point; null: one system
   std::uint32_t systems = 1;
-  // Host points with images: what decides their pairs in double (CPU methods; null on GPU).
-  const ExactImages* exact = nullptr;
   // n plain particles: every point a target and its own source, one system.
   static Points plain(const float* xyz, std::size_t n) {
     Points p;

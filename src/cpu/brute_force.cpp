@@ -27,7 +27,7 @@ class BruteForceCpu final : public HostMethod<BruteForceCpu> {
     xyz_.assign(points.xyz, points.xyz + 3 * points.size);
     system_.clear();
     if (points.systems > 1) system_.assign(points.system, points.system + points.size);
-    set_positions(xyz_.data(), points.size, cutoff, points.targets, points.images, points.exact);
+    set_positions(xyz_.data(), points.size, cutoff, points.targets, points.images);
   }
 
  private:

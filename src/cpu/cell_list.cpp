@@ -23,6 +23,7 @@
 #include <string>
 #include <vector>
 
+#include "core/images.hpp"
 #include "core/method.hpp"
 #include "cpu/host_method.hpp"
 #include "raycut/detail/host_threads.hpp"
@@ -147,10 +148,10 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     // Query points are sorted after every source and never offered as candidates (below).
     ImageTables images = points.images;
     images.candidates_are_sources = true;
-    set_positions(xyz_.data(), n, cutoff, points.targets, images, points.exact);
+    set_positions(xyz_.data(), n, cutoff, points.targets, images);
     // Points rounded at their box's scale: cells as wide as the float distance below which the
     // exact decision is asked, so that they hold every pair it may take (docs/limits.md).
-    const double exact_reach = points.exact ? std::sqrt(points.exact->float_out) * (1 + 1e-6) : 0;
+    const double exact_reach = images.exact ? band_reach(*images.exact) : 0;
     inverse_width_ =
         1.0 / std::max(static_cast<double>(cutoff) * (1.0 + width_margin), exact_reach);
 

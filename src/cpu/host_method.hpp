@@ -109,7 +109,6 @@ class HostMethod : public Method {
     pass.host.method = this;
     pass.host.xyz = xyz_;
     pass.host.order = static_cast<const Self*>(this)->target_order();
-    pass.host.exact = exact_;
     pass.host.walk = [](const void* method, std::size_t i, CandidateSink sink, void* context) {
       static_cast<const Self*>(method)->candidates()(
           i, [&](std::size_t j, const float* xj) { sink(context, j, xj); });
@@ -121,7 +120,7 @@ class HostMethod : public Method {
   // points' images, ExactImages).
   ListFilter list_filter(const ListOptions& options) const {
     ListFilter filter{options.half, host_cutoff_filter(options.cutoffs)};
-    if (exact_) filter.cutoffs.exact = *exact_;
+    if (images_.exact) filter.cutoffs.exact = *images_.exact;
     return filter;
   }
   // The count pass into offsets[1 .. n], then their running sum: offsets[i] is row i's first.
@@ -148,9 +147,8 @@ class HostMethod : public Method {
   // The points candidates() reads targets from (the first `targets`; the caller's order), their
   // images, and the cutoff.
   void set_positions(const float* xyz, std::size_t points, float cutoff, std::size_t targets,
-                     const ImageTables& images = {}, const ExactImages* exact = nullptr) {
+                     const ImageTables& images = {}) {
     xyz_ = xyz;
-    exact_ = exact;
     points_ = points;
     n_ = targets;
     images_ = images;
@@ -169,7 +167,6 @@ class HostMethod : public Method {
   const float* xyz_ = nullptr;
   std::size_t n_ = 0, points_ = 0;  // targets, points
   ImageTables images_;
-  const ExactImages* exact_ = nullptr;
   float cutoff_squared_ = 0;
   Results results_;
 };

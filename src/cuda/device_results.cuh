@@ -166,12 +166,14 @@ class GpuMethod : public Method {
   }
 
   // The lists of every GPU method: run(f) must run functor f over every target's pairs.
+  // `exact`: the pass's ExactImages (null without images), where per-pair cutoffs decide their
+  // band in double as the search does.
   template <class Run>
   void device_neighbours(ListStorage& storage, std::size_t n, const ListOptions& options,
-                         Run&& run) {
+                         const ExactImages* exact, Run&& run) {
     auto& list = static_cast<DeviceListStorage&>(storage);
     std::uint32_t* counts = list.prepare_counts(n, options);
-    const ListFilter filter{options.half, list.stage_cutoffs(options.cutoffs, n, stream_)};
+    const ListFilter filter = list_filter(list, options, n, exact);
     count_list(filter, counts, run);
     run(list.prepare_fill(list.scan_counts(stream_), filter));
   }
@@ -179,11 +181,11 @@ class GpuMethod : public Method {
   // stream, nothing read back (the count, offsets and cutoffs in static_scratch_).
   template <class Run>
   void device_static_neighbours(const StaticPairs& out, const ListOptions& options, std::size_t n,
-                                Run&& run) {
+                                const ExactImages* exact, Run&& run) {
     if (n > 0) {
       DeviceListStorage& list = static_scratch_;
       std::uint32_t* counts = list.prepare_counts(n, options);
-      const ListFilter filter{options.half, list.stage_cutoffs(options.cutoffs, n, stream_)};
+      const ListFilter filter = list_filter(list, options, n, exact);
       count_list(filter, counts, run);
       list.scan(stream_);
       ListFill fill{filter,  list.offsets_data(), nullptr, nullptr,
@@ -201,6 +203,14 @@ class GpuMethod : public Method {
     auto& list = static_cast<DevicePaddedStorage&>(storage);
     run(list.prepare(n, k, half, shifts, stream_));
     list.read_report(stream_);
+  }
+
+  // What a list keeps: its half orientation and per-pair cutoffs, staged in `list`.
+  ListFilter list_filter(DeviceListStorage& list, const ListOptions& options, std::size_t n,
+                         const ExactImages* exact) const {
+    ListFilter filter{options.half, list.stage_cutoffs(options.cutoffs, n, stream_)};
+    if (exact && filter.cutoffs.active()) filter.cutoffs.exact = *exact;
+    return filter;
   }
 
   cudaStream_t stream_ = nullptr;
@@ -221,14 +231,16 @@ class CudaPairMethod : public GpuMethod {
     });
   }
   void neighbours(ListStorage& list, const ListOptions& options) override {
-    device_neighbours(list, self().size(), options, [&](const auto& f) { self().run(f); });
+    device_neighbours(list, self().size(), options, self().pair_pass().images.exact,
+                      [&](const auto& f) { self().run(f); });
   }
   void padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half, bool shifts) override {
     device_padded(list, self().size(), k, half, shifts, [&](const auto& f) { self().run(f); });
   }
   void static_neighbours(const StaticPairs& out, const ListOptions& options,
                          std::size_t n) override {
-    device_static_neighbours(out, options, n, [&](const auto& f) { self().run(f); });
+    device_static_neighbours(out, options, n, self().pair_pass().images.exact,
+                             [&](const auto& f) { self().run(f); });
   }
 
  private:

@@ -2,7 +2,11 @@
 // A build is: the bounding box (read back), a plan (grid_policy.hpp: cell widths, table layout,
 // kernel), the tables (grid_tables.cuh); every functor then runs through the one traversal of
 // include/raycut/detail/cuda/grid_pass.cuh. docs/grid.md explains each choice.
+#include <algorithm>
+#include <cmath>
 #include <string>
+
+#include "core/images.hpp"
 
 #include "cuda/device_results.cuh"
 #include "cuda/grid_common.cuh"
@@ -14,6 +18,13 @@
 
 namespace raycut::detail::cuda {
 namespace {
+
+// The cutoff, or the band's reach (band_reach) when wider, rounded up to a float.
+float search_reach(float cutoff, const ExactImages& exact) {
+  const double reach = std::max<double>(cutoff, band_reach(exact));
+  const auto rounded = static_cast<float>(reach);
+  return static_cast<double>(rounded) >= reach ? rounded : std::nextafter(rounded, INFINITY);
+}
 
 class Grid final : public CudaPairMethod<Grid> {
  public:
@@ -36,7 +47,10 @@ class Grid final : public CudaPairMethod<Grid> {
     build_timer_.start(stream_);
     float lo[3], hi[3];
     box_.compute(points.xyz, n, lo, hi, stream_);
-    plan_ = plan_grid(policy_, GridInput{n, points.targets, points.systems}, lo, hi, cutoff);
+    // Points with images: cells as wide as the band's reach, so that every pair the exact
+    // decision may take is offered (the CPU cell list widens its cells the same way).
+    const float reach = points.images.exact ? search_reach(cutoff, *points.images.exact) : cutoff;
+    plan_ = plan_grid(policy_, GridInput{n, points.targets, points.systems}, lo, hi, reach);
     plan_.geometry.system = points.systems > 1 ? points.system : nullptr;
     tables_.build(points.xyz, static_cast<std::uint32_t>(n), plan_, stream_);
     if (points.targets < n)

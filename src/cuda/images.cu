@@ -40,7 +40,10 @@ struct Plan {
   std::uint64_t n, targets, first_image;
 };
 
-__global__ void origins_kernel(Plan plan, const float* sources, const float* queries) {
+// `Real`: the sources as given (float), or the caller's float64 positions (their float rounding
+// is then only what the search reads; Engine::build(Float64Positions)).
+template <class Real>
+__global__ void origins_kernel(Plan plan, const Real* sources, const float* queries) {
   const std::uint32_t s = blockIdx.x * blockDim.x + threadIdx.x;
   if (s >= plan.systems) return;
   if (plan.sources[s] < plan.sources[s + 1])
@@ -51,10 +54,12 @@ __global__ void origins_kernel(Plan plan, const float* sources, const float* que
 
 // What the wrap pass finds, read back once: the first particle whose shift leaves int32 (a
 // query's as index + n) and the first with a non-finite coordinate, each kept as ~index by
-// atomicMax (0: none, so that one memset clears all), and how many particles have images
-// (listed by wrap_kernel for images_kernel).
+// atomicMax (0: none, so that one memset clears all), how many particles have images (listed by
+// wrap_kernel for images_kernel), and the largest |coordinate| of every point to come (the bits
+// of a float >= 0, which order as unsigned; 0: 0.0f), for the float band.
 struct Findings {
   unsigned long long not_shift, not_non_finite, with_images;
+  unsigned extent;
 };
 constexpr std::uint64_t none = ~0ull;
 __host__ __device__ inline std::uint64_t first_of(unsigned long long inverted) {
@@ -62,6 +67,21 @@ __host__ __device__ inline std::uint64_t first_of(unsigned long long inverted) {
 }
 __device__ inline void report(unsigned long long& inverted, std::uint64_t index) {
   atomicMax(&inverted, ~static_cast<unsigned long long>(index));
+}
+
+// The largest extent of the block's threads into found->extent: a warp maximum, one shared
+// atomic per warp, one global atomic per block (contended atomics are what wrap_kernel's time
+// is sensitive to, below). Every thread of the block calls it.
+__device__ void report_extent(double extent, Findings* found) {
+  __shared__ unsigned block_extent;
+  if (threadIdx.x == 0) block_extent = 0;
+  __syncthreads();
+  unsigned bits = __float_as_uint(__double2float_ru(extent));  // rounded up: still a bound
+  for (int offset = 16; offset > 0; offset /= 2)
+    bits = max(bits, __shfl_xor_sync(0xffffffffu, bits, offset));
+  if (threadIdx.x % 32 == 0) atomicMax(&block_extent, bits);
+  __syncthreads();
+  if (threadIdx.x == 0 && block_extent > 0) atomicMax(&found->extent, block_extent);
 }
 
 struct Out {
@@ -84,10 +104,12 @@ struct Out {
 };
 
 // Particle p wrapped and placed as a point of its own (a target, or a source after the queries:
-// its place needs no scan), its images counted; whether it has any.
-__device__ bool wrap_one(const Plan& plan, const float* sources, bool with_queries, const Out& out,
-                         std::uint32_t* counts, Findings* found, std::uint64_t p) {
-  const float* x = sources + 3 * p;
+// its place needs no scan), its images counted; whether it has any. `extent`: the largest
+// |coordinate| of its point and its images.
+template <class Real>
+__device__ bool wrap_one(const Plan& plan, const Real* sources, bool with_queries, const Out& out,
+                         std::uint32_t* counts, Findings* found, std::uint64_t p, double& extent) {
+  const Real* x = sources + 3 * p;
   if (!(isfinite(x[0]) && isfinite(x[1]) && isfinite(x[2]))) {
     report(found->not_non_finite, p);
     counts[p] = 0;
@@ -99,6 +121,7 @@ __device__ bool wrap_one(const Plan& plan, const float* sources, bool with_queri
   if (!w.ok) report(found->not_shift, p);
   out.place_wrapped(with_queries ? plan.targets + p : p, frame, w, static_cast<std::uint32_t>(p),
                     s);
+  extent = image_extent(frame, w);
   const auto count = static_cast<std::uint32_t>(image_count(frame, w, false));
   counts[p] = count;
   return count > 0;
@@ -110,14 +133,18 @@ __device__ bool wrap_one(const Plan& plan, const float* sources, bool with_queri
 // warp: images_kernel over the list keeps its warps full (docs/periodic.md). One list atomic
 // per block: one per warp contended enough to double this kernel's time (ncu on the H200,
 // 2026-12-02).
-__global__ void wrap_kernel(Plan plan, const float* sources, bool with_queries, Out out,
+template <class Real>
+__global__ void wrap_kernel(Plan plan, const Real* sources, bool with_queries, Out out,
                             std::uint32_t* counts, std::uint32_t* with_images, Findings* found) {
   __shared__ std::uint32_t listed;
   __shared__ unsigned long long first;
   if (threadIdx.x == 0) listed = 0;
   __syncthreads();
   const std::uint64_t p = blockIdx.x * std::uint64_t{block} + threadIdx.x;
-  const bool has = p < plan.n && wrap_one(plan, sources, with_queries, out, counts, found, p);
+  double extent = 0;
+  const bool has =
+      p < plan.n && wrap_one(plan, sources, with_queries, out, counts, found, p, extent);
+  report_extent(extent, found);
   const std::uint32_t rank = has ? atomicAdd(&listed, 1u) : 0;
   __syncthreads();
   if (threadIdx.x == 0 && listed > 0) first = atomicAdd(&found->with_images, listed);
@@ -128,15 +155,21 @@ __global__ void wrap_kernel(Plan plan, const float* sources, bool with_queries, 
 // Query points: the targets, wrapped.
 __global__ void queries_kernel(Plan plan, const float* queries, Out out, Findings* found) {
   const std::uint64_t q = blockIdx.x * std::uint64_t{block} + threadIdx.x;
-  if (q >= plan.targets) return;
-  const std::uint32_t s = system_of(plan.queries, plan.systems, q);
-  const WrappedPoint w = wrap_point(plan.frames[s], queries + 3 * q);
-  if (!w.ok) report(found->not_shift, plan.n + q);
-  out.place_wrapped(q, plan.frames[s], w, not_a_source, s);
+  double extent = 0;
+  if (q < plan.targets) {
+    const std::uint32_t s = system_of(plan.queries, plan.systems, q);
+    const ImageFrame& frame = plan.frames[s];
+    const WrappedPoint w = wrap_point(frame, queries + 3 * q);
+    if (!w.ok) report(found->not_shift, plan.n + q);
+    out.place_wrapped(q, frame, w, not_a_source, s);
+    for (int c = 0; c < 3; ++c) extent = fmax(extent, fabs(w.x[c] - frame.origin[c]));
+  }
+  report_extent(extent, found);
 }
 
 // The images of each listed particle, at the places the scan of the counts gave them.
-__global__ void images_kernel(Plan plan, const float* sources, const std::uint32_t* with_images,
+template <class Real>
+__global__ void images_kernel(Plan plan, const Real* sources, const std::uint32_t* with_images,
                               std::uint64_t listed, const std::uint64_t* image_offset, Out out) {
   const std::uint64_t k = blockIdx.x * std::uint64_t{block} + threadIdx.x;
   if (k >= listed) return;
@@ -175,11 +208,17 @@ class DeviceImagePoints final : public ImagePoints {
   DeviceBuffer<std::uint64_t> source_offsets_, query_offsets_, image_offset_;
   DeviceBuffer<Findings> found_;  // atomics to mapped host memory are not portable
   DeviceBuffer<unsigned char> temp_;
+  // What decides the band's pairs in double (ExactImages): the caller's positions, kept while
+  // the build lives (the engine's device copy of host positions is not), and the cells.
+  DeviceBuffer<float> sources_, queries_;
+  DeviceBuffer<double> sources64_, cells_;
+  ExactImages exact_;
   MappedValue<Findings> found_host_;
   MappedValue<std::uint64_t> total_;
   // What frames_ and the offsets hold: a step loop's next expansion uploads nothing.
   std::vector<ImageFrame> uploaded_frames_;
   std::vector<std::uint64_t> uploaded_sources_, uploaded_queries_;
+  bool origins_written_ = false;  // frames_ holds origins of an earlier expansion
 };
 
 bool same_frames(const std::vector<ImageFrame>& a, const std::vector<ImageFrame>& b) {
@@ -216,10 +255,37 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
   const std::uint32_t systems = plan.systems();
   const std::uint64_t n = plan.source_count(), targets = plan.target_count();
   const bool with_queries = plan.has_queries();
-  if (!same_frames(plan.frames, uploaded_frames_)) {
+  // Batches: each system in its own frame; float64 sources too (one system as well), so that
+  // their float points span the system rather than its distance from the origin and the band
+  // stays narrow (core/images.cpp does the same). origins_kernel writes the origins into
+  // frames_: a build without them uploads the frames afresh.
+  const bool own_frames = plan.own_frames || float64_sources_ != nullptr;
+  if (!same_frames(plan.frames, uploaded_frames_) || (origins_written_ && !own_frames)) {
     upload_async(frames_, plan.frames, stream);
     uploaded_frames_ = plan.frames;
+    std::vector<double> cells(9 * std::size_t{systems});
+    for (std::uint32_t s = 0; s < systems; ++s)
+      for (int k = 0; k < 3; ++k)
+        for (int c = 0; c < 3; ++c) cells[9 * s + 3 * k + c] = plan.frames[s].cell[k][c];
+    upload_async(cells_, cells, stream);
   }
+  // float64 sources (host memory): wrapped from the doubles, as the host expansion does, so
+  // that the float points are within the rounding the band assumes of the caller's positions.
+  const double* float64 = nullptr;
+  if (float64_sources_) {
+    sources64_.resize(std::max<std::uint64_t>(3 * n, 1));
+    if (n > 0)
+      RAYCUT_CUDA_CHECK(cudaMemcpyAsync(sources64_.data(), float64_sources_, 3 * n * sizeof(double),
+                                        cudaMemcpyHostToDevice, stream));
+    float64 = sources64_.data();
+  }
+  // The kernels that read the sources, on the doubles when given.
+  const auto on_sources = [&](auto&& launch) {
+    if (float64)
+      launch(float64);
+    else
+      launch(sources);
+  };
   if (plan.sources != uploaded_sources_) {
     upload_async(source_offsets_, plan.sources, stream);
     uploaded_sources_ = plan.sources;
@@ -235,8 +301,11 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
          n,
          targets,
          0};
-  if (plan.own_frames) {
-    origins_kernel<<<blocks_for(systems, block), block, 0, stream>>>(p, sources, queries);
+  origins_written_ = own_frames;
+  if (own_frames) {
+    on_sources([&](const auto* x) {
+      origins_kernel<<<blocks_for(systems, block), block, 0, stream>>>(p, x, queries);
+    });
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
 
@@ -253,8 +322,10 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
   with_images_.resize(std::max<std::uint64_t>(n, 1));
   image_offset_.resize(n + 1);
   if (n > 0) {
-    wrap_kernel<<<blocks_for(n, block), block, 0, stream>>>(
-        p, sources, with_queries, out, counts_.data(), with_images_.data(), found_.data());
+    on_sources([&](const auto* x) {
+      wrap_kernel<<<blocks_for(n, block), block, 0, stream>>>(
+          p, x, with_queries, out, counts_.data(), with_images_.data(), found_.data());
+    });
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
   if (with_queries && targets > 0) {
@@ -301,12 +372,38 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
 
   out = reserve(points, p.first_image, batch, stream);
   if (found.with_images > 0) {
-    images_kernel<<<blocks_for(found.with_images, block), block, 0, stream>>>(
-        p, sources, with_images_.data(), found.with_images, image_offset_.data(), out);
+    on_sources([&](const auto* x) {
+      images_kernel<<<blocks_for(found.with_images, block), block, 0, stream>>>(
+          p, x, with_images_.data(), found.with_images, image_offset_.data(), out);
+    });
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
 
-  publish(plan, xyz_.data(), points, image_.data(), system_.data());
+  // The caller's positions, kept for the band's decisions (ExactImages): the float64 ones when
+  // given (uploaded above), else the float sources.
+  if (!float64) {
+    sources_.resize(std::max<std::uint64_t>(3 * n, 1));
+    if (n > 0)
+      RAYCUT_CUDA_CHECK(cudaMemcpyAsync(sources_.data(), sources, 3 * n * sizeof(float),
+                                        cudaMemcpyDeviceToDevice, stream));
+  }
+  if (with_queries) {
+    queries_.resize(std::max<std::uint64_t>(3 * targets, 1));
+    if (targets > 0)
+      RAYCUT_CUDA_CHECK(cudaMemcpyAsync(queries_.data(), queries, 3 * targets * sizeof(float),
+                                        cudaMemcpyDeviceToDevice, stream));
+  }
+  float extent;
+  std::memcpy(&extent, &found.extent, sizeof extent);
+  exact_ = {};
+  exact_.sources = float64 ? nullptr : sources_.data();
+  exact_.sources64 = float64;
+  exact_.queries = with_queries ? queries_.data() : nullptr;
+  exact_.image = image_.data();
+  exact_.system = batch ? system_.data() : nullptr;
+  exact_.cells = cells_.data();
+  set_float_band(exact_, plan.cutoff, rounding_bound(extent));
+  publish(plan, xyz_.data(), points, image_.data(), system_.data(), &exact_);
 }
 
 }  // namespace

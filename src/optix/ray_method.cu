@@ -203,7 +203,7 @@ void RayTracingMethod::compute(Kernel kernel, const KernelOptions& options) {
 }
 
 void RayTracingMethod::neighbours(ListStorage& list, const ListOptions& options) {
-  device_neighbours(list, n_, options, [&](const auto& f) { launch(f); });
+  device_neighbours(list, n_, options, nullptr, [&](const auto& f) { launch(f); });
 }
 
 void RayTracingMethod::padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half,
@@ -213,7 +213,7 @@ void RayTracingMethod::padded_neighbours(PaddedStorage& list, std::uint32_t k, b
 
 void RayTracingMethod::static_neighbours(const StaticPairs& out, const ListOptions& options,
                                          std::size_t n) {
-  device_static_neighbours(out, options, n, [&](const auto& f) { launch(f); });
+  device_static_neighbours(out, options, n, nullptr, [&](const auto& f) { launch(f); });
 }
 
 }  // namespace raycut::detail::optix

@@ -27,10 +27,12 @@ struct PointImage;
 
 // Points with images are float positions rounded at the scale of their box, so the float
 // predicate on them can misjudge a pair within ~(box / C) 2^-23 of the cutoff, and judge
-// (i, j, S) and (j, i, -S) apart. The CPU pass therefore decides every candidate whose float r2
-// lies in the band [float_in, float_out) in double, from the caller's own positions:
+// (i, j, S) and (j, i, -S) apart. Every pass (CPU and GPU) therefore decides each candidate whose
+// float r2 lies in the band [float_in, float_out) in double, from the caller's own positions:
 // r = (x_j - x_i) + S . cell, which is exactly antisymmetric (IEEE rounding is symmetric), so a
 // full list holds (i, j, S) iff it holds (j, i, -S), and every pair is the float64 answer.
+// Plain data: the arrays are in the method's memory space, the struct is passed by value to
+// kernels (detail/images.hpp).
 struct ExactImages {
   const float* sources = nullptr;         // the caller's particles (N, 3), as given
   const double* sources64 = nullptr;      // the same in double when given so (else null)
@@ -40,7 +42,7 @@ struct ExactImages {
   const double* cells = nullptr;          // per system, 9 each: rows a, b, c
   double cutoff_squared = 0;              // C^2 in double
   // A float r2 below float_in is in for certain, at or above float_out out for certain. Cells
-  // at least sqrt(float_out) wide offer every pair in range.
+  // at least sqrt(float_out) wide offer every pair in range. float_in is 0 with exact_vectors.
   float float_in = 0, float_out = 0;
   // How far a float point may lie from its real position, per coordinate (float_band_slack).
   double rounding = 0;
@@ -59,7 +61,6 @@ struct HostPass {
   // The n targets in the order to visit them (the cell list: cell order, so that consecutive
   // targets share cached cells); null: 0 .. n - 1.
   const std::uint32_t* order = nullptr;
-  const ExactImages* exact = nullptr;  // set with periodic images (see ExactImages)
 };
 
 struct BruteForcePass {
@@ -157,6 +158,9 @@ struct ImageTables {
   // or a structure that never offers them (the CPU cell list). Then a functor that reads
   // neither j nor S runs the open traversal (with_images).
   bool candidates_are_sources = true;
+  // What decides the pairs of the float band in double (see ExactImages): a host struct, its
+  // arrays where the traversal runs. Set whenever `image` is.
+  const ExactImages* exact = nullptr;
   bool active() const { return image != nullptr; }
   // What a traversal launched on `stream` indexes: by point, or the deferred table.
   const PointImage* table(void* stream) const { return deferred ? deferred->on(stream) : image; }

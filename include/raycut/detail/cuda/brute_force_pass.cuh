@@ -44,10 +44,11 @@ __global__ void brute_force_kernel(const float* xyz, std::size_t n, std::size_t 
     for (int t = 0; t < count; ++t) {
       const std::size_t j = base + t;
       if (j == i || (system && system[j] != si)) continue;
-      const Vec3 r{tile[3 * t] - xi, tile[3 * t + 1] - yi, tile[3 * t + 2] - zi};
-      const float r2 = squared_distance(r.x, r.y, r.z);
+      Vec3 r{tile[3 * t] - xi, tile[3 * t + 1] - yi, tile[3 * t + 2] - zi};
+      float r2 = squared_distance(r.x, r.y, r.z);
       const auto k = static_cast<std::uint32_t>(j);
-      visit(f, acc, in_range(r2, cutoff_squared), ii, k, k, r, r2, images, ti);
+      const bool in = in_range_of(images, cutoff_squared, ii, k, r, r2);
+      visit(f, acc, in, ii, k, k, r, r2, images, ti);
     }
   }
   if (active) f.finish(ii, acc);

@@ -3,7 +3,8 @@
 // skipped and each row trimmed to the x cells its sphere can touch, leaving one contiguous range
 // of float4 per row. Large inputs run a thread per target; small ones let 4-32 lanes share each
 // target so that they still fill the GPU. Culling is conservative by construction (slack far
-// above float round-off); the shared predicate decides every pair; self is excluded by slot.
+// above float round-off); the shared predicate decides every pair (in_range_of: with images,
+// the float band in double, the cells then as wide as its reach); self is excluded by slot.
 // Every functor runs through run_grid(): counting, list filling, the built-in kernels and the
 // caller's own. docs/grid.md has the measurements behind each choice. nvcc only.
 #pragma once
@@ -216,7 +217,9 @@ __global__ void __launch_bounds__(grid_block_size, ManyRegisters ? 1 : 0)
   const typename Images::Target ti = images.target(t);
   typename F::Accumulator acc = initial_state(f, i);
   for_each_candidate(pos, t, p, view, table, [&](const float4& q, Slot s, Vec3 r, float r2) {
-    visit(f, acc, in_range(r2, cutoff_squared), i, original_index(q), s, r, r2, images, ti);
+    const std::uint32_t k = original_index(q);
+    const bool in = in_range_of(images, cutoff_squared, i, k, r, r2);
+    visit(f, acc, in, i, k, s, r, r2, images, ti);
   });
   f.finish(i, acc);
 }
@@ -311,10 +314,11 @@ __global__ void __launch_bounds__(grid_block_size)
     for (int u = 0; u < U; ++u) q[u] = pos[s[u]];
 #pragma unroll
     for (int u = 0; u < U; ++u) {
-      const Vec3 d{q[u].x - p.x, q[u].y - p.y, q[u].z - p.z};
-      const float r2 = squared_distance(d.x, d.y, d.z);
-      visit(f, acc, in_range(r2, cutoff_squared) && s[u] != t, i, original_index(q[u]), s[u], d, r2,
-            images, ti);
+      Vec3 d{q[u].x - p.x, q[u].y - p.y, q[u].z - p.z};
+      float r2 = squared_distance(d.x, d.y, d.z);
+      const std::uint32_t k = original_index(q[u]);
+      const bool in = in_range_of(images, cutoff_squared, i, k, d, r2) && s[u] != t;
+      visit(f, acc, in, i, k, s[u], d, r2, images, ti);
     }
   }
   combine_lanes<G, F>(acc);
@@ -363,8 +367,9 @@ __global__ void __launch_bounds__(grid_block_size)
       const float4 q = pos[s];
       d = Vec3{q.x - p.x, q.y - p.y, q.z - p.z};
       r2 = squared_distance(d.x, d.y, d.z);
-      take = resolve(f, images, ti, in_range(r2, cutoff_squared) && s != t, i, original_index(q), s,
-                     j, shift);
+      const std::uint32_t k = original_index(q);
+      const bool in = in_range_of(images, cutoff_squared, i, k, d, r2) && s != t;
+      take = resolve(f, images, ti, in, i, k, s, j, shift);
     }
     const unsigned taken = __ballot_sync(0xffffffffu, take);
     if (take) {
