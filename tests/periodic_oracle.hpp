@@ -351,4 +351,48 @@ PeriodicCheck check_periodic_pairs(const PeriodicOracle& o, const std::vector<In
   return check;
 }
 
+// The sorted (i, j, S) of a CSR list with shifts (anything with offsets, indices and shifts).
+template <class List>
+std::vector<PeriodicTriple> list_triples(const List& list) {
+  std::vector<PeriodicTriple> out;
+  for (std::size_t i = 0; i + 1 < list.offsets.size(); ++i)
+    for (std::uint64_t p = list.offsets[i]; p < list.offsets[i + 1]; ++p)
+      out.push_back({static_cast<std::int64_t>(i), static_cast<std::int64_t>(list.indices[p]),
+                     list.shifts[3 * p], list.shifts[3 * p + 1], list.shifts[3 * p + 2]});
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// A full and a half list (with shifts) against the oracle, the full list's symmetry ((i, j, S)
+// listed iff (j, i, -S) is, band pairs included) and the half list as exactly the full list's
+// half orientation: the failures, one a line (empty when they pass).
+template <class List>
+std::string check_full_and_half(const PeriodicOracle& o, const List& full, const List& half) {
+  std::string failures;
+  for (const bool is_half : {false, true}) {
+    const List& list = is_half ? half : full;
+    std::vector<std::uint32_t> i, j;
+    for (std::size_t r = 0; r + 1 < list.offsets.size(); ++r)
+      for (std::uint64_t p = list.offsets[r]; p < list.offsets[r + 1]; ++p) {
+        i.push_back(static_cast<std::uint32_t>(r));
+        j.push_back(list.indices[p]);
+      }
+    const PeriodicCheck check = check_periodic_pairs(o, i, j, list.shifts, is_half);
+    if (!check.ok) failures += (is_half ? "half list: " : "full list: ") + check.problems;
+  }
+  const std::vector<PeriodicTriple> f = list_triples(full), h = list_triples(half);
+  std::vector<PeriodicTriple> expected_half;
+  for (const PeriodicTriple& t : f) {
+    const PeriodicTriple mirror{t[1], t[0], -t[2], -t[3], -t[4]};
+    if (!std::binary_search(f.begin(), f.end(), mirror))
+      failures += "one-sided: " + triple_text(t) + " without its mirror\n";
+    if (half_orientation(t)) expected_half.push_back(t);
+  }
+  if (h != expected_half)
+    failures += "the half list (" + std::to_string(h.size()) +
+                " entries) is not the half orientation of the full list (" +
+                std::to_string(expected_half.size()) + ")\n";
+  return failures;
+}
+
 }  // namespace raycut_test

@@ -20,8 +20,6 @@
 
 namespace {
 
-using raycut_test::PeriodicTriple;
-
 // Every method that takes boxes; those not available here (no GPU) are skipped by name.
 const std::vector<std::string> box_methods = {"brute-force", "cell-list", "grid",
                                               "brute-force-gpu"};
@@ -150,16 +148,6 @@ Case make_case(std::uint64_t seed, double max_ratio) {
   return c;
 }
 
-std::vector<PeriodicTriple> triples(const raycut::NeighbourList& list) {
-  std::vector<PeriodicTriple> out;
-  for (std::size_t i = 0; i + 1 < list.offsets.size(); ++i)
-    for (std::uint64_t p = list.offsets[i]; p < list.offsets[i + 1]; ++p)
-      out.push_back({static_cast<std::int64_t>(i), list.indices[p], list.shifts[3 * p],
-                     list.shifts[3 * p + 1], list.shifts[3 * p + 2]});
-  std::sort(out.begin(), out.end());
-  return out;
-}
-
 // The engine's search cutoff: the largest pair cutoff rounded up to a float, so that the search
 // offers every pair the filter may keep (any cutoff when every pair cutoff is 0).
 float search_cutoff(double largest) {
@@ -185,29 +173,7 @@ std::string run_case(const Case& c, const std::string& method, bool float64) {
   const raycut_test::PeriodicOracle oracle =
       float64 ? raycut_test::make_pair_cutoff_oracle(c.xyz64, c.box, pair_cutoff, c.largest, 1e-6)
               : raycut_test::make_pair_cutoff_oracle(c.xyz, c.box, pair_cutoff, c.largest, 1e-6);
-  std::string failures;
-  for (const bool is_half : {false, true}) {
-    const raycut::NeighbourList& list = is_half ? half : full;
-    std::vector<std::uint32_t> i, j;
-    for (std::size_t r = 0; r + 1 < list.offsets.size(); ++r)
-      for (std::uint64_t p = list.offsets[r]; p < list.offsets[r + 1]; ++p) {
-        i.push_back(static_cast<std::uint32_t>(r));
-        j.push_back(list.indices[p]);
-      }
-    const raycut_test::PeriodicCheck check =
-        raycut_test::check_periodic_pairs(oracle, i, j, list.shifts, is_half);
-    if (!check.ok) failures += (is_half ? "half list: " : "full list: ") + check.problems;
-  }
-  const std::vector<PeriodicTriple> f = triples(full), h = triples(half);
-  std::vector<PeriodicTriple> expected_half;
-  for (const PeriodicTriple& t : f) {
-    const PeriodicTriple mirror{t[1], t[0], -t[2], -t[3], -t[4]};
-    if (!std::binary_search(f.begin(), f.end(), mirror))
-      failures += "one-sided: " + raycut_test::triple_text(t) + " without its mirror\n";
-    if (raycut_test::half_orientation(t)) expected_half.push_back(t);
-  }
-  if (h != expected_half) failures += "the half list is not the full list's half orientation\n";
-  return failures;
+  return raycut_test::check_full_and_half(oracle, full, half);
 }
 
 class PairCutoffs : public ::testing::TestWithParam<std::string> {};

@@ -29,8 +29,6 @@
 
 namespace {
 
-using raycut_test::PeriodicTriple;
-
 // The methods that take boxes.
 const std::vector<std::string> exact_methods = {"brute-force", "cell-list", "brute-force-gpu",
                                                 "grid"};
@@ -139,16 +137,6 @@ FuzzCase make_case(std::uint64_t seed) {
   return c;
 }
 
-std::vector<PeriodicTriple> triples(const raycut::NeighbourList& list) {
-  std::vector<PeriodicTriple> out;
-  for (std::size_t i = 0; i + 1 < list.offsets.size(); ++i)
-    for (std::uint64_t p = list.offsets[i]; p < list.offsets[i + 1]; ++p)
-      out.push_back({static_cast<std::int64_t>(i), list.indices[p], list.shifts[3 * p],
-                     list.shifts[3 * p + 1], list.shifts[3 * p + 2]});
-  std::sort(out.begin(), out.end());
-  return out;
-}
-
 // Runs one case on one method, from the float positions or the float64 ones (then the oracle
 // takes those); returns the failures (empty when it passes).
 std::string run_case(const FuzzCase& c, const std::string& method, bool float64) {
@@ -169,32 +157,7 @@ std::string run_case(const FuzzCase& c, const std::string& method, bool float64)
   const raycut_test::PeriodicOracle oracle =
       float64 ? raycut_test::make_periodic_oracle(c.xyz64, c.box, cutoff, 1e-6)
               : raycut_test::make_periodic_oracle(c.xyz, c.box, cutoff, 1e-6);
-  std::string failures;
-  for (const bool is_half : {false, true}) {
-    const raycut::NeighbourList& list = is_half ? half : full;
-    std::vector<std::uint32_t> i, j;
-    for (std::size_t r = 0; r + 1 < list.offsets.size(); ++r)
-      for (std::uint64_t p = list.offsets[r]; p < list.offsets[r + 1]; ++p) {
-        i.push_back(static_cast<std::uint32_t>(r));
-        j.push_back(list.indices[p]);
-      }
-    const raycut_test::PeriodicCheck check =
-        raycut_test::check_periodic_pairs(oracle, i, j, list.shifts, is_half);
-    if (!check.ok) failures += (is_half ? "half list: " : "full list: ") + check.problems;
-  }
-  // Symmetry, band pairs included, and the half list as the full list's half orientation.
-  const std::vector<PeriodicTriple> f = triples(full), h = triples(half);
-  std::vector<PeriodicTriple> expected_half;
-  for (const PeriodicTriple& t : f) {
-    const PeriodicTriple mirror{t[1], t[0], -t[2], -t[3], -t[4]};
-    if (!std::binary_search(f.begin(), f.end(), mirror))
-      failures += "one-sided: " + raycut_test::triple_text(t) + " without its mirror\n";
-    if (raycut_test::half_orientation(t)) expected_half.push_back(t);
-  }
-  if (h != expected_half)
-    failures += "the half list (" + std::to_string(h.size()) +
-                " entries) is not the half orientation of the full list (" +
-                std::to_string(expected_half.size()) + ")\n";
+  std::string failures = raycut_test::check_full_and_half(oracle, full, half);
   // The count kernel reads neither j nor S: it runs the open traversal, with the same decision.
   const std::vector<std::uint32_t> counts = engine.compute(raycut::Kernel::count).count;
   for (std::size_t i = 0; i + 1 < full.offsets.size(); ++i)
