@@ -1,7 +1,8 @@
 // The stream-ordered small-system pair list (raycut/device_pairs.hpp): brute force within each
 // system, a warp per particle, every distance in double. Four launches and a memset per call,
 // all on the context's stream: count per row, scan, fill, pad. No host synchronisation and no
-// allocation outside the context's memory resource, so a CUDA graph captures it.
+// allocation outside the context's memory resource, so a CUDA graph captures it. Compiled with
+// --fmad=false (CMakeLists.txt): the device rounds every double as the host mirror below does.
 #include <cuda_runtime.h>
 #include <cub/device/device_scan.cuh>
 
