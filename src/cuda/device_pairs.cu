@@ -159,6 +159,22 @@ __host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
   return 0;
 }
 
+// The shifts [first, last] along one periodic axis from their bounds in double; false: none. A
+// bound that is not finite (a non-finite position, which that particle's own row reports as a
+// count code) gives none, and bounds past the int32 shifts are clamped: converting them to int
+// unchecked is undefined, and on the GPU saturates (-inf to INT_MIN, NaN to 0), which made one
+// infinite coordinate loop over 2^31 images per pair. The limit leaves ++s room below INT_MAX.
+__host__ __device__ bool shift_range(double low, double high, int& first, int& last) {
+  constexpr double limit = 2147483646.0;
+  if (!(isfinite(low) && isfinite(high))) return false;
+  low = fmax(low, -limit);
+  high = fmin(high, limit);
+  if (low > high) return false;
+  first = static_cast<int>(low);
+  last = static_cast<int>(high);
+  return true;
+}
+
 // Calls visit(S) for every in-range image (i, j, S) of row i, in lexicographic order of S;
 // returns how many.
 template <class Real, class Visit>
@@ -181,8 +197,9 @@ __host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f
     const double fa = dot(d, f.g[a]);
     // A margin far above the rounding of fa and reach; extra images are decided exactly below.
     const double margin = 1e-9 * (1 + fabs(fa) + f.reach[a]);
-    first[a] = static_cast<int>(ceil(-fa - f.reach[a] - margin));
-    last[a] = static_cast<int>(floor(-fa + f.reach[a] + margin));
+    if (!shift_range(ceil(-fa - f.reach[a] - margin), floor(-fa + f.reach[a] + margin), first[a],
+                     last[a]))
+      return 0;
   }
   std::uint32_t hits = 0;
   for (int sx = first[0]; sx <= last[0]; ++sx)
