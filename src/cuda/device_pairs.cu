@@ -309,6 +309,10 @@ __global__ void finish(const unsigned long long* total, const int* status, const
   }
 }
 
+// The largest capacity of a pair list, far beyond any device's memory: below it, the byte sizes
+// of StaticPairBuffer and the indices 3 * entry of S stay far from overflowing.
+constexpr std::size_t max_capacity = std::size_t(1) << 56;
+
 constexpr std::size_t align_up(std::size_t bytes) {
   return (bytes + 255) / 256 * 256;
 }
@@ -348,7 +352,8 @@ Input make_input(const DeviceSystems& systems, double cutoff, const PairOptions&
   require(out.count, "the count pointer is null");
   require(out.capacity == 0 || (out.i && out.j),
           "i or j is null for a capacity of " + std::to_string(out.capacity));
-  require(out.capacity < (std::size_t(1) << 62), "capacity out of range");
+  require(out.capacity <= max_capacity,
+          "capacity " + std::to_string(out.capacity) + " is above the largest, 2^56");
 
   Input in;
   in.xyz = systems.positions;
@@ -482,6 +487,10 @@ namespace {
 struct PairLayout {
   std::size_t i = 0, j = 0, shifts = 0, count = 0, bytes = 0;
   explicit PairLayout(std::size_t capacity) {
+    if (capacity > max_capacity)  // the sizes below would wrap around
+      throw Error(
+          ErrorCode::invalid_argument,
+          "StaticPairBuffer: capacity " + std::to_string(capacity) + " is above the largest, 2^56");
     j = align_up(capacity * sizeof(std::int64_t));
     shifts = j + align_up(capacity * sizeof(std::int64_t));
     count = shifts + align_up(3 * capacity * sizeof(std::int32_t));
