@@ -635,8 +635,8 @@ void DeviceVerletList::update(const DeviceSystems& systems) {
   if (first_) {
     deallocate(ctx_, reference_, reference_bytes_);
     reference_ = nullptr;
-    reference_bytes_ = bytes;
-    reference_ = allocate(ctx_, bytes ? bytes : 4);
+    reference_bytes_ = bytes ? bytes : 4;  // what deallocate() is told: the size allocated
+    reference_ = allocate(ctx_, reference_bytes_);
     size_ = systems.size;
     scalar_ = systems.scalar;
     set_flag<<<1, 1, 0, stream>>>(flag_, 1);
