@@ -57,9 +57,28 @@ RAYCUT_HD bool resolve(const F& f, const Images& images, const typename Images::
   return in && accepts(f, i, j, s);
 }
 
+// a * b and a + b each rounded once, on the device too: nvcc contracts a * b + c into an FMA by
+// default, which rounds differently from the host (built with -ffp-contract=off) and could flip
+// a pair at the cutoff between a host and a device pass.
+RAYCUT_HD double rounded_product(double a, double b) {
+#if defined(__CUDA_ARCH__)
+  return __dmul_rn(a, b);
+#else
+  return a * b;
+#endif
+}
+RAYCUT_HD double rounded_sum(double a, double b) {
+#if defined(__CUDA_ARCH__)
+  return __dadd_rn(a, b);
+#else
+  return a + b;
+#endif
+}
+
 // The caller's pair vector r = (x_j - x_i) + S . cell in double (ExactImages), for target point
-// i (a particle or a query point), source particle j and shift s; returns |r|^2 in double.
-// Exactly antisymmetric in (i, j, S) and (j, i, -S): IEEE rounding is symmetric.
+// i (a particle or a query point), source particle j and shift s; returns |r|^2 in double, with
+// the same roundings on host and device. Exactly antisymmetric in (i, j, S) and (j, i, -S): IEEE
+// rounding is symmetric.
 RAYCUT_HD double exact_pair_vector(const ExactImages& e, std::size_t i, std::uint32_t j,
                                    const double s[3], double r[3]) {
   const PointImage& pi = e.image[i];
@@ -71,9 +90,13 @@ RAYCUT_HD double exact_pair_vector(const ExactImages& e, std::size_t i, std::uin
                                     : e.sources[3 * std::size_t{pi.source} + c];
     const double xj =
         e.sources64 ? e.sources64[3 * std::size_t{j} + c] : e.sources[3 * std::size_t{j} + c];
-    r[c] = (xj - xi) + ((s[0] * cell[c] + s[1] * cell[3 + c]) + s[2] * cell[6 + c]);
+    const double image =
+        rounded_sum(rounded_sum(rounded_product(s[0], cell[c]), rounded_product(s[1], cell[3 + c])),
+                    rounded_product(s[2], cell[6 + c]));
+    r[c] = rounded_sum(xj - xi, image);
   }
-  return r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+  return rounded_sum(rounded_sum(rounded_product(r[0], r[0]), rounded_product(r[1], r[1])),
+                     rounded_product(r[2], r[2]));
 }
 
 // The largest error of a float r2 near cutoff^2 when each coordinate of both points is off by
