@@ -8,9 +8,12 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "cuda/device_pairs_host.hpp"
@@ -39,6 +42,8 @@ struct DeviceVector {
   explicit DeviceVector(const std::vector<T>& v) : bytes(v.size() * sizeof(T)) {
     if (cudaMalloc(&p, bytes ? bytes : 1) != cudaSuccess) throw std::runtime_error("cudaMalloc");
     if (bytes) cudaMemcpy(p, v.data(), bytes, cudaMemcpyHostToDevice);
+    // A pageable copy may return before its DMA ends; tests use the data on non-blocking streams.
+    cudaDeviceSynchronize();
   }
   ~DeviceVector() { cudaFree(p); }
   DeviceVector(const DeviceVector&) = delete;
@@ -301,6 +306,16 @@ TEST_P(DevicePairsOn, BadDataGivesItsCountCodeAndOnlyPadding) {
   EXPECT_EQ(
       run_pass(uniform(50, 0, 3, 15), {cubic(3), cubic(3)}, beyond, 1.0, false, 100, where).count,
       raycut::count_batch_out_of_range);
+  // An infinite coordinate in a periodic cell: its code, in the time of any other pass (the
+  // other rows' image range towards it is not finite: no images, not 2^31 of them).
+  for (float infinity :
+       {std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity()}) {
+    std::vector<float> far = uniform(50, 0, 3, 16);
+    far[3 * 20] = infinity;
+    const HostPairs inf = run_pass(far, {cubic(3)}, {}, 1.0, false, 100, where);
+    EXPECT_EQ(inf.count, raycut::count_non_finite_position) << infinity;
+    EXPECT_EQ(inf.i[0], 50) << "bad input: every entry is padding";
+  }
 }
 
 TEST(DevicePairs, ReadPairCountNamesBadDataAndHostArgumentsFailEarly) {
@@ -345,6 +360,78 @@ TEST(DevicePairs, HostArgumentsAreCheckedBeforeAnyWork) {
   EXPECT_THROW(raycut::detail::list_pairs_small_systems_on_host(none, 1.0, {}, no_count),
                raycut::Error);
   EXPECT_EQ(count, 7) << "nothing written";
+}
+
+// Capacities whose byte sizes would wrap around are refused, naming the capacity, before any
+// allocation or work (so this runs without a GPU).
+TEST(DevicePairs, CapacitiesPastTheLargestAreRefused) {
+  const raycut::Context ctx;
+  for (std::size_t capacity : {(std::size_t(1) << 56) + 1, std::size_t(1) << 61, ~std::size_t(0)}) {
+    try {
+      raycut::StaticPairBuffer buffer(capacity, ctx);
+      ADD_FAILURE() << "capacity " << capacity << " accepted";
+    } catch (const raycut::Error& e) {
+      EXPECT_EQ(e.code(), raycut::ErrorCode::invalid_argument) << e.what();
+      EXPECT_NE(std::string(e.what()).find(std::to_string(capacity)), std::string::npos)
+          << e.what();
+    }
+  }
+  raycut::DeviceSystems none;
+  std::int64_t i[1], j[1], count = 7;
+  const raycut::StaticPairs huge{i, j, nullptr, &count, (std::size_t(1) << 56) + 1, 0};
+  EXPECT_THROW(raycut::detail::list_pairs_small_systems_on_host(none, 1.0, {}, huge),
+               raycut::Error);
+  EXPECT_EQ(count, 7) << "nothing written";
+}
+
+// Pairs within an ulp of the cutoff, chosen so that a fused multiply-add in |r|^2 (the device's
+// default contraction, in either order of the first two terms) would decide them the other way:
+// the device must decide each as its host mirror does, bit for bit. Two float64 particles per
+// system, x_i = 0 and x_j = r, in one open batch; cutoff 1, so cutoff^2 = 1 exactly.
+std::vector<double> pairs_at_the_cutoff(std::size_t wanted) {
+  std::mt19937_64 rng(31);
+  std::normal_distribution<double> gauss(0, 1);
+  std::vector<double> xyz;
+  while (xyz.size() < 6 * wanted) {
+    double r[3] = {gauss(rng), gauss(rng), gauss(rng)};
+    const double length = std::sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2]);
+    for (double& c : r) c /= length;
+    for (int step = 0; step < 8; ++step) {  // walk r[2] by ulps across |r| = 1
+      const double plain = r[0] * r[0] + r[1] * r[1] + r[2] * r[2];
+      const double fused_a = std::fma(r[2], r[2], std::fma(r[1], r[1], r[0] * r[0]));
+      const double fused_b = std::fma(r[2], r[2], std::fma(r[0], r[0], r[1] * r[1]));
+      if ((plain < 1) != (fused_a < 1) && (plain < 1) != (fused_b < 1)) {
+        xyz.insert(xyz.end(), {0.0, 0.0, 0.0, r[0], r[1], r[2]});
+        break;
+      }
+      r[2] = std::nextafter(r[2], plain < 1 ? 2.0 : 0.0);
+    }
+  }
+  return xyz;
+}
+
+TEST_P(DevicePairsOn, PairsAtTheCutoffAreDecidedAsOnTheHost) {
+  const Where where = GetParam();
+  if (!available(where)) GTEST_SKIP() << "no CUDA device";
+  constexpr std::size_t systems = 400;
+  const std::vector<double> xyz = pairs_at_the_cutoff(systems);
+  std::vector<std::int64_t> batch;
+  for (std::size_t s = 0; s < systems; ++s) batch.insert(batch.end(), 2, std::int64_t(s));
+  // The host mirror's decision, without FMA contraction (this file too: -ffp-contract=off).
+  std::vector<std::int64_t> i, j;
+  for (std::size_t s = 0; s < systems; ++s) {
+    const double* r = &xyz[6 * s + 3];
+    if (r[0] * r[0] + r[1] * r[1] + r[2] * r[2] < 1) {
+      i.insert(i.end(), {std::int64_t(2 * s), std::int64_t(2 * s + 1)});
+      j.insert(j.end(), {std::int64_t(2 * s + 1), std::int64_t(2 * s)});
+    }
+  }
+  ASSERT_GT(i.size(), 0u);
+  ASSERT_LT(i.size(), 2 * systems) << "both decisions are represented";
+  const HostPairs found = run_pass(xyz, {}, batch, 1.0, false, 2 * systems, where);
+  ASSERT_EQ(found.count, std::int64_t(i.size()));
+  EXPECT_EQ(std::vector<std::int64_t>(found.i.begin(), found.i.begin() + found.count), i);
+  EXPECT_EQ(std::vector<std::int64_t>(found.j.begin(), found.j.begin() + found.count), j);
 }
 
 INSTANTIATE_TEST_SUITE_P(Where, DevicePairsOn, ::testing::Values(Where::host, Where::device),

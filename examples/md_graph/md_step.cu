@@ -83,6 +83,11 @@ int main(int argc, char** argv) {
   }
   const int n_side = static_cast<int>(std::lround(std::cbrt(argc > 1 ? std::atof(argv[1]) : 1000)));
   const int steps = argc > 2 ? std::atoi(argv[2]) : 2000;
+  if (n_side < 1 || steps < 1) {
+    std::fprintf(stderr, "particles must be >= 1 and steps >= 1, got %s and %d\n",
+                 argc > 1 ? argv[1] : "1000", steps);
+    return 2;
+  }
   const int n = n_side * n_side * n_side;
   const double box = std::cbrt(n / density);
 
@@ -111,9 +116,11 @@ int main(int argc, char** argv) {
   CHECK(cudaMalloc(&d_f, 3 * n * sizeof(double)));
   CHECK(cudaMalloc(&d_energy, sizeof(double)));
   CHECK(cudaMalloc(&d_cell, sizeof cell));
-  CHECK(cudaMemcpy(d_x, x.data(), 3 * n * sizeof(double), cudaMemcpyHostToDevice));
-  CHECK(cudaMemcpy(d_v, v.data(), 3 * n * sizeof(double), cudaMemcpyHostToDevice));
-  CHECK(cudaMemcpy(d_cell, cell, sizeof cell, cudaMemcpyHostToDevice));
+  // On the step's stream: a pageable cudaMemcpy may return before its DMA is done, and work on a
+  // non-blocking stream does not wait for it.
+  CHECK(cudaMemcpyAsync(d_x, x.data(), 3 * n * sizeof(double), cudaMemcpyHostToDevice, stream));
+  CHECK(cudaMemcpyAsync(d_v, v.data(), 3 * n * sizeof(double), cudaMemcpyHostToDevice, stream));
+  CHECK(cudaMemcpyAsync(d_cell, cell, sizeof cell, cudaMemcpyHostToDevice, stream));
 
   raycut::DeviceSystems system;
   system.positions = d_x;
@@ -126,6 +133,12 @@ int main(int argc, char** argv) {
   const double sphere = 4.0 / 3.0 * 3.141592653589793 * std::pow(cutoff + skin, 3) * density;
   raycut::DeviceVerletList verlet(ctx, cutoff, skin, static_cast<std::size_t>(1.3 * sphere * n));
   const unsigned blocks = (3 * n + 255) / 256;
+  // Device to host on the step's stream, then wait for it: a plain cudaMemcpy runs on the legacy
+  // default stream, which does not wait for work on a non-blocking stream.
+  auto read = [&](void* host, const void* device, std::size_t bytes) {
+    CHECK(cudaMemcpyAsync(host, device, bytes, cudaMemcpyDeviceToHost, stream));
+    CHECK(cudaStreamSynchronize(stream));
+  };
   auto forces = [&] {
     CHECK(cudaMemsetAsync(d_f, 0, 3 * n * sizeof(double), stream));
     CHECK(cudaMemsetAsync(d_energy, 0, sizeof(double), stream));
@@ -133,6 +146,7 @@ int main(int argc, char** argv) {
     lj_forces<<<1024, 256, 0, stream>>>(pairs.i(), pairs.j(), pairs.shifts(), pairs.count(),
                                         static_cast<std::int64_t>(pairs.capacity()), d_x, box, d_f,
                                         d_energy);
+    CHECK(cudaGetLastError());
   };
   // The first list and forces, eagerly: the list's size is known before the capture.
   verlet.update(system);
@@ -154,13 +168,13 @@ int main(int argc, char** argv) {
   CHECK(cudaGraphInstantiate(&step, graph, 0));
 
   double potential = 0;
-  CHECK(cudaMemcpy(&potential, d_energy, sizeof potential, cudaMemcpyDeviceToHost));
+  read(&potential, d_energy, sizeof potential);  // the eager forces' energy
   const double first = total_energy(v, potential);
   int rebuilds = 0;
   const auto start = std::chrono::steady_clock::now();
   constexpr int block = 50;  // steps between checks of the list's count
   for (int done = 0; done < steps; done += block) {
-    for (int s = 0; s < block; ++s) CHECK(cudaGraphLaunch(step, stream));
+    for (int s = 0; s < block && done + s < steps; ++s) CHECK(cudaGraphLaunch(step, stream));
     const std::int64_t count = raycut::read_pair_count(ctx, verlet.pairs().count());
     if (count > static_cast<std::int64_t>(verlet.pairs().capacity())) {
       std::printf("the list outgrew its capacity (%lld pairs): grow it and rerun\n",
@@ -168,19 +182,20 @@ int main(int argc, char** argv) {
       return 1;
     }
     int rebuilt = 0;
-    CHECK(cudaMemcpy(&rebuilt, verlet.rebuilt(), sizeof rebuilt, cudaMemcpyDeviceToHost));
+    read(&rebuilt, verlet.rebuilt(), sizeof rebuilt);
     rebuilds += rebuilt;  // sampled: the last step of each block
   }
   const double seconds =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  CHECK(cudaMemcpy(v.data(), d_v, 3 * n * sizeof(double), cudaMemcpyDeviceToHost));
-  CHECK(cudaMemcpy(&potential, d_energy, sizeof potential, cudaMemcpyDeviceToHost));
+  read(v.data(), d_v, 3 * n * sizeof(double));
+  read(&potential, d_energy, sizeof potential);
   const double last = total_energy(v, potential);
   const double drift = std::fabs(last - first) / std::fabs(first);
   std::printf(
       "%d particles, %d steps in one graph each: %.1f us per step, rebuilt at %d of %d "
       "sampled steps, energy %.6f -> %.6f (relative drift %.2e)\n",
-      n, steps, 1e6 * seconds / steps, rebuilds, steps / block, first / n, last / n, drift);
+      n, steps, 1e6 * seconds / steps, rebuilds, (steps + block - 1) / block, first / n, last / n,
+      drift);
   cudaGraphExecDestroy(step);
   cudaGraphDestroy(graph);
   return drift < 1e-2 ? 0 : 1;

@@ -114,7 +114,9 @@ std::int64_t list_pairs_small_systems_growing(const Context& ctx, const DeviceSy
 // cutoff can be missing). The check, the conditional rebuild and the copy of the reference
 // positions are kernels on the context's stream that read a device flag: update() never waits,
 // and a CUDA graph can capture it. Kernels that use the list filter by the cutoff themselves.
-// The first update() always rebuilds: run one before capturing a step.
+// The first update() always rebuilds: run one before capturing a step. Only positions are
+// watched: cells must stay as they were at the last rebuild, and options.run_if is the list's own
+// flag (one given is not read).
 class DeviceVerletList {
  public:
   DeviceVerletList(const Context& ctx, double cutoff, double skin, std::size_t capacity,
@@ -129,7 +131,9 @@ class DeviceVerletList {
   const StaticPairBuffer& pairs() const { return pairs_; }
   // A device int: 1 when the last update() rebuilt the list, else 0.
   const int* rebuilt() const { return flag_; }
-  // Grows the list to `capacity` (waits for the stream); the next update() rebuilds.
+  // Grows the list to `capacity` (waits for the stream); the next update() rebuilds. The old
+  // buffers are freed: a CUDA graph captured before holds their addresses and must be captured
+  // again (after one eager update()).
   void reserve(std::size_t capacity);
   double cutoff() const { return cutoff_; }
   double skin() const { return skin_; }

@@ -1,7 +1,8 @@
 // The stream-ordered small-system pair list (raycut/device_pairs.hpp): brute force within each
 // system, a warp per particle, every distance in double. Four launches and a memset per call,
 // all on the context's stream: count per row, scan, fill, pad. No host synchronisation and no
-// allocation outside the context's memory resource, so a CUDA graph captures it.
+// allocation outside the context's memory resource, so a CUDA graph captures it. Compiled with
+// --fmad=false (CMakeLists.txt): the device rounds every double as the host mirror below does.
 #include <cuda_runtime.h>
 #include <cub/device/device_scan.cuh>
 
@@ -158,6 +159,22 @@ __host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
   return 0;
 }
 
+// The shifts [first, last] along one periodic axis from their bounds in double; false: none. A
+// bound that is not finite (a non-finite position, which that particle's own row reports as a
+// count code) gives none, and bounds past the int32 shifts are clamped: converting them to int
+// unchecked is undefined, and on the GPU saturates (-inf to INT_MIN, NaN to 0), which made one
+// infinite coordinate loop over 2^31 images per pair. The limit leaves ++s room below INT_MAX.
+__host__ __device__ bool shift_range(double low, double high, int& first, int& last) {
+  constexpr double limit = 2147483646.0;
+  if (!(isfinite(low) && isfinite(high))) return false;
+  low = fmax(low, -limit);
+  high = fmin(high, limit);
+  if (low > high) return false;
+  first = static_cast<int>(low);
+  last = static_cast<int>(high);
+  return true;
+}
+
 // Calls visit(S) for every in-range image (i, j, S) of row i, in lexicographic order of S;
 // returns how many.
 template <class Real, class Visit>
@@ -180,8 +197,9 @@ __host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f
     const double fa = dot(d, f.g[a]);
     // A margin far above the rounding of fa and reach; extra images are decided exactly below.
     const double margin = 1e-9 * (1 + fabs(fa) + f.reach[a]);
-    first[a] = static_cast<int>(ceil(-fa - f.reach[a] - margin));
-    last[a] = static_cast<int>(floor(-fa + f.reach[a] + margin));
+    if (!shift_range(ceil(-fa - f.reach[a] - margin), floor(-fa + f.reach[a] + margin), first[a],
+                     last[a]))
+      return 0;
   }
   std::uint32_t hits = 0;
   for (int sx = first[0]; sx <= last[0]; ++sx)
@@ -291,6 +309,10 @@ __global__ void finish(const unsigned long long* total, const int* status, const
   }
 }
 
+// The largest capacity of a pair list, far beyond any device's memory: below it, the byte sizes
+// of StaticPairBuffer and the indices 3 * entry of S stay far from overflowing.
+constexpr std::size_t max_capacity = std::size_t(1) << 56;
+
 constexpr std::size_t align_up(std::size_t bytes) {
   return (bytes + 255) / 256 * 256;
 }
@@ -330,7 +352,8 @@ Input make_input(const DeviceSystems& systems, double cutoff, const PairOptions&
   require(out.count, "the count pointer is null");
   require(out.capacity == 0 || (out.i && out.j),
           "i or j is null for a capacity of " + std::to_string(out.capacity));
-  require(out.capacity < (std::size_t(1) << 62), "capacity out of range");
+  require(out.capacity <= max_capacity,
+          "capacity " + std::to_string(out.capacity) + " is above the largest, 2^56");
 
   Input in;
   in.xyz = systems.positions;
@@ -464,6 +487,10 @@ namespace {
 struct PairLayout {
   std::size_t i = 0, j = 0, shifts = 0, count = 0, bytes = 0;
   explicit PairLayout(std::size_t capacity) {
+    if (capacity > max_capacity)  // the sizes below would wrap around
+      throw Error(
+          ErrorCode::invalid_argument,
+          "StaticPairBuffer: capacity " + std::to_string(capacity) + " is above the largest, 2^56");
     j = align_up(capacity * sizeof(std::int64_t));
     shifts = j + align_up(capacity * sizeof(std::int64_t));
     count = shifts + align_up(3 * capacity * sizeof(std::int32_t));
@@ -608,8 +635,8 @@ void DeviceVerletList::update(const DeviceSystems& systems) {
   if (first_) {
     deallocate(ctx_, reference_, reference_bytes_);
     reference_ = nullptr;
-    reference_bytes_ = bytes;
-    reference_ = allocate(ctx_, bytes ? bytes : 4);
+    reference_bytes_ = bytes ? bytes : 4;  // what deallocate() is told: the size allocated
+    reference_ = allocate(ctx_, reference_bytes_);
     size_ = systems.size;
     scalar_ = systems.scalar;
     set_flag<<<1, 1, 0, stream>>>(flag_, 1);
