@@ -306,6 +306,9 @@ TEST_P(DevicePairsOn, BadDataGivesItsCountCodeAndOnlyPadding) {
   EXPECT_EQ(
       run_pass(uniform(50, 0, 3, 15), {cubic(3), cubic(3)}, beyond, 1.0, false, 100, where).count,
       raycut::count_batch_out_of_range);
+  // A cell 300 times thinner than the cutoff on each axis: ~6e2^3 images per pair, refused.
+  EXPECT_EQ(run_pass(uniform(4, 0, 0.01, 17), {cubic(0.01)}, {}, 3.0, false, 100, where).count,
+            raycut::count_too_many_images);
   // An infinite coordinate in a periodic cell: its code, in the time of any other pass (the
   // other rows' image range towards it is not finite: no images, not 2^31 of them).
   for (float infinity :

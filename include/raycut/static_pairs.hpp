@@ -28,5 +28,9 @@ inline constexpr std::int64_t count_non_finite_position = -1;
 inline constexpr std::int64_t count_unsorted_batch = -2;
 inline constexpr std::int64_t count_invalid_cell = -3;  // non-finite, or periodic rows dependent
 inline constexpr std::int64_t count_batch_out_of_range = -4;  // a system without its cell/pbc
+// A cell so much thinner than the cutoff that a pair has more than max_images_per_pair images
+// (the brute force over them would run for hours; the Engine's cell lists take such boxes).
+inline constexpr std::int64_t count_too_many_images = -5;
+inline constexpr double max_images_per_pair = 16777216.0;  // 2^24
 
 }  // namespace raycut

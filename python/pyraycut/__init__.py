@@ -799,6 +799,7 @@ _BAD_COUNT = {
     -2: "batch is not sorted: the particles of each system must be contiguous",
     -3: "a cell has non-finite entries or linearly dependent periodic rows",
     -4: "a batch value is negative or has no cell or pbc row (one per system)",
+    -5: "a periodic cell is so much thinner than the cutoff that a pair has over 2^24 images",
 }
 
 

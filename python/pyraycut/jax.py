@@ -25,7 +25,7 @@ on XLA's stream, with XLA's scratch memory, and never waits for the GPU. Under `
 runs one pass per system, so that every system's count is exact. Bad data that only the GPU sees
 is not an error of the call there: the count comes back negative instead (-1: a non-finite
 position, -2: an unsorted ``batch``, -3: a degenerate periodic cell, -4: a ``batch`` index outside
-[0, B)), with the pairs all padding. The pass suits systems of up to a few thousand particles;
+[0, B), -5: a cell so thin that a pair has over 2^24 images), with the pairs all padding. The pass suits systems of up to a few thousand particles;
 larger ones take it too (correct, slower than the library's grids, which synchronise with the
 host and so cannot run inside an XLA program yet).
 """

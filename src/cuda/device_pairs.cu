@@ -156,6 +156,12 @@ __host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
     for (int k = 0; k < 3; ++k) f.g[a][k] = cof[a][k] / det;
     f.reach[a] = f.periodic[a] ? in.cutoff * sqrt(dot(f.g[a], f.g[a])) : 0;
   }
+  // The images a pair can have, ~prod(2 reach + 1) over the periodic axes (+ 2 for rounding):
+  // past the limit a cell far thinner than the cutoff would keep the GPU busy for hours.
+  double images = 1;
+  for (int a = 0; a < 3; ++a)
+    if (f.periodic[a]) images *= 2 * f.reach[a] + 3;
+  if (!(images <= max_images_per_pair)) return int(count_too_many_images);
   return 0;
 }
 
@@ -475,6 +481,10 @@ std::int64_t read_pair_count(const Context& ctx, const std::int64_t* device_coun
     case count_batch_out_of_range:
       throw Error(ErrorCode::invalid_input,
                   "a batch value is negative or has no cell or pbc row (one per system)");
+    case count_too_many_images:
+      throw Error(ErrorCode::invalid_input,
+                  "a periodic cell is so much thinner than the cutoff that a pair has over 2^24 "
+                  "images (use the Engine's cell list for such boxes)");
     default:
       if (count < 0)
         throw Error(ErrorCode::internal, "unknown pair count code " + std::to_string(count));
