@@ -306,6 +306,10 @@ TEST_P(DevicePairsOn, BadDataGivesItsCountCodeAndOnlyPadding) {
   EXPECT_EQ(
       run_pass(uniform(50, 0, 3, 15), {cubic(3), cubic(3)}, beyond, 1.0, false, 100, where).count,
       raycut::count_batch_out_of_range);
+  std::vector<std::int64_t> negative(50, 0);
+  negative[0] = -1;  // sorted, but not a system: refused without cells too, as the Engine does
+  EXPECT_EQ(run_pass(uniform(50, 0, 3, 15), {}, negative, 1.0, false, 100, where).count,
+            raycut::count_batch_out_of_range);
   // A cell 300 times thinner than the cutoff on each axis: ~6e2^3 images per pair, refused.
   EXPECT_EQ(run_pass(uniform(4, 0, 0.01, 17), {cubic(0.01)}, {}, 3.0, false, 100, where).count,
             raycut::count_too_many_images);

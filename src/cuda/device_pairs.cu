@@ -89,8 +89,9 @@ __host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
     f.lo = bound(in.batch, in.n, system, false);
     f.hi = bound(in.batch, in.n, system, true);
   }
+  if (system < 0) return int(count_batch_out_of_range);  // open systems too, as the Engine
   if (!in.cells) return 0;
-  if (system < 0 || (in.cell_count > 1 && system >= in.cell_count) ||
+  if ((in.cell_count > 1 && system >= in.cell_count) ||
       (in.pbc_count > 1 && system >= in.pbc_count))
     return int(count_batch_out_of_range);
   const std::int64_t c = in.cell_count > 1 ? system : 0;
