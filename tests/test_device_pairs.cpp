@@ -284,6 +284,94 @@ TEST_P(DevicePairsOn, CapacityShortByOneIsReportedAndTheRestIsExact) {
             std::vector<std::int64_t>(exact.j.begin(), exact.j.begin() + exact.count));
 }
 
+// A list per system (StaticPairs::systems, what jax.vmap maps onto): each system's K slots hold
+// exactly what a pass over that system alone gives (global indices), with its own count, also
+// when another system overflows its slots; an empty system is all padding.
+TEST_P(DevicePairsOn, AListPerSystemEqualsAPassPerSystem) {
+  const Where where = GetParam();
+  if (!available(where)) GTEST_SKIP() << "no CUDA device";
+  const std::vector<std::size_t> sizes = {40, 0, 90, 25};
+  std::vector<float> xyz;
+  std::vector<std::int64_t> batch;
+  std::vector<Box> boxes;
+  for (std::size_t s = 0; s < sizes.size(); ++s) {
+    const std::vector<float> part = uniform(sizes[s], 0, 4.0, 30 + int(s));
+    xyz.insert(xyz.end(), part.begin(), part.end());
+    batch.insert(batch.end(), sizes[s], std::int64_t(s));
+    boxes.push_back(cubic(4.0 + 0.5 * double(s)));
+  }
+  const std::size_t systems = sizes.size(), k = 400, n = batch.size();
+  const double cutoff = 1.6;
+  // The reference: each system alone, indices made global.
+  std::vector<HostPairs> alone(systems);
+  std::size_t first = 0;
+  for (std::size_t s = 0; s < systems; ++s) {
+    const std::vector<float> part(xyz.begin() + 3 * first, xyz.begin() + 3 * (first + sizes[s]));
+    alone[s] = run_pass(part, {boxes[s]}, {}, cutoff, false, 1 << 14, Where::host);
+    for (auto& v : {&alone[s].i, &alone[s].j})
+      for (std::int64_t& x : *v) x += std::int64_t(first);
+    first += sizes[s];
+  }
+  ASSERT_GT(alone[2].count, std::int64_t(k)) << "system 2 overflows its slots";
+  ASSERT_LT(alone[0].count, std::int64_t(k));
+  // The pass with a list per system.
+  std::vector<float> cells;
+  std::vector<std::uint8_t> pbc;
+  for (const Box& b : boxes)
+    for (int r = 0; r < 3; ++r) {
+      pbc.push_back(1);
+      for (int c = 0; c < 3; ++c) cells.push_back(static_cast<float>(b.cell[r][c]));
+    }
+  std::vector<std::int64_t> i(systems * k, -9), j(systems * k, -9), count(systems, -9);
+  std::vector<std::int32_t> shifts(3 * systems * k, -9);
+  raycut::DeviceSystems sys;
+  sys.size = n;
+  sys.cell_count = sys.pbc_count = systems;
+  if (where == Where::host) {
+    sys.positions = xyz.data();
+    sys.cells = cells.data();
+    sys.pbc = reinterpret_cast<const bool*>(pbc.data());
+    sys.batch = batch.data();
+    raycut::StaticPairs out{i.data(), j.data(), shifts.data(), count.data(), k, std::int64_t(n)};
+    out.systems = systems;
+    raycut::detail::list_pairs_small_systems_on_host(sys, cutoff, {}, out);
+  } else {
+    DeviceVector d_xyz(xyz), d_cells(cells), d_pbc(pbc), d_batch(batch), d_i(i), d_j(j),
+        d_count(count), d_shifts(shifts);
+    sys.positions = d_xyz.p;
+    sys.cells = d_cells.p;
+    sys.pbc = static_cast<const bool*>(d_pbc.p);
+    sys.batch = static_cast<const std::int64_t*>(d_batch.p);
+    raycut::StaticPairs out{static_cast<std::int64_t*>(d_i.p),
+                            static_cast<std::int64_t*>(d_j.p),
+                            static_cast<std::int32_t*>(d_shifts.p),
+                            static_cast<std::int64_t*>(d_count.p),
+                            k,
+                            std::int64_t(n)};
+    out.systems = systems;
+    raycut::list_pairs_small_systems(raycut::Context{}, sys, cutoff, {}, out);
+    CUDA_OK(cudaDeviceSynchronize());
+    i = to_host(out.i, systems * k);
+    j = to_host(out.j, systems * k);
+    shifts = to_host(out.shifts, 3 * systems * k);
+    count = to_host(out.count, systems);
+  }
+  for (std::size_t s = 0; s < systems; ++s) {
+    EXPECT_EQ(count[s], alone[s].count) << "system " << s;
+    const std::size_t kept = std::min<std::size_t>(k, std::size_t(alone[s].count));
+    for (std::size_t e = 0; e < k; ++e) {
+      const std::size_t at = s * k + e;
+      const std::int64_t want_i = e < kept ? alone[s].i[e] : std::int64_t(n);
+      const std::int64_t want_j = e < kept ? alone[s].j[e] : std::int64_t(n);
+      ASSERT_EQ(i[at], want_i) << "system " << s << ", slot " << e;
+      ASSERT_EQ(j[at], want_j) << "system " << s << ", slot " << e;
+      for (int c = 0; c < 3; ++c)
+        ASSERT_EQ(shifts[3 * at + c], e < kept ? alone[s].shifts[3 * e + c] : 0)
+            << "system " << s << ", slot " << e;
+    }
+  }
+}
+
 TEST_P(DevicePairsOn, BadDataGivesItsCountCodeAndOnlyPadding) {
   const Where where = GetParam();
   if (!available(where)) GTEST_SKIP() << "no CUDA device";

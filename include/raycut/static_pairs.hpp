@@ -21,6 +21,11 @@ struct StaticPairs {
   std::int64_t* count = nullptr;
   std::size_t capacity = 0;
   std::int64_t pad_index = 0;
+  // 0: one list, as above. B > 0 (the small-system pass only): a list per system of a batch,
+  // system s in entries [s * capacity, (s + 1) * capacity) with its own count, count[s] (B
+  // counts), and its own padding; indices stay global. What jax.vmap maps onto: every system's
+  // count exact, whatever the others hold.
+  std::size_t systems = 0;
 };
 
 // What a negative count says (the small-system pass, which checks its data on the device).

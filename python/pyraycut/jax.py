@@ -22,7 +22,8 @@ system (sorted), with a cell per system; the pairs come back in one list with gl
 On a CUDA GPU the same call runs the library's stream-ordered small-system pass
 (raycut::list_pairs_small_systems: brute force within each system, decided in double precision)
 on XLA's stream, with XLA's scratch memory, and never waits for the GPU. Under ``jax.vmap`` it
-runs one pass per system, so that every system's count is exact. Bad data that only the GPU sees
+runs one pass with a list per system (each system's own K slots and count), so that every
+system's count is exact. Bad data that only the GPU sees
 is not an error of the call there: the count comes back negative instead (-1: a non-finite
 position, -2: an unsorted ``batch``, -3: a degenerate periodic cell, -4: a ``batch`` index outside
 [0, B), -5: a cell so thin that a pair has over 2^24 images), with the pairs all padding. The pass suits systems of up to a few thousand particles;
@@ -74,7 +75,7 @@ def neighbor_list(positions: Any, cutoff: float, cell: Any = None, pbc: Any = No
     ``positions`` (N, 3); ``cell`` (3, 3) (rows: lattice vectors) or 3 edge lengths, None: open;
     ``pbc`` 3 bools (default: all, with a cell). ``half``: each pair once. ``jax.vmap`` over
     positions (and cells) gives every system its own K slots and count (in one search on the
-    CPU; one pass per system on a GPU).
+    CPU, and in one pass on a GPU).
 
     Ragged batches (systems of different sizes, one search): ``batch`` (N,) int32, the system
     index of each particle, sorted (torch_cluster's convention; may be traced under ``jit``);

@@ -80,16 +80,33 @@ __global__ void system_index(const std::int32_t* in, std::int64_t* out, std::siz
     out[k] = in[k] >= 0 && in[k] < systems ? in[k] : -1;
 }
 
+// The system of each of B x N particles (jax.vmap's batch): k / N.
+__global__ void systems_of_rows(std::int64_t* out, std::size_t n, std::size_t count) {
+  for (std::size_t k = blockIdx.x * std::size_t{blockDim.x} + threadIdx.x; k < count;
+       k += std::size_t{gridDim.x} * blockDim.x)
+    out[k] = static_cast<std::int64_t>(k / n);
+}
+
 // XLA's int32 results from the pass's int64 ones: i, j (entries) and the counts (one per
 // system). A count above INT32_MAX is clamped (it still says "cut"); negative codes pass through.
+// `local`: a list per system of `local` particles (K = entries / systems slots each), whose
+// global indices become local ones (padding stays `local`).
 __global__ void narrow(const std::int64_t* i64, const std::int64_t* j64, const std::int64_t* c64,
                        std::int32_t* i, std::int32_t* j, std::int32_t* count, std::size_t entries,
-                       std::size_t systems) {
+                       std::size_t systems, std::size_t local = 0) {
   const std::size_t first = blockIdx.x * std::size_t{blockDim.x} + threadIdx.x;
   const std::size_t stride = std::size_t{gridDim.x} * blockDim.x;
+  const std::size_t k_slots = local && systems ? entries / systems : 0;
   for (std::size_t k = first; k < entries; k += stride) {
-    i[k] = static_cast<std::int32_t>(i64[k]);
-    j[k] = static_cast<std::int32_t>(j64[k]);
+    std::int64_t offset = 0;
+    if (local) {
+      const std::size_t b = k / k_slots;
+      const std::int64_t pairs = c64[b];
+      const bool pair = pairs >= 0 && static_cast<std::int64_t>(k - b * k_slots) < pairs;
+      offset = pair ? static_cast<std::int64_t>(b * local) : 0;
+    }
+    i[k] = static_cast<std::int32_t>(i64[k] - offset);
+    j[k] = static_cast<std::int32_t>(j64[k] - offset);
   }
   for (std::size_t b = first; b < systems; b += stride)
     count[b] = static_cast<std::int32_t>(c64[b] < INT32_MAX ? c64[b] : INT32_MAX);
@@ -145,9 +162,10 @@ ffi::Error check_indices(std::size_t n) {
   return ffi::Error::Success();
 }
 
-// B systems of N particles (jax.vmap): one pass per system, each writing its own K slots with
-// local indices and its own count, so that every count is exact even when other systems
-// overflow their slots; then one kernel narrows all of them.
+// B systems of N particles (jax.vmap): one pass over all of them with a list per system
+// (StaticPairs::systems), each writing its own K slots and its own count, so that every count is
+// exact even when other systems overflow their slots; then one kernel narrows all of them to
+// local int32 indices.
 ffi::Error neighbor_list(cudaStream_t stream, ffi::ScratchAllocator scratch_allocator,
                          ffi::Buffer<ffi::F32> positions, ffi::AnyBuffer cell,
                          ffi::Buffer<ffi::PRED> pbc, float cutoff, std::int64_t half,
@@ -170,29 +188,32 @@ ffi::Error neighbor_list(cudaStream_t stream, ffi::ScratchAllocator scratch_allo
     auto* i64 = scratch.array<std::int64_t>(systems * k);
     auto* j64 = scratch.array<std::int64_t>(systems * k);
     auto* c64 = scratch.array<std::int64_t>(systems);
-    const raycut::Context ctx{stream, &scratch};
+    auto* batch = scratch.array<std::int64_t>(systems * n);
+    if (systems * n > 0)
+      systems_of_rows<<<blocks_for(systems * n), block_threads, 0, stream>>>(batch, n, systems * n);
+    raycut::DeviceSystems all;
+    all.positions = at.positions;
+    all.scalar = at.scalar;
+    all.size = systems * n;
+    all.cells = at.cells;
+    all.cell_count = systems;
+    all.pbc = pbc.typed_data();
+    all.pbc_count = systems;
+    all.batch = batch;
+    raycut::StaticPairs out;
+    out.i = i64;
+    out.j = j64;
+    out.shifts = shifts->typed_data();
+    out.count = c64;
+    out.capacity = k;
+    out.pad_index = static_cast<std::int64_t>(n);
+    out.systems = systems;
     raycut::PairOptions options;
     options.half = half != 0;
-    for (std::size_t b = 0; b < systems; ++b) {
-      raycut::DeviceSystems one;
-      one.positions = static_cast<const char*>(at.positions) + 3 * n * b * at.scalar_bytes;
-      one.scalar = at.scalar;
-      one.size = n;
-      one.cells = static_cast<const char*>(at.cells) + 9 * b * at.scalar_bytes;
-      one.cell_count = 1;
-      one.pbc = pbc.typed_data() + 3 * b;
-      one.pbc_count = 1;
-      raycut::StaticPairs out;
-      out.i = i64 + b * k;
-      out.j = j64 + b * k;
-      out.shifts = shifts->typed_data() + 3 * b * k;
-      out.count = c64 + b;
-      out.capacity = k;
-      out.pad_index = static_cast<std::int64_t>(n);
-      raycut::list_pairs_small_systems(ctx, one, cutoff, options, out);
-    }
+    raycut::list_pairs_small_systems(raycut::Context{stream, &scratch}, all, cutoff, options, out);
     narrow<<<blocks_for(std::max(systems * k, systems)), block_threads, 0, stream>>>(
-        i64, j64, c64, i->typed_data(), j->typed_data(), count->typed_data(), systems * k, systems);
+        i64, j64, c64, i->typed_data(), j->typed_data(), count->typed_data(), systems * k, systems,
+        n);
     return launched("writing the int32 results");
   } catch (const raycut::Error& e) {
     return failed(e);

@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "core/validation.hpp"
 #include "cuda/device_pairs_host.hpp"
@@ -36,6 +37,7 @@ struct Input {
   double cutoff = 0, cutoff2 = 0;
   bool half = false;
   const int* run_if = nullptr;  // PairOptions::run_if
+  std::int64_t systems = 0;     // StaticPairs::systems: a list per system (0: one list)
 };
 
 // What a row needs to enumerate its pairs: its system's particles, and where periodic, the
@@ -89,7 +91,8 @@ __host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
     f.lo = bound(in.batch, in.n, system, false);
     f.hi = bound(in.batch, in.n, system, true);
   }
-  if (system < 0) return int(count_batch_out_of_range);  // open systems too, as the Engine
+  if (system < 0 || (in.systems > 0 && system >= in.systems))  // open systems too
+    return int(count_batch_out_of_range);
   if (!in.cells) return 0;
   if ((in.cell_count > 1 && system >= in.cell_count) ||
       (in.pbc_count > 1 && system >= in.pbc_count))
@@ -261,15 +264,32 @@ __global__ void count_rows(Input in, unsigned long long* counts, int* status) {
   if (lane == 0) counts[row] = c;
 }
 
+// Where row `row`'s list lies: its first entry (s * capacity for system s with a list per
+// system, else 0) and the global offset its list counts from (its system's first row's).
+struct ListSlots {
+  std::uint64_t first = 0;
+  unsigned long long origin = 0;
+};
+__host__ __device__ ListSlots list_slots(const Input& in, const Frame& f, std::int64_t row,
+                                         const unsigned long long* offsets,
+                                         const StaticPairs& out) {
+  if (in.systems == 0) return {};
+  const std::int64_t system = in.batch ? in.batch[row] : 0;
+  return {static_cast<std::uint64_t>(system) * out.capacity, offsets[f.lo]};
+}
+
 template <class Real>
 __global__ void fill_rows(Input in, const unsigned long long* offsets, StaticPairs out) {
   const std::int64_t row = (std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x) / warp_size;
   const int lane = threadIdx.x % warp_size;
   if (row >= in.n) return;
-  const unsigned long long start = offsets[row];
-  if (start >= static_cast<unsigned long long>(out.capacity) || offsets[row + 1] == start) return;
   Frame f;
   if (make_frame<Real>(in, row, f)) return;
+  // A list per system: this system's entries from s * capacity, counted from its first row.
+  const ListSlots slots = list_slots(in, f, row, offsets, out);
+  const unsigned long long start = offsets[row] - slots.origin;
+  if (start >= static_cast<unsigned long long>(out.capacity) || offsets[row + 1] == offsets[row])
+    return;
   unsigned long long written = start;
   // Chunks of 32 sources in lockstep: each lane's hits go after the lower lanes' (a warp scan),
   // so the order is j ascending whatever the scheduling.
@@ -286,10 +306,11 @@ __global__ void fill_rows(Input in, const unsigned long long* offsets, StaticPai
     if (hits)
       for_each_image<Real>(in, f, row, j, [&](const int* s) {
         if (at < static_cast<unsigned long long>(out.capacity)) {
-          out.i[at] = row;
-          out.j[at] = j;
+          const std::uint64_t e = slots.first + at;
+          out.i[e] = row;
+          out.j[e] = j;
           if (out.shifts)
-            for (int k = 0; k < 3; ++k) out.shifts[3 * at + k] = s[k];
+            for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = s[k];
         }
         ++at;
       });
@@ -310,6 +331,32 @@ __global__ void finish(const unsigned long long* total, const int* status, const
   const std::int64_t thread = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
   if (thread == 0) *out.count = bad ? std::int64_t(*status) : static_cast<std::int64_t>(pairs);
   for (std::int64_t e = first + thread; e < capacity; e += std::int64_t(gridDim.x) * blockDim.x) {
+    out.i[e] = out.j[e] = out.pad_index;
+    if (out.shifts)
+      for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = 0;
+  }
+}
+
+// finish for a list per system: each system's count (offsets at its last row minus its first,
+// or the error code) and padding after its pairs in its own slots.
+__global__ void finish_systems(Input in, const unsigned long long* offsets, const int* status,
+                               StaticPairs out) {
+  if (in.run_if && *in.run_if == 0) return;
+  const bool bad = *status < 0;
+  const std::uint64_t entries = out.capacity * out.systems;
+  const std::int64_t thread = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  const std::int64_t stride = std::int64_t(gridDim.x) * blockDim.x;
+  for (std::int64_t s = thread; s < std::int64_t(out.systems); s += stride) {
+    const std::int64_t lo = in.batch ? bound(in.batch, in.n, s, false) : (s == 0 ? 0 : in.n);
+    const std::int64_t hi = in.batch ? bound(in.batch, in.n, s, true) : in.n;
+    out.count[s] = bad ? std::int64_t(*status) : std::int64_t(offsets[hi] - offsets[lo]);
+  }
+  for (std::int64_t e = thread; e < std::int64_t(entries); e += stride) {
+    const std::int64_t s = e / std::int64_t(out.capacity);
+    const std::int64_t lo = in.batch ? bound(in.batch, in.n, s, false) : (s == 0 ? 0 : in.n);
+    const std::int64_t hi = in.batch ? bound(in.batch, in.n, s, true) : in.n;
+    const auto pairs = static_cast<std::int64_t>(offsets[hi] - offsets[lo]);
+    if (!bad && e - s * std::int64_t(out.capacity) < pairs) continue;
     out.i[e] = out.j[e] = out.pad_index;
     if (out.shifts)
       for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = 0;
@@ -361,6 +408,11 @@ Input make_input(const DeviceSystems& systems, double cutoff, const PairOptions&
           "i or j is null for a capacity of " + std::to_string(out.capacity));
   require(out.capacity <= max_capacity,
           "capacity " + std::to_string(out.capacity) + " is above the largest, 2^56");
+  require(out.systems == 0 || out.capacity == 0 || out.systems <= max_capacity / out.capacity,
+          "capacity " + std::to_string(out.capacity) + " for each of " +
+              std::to_string(out.systems) + " systems is above the largest, 2^56 in all");
+  require(out.systems <= 1 || n == 0 || systems.batch,
+          "a list per system for " + std::to_string(out.systems) + " systems needs the batch");
 
   Input in;
   in.xyz = systems.positions;
@@ -374,6 +426,7 @@ Input make_input(const DeviceSystems& systems, double cutoff, const PairOptions&
   in.cutoff2 = cutoff * cutoff;
   in.half = options.half;
   in.run_if = options.run_if;
+  in.systems = static_cast<std::int64_t>(out.systems);
   return in;
 }
 
@@ -381,33 +434,40 @@ Input make_input(const DeviceSystems& systems, double cutoff, const PairOptions&
 // what lets a machine without a GPU test the pass's arithmetic (cuda/device_pairs_host.hpp).
 template <class Real>
 void host_pass(const Input& in, const StaticPairs& out) {
-  std::uint64_t written = 0;
+  if (in.run_if && *in.run_if == 0) return;
+  const std::size_t lists = out.systems ? out.systems : 1;
+  std::vector<std::uint64_t> written(lists, 0);  // by list
   int status = 0;
   for (std::int64_t row = 0; row < in.n; ++row) {
-    if (in.run_if && *in.run_if == 0) return;
     Frame f;
     if (const int bad = make_frame<Real>(in, row, f)) {
       status = std::min(status, bad);
       continue;
     }
+    const std::size_t list = out.systems && in.batch ? std::size_t(in.batch[row]) : 0;
+    std::uint64_t& at = written[list];
     for (std::int64_t j = first_source(in, f, row); j < f.hi; ++j)
       for_each_image<Real>(in, f, row, j, [&](const int* s) {
-        if (written < out.capacity) {
-          out.i[written] = row;
-          out.j[written] = j;
+        if (at < out.capacity) {
+          const std::uint64_t e = list * out.capacity + at;
+          out.i[e] = row;
+          out.j[e] = j;
           if (out.shifts)
-            for (int k = 0; k < 3; ++k) out.shifts[3 * written + k] = s[k];
+            for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = s[k];
         }
-        ++written;
+        ++at;
       });
   }
-  const std::uint64_t kept = status < 0 ? 0 : std::min<std::uint64_t>(written, out.capacity);
-  for (std::uint64_t e = kept; e < out.capacity; ++e) {
-    out.i[e] = out.j[e] = out.pad_index;
-    if (out.shifts)
-      for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = 0;
+  for (std::size_t list = 0; list < lists; ++list) {
+    const std::uint64_t kept =
+        status < 0 ? 0 : std::min<std::uint64_t>(written[list], out.capacity);
+    for (std::uint64_t e = list * out.capacity + kept; e < (list + 1) * out.capacity; ++e) {
+      out.i[e] = out.j[e] = out.pad_index;
+      if (out.shifts)
+        for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = 0;
+    }
+    out.count[list] = status < 0 ? std::int64_t(status) : static_cast<std::int64_t>(written[list]);
   }
-  *out.count = status < 0 ? std::int64_t(status) : static_cast<std::int64_t>(written);
 }
 
 }  // namespace
@@ -453,9 +513,15 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
         fill_rows<float><<<rows_blocks, block_threads, 0, stream>>>(in, offsets, out);
       RAYCUT_CUDA_CHECK_LAUNCH();
     }
-    const std::size_t pad_blocks = std::min<std::size_t>((out.capacity + 255) / 256 + 1, 1024);
-    finish<<<static_cast<unsigned>(pad_blocks), 256, 0, stream>>>(offsets + n, status, in.run_if,
-                                                                  out);
+    const std::size_t entries = out.capacity * std::max<std::size_t>(out.systems, 1);
+    const std::size_t pad_blocks =
+        std::min<std::size_t>((std::max(entries, out.systems) + 255) / 256 + 1, 1024);
+    if (out.systems)
+      finish_systems<<<static_cast<unsigned>(pad_blocks), 256, 0, stream>>>(in, offsets, status,
+                                                                            out);
+    else
+      finish<<<static_cast<unsigned>(pad_blocks), 256, 0, stream>>>(offsets + n, status, in.run_if,
+                                                                    out);
     RAYCUT_CUDA_CHECK_LAUNCH();
   } catch (...) {
     deallocate(ctx, block, bytes);
