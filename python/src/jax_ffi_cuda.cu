@@ -162,6 +162,33 @@ ffi::Error check_indices(std::size_t n) {
   return ffi::Error::Success();
 }
 
+// The pass over `all` into int64 scratch (with `lists` > 0, a list of K slots per system, else
+// one list of K), then XLA's int32 results narrowed from it (local indices with a list per
+// system of `n` particles).
+ffi::Error pass_and_narrow(cudaStream_t stream, ScratchResource& scratch,
+                           const raycut::DeviceSystems& all, float cutoff, std::int64_t half,
+                           std::size_t lists, std::size_t k, std::size_t n,
+                           ffi::ResultBuffer<ffi::S32>& i, ffi::ResultBuffer<ffi::S32>& j,
+                           ffi::ResultBuffer<ffi::S32>& shifts,
+                           ffi::ResultBuffer<ffi::S32>& count) {
+  const std::size_t counts = std::max<std::size_t>(lists, 1), entries = counts * k;
+  raycut::StaticPairs out;
+  out.i = scratch.array<std::int64_t>(entries);
+  out.j = scratch.array<std::int64_t>(entries);
+  out.shifts = shifts->typed_data();
+  out.count = scratch.array<std::int64_t>(counts);
+  out.capacity = k;
+  out.pad_index = static_cast<std::int64_t>(n);
+  out.systems = lists;
+  raycut::PairOptions options;
+  options.half = half != 0;
+  raycut::list_pairs_small_systems(raycut::Context{stream, &scratch}, all, cutoff, options, out);
+  narrow<<<blocks_for(std::max(entries, counts)), block_threads, 0, stream>>>(
+      out.i, out.j, out.count, i->typed_data(), j->typed_data(), count->typed_data(), entries,
+      counts, lists ? n : 0);
+  return launched("writing the int32 results");
+}
+
 // B systems of N particles (jax.vmap): one pass over all of them with a list per system
 // (StaticPairs::systems), each writing its own K slots and its own count, so that every count is
 // exact even when other systems overflow their slots; then one kernel narrows all of them to
@@ -185,9 +212,6 @@ ffi::Error neighbor_list(cudaStream_t stream, ffi::ScratchAllocator scratch_allo
     Coordinates at;
     if (ffi::Error error = coordinates(stream, positions, cell, scratch, at); error.failure())
       return error;
-    auto* i64 = scratch.array<std::int64_t>(systems * k);
-    auto* j64 = scratch.array<std::int64_t>(systems * k);
-    auto* c64 = scratch.array<std::int64_t>(systems);
     auto* batch = scratch.array<std::int64_t>(systems * n);
     if (systems * n > 0)
       systems_of_rows<<<blocks_for(systems * n), block_threads, 0, stream>>>(batch, n, systems * n);
@@ -200,21 +224,7 @@ ffi::Error neighbor_list(cudaStream_t stream, ffi::ScratchAllocator scratch_allo
     all.pbc = pbc.typed_data();
     all.pbc_count = systems;
     all.batch = batch;
-    raycut::StaticPairs out;
-    out.i = i64;
-    out.j = j64;
-    out.shifts = shifts->typed_data();
-    out.count = c64;
-    out.capacity = k;
-    out.pad_index = static_cast<std::int64_t>(n);
-    out.systems = systems;
-    raycut::PairOptions options;
-    options.half = half != 0;
-    raycut::list_pairs_small_systems(raycut::Context{stream, &scratch}, all, cutoff, options, out);
-    narrow<<<blocks_for(std::max(systems * k, systems)), block_threads, 0, stream>>>(
-        i64, j64, c64, i->typed_data(), j->typed_data(), count->typed_data(), systems * k, systems,
-        n);
-    return launched("writing the int32 results");
+    return pass_and_narrow(stream, scratch, all, cutoff, half, systems, k, n, i, j, shifts, count);
   } catch (const raycut::Error& e) {
     return failed(e);
   } catch (const std::exception& e) {  // nothing may cross into XLA as an exception
@@ -262,22 +272,7 @@ ffi::Error ragged_neighbor_list(cudaStream_t stream, ffi::ScratchAllocator scrat
       all.pbc_count = systems;
       all.batch = system_of;
     }
-    auto* i64 = scratch.array<std::int64_t>(k);
-    auto* j64 = scratch.array<std::int64_t>(k);
-    auto* c64 = scratch.array<std::int64_t>(1);
-    raycut::StaticPairs out;
-    out.i = i64;
-    out.j = j64;
-    out.shifts = shifts->typed_data();
-    out.count = c64;
-    out.capacity = k;
-    out.pad_index = static_cast<std::int64_t>(n);
-    raycut::PairOptions options;
-    options.half = half != 0;
-    raycut::list_pairs_small_systems(raycut::Context{stream, &scratch}, all, cutoff, options, out);
-    narrow<<<blocks_for(k), block_threads, 0, stream>>>(i64, j64, c64, i->typed_data(),
-                                                        j->typed_data(), count->typed_data(), k, 1);
-    return launched("writing the int32 results");
+    return pass_and_narrow(stream, scratch, all, cutoff, half, 0, k, n, i, j, shifts, count);
   } catch (const raycut::Error& e) {
     return failed(e);
   } catch (const std::exception& e) {  // nothing may cross into XLA as an exception
