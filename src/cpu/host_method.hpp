@@ -116,23 +116,6 @@ class HostMethod : public Method {
     return pass;
   }
 
-  // What a list keeps: its half orientation and per-pair cutoffs (decided in double with the
-  // points' images, ExactImages).
-  ListFilter list_filter(const ListOptions& options) const {
-    ListFilter filter{options.half, host_cutoff_filter(options.cutoffs)};
-    if (images_.exact) filter.cutoffs.exact = *images_.exact;
-    return filter;
-  }
-  // The count pass into offsets[1 .. n], then their running sum: offsets[i] is row i's first.
-  void count_rows(const ListFilter& filter, std::uint64_t* offsets) const {
-    require_host_memory(4.0 * static_cast<double>(n_),
-                        "the row counts of a neighbour list of " + std::to_string(n_) + " rows");
-    std::vector<std::uint32_t> counts(n_);
-    count_list(filter, counts.data(), [&](const auto& f) { run(f); });
-    offsets[0] = 0;
-    for (std::size_t i = 0; i < n_; ++i) offsets[i + 1] = offsets[i] + counts[i];
-  }
-
   // The visiting order of targets; a method whose candidates lie in cell order gives its own.
   const std::uint32_t* target_order() const { return nullptr; }
 
@@ -159,6 +142,23 @@ class HostMethod : public Method {
   }
 
  private:
+  // What a list keeps: its half orientation and per-pair cutoffs (decided in double with the
+  // points' images, ExactImages).
+  ListFilter list_filter(const ListOptions& options) const {
+    ListFilter filter{options.half, host_cutoff_filter(options.cutoffs)};
+    if (images_.exact) filter.cutoffs.exact = *images_.exact;
+    return filter;
+  }
+  // The count pass into offsets[1 .. n], then their running sum: offsets[i] is row i's first.
+  void count_rows(const ListFilter& filter, std::uint64_t* offsets) const {
+    require_host_memory(4.0 * static_cast<double>(n_),
+                        "the row counts of a neighbour list of " + std::to_string(n_) + " rows");
+    std::vector<std::uint32_t> counts(n_);
+    count_list(filter, counts.data(), [&](const auto& f) { run(f); });
+    offsets[0] = 0;
+    for (std::size_t i = 0; i < n_; ++i) offsets[i + 1] = offsets[i] + counts[i];
+  }
+
   template <class F>
   void run(const F& f) const {
     run_host_pass(pair_pass(), static_cast<const Self*>(this)->candidates(), f);
