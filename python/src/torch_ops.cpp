@@ -261,6 +261,35 @@ Work& work_for(const at::Device& device) {
   return *work;
 }
 
+// For the length of a call: `device` current (first: a CUDA engine is made on its own device),
+// its engine, and on CUDA torch's current stream as the engine's.
+class OnDevice {
+ public:
+  explicit OnDevice(const at::Device& device) : guard_(guarded(device)), work(work_for(device)) {
+#ifdef RAYCUT_TORCH_CUDA
+    if (device.is_cuda())
+      work.engine.set_stream(c10::cuda::getCurrentCUDAStream(device.index()).stream());
+#endif
+  }
+
+ private:
+#ifdef RAYCUT_TORCH_CUDA
+  static std::optional<c10::cuda::CUDAGuard> guarded(const at::Device& device) {
+    if (device.is_cuda()) return std::optional<c10::cuda::CUDAGuard>(std::in_place, device);
+    return std::nullopt;
+  }
+  std::optional<c10::cuda::CUDAGuard> guard_;
+#else
+  static bool guarded(const at::Device&) {
+    return false;
+  }
+  bool guard_;
+#endif
+
+ public:
+  Work& work;
+};
+
 // The list's pairs as (i, j, S, count) tensors on `device`: exactly its pairs, or `max_pairs`
 // entries with padding (i = pad_i, j = pad_j, S = 0) after the pairs (cut past max_pairs: count
 // says so). Device lists are copied on the current stream, the one the engine worked on.
@@ -305,17 +334,11 @@ Pairs run(const at::Tensor& x, double cutoff, const raycut::Systems& systems, bo
           std::optional<std::int64_t> max_pairs, std::int64_t pad_i, std::int64_t pad_j,
           const at::Tensor& wide = at::Tensor()) {
   const at::Device device = x.device();
-  Work& work = work_for(device);
+  const OnDevice on(device);
+  Work& work = on.work;
   raycut::NeighbourListBuffer fresh;
   raycut::NeighbourListBuffer& list = device.is_cpu() ? work.list : fresh;
   const auto space = device.is_cpu() ? raycut::MemorySpace::host : raycut::MemorySpace::device;
-#ifdef RAYCUT_TORCH_CUDA
-  std::optional<c10::cuda::CUDAGuard> guard;
-  if (device.is_cuda()) {
-    guard.emplace(device);
-    work.engine.set_stream(c10::cuda::getCurrentCUDAStream(device.index()).stream());
-  }
-#endif
   try {
     if (wide.defined())
       work.engine.build(
@@ -536,14 +559,8 @@ std::tuple<at::Tensor, at::Tensor, at::Tensor> lj_forces(const at::Tensor& posit
       systems_of(boxes_of(cell, pbc), system_index(batch, n, "batch"), n, at::Tensor(), 0,
                  /*with_queries=*/false, "batch");
   const at::Device device = x.device();
-  Work& work = work_for(device);
-#ifdef RAYCUT_TORCH_CUDA
-  std::optional<c10::cuda::CUDAGuard> guard;
-  if (device.is_cuda()) {
-    guard.emplace(device);
-    work.engine.set_stream(c10::cuda::getCurrentCUDAStream(device.index()).stream());
-  }
-#endif
+  const OnDevice on(device);
+  Work& work = on.work;
   const auto space = device.is_cpu() ? raycut::MemorySpace::host : raycut::MemorySpace::device;
   raycut::KernelOptions options;
   options.lj_epsilon = static_cast<float>(epsilon);
