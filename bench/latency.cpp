@@ -12,7 +12,9 @@
 // stream into a StaticPairBuffer of 1.25 x the true count, found once with
 // list_pairs_small_systems_growing), mode graph / capacity static (the same call captured once
 // in global mode, replayed with cudaGraphLaunch), mode eager / capacity exact (Engine("grid")
-// build + neighbours with shifts, engine and buffer reused). The small path is measured where
+// build + neighbours with shifts, engine and buffer reused), mode eager / capacity engine-static
+// (the same build, then Engine::neighbours into a StaticPairs of 1.25 x the count: no read-back
+// of the total). The small path is measured where
 // prefer_small_systems says so, everywhere with --all; --crossover adds single systems of 2000,
 // 4000 and 8000 particles on every path.
 //
@@ -377,8 +379,27 @@ std::uint64_t measure_engine(const Workload& w, DeviceWorkload& d, cudaStream_t 
   Row row{"lj-pbc", w.systems, w.per_system, "cpp", "eager", "exact", 0, "", ""};
   row.us = us_per_call(call, sync, o.reps, o.min_loop_ms);
   rows.push_back(row);
-  std::printf("  engine: %llu pairs\n", static_cast<unsigned long long>(list.pairs()));
-  return list.pairs();
+  const std::uint64_t pairs = list.pairs();
+  std::printf("  engine: %llu pairs\n", static_cast<unsigned long long>(pairs));
+
+  // The same build, then the list into a static capacity (1.25 x the count): no read-back of
+  // the total, no list buffers.
+  raycut::Context ctx;
+  ctx.stream = stream;
+  raycut::StaticPairBuffer buffer(pairs + pairs / 4 + 1, ctx);
+  const raycut::StaticPairs out = buffer.view(static_cast<std::int64_t>(w.particles()));
+  auto static_call = [&] {
+    engine.build(d.positions(), cutoff, d.engine_systems);
+    engine.neighbours(out, raycut::ListOptions{});
+  };
+  Row static_row{"lj-pbc", w.systems, w.per_system, "cpp", "eager", "engine-static", 0, "", ""};
+  static_row.us = us_per_call(static_call, sync, o.reps, o.min_loop_ms);
+  rows.push_back(static_row);
+  const std::int64_t count = raycut::read_pair_count(ctx, buffer.count());
+  if (count != static_cast<std::int64_t>(pairs))
+    throw std::runtime_error("the engine's static list counts " + std::to_string(count) +
+                             " pairs, its exact list " + std::to_string(pairs));
+  return pairs;
 }
 
 std::vector<Workload> workloads(const Options& o) {
