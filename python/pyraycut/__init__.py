@@ -676,9 +676,10 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     letters = _letters(quantities)
     pair_cutoffs = None
     if _cutoffs.is_varying(cutoff):
-        if max_pairs is not None:
-            raise ValueError("per-atom and per-pair cutoffs: not with max_pairs (the static-"
-                             "capacity operator takes one cutoff)")
+        if max_pairs is not None or _compiling(positions):
+            raise ValueError("per-atom and per-pair cutoffs: not with max_pairs nor inside "
+                             "torch.compile (the operator takes one cutoff: list at the largest "
+                             "and mask d < cutoff(i, j) in the model)")
         n = _points(positions)
         cutoffs = _cutoffs.PairCutoffs(
             cutoff, n if n is not None else _points(_arrays.to_host(positions)), numbers)
@@ -776,6 +777,15 @@ def load_torch_ops() -> str:
     if _torch_ops() is None:
         from . import _torch  # noqa: F401  raises the ImportError that says why
     return _torch_ops().LIBRARY
+
+
+def _compiling(x: Any) -> bool:
+    """Whether a PyTorch tensor is being traced by torch.compile or torch.export."""
+    if _arrays.framework_of(x) != "torch":
+        return False
+    import torch
+
+    return bool(torch.compiler.is_compiling())
 
 
 def _torch_ops_route(x: Any, method: str, max_pairs: Optional[int]) -> bool:

@@ -359,3 +359,10 @@ def test_varying_cutoffs_in_the_pass_take_every_framework_and_huge_boxes():
     np.testing.assert_array_equal(triples(i.numpy(), j.numpy(), S.numpy()), triples(*theirs))
     with pytest.raises(ValueError, match="not with max_pairs"):
         pyraycut.neighbor_list("ij", x, cutoff, numbers=atoms.numbers, max_pairs=100)
+
+    @torch.compile(fullgraph=True)
+    def compiled(y):
+        return pyraycut.neighbor_list("ij", y, cutoff, numbers=atoms.numbers)
+
+    with pytest.raises(Exception, match="nor inside torch.compile"):
+        compiled(x)
