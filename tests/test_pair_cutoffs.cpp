@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "method_availability.hpp"
 #include "periodic_oracle.hpp"
 #include "raycut/box.hpp"
 #include "raycut/engine.hpp"
@@ -29,11 +30,7 @@ bool exact_search(const std::string& method) {
   return method == "brute-force" || method == "cell-list";
 }
 
-std::string why_unavailable(const std::string& method) {
-  for (const raycut::MethodDescription& m : raycut::list_methods())
-    if (m.name == method) return m.available ? "" : m.why_unavailable;
-  return "not built";
-}
+using raycut_test::unavailable;
 
 struct Case {
   std::uint64_t seed = 0;
@@ -180,7 +177,7 @@ class PairCutoffs : public ::testing::TestWithParam<std::string> {};
 
 TEST_P(PairCutoffs, FuzzAgainstTheImageOracle) {
   const std::string& method = GetParam();
-  if (const std::string why = why_unavailable(method); !why.empty())
+  if (const std::string why = unavailable(method); !why.empty())
     GTEST_SKIP() << method << ": " << why;
   const double max_ratio = exact_search(method) ? 1e6 : 1e2;
   std::size_t pairs = 0;
@@ -201,7 +198,7 @@ TEST_P(PairCutoffs, FuzzAgainstTheImageOracle) {
 // Two systems in one batch, each with its own cell: the cutoffs index the batch's particles.
 TEST_P(PairCutoffs, BatchWithACellPerSystem) {
   const std::string& method = GetParam();
-  if (const std::string why = why_unavailable(method); !why.empty())
+  if (const std::string why = unavailable(method); !why.empty())
     GTEST_SKIP() << method << ": " << why;
   const Case a = make_case(7, 10), b = make_case(8, 10);
   Case all = a;  // radii from both (species tables differ between cases: radii here)
@@ -244,7 +241,7 @@ TEST_P(PairCutoffs, BatchWithACellPerSystem) {
 // An open cloud (no box): d < r_i + r_j, with distances written as asked.
 TEST_P(PairCutoffs, OpenCloudWithDistances) {
   const std::string& method = GetParam();
-  if (const std::string why = why_unavailable(method); !why.empty())
+  if (const std::string why = unavailable(method); !why.empty())
     GTEST_SKIP() << method << ": " << why;
   // Particles on a line 1 apart: radii 0.3, 0.8, 0.3, 0.45 pair (0, 1) at 1.1 > 1, (1, 2)
   // likewise, (2, 3) at 0.75 < 1 (out), and (1, 3) at 1.25 < 2 (out).

@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "error_helpers.hpp"
+#include "method_availability.hpp"
 #include "periodic_oracle.hpp"
 #include "raycut/box.hpp"
 #include "raycut/engine.hpp"
@@ -49,14 +50,7 @@ using raycut_test::PeriodicTriple;
 // The methods that take Systems (the others refuse them: PeriodicUnsupported below).
 const std::vector<std::string> methods = {"brute-force", "cell-list", "brute-force-gpu", "grid"};
 
-// Why `method` cannot run here; empty when it can.
-std::string unavailable(const std::string& method) {
-  for (const auto& m : raycut::list_methods())
-    if (m.name == method)
-      return m.available ? "" : (m.why_unavailable.empty() ? "not available" : m.why_unavailable);
-  ADD_FAILURE() << method << " is not in list_methods()";
-  return "not in list_methods()";
-}
+using raycut_test::unavailable;
 
 #define SKIP_UNAVAILABLE(method)                                 \
   do {                                                           \

@@ -23,6 +23,7 @@
 #include <string>
 #include <vector>
 
+#include "method_availability.hpp"
 #include "periodic_oracle.hpp"
 #include "raycut/box.hpp"
 #include "raycut/engine.hpp"
@@ -33,14 +34,7 @@ namespace {
 const std::vector<std::string> exact_methods = {"brute-force", "cell-list", "brute-force-gpu",
                                                 "grid"};
 
-// Why `method` cannot run here; empty when it can.
-std::string unavailable(const std::string& method) {
-  for (const auto& m : raycut::list_methods())
-    if (m.name == method)
-      return m.available ? "" : (m.why_unavailable.empty() ? "not available" : m.why_unavailable);
-  ADD_FAILURE() << method << " is not in list_methods()";
-  return "not in list_methods()";
-}
+using raycut_test::unavailable;
 
 class PeriodicExact : public ::testing::TestWithParam<std::string> {
  protected:

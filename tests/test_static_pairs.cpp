@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "method_availability.hpp"
 #include "raycut/device_pairs.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/tools/generators.hpp"
@@ -24,17 +25,8 @@ using raycut::Engine;
 using raycut::ListOptions;
 using raycut::MemorySpace;
 
-std::vector<std::string> every_method() {
-  std::vector<std::string> names;
-  for (const auto& m : raycut::list_methods()) names.push_back(m.name);
-  return names;
-}
-
-std::string why_unavailable(const std::string& method) {
-  for (const auto& m : raycut::list_methods())
-    if (m.name == method) return m.available ? "" : m.why_unavailable;
-  return "not built";
-}
+using raycut_test::every_method;
+using raycut_test::unavailable;
 
 // A static list read back: i, j, S of every slot (capacity), the count, and whatever lies in
 // the `guard` slots past the capacity (a write there is a bug).
@@ -132,7 +124,7 @@ void expect_static_equals(const Read& r, const Expected& e, std::size_t capacity
 class StaticLists : public ::testing::TestWithParam<std::string> {
  protected:
   void SetUp() override {
-    if (const std::string why = why_unavailable(GetParam()); !why.empty())
+    if (const std::string why = unavailable(GetParam()); !why.empty())
       GTEST_SKIP() << GetParam() << ": " << why;
   }
   // Capacities around the count: short by one, exact, with room, and none.
