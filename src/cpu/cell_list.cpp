@@ -116,16 +116,26 @@ void sort_entries(std::vector<Entry>& entries) {
 
 class CellListCpu final : public HostMethod<CellListCpu> {
  public:
-  // Candidates of target i: the particles of the non-empty cells around its own.
-  auto candidates() const {
-    return [this](std::size_t i, auto&& f) {
-      const std::uint32_t c = cell_of_particle_[i];
-      for (std::size_t e = neighbour_offsets_[c]; e < neighbour_offsets_[c + 1]; ++e) {
-        const std::uint32_t nc = neighbour_cells_[e];
-        for (std::uint32_t s = cell_start_[nc]; s < cell_start_[nc + 1]; ++s)
-          f(order_[s], &sorted_xyz_[3 * std::size_t{s}]);
-      }
-    };
+  // Candidates of target i: the particles of the non-empty cells around its own. Cells with
+  // consecutive numbers hold consecutive slots, so each run of them (a row of up to 3 cells) is
+  // one run of candidates.
+  std::size_t candidate_runs(std::size_t i, CandidateRun* out) const {
+    const std::uint32_t c = cell_of_particle_[i];
+    const std::uint64_t end = neighbour_offsets_[c + 1];
+    std::size_t runs = 0;
+    for (std::uint64_t e = neighbour_offsets_[c]; e < end;) {
+      const std::uint32_t first_cell = neighbour_cells_[e];
+      std::uint32_t last_cell = first_cell;
+      for (++e; e < end && neighbour_cells_[e] == last_cell + 1; ++e) ++last_cell;
+      const std::uint32_t s = cell_start_[first_cell];
+      out[runs++] = {sorted_x_.data() + s,
+                     sorted_y_.data() + s,
+                     sorted_z_.data() + s,
+                     order_.data() + s,
+                     0,
+                     cell_start_[last_cell + 1] - s};
+    }
+    return runs;
   }
 
   // The targets in slot order: consecutive targets then read the same neighbour cells, cached
@@ -169,9 +179,16 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     sort_entries(entries);
     order_.resize(n);
     for (std::size_t s = 0; s < n; ++s) order_[s] = entries[s].index;
-    sorted_xyz_.resize(3 * n);
-    for (std::size_t s = 0; s < n; ++s)
-      std::copy_n(&xyz[3 * std::size_t{order_[s]}], 3, &sorted_xyz_[3 * s]);
+    // Padded past the last slot: a run reads whole vectors (CandidateRun::padding).
+    sorted_x_.assign(n + CandidateRun::padding, 0.0f);
+    sorted_y_.assign(n + CandidateRun::padding, 0.0f);
+    sorted_z_.assign(n + CandidateRun::padding, 0.0f);
+    for (std::size_t s = 0; s < n; ++s) {
+      const float* p = &xyz[3 * std::size_t{order_[s]}];
+      sorted_x_[s] = p[0];
+      sorted_y_[s] = p[1];
+      sorted_z_[s] = p[2];
+    }
     target_order_.clear();
     for (const std::uint32_t p : order_)
       if (p < points.targets) target_order_.push_back(p);
@@ -260,12 +277,12 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   }
 
   std::vector<float> xyz_;
-  static constexpr double width_margin = 1e-4;   // as CellGrid: far above predicate round-off
-  double inverse_width_ = 1;                     // cells per unit length
-  std::vector<std::uint32_t> order_;             // sorted slot -> particle index
-  std::vector<std::uint32_t> target_order_;      // the targets (points < targets) in slot order
-  std::vector<float> sorted_xyz_;                // positions in sorted order
-  std::vector<CellKey> cell_keys_;               // non-empty cells, ascending
+  static constexpr double width_margin = 1e-4;  // as CellGrid: far above predicate round-off
+  double inverse_width_ = 1;                    // cells per unit length
+  std::vector<std::uint32_t> order_;            // sorted slot -> particle index
+  std::vector<std::uint32_t> target_order_;     // the targets (points < targets) in slot order
+  std::vector<float> sorted_x_, sorted_y_, sorted_z_;  // positions in slot order
+  std::vector<CellKey> cell_keys_;                     // non-empty cells, ascending
   std::vector<std::uint32_t> cell_start_;        // cell c's sources: slots [start[c], start[c+1])
   std::vector<std::uint32_t> cell_of_particle_;  // particle index -> cell
   std::vector<std::uint64_t> neighbour_offsets_;

@@ -1,9 +1,11 @@
 // What every CPU method shares: results, lists and the caller's functors all run through the one
 // CPU pair loop (raycut/pairs.hpp) over the candidates the method names. A method derives from
 // HostMethod<Self> and provides:
-//   build(xyz, n, cutoff)  (storing what candidates() needs, and calling set_positions)
-//   candidates()           a callable walk(i, f) that calls f(j, xyz_j) for every candidate
-//                          source j of target i (j == i allowed), each at most once;
+//   build(xyz, n, cutoff)  (storing what candidate_runs() needs, and calling set_positions)
+//   candidate_runs(i, out) writes CandidateRuns (detail/pair_pass.hpp, at most
+//                          max_candidate_runs) holding every candidate point of target i (i
+//                          allowed), each at most once, and returns how many: the longer the
+//                          runs, the faster;
 // and optionally target_order(): the targets in the order to visit them (else 0 .. n - 1).
 #pragma once
 
@@ -109,9 +111,8 @@ class HostMethod : public Method {
     pass.host.method = this;
     pass.host.xyz = xyz_;
     pass.host.order = static_cast<const Self*>(this)->target_order();
-    pass.host.walk = [](const void* method, std::size_t i, CandidateSink sink, void* context) {
-      static_cast<const Self*>(method)->candidates()(
-          i, [&](std::size_t j, const float* xj) { sink(context, j, xj); });
+    pass.host.runs = [](const void* method, std::size_t i, CandidateRun* out) {
+      return static_cast<const Self*>(method)->candidate_runs(i, out);
     };
     return pass;
   }
@@ -127,7 +128,7 @@ class HostMethod : public Method {
                   std::string(method) + " supports fewer than 2^32 = 4294967296 particles " +
                       "(32-bit indices), got N = " + std::to_string(n));
   }
-  // The points candidates() reads targets from (the first `targets`; the caller's order), their
+  // The points candidate_runs() reads targets from (the first `targets`; the caller's order), their
   // images, and the cutoff.
   void set_positions(const float* xyz, std::size_t points, float cutoff, std::size_t targets,
                      const ImageTables& images = {}) {
@@ -161,7 +162,10 @@ class HostMethod : public Method {
 
   template <class F>
   void run(const F& f) const {
-    run_host_pass(pair_pass(), static_cast<const Self*>(this)->candidates(), f);
+    const auto* self = static_cast<const Self*>(this);
+    run_host_pass(
+        pair_pass(),
+        [self](std::size_t i, CandidateRun* out) { return self->candidate_runs(i, out); }, f);
   }
 
   const float* xyz_ = nullptr;

@@ -157,6 +157,19 @@ RAYCUT_HD bool in_range_of(const Images& images, float cutoff_squared, std::uint
   }
 }
 
+// Every float r2 at or above this is out of range under policy `images` (in_range_of says so
+// without a look at anything else): the cutoff, or the band's upper edge.
+template <class Images>
+RAYCUT_HD float out_of_range_from(const Images& images, float cutoff_squared) {
+  if constexpr (Images::banded) {
+    (void)cutoff_squared;
+    return images.exact.float_out;
+  } else {
+    (void)images;
+    return cutoff_squared;
+  }
+}
+
 // The largest error of a float r2 near cutoff^2 when each coordinate of both points is off by
 // up to `rounding` (r_f = p_k - p_i: 2 roundings per component plus its own relative rounding;
 // r2 in three roundings; the float cutoff^2 in one), with a factor 2 to spare.

@@ -17,7 +17,7 @@ namespace raycut::detail {
 
 enum class PassKind {
   none,             // nothing built (N = 0), or a method without a pass users can run (OptiX)
-  host,             // CPU methods: a candidate walk per target
+  host,             // CPU methods: runs of candidates per target
   brute_force_gpu,  // every target against every source
   grid_paper,       // the paper's dense grid, 27 cells
   grid,             // the production grid: dense or compact table, culled rows
@@ -51,12 +51,30 @@ struct ExactImages {
   bool exact_vectors = false;
 };
 
-// CPU methods: walk(method, i, sink, context) calls sink(context, j, xyz + 3 j) for every
-// candidate source j of target i (j == i included), each at most once.
-using CandidateSink = void (*)(void* context, std::size_t j, const float* xyz_j);
+// CPU methods hand candidates over in runs whose positions lie side by side (a row of cells, a
+// system), so that the in-range test runs over arrays, vectorised and without a branch per
+// candidate (pairs.hpp): point point(t) at (x[t], y[t], z[t]), t < count. x, y and z are readable
+// (any finite values) up to count rounded up to `padding`: the test runs whole vectors.
+struct CandidateRun {
+  static constexpr std::size_t padding = 8;
+  // No default values: a pass keeps an array of them per target, left unset until written.
+  const float* x;
+  const float* y;
+  const float* z;
+  const std::uint32_t* index;  // the points; null: first + t
+  std::uint32_t first;
+  std::size_t count;
+  std::uint32_t point(std::size_t t) const {
+    return index ? index[t] : first + static_cast<std::uint32_t>(t);
+  }
+};
+// The most runs a CPU method gives one target (the cell list: its 27 cells).
+constexpr std::size_t max_candidate_runs = 27;
 struct HostPass {
   const void* method = nullptr;
-  void (*walk)(const void* method, std::size_t i, CandidateSink sink, void* context) = nullptr;
+  // Writes runs (at most max_candidate_runs) that hold every candidate point of target i (i
+  // itself allowed), each point at most once, and returns how many.
+  std::size_t (*runs)(const void* method, std::size_t i, CandidateRun* out) = nullptr;
   const float* xyz = nullptr;  // (points, 3): the caller's order, or the points with images
   // The n targets in the order to visit them (the cell list: cell order, so that consecutive
   // targets share cached cells); null: 0 .. n - 1.
