@@ -13,7 +13,11 @@
 // and candidates per target (the points of the 27 cells around the target's own, counted here
 // with the cell list's cell width). Threads: OMP_NUM_THREADS.
 //
-//   periodic_cpu [particles=200000] [rounds=5] [method=cell-list] [kernel=lj_forces|count]
+// kernel "list" times the engine's CSR list with S (count and fill; not for open-n), "half-list"
+// the same half (nor for queries); those rows report 0 ms.
+//
+//   periodic_cpu [particles=200000] [rounds=5] [method=cell-list]
+//                [kernel=lj_forces|count|list|half-list]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -134,8 +138,19 @@ int main(int argc, char** argv) {
     direct->build_points(open_n, cutoff);
     return ms(start, Clock::now());
   };
+  const bool list = kernel_name == "list" || kernel_name == "half-list";
+  raycut::NeighbourListBuffer list_buffer;
   // Runs `kernel` on variant v; its ms.
   const auto run = [&](int v, raycut::Kernel kernel) {
+    if (list && kernel != raycut::Kernel::count) {
+      raycut::ListOptions options;
+      options.shifts = true;
+      options.half = kernel_name == "half-list";
+      if (v == 2 || (v == 3 && options.half)) return 0.0;  // no list, no half list of queries
+      const auto start = Clock::now();
+      engine_of(v).neighbours(list_buffer, options);
+      return ms(start, Clock::now());
+    }
     if (v != 2) {
       raycut::Engine& e = engine_of(v);
       e.run(kernel);

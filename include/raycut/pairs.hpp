@@ -46,9 +46,8 @@ inline int lowest_set_bit(std::uint64_t x) {
 // target i (at most max_candidate_runs) and returns how many. Two steps per block of a run: r2
 // of every candidate and whether it is below out_of_range_from, over arrays (vectorised, no
 // branch); then the predicate and on_pair for those alone, in the run's order. Most candidates
-// are out (5 in 6 in a cell list of cells C wide), and a branch on each mispredicted often:
-// 2026-12-05, the 200,000-particle LJ liquid, one thread on a shared 2-core machine, per pair:
-// count 11.4 -> <FILL> ns, lj_forces 36 -> <FILL> ns (docs/pair-pass.md).
+// are out (5 in 6 in a cell list of cells C wide), and a branch on each mispredicted often
+// (lists and lj_forces 1.6-2.4x faster on one CPU thread: docs/pair-pass.md, "The CPU loop").
 template <class Images, class RunsOf, class OnPair>
 void for_each_in_range(const Images& images, std::size_t i, const float* xyz, float cutoff_squared,
                        const RunsOf& runs_of, OnPair&& on_pair) {
@@ -71,20 +70,22 @@ void for_each_in_range(const Images& images, std::size_t i, const float* xyz, fl
           near[t] = r2[t] < out_from;
         }
       for (std::size_t t = m; t % lanes != 0; ++t) near[t] = 0;
-      // The near candidates, 8 flags (bytes 0 or 1) at a time: one branch per 8 candidates
-      // that hold none.
+      // The flags as one bit per candidate (8 bytes 0 or 1 gathered by one multiplication),
+      // then the near candidates: a branch per near one, and one that mispredicts per block.
+      std::uint64_t mask = 0;
       for (std::size_t w = 0; w < m; w += 8) {
         std::uint64_t flags;
         std::memcpy(&flags, near + w, 8);
-        for (; flags != 0; flags &= flags - 1) {
-          const std::size_t t = w + static_cast<std::size_t>(lowest_set_bit(flags)) / 8;
-          const std::uint32_t j = run.point(b + t);
-          if (j == i) continue;
-          Vec3 r{x[t] - xi, y[t] - yi, z[t] - zi};
-          float d2 = r2[t];
-          if (in_range_of(images, cutoff_squared, static_cast<std::uint32_t>(i), j, r, d2))
-            on_pair(j, r, d2);
-        }
+        mask |= ((flags * 0x0102040810204080u) >> 56) << w;
+      }
+      for (; mask != 0; mask &= mask - 1) {
+        const std::size_t t = static_cast<std::size_t>(lowest_set_bit(mask));
+        const std::uint32_t j = run.point(b + t);
+        if (j == i) continue;
+        Vec3 r{x[t] - xi, y[t] - yi, z[t] - zi};
+        float d2 = r2[t];
+        if (in_range_of(images, cutoff_squared, static_cast<std::uint32_t>(i), j, r, d2))
+          on_pair(j, r, d2);
       }
     }
   }
