@@ -157,8 +157,9 @@ std::vector<std::string> all_methods() {
 
 std::string test_name(const ::testing::TestParamInfo<ExtremeScales::ParamType>& info) {
   const auto& [method, c] = info.param;
-  char cutoff[32];
-  std::snprintf(cutoff, sizeof cutoff, "%g", c.cutoff);
+  char text[32];
+  std::snprintf(text, sizeof text, "%g", c.cutoff);
+  std::string cutoff = text;
   for (char& ch : cutoff) {
     if (ch == '-') ch = 'm';  // 1e-30 and 1e+30 must not give the same name
     if (ch == '+') ch = 'p';

@@ -27,12 +27,37 @@ from . import CapacityError, _systems, neighbor_list
 from . import radius as _radius_pairs
 
 
+def _by_row_nearest_first(i: torch.Tensor, d: torch.Tensor,
+                          ties: tuple[torch.Tensor, ...]) -> torch.Tensor:
+    """The order of the entries by row i, nearest first (d >= 0), equal distances by ``ties``
+    (most significant first). One sort of an int64 key, i and the bits of d in float32 (which
+    order like d), then the full comparison for the entries whose keys tie. (A stable sort per
+    key over every entry, as before, took 664 ms for 1.6M entries against 70-100 ms, one CPU
+    thread, 2026-12-05.)"""
+    key = (i.to(torch.int64) << 32) | d.to(torch.float32).contiguous().view(torch.int32).to(torch.int64)
+    order = torch.argsort(key, stable=True)  # stable: entries equal in every key keep their order
+    if len(order) < 2:
+        return order
+    sorted_key = key[order]
+    tied = sorted_key[1:] == sorted_key[:-1]
+    if bool(tied.any()):
+        # The tied entries hold whole groups of equal keys, in key order: sorting them all by the
+        # full (i, d, ties) puts each group in order without moving it.
+        mark = torch.zeros(len(order), dtype=torch.bool, device=order.device)
+        mark[1:] |= tied
+        mark[:-1] |= tied
+        sub = order[mark]
+        within = torch.arange(len(sub), device=sub.device)
+        for column in (*reversed(ties), d, i):  # least significant first
+            within = within[torch.argsort(column[sub][within], stable=True)]
+        order[mark] = sub[within]
+    return order
+
+
 def _keep_nearest(i: torch.Tensor, j: torch.Tensor, d: torch.Tensor, k: Optional[int],
                   rows: int, on_overflow: str) -> tuple[torch.Tensor, torch.Tensor]:
     """At most k entries per row i: the nearest (ties by j), in (i, d, j) order."""
-    order = torch.argsort(j, stable=True)
-    order = order[torch.argsort(d[order], stable=True)]
-    order = order[torch.argsort(i[order], stable=True)]
+    order = _by_row_nearest_first(i, d, (j,))
     i, j = i[order], j[order]
     if k is None:
         return i, j
@@ -105,10 +130,7 @@ _SMALLEST_RADIUS = 2.0**-59  # the library takes cutoffs from 2^-60: all points 
 def _nearest_first(i: torch.Tensor, j: torch.Tensor, d: torch.Tensor,
                    shifts: torch.Tensor) -> torch.Tensor:
     """The order (i, d, j, S) of the entries: by row, nearest first, ties by index then shift."""
-    order = torch.arange(len(i), device=i.device)
-    for key in (shifts[:, 2], shifts[:, 1], shifts[:, 0], j, d, i):  # least significant first
-        order = order[torch.argsort(key[order], stable=True)]
-    return order
+    return _by_row_nearest_first(i, d, (j, shifts[:, 0], shifts[:, 1], shifts[:, 2]))
 
 
 def _knn_pairs(x: torch.Tensor, y: torch.Tensor, k: int, batch_x: Any, batch_y: Any,

@@ -93,3 +93,20 @@ def test_knn_graph_loops_and_far_clusters():
     looped = rt.knn_graph(x, k, loop=True)
     assert all((p, p) in edges(looped) for p in range(105))
     assert looped.shape[1] == 105 * k
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+def test_rows_nearest_first_breaks_ties_by_index_then_shift(dtype):
+    # The order knn and capped radius lists keep: by row, nearest first, equal distances by j,
+    # then by S. Distances from 4 values (and float64 ones that round to one float32) tie often.
+    g = torch.Generator().manual_seed(3)
+    n = 3000
+    i = torch.randint(0, 40, (n,), generator=g)
+    j = torch.randint(0, 50, (n,), generator=g)
+    s = torch.randint(-1, 2, (n, 3), generator=g, dtype=torch.int32)
+    d = torch.randint(0, 4, (n,), generator=g).to(dtype)
+    if dtype == torch.float64:
+        d = d + torch.randint(0, 2, (n,), generator=g).to(dtype) * 1e-12
+    order = rt._nearest_first(i, j, d, s).tolist()
+    key = [(int(i[e]), float(d[e]), int(j[e]), *s[e].tolist(), e) for e in range(n)]
+    assert order == [t[-1] for t in sorted(key)]
