@@ -2,7 +2,8 @@
 // only non-empty cells are stored (sorted keys + start offsets), so a far outlier or a sphere
 // surface never allocates a dense grid (a counting sort when the cells' box is no bigger than
 // the particles, a comparison sort otherwise). Each cell's up-to-27 non-empty neighbours are
-// found once, by a cursor per neighbour row, at build time.
+// found once, by a cursor per neighbour row, at build time, and kept as the slot ranges the
+// pair loop reads (a row of consecutive cells is one range).
 //
 // Cells are never coarsened: the key of a cell is its three unbounded axis coordinates (see
 // CellKey), not a row-major index into a bounded box, so one particle at 1e9 cutoffs does not
@@ -116,26 +117,21 @@ void sort_entries(std::vector<Entry>& entries) {
 
 class CellListCpu final : public HostMethod<CellListCpu> {
  public:
-  // Candidates of target i: the particles of the non-empty cells around its own. Cells with
-  // consecutive numbers hold consecutive slots, so each run of them (a row of up to 3 cells) is
-  // one run of candidates.
+  // Candidates of target i: the particles of the non-empty cells around its own, as the slot
+  // ranges of its cell (find_neighbour_cells).
   std::size_t candidate_runs(std::size_t i, CandidateRun* out) const {
     const std::uint32_t c = cell_of_particle_[i];
-    const std::uint64_t end = neighbour_offsets_[c + 1];
-    std::size_t runs = 0;
-    for (std::uint64_t e = neighbour_offsets_[c]; e < end;) {
-      const std::uint32_t first_cell = neighbour_cells_[e];
-      std::uint32_t last_cell = first_cell;
-      for (++e; e < end && neighbour_cells_[e] == last_cell + 1; ++e) ++last_cell;
-      const std::uint32_t s = cell_start_[first_cell];
-      out[runs++] = {sorted_x_.data() + s,
-                     sorted_y_.data() + s,
-                     sorted_z_.data() + s,
-                     order_.data() + s,
-                     0,
-                     cell_start_[last_cell + 1] - s};
+    const std::uint64_t first = run_offsets_[c], runs = run_offsets_[c + 1] - first;
+    for (std::uint64_t r = 0; r < runs; ++r) {
+      const SlotRange range = runs_[first + r];
+      out[r] = {sorted_x_.data() + range.begin,
+                sorted_y_.data() + range.begin,
+                sorted_z_.data() + range.begin,
+                order_.data() + range.begin,
+                0,
+                range.end - range.begin};
     }
-    return runs;
+    return static_cast<std::size_t>(runs);
   }
 
   // The targets in slot order: consecutive targets then read the same neighbour cells, cached
@@ -220,24 +216,49 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     return order_.size();
   }
 
-  // CSR over cells: the non-empty cells within one cell of each cell (itself included), in key
-  // order. A far label has no neighbours along its axis. For each row (dz, dy) around a cell,
-  // the first key at or after (system, z + dz, y + dy, x - 1) only moves forward from cell to
-  // cell (keys ascend, and adding one offset keeps their order), so a cursor per row finds it
-  // in amortised O(1) where a binary search per neighbour cost 15 comparisons of 32-byte keys
-  // (2026-12-02, the 200,000-particle periodic liquid's cells, one thread: 27-34 -> 3.2-5 ms).
-  // Two walks, one to count and one to fill, each over chunks of cells in parallel.
+  // Each cell's candidates as slot ranges (runs_), from the non-empty cells within one cell of
+  // it (itself included), in key order. A far label has no neighbours along its axis. For each row
+  // (dz, dy) around a cell, the first key at or after (system, z + dz, y + dy, x - 1) only moves
+  // forward from cell to cell (keys ascend, and adding one offset keeps their order), so a cursor
+  // per row finds it in amortised O(1) where a binary search per neighbour cost 15 comparisons of
+  // 32-byte keys (2026-12-02, the 200,000-particle periodic liquid's cells, one thread: 27-34
+  // -> 3.2-5 ms). Two walks, one to count and one to fill, each over chunks of cells in parallel.
   void find_neighbour_cells() {
     const std::size_t cells = cell_keys_.size();
     std::vector<std::uint32_t> counts(cells);
     walk_neighbour_cells([&](std::size_t c, std::uint32_t) { ++counts[c]; });
-    neighbour_offsets_.assign(cells + 1, 0);
+    std::vector<std::uint64_t> neighbour_offsets(cells + 1, 0);
     for (std::size_t c = 0; c < cells; ++c)
-      neighbour_offsets_[c + 1] = neighbour_offsets_[c] + counts[c];
-    neighbour_cells_.resize(neighbour_offsets_[cells]);
+      neighbour_offsets[c + 1] = neighbour_offsets[c] + counts[c];
+    std::vector<std::uint32_t> neighbour_cells(neighbour_offsets[cells]);
     walk_neighbour_cells([&](std::size_t c, std::uint32_t nc) {
-      neighbour_cells_[neighbour_offsets_[c + 1] - counts[c]--] = nc;
+      neighbour_cells[neighbour_offsets[c + 1] - counts[c]--] = nc;
     });
+    // Cells with consecutive numbers hold consecutive slots: each run of them (a row of up to 3
+    // cells) is one range of slots, found here once rather than per target (2026-12-05, 100,000
+    // uniform points with 16 neighbours each, the CSR list, one thread: 92 -> 83 ms; the LJ liquid
+    // count 10.5 -> 9.9 ns per pair).
+    const auto for_each_range = [&](std::size_t c, auto&& f) {
+      const std::uint64_t end = neighbour_offsets[c + 1];
+      for (std::uint64_t e = neighbour_offsets[c]; e < end;) {
+        const std::uint32_t first_cell = neighbour_cells[e];
+        std::uint32_t last_cell = first_cell;
+        for (++e; e < end && neighbour_cells[e] == last_cell + 1; ++e) ++last_cell;
+        f(SlotRange{cell_start_[first_cell], cell_start_[last_cell + 1]});
+      }
+    };
+    run_offsets_.assign(cells + 1, 0);
+    for (std::size_t c = 0; c < cells; ++c) {
+      std::uint64_t runs = 0;
+      for_each_range(c, [&](SlotRange) { ++runs; });
+      run_offsets_[c + 1] = run_offsets_[c] + runs;
+    }
+    runs_.resize(run_offsets_[cells]);
+#pragma omp parallel for schedule(static) if (cells > 4096)
+    for (std::size_t c = 0; c < cells; ++c) {
+      std::uint64_t at = run_offsets_[c];
+      for_each_range(c, [&](SlotRange range) { runs_[at++] = range; });
+    }
   }
 
   // emit(c, nc) for every neighbour nc of every cell c, in ascending nc per cell.
@@ -285,8 +306,11 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   std::vector<CellKey> cell_keys_;                     // non-empty cells, ascending
   std::vector<std::uint32_t> cell_start_;        // cell c's sources: slots [start[c], start[c+1])
   std::vector<std::uint32_t> cell_of_particle_;  // particle index -> cell
-  std::vector<std::uint64_t> neighbour_offsets_;
-  std::vector<std::uint32_t> neighbour_cells_;
+  struct SlotRange {
+    std::uint32_t begin, end;
+  };
+  std::vector<std::uint64_t> run_offsets_;  // cell c's candidates: runs_[offsets[c], offsets[c+1])
+  std::vector<SlotRange> runs_;
 };
 
 }  // namespace
