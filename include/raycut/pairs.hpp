@@ -40,7 +40,8 @@ inline int lowest_set_bit(std::uint64_t x) {
 #endif
 }
 
-// Calls on_pair(j, r, r2) for every in-range candidate j != i of target i, r = x_j - x_i, by
+// Calls on_pair(j, r, r2) for every in-range candidate j != i of target i at target_xyz,
+// r = x_j - x_i, by
 // the predicate of policy `images` (in_range_of: with images, candidates in the float band are
 // decided in double). runs_of(i, out) writes the CandidateRuns that hold every candidate point of
 // target i (at most max_candidate_runs) and returns how many. Two steps per block of a run: r2
@@ -49,9 +50,9 @@ inline int lowest_set_bit(std::uint64_t x) {
 // are out (5 in 6 in a cell list of cells C wide), and a branch on each mispredicted often
 // (lists and lj_forces 1.6-2.4x faster on one CPU thread: docs/pair-pass.md, "The CPU loop").
 template <class Images, class RunsOf, class OnPair>
-void for_each_in_range(const Images& images, std::size_t i, const float* xyz, float cutoff_squared,
-                       const RunsOf& runs_of, OnPair&& on_pair) {
-  const float xi = xyz[3 * i], yi = xyz[3 * i + 1], zi = xyz[3 * i + 2];
+void for_each_in_range(const Images& images, std::size_t i, const float* target_xyz,
+                       float cutoff_squared, const RunsOf& runs_of, OnPair&& on_pair) {
+  const float xi = target_xyz[0], yi = target_xyz[1], zi = target_xyz[2];
   const float out_from = out_of_range_from(images, cutoff_squared);
   CandidateRun runs[max_candidate_runs];
   const std::size_t run_count = runs_of(i, runs);
@@ -92,16 +93,18 @@ void for_each_in_range(const Images& images, std::size_t i, const float* xyz, fl
 }
 
 // Runs functor f for every target (points [0, n)), in parallel over targets (OpenMP), visited
-// in `order` (null: 0 .. n - 1; each target's own sum is the same in any order); candidate
-// points become the caller's sources and shifts through `images` (detail/images.hpp).
+// in `order` (null: 0 .. n - 1; each target's own sum is the same in any order), at positions
+// order_xyz (3 per target in that order; null: xyz by index); candidate points become the
+// caller's sources and shifts through `images` (detail/images.hpp).
 template <class RunsOf, class F, class Images = NoImages>
 void run_host(std::size_t n, const float* xyz, float cutoff_squared, const RunsOf& runs_of,
-              const F& f, const Images& images = {}, const std::uint32_t* order = nullptr) {
+              const F& f, const Images& images = {}, const std::uint32_t* order = nullptr,
+              const float* order_xyz = nullptr) {
   static_assert(check_functor<F>());
-  const auto visit = [&](const std::uint32_t i) {
+  const auto visit = [&](const std::uint32_t i, const float* target_xyz) {
     typename F::Accumulator acc = initial_state(f, i);
     const typename Images::Target ti = images.target(i);
-    for_each_in_range(images, i, xyz, cutoff_squared, runs_of,
+    for_each_in_range(images, i, target_xyz, cutoff_squared, runs_of,
                       [&](std::size_t point, Vec3 r, float r2) {
                         const auto k = static_cast<std::uint32_t>(point);
                         std::uint32_t j;
@@ -113,10 +116,11 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const RunsO
   };
   if (order) {
 #pragma omp parallel for schedule(dynamic, 256) if (n >= parallel_targets)
-    for (std::size_t t = 0; t < n; ++t) visit(order[t]);
+    for (std::size_t t = 0; t < n; ++t)
+      visit(order[t], order_xyz ? order_xyz + 3 * t : xyz + 3 * std::size_t{order[t]});
   } else {
 #pragma omp parallel for schedule(dynamic, 256) if (n >= parallel_targets)
-    for (std::size_t t = 0; t < n; ++t) visit(static_cast<std::uint32_t>(t));
+    for (std::size_t t = 0; t < n; ++t) visit(static_cast<std::uint32_t>(t), xyz + 3 * t);
   }
 }
 
@@ -124,7 +128,8 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const RunsO
 template <class RunsOf, class F>
 void run_host_pass(const PairPass& pass, const RunsOf& runs_of, const F& f) {
   with_images<F>(pass, [&](const auto& images) {
-    run_host(pass.n, pass.host.xyz, pass.cutoff_squared, runs_of, f, images, pass.host.order);
+    run_host(pass.n, pass.host.xyz, pass.cutoff_squared, runs_of, f, images, pass.host.order,
+             pass.host.order_xyz);
   });
 }
 

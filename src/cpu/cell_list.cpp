@@ -138,6 +138,10 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   // (2026-12-02, lj_forces over the 200,000-particle periodic liquid in random order, one
   // thread on a shared 2-core machine: 372-393 -> 303-316 ms; docs/periodic.md).
   const std::uint32_t* target_order() const { return target_order_.data(); }
+  // Their positions in that order: read in sequence, where the caller's order is read at random
+  // (2026-12-05, the LJ liquid, one thread: count 10.0-10.3 -> 8.8-9.6 ns per pair, lj_forces
+  // 1-3 % less).
+  const float* target_order_xyz() const { return target_xyz_.data(); }
 
   void build(const float* xyz, std::size_t n, float cutoff) override {
     build_points(Points::plain(xyz, n), cutoff);
@@ -186,8 +190,12 @@ class CellListCpu final : public HostMethod<CellListCpu> {
       sorted_z_[s] = p[2];
     }
     target_order_.clear();
-    for (const std::uint32_t p : order_)
-      if (p < points.targets) target_order_.push_back(p);
+    target_xyz_.clear();
+    for (std::size_t s = 0; s < n; ++s)
+      if (order_[s] < points.targets) {
+        target_order_.push_back(order_[s]);
+        target_xyz_.insert(target_xyz_.end(), {sorted_x_[s], sorted_y_[s], sorted_z_[s]});
+      }
 
     // Compact the non-empty cells: the union of the sources' and the queries' keys, merged; a
     // cell's start indexes the sources (a cell of queries only holds none).
@@ -302,6 +310,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   double inverse_width_ = 1;                    // cells per unit length
   std::vector<std::uint32_t> order_;            // sorted slot -> particle index
   std::vector<std::uint32_t> target_order_;     // the targets (points < targets) in slot order
+  std::vector<float> target_xyz_;               // their positions, 3 each
   std::vector<float> sorted_x_, sorted_y_, sorted_z_;  // positions in slot order
   std::vector<CellKey> cell_keys_;                     // non-empty cells, ascending
   std::vector<std::uint32_t> cell_start_;        // cell c's sources: slots [start[c], start[c+1])

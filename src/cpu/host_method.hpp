@@ -6,7 +6,8 @@
 //                          max_candidate_runs) holding every candidate point of target i (i
 //                          allowed), each at most once, and returns how many: the longer the
 //                          runs, the faster;
-// and optionally target_order(): the targets in the order to visit them (else 0 .. n - 1).
+// and optionally target_order(): the targets in the order to visit them (else 0 .. n - 1), and
+// target_order_xyz(): their positions in that order.
 #pragma once
 
 #include <algorithm>
@@ -111,6 +112,7 @@ class HostMethod : public Method {
     pass.host.method = this;
     pass.host.xyz = xyz_;
     pass.host.order = static_cast<const Self*>(this)->target_order();
+    pass.host.order_xyz = static_cast<const Self*>(this)->target_order_xyz();
     pass.host.runs = [](const void* method, std::size_t i, CandidateRun* out) {
       return static_cast<const Self*>(method)->candidate_runs(i, out);
     };
@@ -119,6 +121,8 @@ class HostMethod : public Method {
 
   // The visiting order of targets; a method whose candidates lie in cell order gives its own.
   const std::uint32_t* target_order() const { return nullptr; }
+  // With target_order(): the targets' positions in that order, 3 each (null: none).
+  const float* target_order_xyz() const { return nullptr; }
 
  protected:
   // Lists index particles with 32 bits: called first by build(), before any copy.

@@ -79,6 +79,9 @@ struct HostPass {
   // The n targets in the order to visit them (the cell list: cell order, so that consecutive
   // targets share cached cells); null: 0 .. n - 1.
   const std::uint32_t* order = nullptr;
+  // With `order`: the targets' positions in that order, 3 each, read in sequence where xyz
+  // would be read at random (null: read xyz).
+  const float* order_xyz = nullptr;
 };
 
 struct BruteForcePass {
