@@ -18,6 +18,7 @@
 #include <cstring>
 #include <string>
 #include <type_traits>
+#include <utility>
 
 #include "raycut/detail/host_threads.hpp"
 #include "raycut/detail/images.hpp"
@@ -49,9 +50,12 @@ inline int lowest_set_bit(std::uint64_t x) {
 // branch); then the predicate and on_pair for those alone, in the run's order. Most candidates
 // are out (5 in 6 in a cell list of cells C wide), and a branch on each mispredicted often
 // (lists and lj_forces 1.6-2.4x faster on one CPU thread: docs/pair-pass.md, "The CPU loop").
+// Candidates whose source (CandidateRun::source, where a run gives it) is below lowest_source are
+// dropped in the first step too: a half list's row i keeps no source below i.
 template <class Images, class RunsOf, class OnPair>
 void for_each_in_range(const Images& images, std::size_t i, const float* target_xyz,
-                       float cutoff_squared, const RunsOf& runs_of, OnPair&& on_pair) {
+                       float cutoff_squared, const RunsOf& runs_of, OnPair&& on_pair,
+                       std::uint32_t lowest_source = 0) {
   const float xi = target_xyz[0], yi = target_xyz[1], zi = target_xyz[2];
   const float out_from = out_of_range_from(images, cutoff_squared);
   CandidateRun runs[max_candidate_runs];
@@ -65,11 +69,20 @@ void for_each_in_range(const Images& images, std::size_t i, const float* target_
       const std::size_t m = std::min(block, run.count - b);
       const float *x = run.x + b, *y = run.y + b, *z = run.z + b;
       // Whole groups of `lanes` (the run's arrays are readable that far): no scalar tail.
-      for (std::size_t w = 0; w < m; w += lanes)
-        for (std::size_t t = w; t < w + lanes; ++t) {
-          r2[t] = squared_distance(x[t] - xi, y[t] - yi, z[t] - zi);
-          near[t] = r2[t] < out_from;
-        }
+      if (lowest_source != 0 && run.source) {
+        const std::uint32_t* source = run.source + b;
+        for (std::size_t w = 0; w < m; w += lanes)
+          for (std::size_t t = w; t < w + lanes; ++t) {
+            r2[t] = squared_distance(x[t] - xi, y[t] - yi, z[t] - zi);
+            near[t] = (r2[t] < out_from) & (source[t] >= lowest_source);
+          }
+      } else {
+        for (std::size_t w = 0; w < m; w += lanes)
+          for (std::size_t t = w; t < w + lanes; ++t) {
+            r2[t] = squared_distance(x[t] - xi, y[t] - yi, z[t] - zi);
+            near[t] = r2[t] < out_from;
+          }
+      }
       for (std::size_t t = m; t % lanes != 0; ++t) near[t] = 0;
       // The flags as one bit per candidate (8 bytes 0 or 1 gathered by one multiplication),
       // then the near candidates: a branch per near one, and one that mispredicts per block.
@@ -92,6 +105,20 @@ void for_each_in_range(const Images& images, std::size_t i, const float* target_
   }
 }
 
+// The lowest source f keeps in row i: f.lowest_source(i) where f says (a half list), else 0.
+template <class F, class = void>
+struct has_lowest_source : std::false_type {};
+template <class F>
+struct has_lowest_source<F, std::void_t<decltype(std::declval<const F&>().lowest_source(0u))>>
+    : std::true_type {};
+template <class F>
+std::uint32_t lowest_source_of(const F& f, std::uint32_t i) {
+  if constexpr (has_lowest_source<F>::value)
+    return f.lowest_source(i);
+  else
+    return 0;
+}
+
 // Runs functor f for every target (points [0, n)), in parallel over targets (OpenMP), visited
 // in `order` (null: 0 .. n - 1; each target's own sum is the same in any order), at positions
 // order_xyz (3 per target in that order; null: xyz by index); candidate points become the
@@ -111,7 +138,8 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const RunsO
                         Shift s{};
                         if (resolve(f, images, ti, true, i, k, k, j, s))
                           apply(f, acc, i, j, r, r2, s);
-                      });
+                      },
+                      lowest_source_of(f, i));
     f.finish(i, acc);
   };
   if (order) {

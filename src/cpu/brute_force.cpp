@@ -17,6 +17,7 @@ class BruteForceCpu final : public HostMethod<BruteForceCpu> {
               y_.data() + first,
               z_.data() + first,
               order_.empty() ? nullptr : order_.data() + first,
+              nullptr,
               first,
               system_start_[s + 1] - first};
     return 1;

@@ -128,6 +128,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
                 sorted_y_.data() + range.begin,
                 sorted_z_.data() + range.begin,
                 order_.data() + range.begin,
+                sorted_source_.data() + range.begin,
                 0,
                 range.end - range.begin};
     }
@@ -167,7 +168,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
 
     // Sort particles by (query, cell key, index): the sources by cell, then the query points by
     // cell.
-    const PointImage* image = points.images.image;  // which points are queries
+    const PointImage* image = points.images.image;  // by point: its source, or a query
     std::vector<Entry> entries(n);
 #pragma omp parallel for schedule(static) if (n >= parallel_items)
     for (std::size_t i = 0; i < n; ++i)
@@ -183,11 +184,13 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     sorted_x_.assign(n + CandidateRun::padding, 0.0f);
     sorted_y_.assign(n + CandidateRun::padding, 0.0f);
     sorted_z_.assign(n + CandidateRun::padding, 0.0f);
+    sorted_source_.assign(n + CandidateRun::padding, not_a_source);
     for (std::size_t s = 0; s < n; ++s) {
       const float* p = &xyz[3 * std::size_t{order_[s]}];
       sorted_x_[s] = p[0];
       sorted_y_[s] = p[1];
       sorted_z_[s] = p[2];
+      sorted_source_[s] = image ? image[order_[s]].source : order_[s];
     }
     target_order_.clear();
     target_xyz_.clear();
@@ -312,6 +315,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   std::vector<std::uint32_t> target_order_;     // the targets (points < targets) in slot order
   std::vector<float> target_xyz_;               // their positions, 3 each
   std::vector<float> sorted_x_, sorted_y_, sorted_z_;  // positions in slot order
+  std::vector<std::uint32_t> sorted_source_;           // the caller's particle of each slot
   std::vector<CellKey> cell_keys_;                     // non-empty cells, ascending
   std::vector<std::uint32_t> cell_start_;        // cell c's sources: slots [start[c], start[c+1])
   std::vector<std::uint32_t> cell_of_particle_;  // particle index -> cell

@@ -62,6 +62,9 @@ struct CandidateRun {
   const float* y;
   const float* z;
   const std::uint32_t* index;  // the points; null: first + t
+  // The caller's particle each point is (its source, for an image), readable as x is; null: not
+  // given. With it a half list drops the candidates below its row before any scalar work.
+  const std::uint32_t* source;
   std::uint32_t first;
   std::size_t count;
   std::uint32_t point(std::size_t t) const {
