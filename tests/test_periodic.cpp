@@ -453,6 +453,67 @@ void expect_kernels(Engine& engine, const Batch& b, const NeighbourList& full,
 }
 
 // Everything a built engine must hold for batch b.
+// The padded matrix of each row's K nearest (PaddedOptions::nearest, CPU methods): the row's
+// true count, and min(count, K) distinct entries of the list, nearest first by the oracle's
+// double distance, none farther than an entry left out. Distances equal to ~1e-12 may come in
+// either order here (the library rounds r's terms in another order than the oracle); the exact
+// order of ties is tested in Python (test_torch_knn_periodic.py) on exactly tied inputs.
+void expect_nearest(Engine& engine, const Batch& b, const NeighbourList& full, std::uint32_t k,
+                    const std::string& what) {
+  raycut::PaddedNeighbourBuffer padded;
+  const raycut::PaddedOptions options{
+      .k = std::max<std::uint32_t>(k, 1), .shifts = true, .nearest = true};
+  if (engine.space() != MemorySpace::host) {
+    const std::string m =
+        error_message(ErrorCode::unsupported, [&] { engine.padded_neighbours(padded, options); });
+    EXPECT_TRUE(contains(m, "nearest")) << what << ": " << m;
+    return;
+  }
+  engine.padded_neighbours(padded, options);
+  if (b.targets() == 0) return;
+  const std::vector<std::uint32_t> counts = padded.counts_to_host(),
+                                   matrix = padded.indices_to_host();
+  const std::vector<std::int32_t> shifts = padded.shifts_to_host();
+  const auto& to = b.target_offsets();
+  const std::uint32_t width = options.k;
+  for (std::size_t s = 0; s < b.systems.size(); ++s) {
+    const PeriodicOracle& oracle = b.oracles[s];
+    for (std::uint64_t i = to[s]; i < to[s + 1]; ++i) {
+      // The row's entries in the full list, by (i, j, S) local to the system, with d^2.
+      std::map<PeriodicTriple, double> in_row;
+      for (std::uint64_t e = full.offsets[i]; e < full.offsets[i + 1]; ++e) {
+        const PeriodicTriple t{static_cast<std::int64_t>(i - to[s]),
+                               static_cast<std::int64_t>(full.indices[e] - b.offsets[s]),
+                               full.shifts[3 * e], full.shifts[3 * e + 1], full.shifts[3 * e + 2]};
+        in_row[t] = oracle.squared_distance(t);
+      }
+      ASSERT_EQ(counts[i], in_row.size()) << what << ": nearest count of target " << i;
+      const std::uint32_t kept = std::min<std::uint32_t>(counts[i], width);
+      double previous = 0, farthest_kept = 0;
+      for (std::uint32_t c = 0; c < kept; ++c) {
+        const std::uint64_t e = i * width + c;
+        const PeriodicTriple t{
+            static_cast<std::int64_t>(i - to[s]),
+            static_cast<std::int64_t>(matrix[e]) - static_cast<std::int64_t>(b.offsets[s]),
+            shifts[3 * e], shifts[3 * e + 1], shifts[3 * e + 2]};
+        const auto found = in_row.find(t);
+        ASSERT_NE(found, in_row.end()) << what << ": row " << i << " entry " << c
+                                       << " is not one of its pairs (or is repeated)";
+        EXPECT_GE(found->second, previous * (1 - 1e-12))
+            << what << ": row " << i << " entry " << c << " is nearer than the one before";
+        previous = found->second;
+        farthest_kept = std::max(farthest_kept, found->second);
+        in_row.erase(found);
+      }
+      for (const auto& [t, d2] : in_row)
+        EXPECT_GE(d2, farthest_kept * (1 - 1e-12))
+            << what << ": row " << i << " left out a nearer pair (j " << t[1] << ")";
+      for (std::uint32_t c = kept; c < width; ++c)
+        EXPECT_EQ(matrix[i * width + c], b.sources()) << what << ": padding of row " << i;
+    }
+  }
+}
+
 void expect_matches(Engine& engine, const Batch& b, const std::string& what) {
   ASSERT_EQ(engine.size(), b.targets()) << what;
   ASSERT_EQ(engine.sources(), b.sources()) << what;
@@ -498,6 +559,7 @@ void expect_matches(Engine& engine, const Batch& b, const std::string& what) {
     EXPECT_EQ(report.largest_count, largest) << what;
     EXPECT_GT(report.overflowed_rows, 0u) << what;
   }
+  ASSERT_NO_FATAL_FAILURE(expect_nearest(engine, b, full, (largest + 1) / 2, what));
 }
 
 // The same systems with particles (and queries) permuted within each system and the systems in

@@ -188,6 +188,11 @@ struct PaddedOptions {
   // Rows over K raise Error(capacity_exceeded) (after the matrix is written); otherwise they
   // are only reported. Never truncated silently either way.
   bool throw_on_overflow = false;
+  // Each row's K nearest, nearest first (|r| in double from the positions the engine holds,
+  // float64 ones when built from them; equal distances by j, then S), in place of its first K
+  // in the traversal's order: the k-nearest-neighbour search within the cutoff. Counts stay
+  // the rows' full counts. CPU methods (Error(unsupported) on the others).
+  bool nearest = false;
 };
 
 // Rows past K of a padded list, never truncated silently.

@@ -131,15 +131,15 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const RunsO
   const auto visit = [&](const std::uint32_t i, const float* target_xyz) {
     typename F::Accumulator acc = initial_state(f, i);
     const typename Images::Target ti = images.target(i);
-    for_each_in_range(images, i, target_xyz, cutoff_squared, runs_of,
-                      [&](std::size_t point, Vec3 r, float r2) {
-                        const auto k = static_cast<std::uint32_t>(point);
-                        std::uint32_t j;
-                        Shift s{};
-                        if (resolve(f, images, ti, true, i, k, k, j, s))
-                          apply(f, acc, i, j, r, r2, s);
-                      },
-                      lowest_source_of(f, i));
+    for_each_in_range(
+        images, i, target_xyz, cutoff_squared, runs_of,
+        [&](std::size_t point, Vec3 r, float r2) {
+          const auto k = static_cast<std::uint32_t>(point);
+          std::uint32_t j;
+          Shift s{};
+          if (resolve(f, images, ti, true, i, k, k, j, s)) apply(f, acc, i, j, r, r2, s);
+        },
+        lowest_source_of(f, i));
     f.finish(i, acc);
   };
   if (order) {

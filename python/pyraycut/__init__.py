@@ -326,7 +326,7 @@ class Engine:
                              "point) are not symmetric (pass half=False)")
 
     def padded_neighbours(self, k: int, raise_on_overflow: bool = False,
-                          shifts: bool = False, half: bool = False) -> tuple:
+                          shifts: bool = False, half: bool = False, nearest: bool = False) -> tuple:
         """The padded [N, K] neighbour matrix: ``(indices, counts, report)``, and with
         ``shifts`` also S, (N, K, 3) int32 (0 in empty slots): ``(indices, counts, report, S)``.
 
@@ -337,7 +337,10 @@ class Engine:
         ``raise_on_overflow`` an overflow raises ``CapacityError``. K is a whole number in
         [1, 2^32 - 1] (ValueError otherwise); a matrix beyond the memory budget raises
         MemoryError before it is allocated, saying which K is always enough. ``half``: each
-        pair once, as ``neighbours`` says.
+        pair once, as ``neighbours`` says. ``nearest``: each row's K nearest, nearest first
+        (equal distances by index, then S), in place of its first K: |r| in double from the
+        positions as built (float64 ones when given, query points as float32); CPU methods only
+        (NotImplementedError otherwise).
         """
         self._no_half_with_queries(half)
         if (isinstance(k, bool) or not isinstance(k, numbers.Real) or int(k) != k or int(k) < 0
@@ -347,7 +350,7 @@ class Engine:
         like = self._like
         indices, counts, report, s = self._call(like, self._engine.padded, int(k),
                                                 bool(raise_on_overflow), like.host, bool(shifts),
-                                                bool(half))
+                                                bool(half), bool(nearest))
         out = (_arrays.output(indices, like), _arrays.output(counts, like), report)
         return out + (_arrays.output(s, like),) if shifts else out
 

@@ -23,7 +23,7 @@ from typing import Any, Optional
 
 import torch
 
-from . import CapacityError, _systems, neighbor_list
+from . import CapacityError, Engine, _host_cell, _systems, neighbor_list
 from . import radius as _radius_pairs
 
 
@@ -149,6 +149,41 @@ def _first_round_mean(k: int) -> float:
     return min((k + 0.1 * step * math.sqrt(k) for step in range(61)), key=pairs)
 
 
+def _nearest_round(x: torch.Tensor, y: torch.Tensor, queries: torch.Tensor, r: float,
+                   want: torch.Tensor, exclude_self: bool, cells: Optional[torch.Tensor],
+                   qb: torch.Tensor, r_in: float, settled: torch.Tensor, cell: Any, pbc: Any,
+                   batch_x: Any, batch_y: Any) -> tuple:
+    """One kNN round on the CPU for the query points y[queries]: the library keeps each one's
+    nearest points within r (a padded list of each row's K nearest, nearest first, |r| in
+    double), so no other pair reaches Python. A query is done when it has its `want` and the
+    last of them lies within r_in, or when `settled` says so. Returns (done, and the (row, j, S)
+    of the done rows' neighbours, nearest first)."""
+    width = int(want.max()) + int(exclude_self) if len(want) else 1
+    engine = Engine("cell-list")
+    engine.build(x.detach(), r, cell=_host_cell(cell), pbc=pbc, batch=batch_x,
+                 queries=y[queries].detach(), batch_queries=batch_y)
+    j, counts, _, shifts = engine.padded_neighbours(max(width, 1), shifts=True, nearest=True)
+    j = j.long()
+    valid = torch.arange(j.shape[1]) < counts.long().unsqueeze(1)
+    if exclude_self:  # a point's own images are neighbours
+        valid &= (j != queries.unsqueeze(1)) | (shifts != 0).any(2)
+    take = valid & (torch.cumsum(valid, 1) <= want.unsqueeze(1))
+    taken = take.sum(1)
+    # The last neighbour taken, in the positions' own dtype: within r_in, nothing nearer was missed.
+    rows = torch.arange(len(queries))
+    column = (take * torch.arange(j.shape[1])).max(1).values  # 0 where none is taken
+    jl, sl = j[rows, column], shifts[rows, column]
+    v = x.detach()[torch.clamp(jl, max=len(x) - 1)] - y.detach()[queries]
+    if cells is not None:
+        c = cells[0] if len(cells) == 1 else cells[qb[queries]]
+        v = v + (sl.to(v.dtype).unsqueeze(1) @ c).squeeze(1)
+    inside = torch.linalg.vector_norm(v, dim=1) < r_in
+    done = ((taken >= want) & ((want == 0) | inside)) | settled
+    take &= done.unsqueeze(1)
+    row = rows.unsqueeze(1).expand_as(take)[take]
+    return done, row, j[take], shifts[take].to(torch.int32)
+
+
 def _knn_pairs(x: torch.Tensor, y: torch.Tensor, k: int, batch_x: Any, batch_y: Any,
                exclude_self: bool, cell: Any = None,
                pbc: Any = None) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -200,12 +235,31 @@ def _knn_pairs(x: torch.Tensor, y: torch.Tensor, k: int, batch_x: Any, batch_y: 
         periodic_rows = torch.as_tensor(boxes.pbc, device=cells.device)
         rows = torch.linalg.vector_norm(cells, dim=2)[periodic_rows]
         r = max(r, 0.5 * float(rows[rows > 0].min()) if bool((rows > 0).any()) else r)
+    # On the CPU the library picks each query's nearest (_nearest_round), exactly where it holds
+    # the queries exactly: they are float32 there (float64 ones are rounded), and a float64
+    # query off float32 takes the pair lists below, ordered in float64.
+    nearest_in_library = x.device.type == "cpu" and (
+        yd.dtype == torch.float32 or bool((yd.to(torch.float32).to(yd.dtype) == yd).all()))
     pending = torch.arange(m, device=y.device)
     found_i, found_j, found_s = [], [], []
     while len(pending):
         # Past the whole extent every point of an open system is within r: its last round.
         last = r > 2 * extent
         sub_batch = None if batch_y is None else qb[pending]
+        # The search decides |r| < radius in float32: only pairs clearly inside count towards
+        # k, so that no nearer image can have been missed at the edge.
+        r_in = r * (1 - 1e-3) - 1e-6 * scale
+        if nearest_in_library:
+            settled = ~periodic[pending] if last else torch.zeros(len(pending), dtype=torch.bool)
+            done, i, j, shifts = _nearest_round(x, y, pending, r, want[pending], exclude_self,
+                                                cells, qb, r_in, settled, cell, pbc, batch_x,
+                                                sub_batch)
+            found_i.append(pending[i])
+            found_j.append(j)
+            found_s.append(shifts)
+            pending = pending[~done]
+            r *= 2
+            continue
         i, j, shifts = _radius_pairs(x, y[pending], r, cell=cell, pbc=pbc, batch_points=batch_x,
                                      batch_queries=sub_batch, quantities="ijS")
         shifts = shifts.to(torch.int32)
@@ -217,9 +271,7 @@ def _knn_pairs(x: torch.Tensor, y: torch.Tensor, k: int, batch_x: Any, batch_y: 
             c = cells[0] if len(cells) == 1 else cells[qb[pending[i]]]
             v = v + (shifts.to(v.dtype).unsqueeze(1) @ c).squeeze(1)
         d = torch.linalg.vector_norm(v, dim=1)
-        # The search decides |r| < radius in float32: only pairs clearly inside count towards
-        # k, so that no nearer image can have been missed at the edge.
-        inside = d < r * (1 - 1e-3) - 1e-6 * scale
+        inside = d < r_in
         counts = torch.bincount(i[inside], minlength=len(pending))
         done = counts >= want[pending]
         if last:

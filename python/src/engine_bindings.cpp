@@ -146,7 +146,7 @@ nb::tuple pairs(PyEngine& engine, bool half, bool distances, bool vectors, bool 
 // Padded [N, K] (int32; N marks an empty slot), counts [N] (int32), report, and with `shifts`
 // S [N, K, 3] (int32; 0 in empty slots).
 nb::tuple padded(PyEngine& engine, std::uint64_t wide_k, bool raise_on_overflow, bool to_host,
-                 bool shifts, bool half) {
+                 bool shifts, bool half, bool nearest) {
   if (wide_k < 1 || wide_k > std::numeric_limits<std::uint32_t>::max())
     value_error(
         "padded neighbour list: K must be a whole number in [1, 2^32 - 1 = 4294967295], "
@@ -157,8 +157,11 @@ nb::tuple padded(PyEngine& engine, std::uint64_t wide_k, bool raise_on_overflow,
   raycut::PaddedReport report;
   {
     Exclusive hold(engine.mutex);
-    report = engine.engine.padded_neighbours(
-        *list, {.k = k, .half = half, .shifts = shifts, .throw_on_overflow = raise_on_overflow});
+    report = engine.engine.padded_neighbours(*list, {.k = k,
+                                                     .half = half,
+                                                     .shifts = shifts,
+                                                     .throw_on_overflow = raise_on_overflow,
+                                                     .nearest = nearest});
   }
   const std::size_t n = list->size();
   nb::dict info;
@@ -249,7 +252,7 @@ void bind_engine(nb::module_& m) {
            nb::arg("to_host"), nb::arg("shifts") = false, nb::arg("radii") = nb::none(),
            nb::arg("species") = nb::none(), nb::arg("table") = nb::none())
       .def("padded", &padded, nb::arg("k"), nb::arg("raise_on_overflow"), nb::arg("to_host"),
-           nb::arg("shifts") = false, nb::arg("half") = false)
+           nb::arg("shifts") = false, nb::arg("half") = false, nb::arg("nearest") = false)
       .def("timings",
            [](PyEngine& e) {
              const raycut::Timings t = locked(e, [](auto& x) { return x.last_timings(); });

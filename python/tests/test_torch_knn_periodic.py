@@ -58,14 +58,20 @@ def positions(n, cell, seed, low=0.0, high=1.0, dtype=torch.float64):
     return torch.tensor(fractional @ np.asarray(cell, np.float64), dtype=dtype)
 
 
+# float32 positions take the library's nearest-K list on the CPU; float64 ones off float32, the
+# pair lists ordered in float64.
+DTYPES = [torch.float32, torch.float64]
+
+
+@pytest.mark.parametrize("dtype", DTYPES)
 @pytest.mark.parametrize("cell, pbc", [
     (np.diag([2.5, 2.5, 2.5]), True),
     (TRICLINIC, True),
     (TRICLINIC, [True, False, True]),
     (np.diag([2.0, 3.0, 2.5]), [False, False, True]),
 ])
-def test_knn_graph_is_the_k_nearest_images(cell, pbc):
-    x = positions(40, cell, 1)
+def test_knn_graph_is_the_k_nearest_images(cell, pbc, dtype):
+    x = positions(40, cell, 1, dtype=dtype)
     k = 7
     edge_index, shifts = rt.knn_graph(x, k, cell=torch.tensor(cell), pbc=pbc)
     assert shifts.dtype == torch.int32 and shifts.shape == (edge_index.shape[1], 3)
@@ -76,22 +82,24 @@ def test_knn_graph_is_the_k_nearest_images(cell, pbc):
     assert not shifts[:, torch.from_numpy(open_axes.copy())].any()
 
 
-def test_knn_between_sets_in_a_triclinic_box_unwrapped():
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_knn_between_sets_in_a_triclinic_box_unwrapped(dtype):
     """Queries and points partly outside the cell: the shifts refer to the positions as given."""
-    x = positions(50, TRICLINIC, 2, low=-0.3, high=1.3)
-    y = positions(20, TRICLINIC, 3, low=-0.3, high=1.3)
+    x = positions(50, TRICLINIC, 2, low=-0.3, high=1.3, dtype=dtype)
+    y = positions(20, TRICLINIC, 3, low=-0.3, high=1.3, dtype=dtype)
     edge_index, shifts = rt.knn(x, y, 9, cell=torch.tensor(TRICLINIC))
     assert rows_of(edge_index, shifts, len(y)) == oracle(x, y, 9, TRICLINIC, True)
     # The vectors the shifts give are the distances' order: nearest first in each row.
-    v = x[edge_index[1]] - y[edge_index[0]] + shifts.double() @ torch.tensor(TRICLINIC)
+    v = (x[edge_index[1]] - y[edge_index[0]]).double() + shifts.double() @ torch.tensor(TRICLINIC)
     d = v.norm(dim=1)
     same_row = edge_index[0][1:] == edge_index[0][:-1]
     assert bool((d[1:][same_row] >= d[:-1][same_row]).all())
 
 
-def test_k_above_the_points_of_a_small_box_takes_several_images():
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_k_above_the_points_of_a_small_box_takes_several_images(dtype):
     cell = np.diag([1.2, 1.0, 1.4])
-    x = positions(3, cell, 4)
+    x = positions(3, cell, 4, dtype=dtype)
     edge_index, shifts = rt.knn_graph(x, 20, cell=cell, flow="target_to_source")
     got = rows_of(edge_index, shifts, 3)  # target_to_source: row 0 the centre
     assert got == oracle(x, x, 20, cell, True, exclude_self=True)
@@ -103,27 +111,30 @@ def test_k_above_the_points_of_a_small_box_takes_several_images():
         assert row[0] == (c, (0, 0, 0)) and row[1:] == got[c]
 
 
-def test_ties_are_broken_by_index_then_by_shift():
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_ties_are_broken_by_index_then_by_shift(dtype):
     """One particle in a cubic box: its six nearest images are at the same distance."""
-    x = torch.tensor([[0.3, 0.4, 0.5]], dtype=torch.float64)
+    x = torch.tensor([[0.3, 0.4, 0.5]], dtype=dtype)
     edge_index, shifts = rt.knn_graph(x, 4, cell=[2.0, 2.0, 2.0])
     assert edge_index.tolist() == [[0] * 4, [0] * 4]
     assert shifts.tolist() == [[-1, 0, 0], [0, -1, 0], [0, 0, -1], [0, 0, 1]]
     # Two particles at the same place: the lower index first at equal distance.
-    y = torch.tensor([[1.0, 1.0, 1.0]], dtype=torch.float64)
+    y = torch.tensor([[1.0, 1.0, 1.0]], dtype=dtype)
     pair = torch.cat([x, x])
     edge_index, shifts = rt.knn(pair, y, 3, cell=[2.0, 2.0, 2.0])
     assert edge_index[1].tolist() == [0, 1, 0] and shifts[0].tolist() == shifts[1].tolist()
     assert rows_of(edge_index, shifts, 1) == oracle(pair, y, 3, np.eye(3) * 2.0, True)
 
 
-def test_batches_with_a_box_per_system():
+@pytest.mark.parametrize("dtype", DTYPES)
+def test_batches_with_a_box_per_system(dtype):
     cells = np.stack([np.diag([2.0, 2.0, 2.0]), TRICLINIC, np.diag([1.5, 1.5, 3.0]),
                       np.diag([4.0, 4.0, 4.0])])
     pbc = np.array([[True, True, True], [True, False, True], [True, True, True],
                     [False, False, False]])
     sizes = [12, 15, 1, 3]  # system 2: one particle; system 3: open, fewer than k
-    x = torch.cat([positions(s, c, 10 + b) for b, (s, c) in enumerate(zip(sizes, cells))])
+    x = torch.cat([positions(s, c, 10 + b, dtype=dtype)
+                   for b, (s, c) in enumerate(zip(sizes, cells))])
     batch = torch.repeat_interleave(torch.arange(4), torch.tensor(sizes))
     k = 5
     edge_index, shifts = rt.knn_graph(x, k, batch, cell=torch.tensor(cells), pbc=pbc)
@@ -137,7 +148,7 @@ def test_batches_with_a_box_per_system():
         start += size
     assert [len(row) for row in got[-3:]] == [2, 2, 2]  # the open system: all the others
     # Queries of a batch against points of a batch (knn), one query system empty.
-    y = torch.cat([positions(4, cells[0], 20), positions(3, cells[1], 21)])
+    y = torch.cat([positions(4, cells[0], 20, dtype=dtype), positions(3, cells[1], 21, dtype=dtype)])
     batch_y = torch.tensor([0, 0, 0, 0, 1, 1, 1])
     edge_index, shifts = rt.knn(x, y, k, batch, batch_y, cell=torch.tensor(cells), pbc=pbc)
     got = rows_of(edge_index, shifts, len(y))

@@ -467,6 +467,11 @@ PaddedReport Engine::padded_neighbours(PaddedNeighbourBuffer& list, const Padded
   const std::uint32_t k = options.k;
   const bool shifts = options.shifts;
   if (options.half && queries_) throw half_with_queries();
+  if (options.nearest && m.space() != MemorySpace::host)
+    throw Error(ErrorCode::unsupported,
+                "padded neighbour list: the K nearest (PaddedOptions::nearest) run on the CPU "
+                "methods, not on '" +
+                    method_ + "'");
   if (!list.storage_ || list.storage_->space() != m.space())
     list.storage_ = m.make_padded_storage();
   if (k == 0 && size_ > 0)
@@ -494,7 +499,10 @@ PaddedReport Engine::padded_neighbours(PaddedNeighbourBuffer& list, const Padded
       "), so K = " + std::to_string(std::max<std::uint64_t>(candidates, 1)) + " is always enough";
   try {
     if (m.space() == MemorySpace::host) require_host_memory(bytes, what);
-    m.padded_neighbours(*list.storage_, k, options.half, shifts);
+    if (options.nearest)
+      m.padded_nearest(*list.storage_, k, options.half, shifts);
+    else
+      m.padded_neighbours(*list.storage_, k, options.half, shifts);
   } catch (const Error& e) {
     if (e.code() != ErrorCode::out_of_memory || k <= candidates) throw;
     throw Error(ErrorCode::out_of_memory, e.what() + bound);

@@ -3,8 +3,10 @@
 // its lists with these.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <vector>
 
 #include "raycut/detail/images.hpp"
 #include "raycut/kernels.hpp"
@@ -199,6 +201,89 @@ struct PaddedFill : ListFilter {
       }
 #endif
     }
+  }
+};
+
+// One of a row's K nearest (PaddedOptions::nearest), in the order of raycut.torch.knn: |r|^2,
+// then j, then S.
+struct NearestEntry {
+  double r2;
+  std::uint32_t j;
+  std::int32_t s[3];
+  bool operator<(const NearestEntry& o) const {
+    if (r2 != o.r2) return r2 < o.r2;
+    if (j != o.j) return j < o.j;
+    for (int a = 0; a < 3; ++a)
+      if (s[a] != o.s[a]) return s[a] < o.s[a];
+    return false;
+  }
+};
+
+// The padded matrix of each row's K nearest, nearest first (CPU methods): a row's first K pairs
+// are kept as they come, then a max-heap of them admits the nearer ones, and the row is sorted
+// when it finishes. The K entries are scratch of the thread visiting the row (a CPU pass visits
+// one target at a time per thread), so they stay in cache. Counts and overflow as PaddedFill's
+// (a row over K is expected here, and still reported). |r|^2 is exact for the positions the
+// engine holds: the double vector of ExactImages where the points have images (float64 sources
+// when built from them), else the float positions' differences, which double holds exactly.
+// Host only: the GPU passes share a row between lanes.
+struct PaddedNearestFill : PaddedFill {
+  struct Accumulator {
+    std::uint32_t count;
+    NearestEntry* row;  // K entries
+  };
+  using options = functor_options<option::accepts, option::init, option::emits_entries>;
+  const float* xyz;   // the points, without images
+  ExactImages exact;  // with images (exact.image set)
+  Accumulator init(std::uint32_t) const {
+    thread_local std::vector<NearestEntry> scratch;
+    if (scratch.size() < k) scratch.resize(k);
+    return {0, scratch.data()};
+  }
+  void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3, float r2,
+                  const Shift& s) const {
+    if (!within(i, j, s, r2)) return;
+    const NearestEntry e{squared_length(i, j, s), j, {s.a, s.b, s.c}};
+    NearestEntry* row = acc.row;
+    if (acc.count < k) {
+      row[acc.count] = e;
+      if (acc.count + 1 == k) std::make_heap(row, row + k);
+    } else if (e < row[0]) {
+      std::pop_heap(row, row + k);
+      row[k - 1] = e;
+      std::push_heap(row, row + k);
+    }
+    ++acc.count;
+  }
+  void finish(std::uint32_t i, Accumulator& acc) const {
+    const std::uint32_t kept = acc.count < k ? acc.count : k;
+    NearestEntry* row = acc.row;
+    if (acc.count < k)
+      std::sort(row, row + kept);
+    else
+      std::sort_heap(row, row + k);
+    for (std::uint32_t c = 0; c < kept; ++c) {
+      const std::uint64_t e = std::uint64_t{i} * k + c;
+      indices[e] = row[c].j;
+      if (shifts)
+        for (int a = 0; a < 3; ++a) shifts[3 * e + a] = row[c].s[a];
+    }
+    PaddedFill::finish(i, acc.count);  // counts, padding, overflow
+  }
+  double squared_length(std::uint32_t i, std::uint32_t j, const Shift& s) const {
+    if (exact.image) {
+      const double shift[3] = {static_cast<double>(s.a), static_cast<double>(s.b),
+                               static_cast<double>(s.c)};
+      double r[3];
+      return exact_pair_vector(exact, i, j, shift, r);
+    }
+    double r2 = 0;
+    for (int a = 0; a < 3; ++a) {
+      const double d = static_cast<double>(xyz[3 * std::size_t{j} + a]) -
+                       static_cast<double>(xyz[3 * std::size_t{i} + a]);
+      r2 += d * d;
+    }
+    return r2;
   }
 };
 

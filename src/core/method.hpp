@@ -87,6 +87,12 @@ class Method {
   virtual std::unique_ptr<PaddedStorage> make_padded_storage() const = 0;
   virtual void neighbours(ListStorage& list, const ListOptions& options) = 0;
   virtual void padded_neighbours(PaddedStorage& list, std::uint32_t k, bool half, bool shifts) = 0;
+  // Each row's K nearest, nearest first (PaddedOptions::nearest): CPU methods (the engine
+  // refuses it for the others before calling).
+  virtual void padded_nearest(PaddedStorage& list, std::uint32_t k, bool half, bool shifts) {
+    (void)list, (void)k, (void)half, (void)shifts;
+    throw Error(ErrorCode::unsupported, "this method has no nearest-K padded list");
+  }
   // A list of n targets into a static capacity (Engine::neighbours(StaticPairs)): no read-back;
   // n = 0 writes the count and the padding only.
   virtual void static_neighbours(const StaticPairs& out, const ListOptions& options,

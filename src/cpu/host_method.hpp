@@ -92,9 +92,24 @@ class HostMethod : public Method {
   }
 
   void padded_neighbours(PaddedStorage& storage, std::uint32_t k, bool half, bool shifts) override {
+    padded(storage, k, half, shifts, false);
+  }
+  void padded_nearest(PaddedStorage& storage, std::uint32_t k, bool half, bool shifts) override {
+    padded(storage, k, half, shifts, true);
+  }
+
+ private:
+  void padded(PaddedStorage& storage, std::uint32_t k, bool half, bool shifts, bool nearest) {
     auto& list = static_cast<HostPaddedStorage&>(storage);
     PaddedOverflow overflow{0, 0};
-    run(list.prepare(n_, k, half, shifts, &overflow));
+    const PaddedFill fill = list.prepare(n_, k, half, shifts, &overflow);
+    if (nearest) {
+      PaddedNearestFill nearest_fill{fill, xyz_, {}};
+      if (images_.exact) nearest_fill.exact = *images_.exact;
+      run(nearest_fill);
+    } else {
+      run(fill);
+    }
     // The largest row, overflowed or not (the fill records only rows over K: on the GPU an
     // atomic per row would cost more than the matrix).
     std::uint32_t largest = 0;
@@ -102,6 +117,7 @@ class HostMethod : public Method {
     list.report = {overflow.rows, largest};
   }
 
+ public:
   PairPass pair_pass() const override {
     PairPass pass;
     pass.kind = PassKind::host;
