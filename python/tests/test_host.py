@@ -155,6 +155,35 @@ def test_padded_half_matches_half_list(method):
         assert all(j > i for j in idx[i, :counts[i]])
 
 
+@pytest.mark.parametrize("family", ["uniform", "clustered"])
+def test_padded_nearest_is_each_rows_k_nearest(method, family):
+    """nearest=True: each row's K nearest, nearest first (ties by index), from a float64 brute
+    force; with query points too. GPU methods refuse it by name."""
+    x = INPUTS[family]()
+    q = uniform(50, seed=9)
+    engine = pyraycut.Engine(method)
+    for queries in (None, q):
+        try:
+            engine.build(x, CUTOFF, queries=queries)
+        except NotImplementedError:  # a method without query sets
+            continue
+        if engine.space != "host":
+            with pytest.raises(NotImplementedError, match="nearest"):
+                engine.padded_neighbours(4, nearest=True)
+            return
+        targets = x if queries is None else q
+        k = 5
+        idx, counts, report = engine.padded_neighbours(k, nearest=True)
+        d = np.linalg.norm(targets[:, None, :].astype(np.float64) - x[None, :, :], axis=2)
+        for i in range(len(targets)):
+            within = [j for j in np.argsort(d[i], kind="stable") if d[i, j] < CUTOFF
+                      and (queries is not None or j != i)]
+            assert counts[i] == len(within)
+            want = sorted(within, key=lambda j: (d[i, j], j))[:k]
+            assert list(idx[i, :len(want)]) == want, i
+            assert all(idx[i, len(want):] == len(x))
+
+
 def test_padded_overflow_report(method):
     x = INPUTS["clustered"]()
     engine = pyraycut.Engine(method)
