@@ -4,7 +4,8 @@
 # sessions ran, in one place.
 #
 #   scripts/device_run.sh [tests REGEX] [bench] [lists] [periodic] [sph] [python] [python-bench]
-#                         [mpi] [mpi-scaling] [memcheck] [grid-suites] [latency]   results: ${OUT:-/tmp/raycut-out}/results.tgz
+#                         [mpi] [mpi-scaling] [memcheck] [grid-suites] [latency] [knn]
+#                         results: ${OUT:-/tmp/raycut-out}/results.tgz
 #
 #   tests REGEX  ctest -R REGEX (e.g. "GridVariants|grid_|Sph"; "." for everything, ~6 min)
 #   bench        both suites, every GPU method, plus the paper's grid when its source is in
@@ -22,6 +23,8 @@
 #                and from a CUDA graph, the engine), bench/python_latency.py --crossover
 #                (pyraycut.neighbor_list on torch CUDA tensors, the Python package built first),
 #                bench/plot_latency.py: latency-cpp.csv, latency-python.csv, latency.png
+#   knn          bench/python_knn.py: pyraycut.torch.knn (k = 16 and 64) beside radius_graph of
+#                the same mean degree, 10^6 uniform points on CUDA (knn.csv; docs/compatibility.md)
 #   memcheck     compute-sanitizer on the functor, list, grid-variant and periodic GPU tests
 #   python       the Python package built with the device's Python (the PyTorch operators with
 #                their CUDA kernel: RAYCUT_TORCH_CUDA=ON), and its tests
@@ -171,6 +174,13 @@ while [ $# -gt 0 ]; do
         > "$res/pytest.log" 2>&1
       echo "pytest exit $?"
       tail -15 "$res/pytest.log"
+      ;;
+    knn)
+      build_python
+      PYTHONPATH="$PWD/build/python" "$py" bench/python_knn.py --device cuda --n 1000000 \
+        --k 16 --k 64 --out "$res/knn.csv" > "$res/knn.log" 2>&1
+      echo "python_knn exit $?"
+      tail -5 "$res/knn.log"
       ;;
     python-bench)
       build_python
