@@ -63,7 +63,8 @@ def main() -> None:
                 edges = rc.knn(x, x, k)
                 assert edges.shape[1] == n * k, "a row without its k neighbours"
                 graph_edges = rc.radius_graph(x, r).shape[1]
-                calls = {"knn": lambda: rc.knn(x, x, k), "radius_graph": lambda: rc.radius_graph(x, r)}
+                calls = {"knn": lambda: rc.knn(x, x, k),
+                         "radius_graph": lambda: rc.radius_graph(x, r)}
                 times = {name_: [] for name_ in calls}
                 for _ in range(args.reps):
                     for call, fn in calls.items():

@@ -67,14 +67,16 @@ Read run_static(Engine& engine, std::size_t capacity, ListOptions options, bool 
   out.capacity = capacity;
   if (!shifts) out.shifts = nullptr;
   engine.neighbours(out, options);  // queued on the engine's stream: read back after it
+  // The count first: read_back waits for the stream (and reads at most 64 bytes); then the
+  // arrays, copied whole.
+  raycut::detail::cuda::read_back(&r.count, buffer.count(), 8, ctx.stream);
   r.i.resize(slots);
   r.j.resize(slots);
-  raycut::detail::cuda::read_back(r.i.data(), buffer.i(), slots * 8, ctx.stream);
-  raycut::detail::cuda::read_back(r.j.data(), buffer.j(), slots * 8, ctx.stream);
-  raycut::detail::cuda::read_back(&r.count, buffer.count(), 8, ctx.stream);
+  raycut::detail::cuda::copy(r.i.data(), buffer.i(), slots * 8);
+  raycut::detail::cuda::copy(r.j.data(), buffer.j(), slots * 8);
   if (shifts) {
     r.shifts.resize(3 * slots);
-    raycut::detail::cuda::read_back(r.shifts.data(), buffer.shifts(), 3 * slots * 4, ctx.stream);
+    raycut::detail::cuda::copy(r.shifts.data(), buffer.shifts(), 3 * slots * 4);
   }
 #else
   ADD_FAILURE() << "a device method without CUDA";

@@ -338,7 +338,7 @@ class Engine:
         [1, 2^32 - 1] (ValueError otherwise); a matrix beyond the memory budget raises
         MemoryError before it is allocated, saying which K is always enough. ``half``: each
         pair once, as ``neighbours`` says. ``nearest``: each row's K nearest, nearest first
-        (equal distances by index, then S), in place of its first K: |r| in double from the
+        (equal distances by index, then S), in place of its first K: distances in double from the
         positions as built (float64 ones when given, query points as float32); CPU methods only
         (NotImplementedError otherwise).
         """

@@ -154,7 +154,7 @@ def _nearest_round(x: torch.Tensor, y: torch.Tensor, queries: torch.Tensor, r: f
                    qb: torch.Tensor, r_in: float, settled: torch.Tensor, cell: Any, pbc: Any,
                    batch_x: Any, batch_y: Any) -> tuple:
     """One kNN round on the CPU for the query points y[queries]: the library keeps each one's
-    nearest points within r (a padded list of each row's K nearest, nearest first, |r| in
+    nearest points within r (a padded list of each row's K nearest, nearest first, distances in
     double), so no other pair reaches Python. A query is done when it has its `want` and the
     last of them lies within r_in, or when `settled` says so. Returns (done, and the (row, j, S)
     of the done rows' neighbours, nearest first)."""

@@ -148,7 +148,8 @@ def test_batches_with_a_box_per_system(dtype):
         start += size
     assert [len(row) for row in got[-3:]] == [2, 2, 2]  # the open system: all the others
     # Queries of a batch against points of a batch (knn), one query system empty.
-    y = torch.cat([positions(4, cells[0], 20, dtype=dtype), positions(3, cells[1], 21, dtype=dtype)])
+    y = torch.cat([positions(4, cells[0], 20, dtype=dtype),
+                   positions(3, cells[1], 21, dtype=dtype)])
     batch_y = torch.tensor([0, 0, 0, 0, 1, 1, 1])
     edge_index, shifts = rt.knn(x, y, k, batch, batch_y, cell=torch.tensor(cells), pbc=pbc)
     got = rows_of(edge_index, shifts, len(y))
