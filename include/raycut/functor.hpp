@@ -36,7 +36,9 @@
 //   emits_entries         the Accumulator is the position of the target's next entry: each call
 //                         writes one entry there and adds one. The grid may then give each call
 //                         its position itself, so that the lanes sharing a target write its
-//                         entries together (coalesced lists)
+//                         entries together (coalesced lists); a functor that writes only some
+//                         of the pairs it is handed says which in RAYCUT_HD bool within(i, j,
+//                         const Shift&, float r2) const, asked before the positions are given
 //
 // Why a list of types rather than optional members found by name: C++ cannot tell a misspelt
 // member (`vanishes_at_infinty`, `combin`) from one that is not there, so an optional member
