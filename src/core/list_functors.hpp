@@ -232,7 +232,7 @@ struct PaddedNearestFill : PaddedFill {
     std::uint32_t count;
     NearestEntry* row;  // K entries
   };
-  using options = functor_options<option::accepts, option::init, option::emits_entries>;
+  using options = functor_options<option::accepts, option::init>;  // entries written at finish
   const float* xyz;   // the points, without images
   ExactImages exact;  // with images (exact.image set)
   Accumulator init(std::uint32_t) const {
