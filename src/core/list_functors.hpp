@@ -233,8 +233,8 @@ struct PaddedNearestFill : PaddedFill {
     NearestEntry* row;  // K entries
   };
   using options = functor_options<option::accepts, option::init>;  // entries written at finish
-  const float* xyz;   // the points, without images
-  ExactImages exact;  // with images (exact.image set)
+  const float* xyz;                                                // the points, without images
+  ExactImages exact;                                               // with images (exact.image set)
   Accumulator init(std::uint32_t) const {
     thread_local std::vector<NearestEntry> scratch;
     if (scratch.size() < k) scratch.resize(k);
