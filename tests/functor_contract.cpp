@@ -113,6 +113,17 @@ struct Functor {
   void operator()(Accumulator&, std::uint32_t, Vec3, float) const {}
   void finish(std::uint32_t, Accumulator&) const {}
 };
+#elif RAYCUT_CONTRACT_CASE == 12
+// Entries placed by the traversal, without saying which pairs the call writes.
+struct Functor {
+  using Accumulator = std::uint64_t;
+  using options = raycut::functor_options<raycut::option::emits_entries>;
+  void operator()(Accumulator& slot, std::uint32_t, std::uint32_t, Vec3, float,
+                  const Shift&) const {
+    ++slot;
+  }
+  void finish(std::uint32_t, Accumulator&) const {}
+};
 #else
 #error "unknown RAYCUT_CONTRACT_CASE"
 #endif

@@ -36,9 +36,10 @@
 //   emits_entries         the Accumulator is the position of the target's next entry: each call
 //                         writes one entry there and adds one. The grid may then give each call
 //                         its position itself, so that the lanes sharing a target write its
-//                         entries together (coalesced lists); a functor that writes only some
-//                         of the pairs it is handed says which in RAYCUT_HD bool within(i, j,
-//                         const Shift&, float r2) const, asked before the positions are given
+//                         entries together (coalesced lists); it requires RAYCUT_HD bool
+//                         within(i, j, const Shift& s, float r2) const: whether the call writes
+//                         the pair (a list with per-pair cutoffs drops some), asked before the
+//                         positions are given
 //
 // Why a list of types rather than optional members found by name: C++ cannot tell a misspelt
 // member (`vanishes_at_infinty`, `combin`) from one that is not there, so an optional member
@@ -164,6 +165,15 @@ template <class F>
 struct init_member<F, std::void_t<decltype(std::declval<const F&>().init(std::uint32_t{}))>>
     : std::is_convertible<decltype(std::declval<const F&>().init(std::uint32_t{})),
                           typename F::Accumulator> {};
+// within(i, j, s, r2): whether an entry-emitting functor writes the pair it is handed.
+template <class F, class = void>
+struct within_member : std::false_type {};
+template <class F>
+struct within_member<F, std::void_t<decltype(std::declval<const F&>().within(
+                            std::uint32_t{}, std::uint32_t{}, Shift{}, 0.0f))>>
+    : std::is_convertible<decltype(std::declval<const F&>().within(std::uint32_t{}, std::uint32_t{},
+                                                                   Shift{}, 0.0f)),
+                          bool> {};
 template <class F, class = void>
 struct combine_member : std::false_type {};
 template <class F>
@@ -287,6 +297,10 @@ constexpr bool check_functor() {
     static_assert(opts_into<F, option::accepts> || !names_accepts<F>::value,
                   "raycut functor: a member accepts is declared without option::accepts in "
                   "`options` (it would be ignored)");
+    static_assert(!opts_into<F, option::emits_entries> || within_member<F>::value,
+                  "raycut functor: option::emits_entries is declared but no `bool within(uint32_t "
+                  "i, uint32_t j, const raycut::Shift& s, float r2) const` is found (whether the "
+                  "call writes the pair: the grid places entries before the calls)");
   }
   return true;
 }

@@ -12,8 +12,6 @@
 #include <cuda_runtime.h>
 
 #include <cstdint>
-#include <type_traits>
-#include <utility>
 
 #include "raycut/detail/cuda/visit.cuh"
 #include "raycut/detail/pair_pass.hpp"
@@ -331,24 +329,6 @@ __global__ void __launch_bounds__(grid_block_size)
   }
 }
 
-// Whether an entry-emitting functor writes pair (i, j, S) when called: a list with per-pair
-// cutoffs writes only the pairs within their own (ListFilter::within). Asked before the ballot
-// places the entries, since a pair dropped after its place was given would leave a hole in the
-// row (and the fill would disagree with the count).
-template <class F, class = void>
-struct has_within : std::false_type {};
-template <class F>
-struct has_within<F, std::void_t<decltype(std::declval<const F&>().within(
-                         std::uint32_t{}, std::uint32_t{}, Shift{}, 0.0f))>> : std::true_type {};
-template <class F>
-__device__ __forceinline__ bool writes_entry(const F& f, std::uint32_t i, std::uint32_t j,
-                                             const Shift& s, float r2) {
-  if constexpr (has_within<F>::value)
-    return f.within(i, j, s, r2);
-  else
-    return true;
-}
-
 // A warp per target for functors that emit entries (lists): the 32 lanes take 32 consecutive
 // candidates at a time, and a ballot gives each taken pair its place among them, so the warp
 // writes the target's entries together: coalesced stores instead of one scattered store per
@@ -389,7 +369,8 @@ __global__ void __launch_bounds__(grid_block_size)
       r2 = squared_distance(d.x, d.y, d.z);
       const std::uint32_t k = original_index(q);
       const bool in = in_range_of(images, cutoff_squared, i, k, d, r2) && s != t;
-      take = resolve(f, images, ti, in, i, k, s, j, shift) && writes_entry(f, i, j, shift, r2);
+      // A pair the functor drops (per-pair cutoffs) takes no place: it would leave a hole.
+      take = resolve(f, images, ti, in, i, k, s, j, shift) && f.within(i, j, shift, r2);
     }
     const unsigned taken = __ballot_sync(0xffffffffu, take);
     if (take) {
