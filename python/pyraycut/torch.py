@@ -249,44 +249,38 @@ def _knn_pairs(x: torch.Tensor, y: torch.Tensor, k: int, batch_x: Any, batch_y: 
         # The search decides |r| < radius in float32: only pairs clearly inside count towards
         # k, so that no nearer image can have been missed at the edge.
         r_in = r * (1 - 1e-3) - 1e-6 * scale
+        # An open system's queries are done in its last round, with what they have.
+        settled = ~periodic[pending] if last else torch.zeros_like(pending, dtype=torch.bool)
         if nearest_in_library:
-            settled = ~periodic[pending] if last else torch.zeros(len(pending), dtype=torch.bool)
             done, i, j, shifts = _nearest_round(x, y, pending, r, want[pending], exclude_self,
                                                 cells, qb, r_in, settled, cell, pbc, batch_x,
                                                 sub_batch)
-            found_i.append(pending[i])
-            found_j.append(j)
-            found_s.append(shifts)
-            pending = pending[~done]
-            r *= 2
-            continue
-        i, j, shifts = _radius_pairs(x, y[pending], r, cell=cell, pbc=pbc, batch_points=batch_x,
-                                     batch_queries=sub_batch, quantities="ijS")
-        shifts = shifts.to(torch.int32)
-        if exclude_self:
-            keep = (pending[i] != j) | (shifts != 0).any(1)  # own images are neighbours
-            i, j, shifts = i[keep], j[keep], shifts[keep]
-        v = xd[j] - yd[pending[i]]
-        if cells is not None:
-            c = cells[0] if len(cells) == 1 else cells[qb[pending[i]]]
-            v = v + (shifts.to(v.dtype).unsqueeze(1) @ c).squeeze(1)
-        d = torch.linalg.vector_norm(v, dim=1)
-        inside = d < r_in
-        counts = torch.bincount(i[inside], minlength=len(pending))
-        done = counts >= want[pending]
-        if last:
-            done |= ~periodic[pending]
-        take = done[i]
-        i, j, d, shifts = i[take], j[take], d[take], shifts[take]
-        order = _nearest_first(i, j, d, shifts)
-        i, j, shifts = i[order], j[order], shifts[order]
-        counts = torch.bincount(i, minlength=len(pending))
-        starts = torch.cumsum(counts, 0) - counts
-        rank = torch.arange(len(i), device=i.device) - starts[i]
-        first = rank < want[pending][i]
-        found_i.append(pending[i[first]])
-        found_j.append(j[first])
-        found_s.append(shifts[first])
+        else:
+            i, j, shifts = _radius_pairs(x, y[pending], r, cell=cell, pbc=pbc,
+                                         batch_points=batch_x, batch_queries=sub_batch,
+                                         quantities="ijS")
+            shifts = shifts.to(torch.int32)
+            if exclude_self:
+                keep = (pending[i] != j) | (shifts != 0).any(1)  # own images are neighbours
+                i, j, shifts = i[keep], j[keep], shifts[keep]
+            v = xd[j] - yd[pending[i]]
+            if cells is not None:
+                c = cells[0] if len(cells) == 1 else cells[qb[pending[i]]]
+                v = v + (shifts.to(v.dtype).unsqueeze(1) @ c).squeeze(1)
+            d = torch.linalg.vector_norm(v, dim=1)
+            counts = torch.bincount(i[d < r_in], minlength=len(pending))
+            done = (counts >= want[pending]) | settled
+            take = done[i]
+            i, j, d, shifts = i[take], j[take], d[take], shifts[take]
+            order = _nearest_first(i, j, d, shifts)
+            i, j, shifts = i[order], j[order], shifts[order]
+            counts = torch.bincount(i, minlength=len(pending))
+            starts = torch.cumsum(counts, 0) - counts
+            first = torch.arange(len(i), device=i.device) - starts[i] < want[pending][i]
+            i, j, shifts = i[first], j[first], shifts[first]
+        found_i.append(pending[i])
+        found_j.append(j)
+        found_s.append(shifts)
         pending = pending[~done]
         r *= 2
     i, j, shifts = torch.cat(found_i), torch.cat(found_j), torch.cat(found_s)
