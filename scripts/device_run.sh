@@ -7,7 +7,8 @@
 #                         [mpi] [mpi-scaling] [memcheck] [grid-suites] [latency] [knn]
 #                         results: ${OUT:-/tmp/raycut-out}/results.tgz
 #
-#   tests REGEX  ctest -R REGEX (e.g. "GridVariants|grid_|Sph"; "." for everything, ~6 min)
+#   tests REGEX  ctest -R REGEX (e.g. "GridVariants|grid_|Sph"; "." for everything, ~6 min),
+#                less those matching $TESTS_EXCLUDE; ctest-K.log for the K-th tests step
 #   bench        both suites, every GPU method, plus the paper's grid when its source is in
 #                .deps/paper/Cuda-version/cudaLJ.cu (docs/benchmarks.md; never committed)
 #   lists        neighbour lists vs fused kernels (bench/neighbour_bench: uniform beta 16 and 32,
@@ -27,7 +28,7 @@
 #                the same mean degree, 10^6 uniform points on CUDA (knn.csv; docs/compatibility.md)
 #   memcheck     compute-sanitizer on the functor, list, grid-variant and periodic GPU tests
 #   python       the Python package built with the device's Python (the PyTorch operators with
-#                their CUDA kernel: RAYCUT_TORCH_CUDA=ON), and its tests
+#                their CUDA kernel: RAYCUT_TORCH_CUDA=ON), and its tests ($PYTEST_FILES, or all)
 #   python-bench bench/python_lists.py (beside neighbour_bench's periodic list rows, run first)
 #                and bench/python_overhead.py: python-lists.csv/.md, python-overhead.csv
 #                (docs/python.md)
@@ -77,9 +78,11 @@ fi
 while [ $# -gt 0 ]; do
   case "$1" in
     tests)
-      (cd build && ctest -R "$2" -j12 --output-on-failure > "$res/ctest.log" 2>&1)
-      grep -E "tests passed|tests failed" "$res/ctest.log"
-      grep -E "\(Failed\)|\(Timeout\)" "$res/ctest.log" | head -20
+      runs=$((${runs:-0} + 1))
+      (cd build && ctest -R "$2" -E "${TESTS_EXCLUDE:-^$}" -j12 --output-on-failure \
+        > "$res/ctest-$runs.log" 2>&1)
+      grep -E "tests passed|tests failed" "$res/ctest-$runs.log"
+      grep -E "\(Failed\)|\(Timeout\)" "$res/ctest-$runs.log" | head -20
       shift
       ;;
     bench)
@@ -170,7 +173,9 @@ while [ $# -gt 0 ]; do
       ;;
     python)
       build_python
-      PYTHONPATH="$PWD/build/python" "$py" -m pytest -q -rs -p no:cacheprovider python/tests \
+      # shellcheck disable=SC2086
+      PYTHONPATH="$PWD/build/python" "$py" -m pytest -q -rs -p no:cacheprovider \
+        ${PYTEST_FILES:-python/tests} \
         > "$res/pytest.log" 2>&1
       echo "pytest exit $?"
       tail -15 "$res/pytest.log"
