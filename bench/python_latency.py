@@ -9,7 +9,10 @@ uniform random in a cube of side (n / 0.8442)^(1/3) per system, float32; single 
 cell per system, ``batch`` the sorted int64 system index). Each workload is measured twice:
 
 - capacity ``exact``: ``neighbor_list("ijS", x, 2.5, cell=..., pbc=True, batch=...)``;
-- capacity ``static``: the same with ``max_pairs`` = 1.25 x the true count (found once).
+- capacity ``static``: the same with ``max_pairs`` = 1.25 x the true count (found once);
+- interface ``python-torch-op``, capacity ``exact``: the operator ``torch.ops.raycut``'s Python
+  wrapper called directly in eager mode (where its CUDA kernel is built), against the package's
+  zero-copy path above: which of the two eager CUDA calls should take.
 
 Timing as the C++ bench: after warm-up, ``--reps`` repetitions of a loop of K calls (K doubled
 until a loop takes ``--min-loop-ms``), synchronised (``torch.cuda.synchronize``) only around each
@@ -232,6 +235,7 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
         cases += [(1, n) for n in CROSSOVER_SIZES]
     cases += args.batches
     generator = torch.Generator().manual_seed(args.seed)
+    ops = pyraycut._torch_ops()  # the operators' Python wrapper, None where they are not built
     rows = []
     for systems, per_system in cases:
         x, cell, batch = workload(torch, systems, per_system, args.device, generator)
@@ -253,15 +257,22 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
         if entries != max_pairs:
             raise SystemExit(f"python_latency: max_pairs={max_pairs} gave {entries} entries, "
                              f"not the static size")
-        for capacity, call in (("static", static), ("exact", exact)):
+        def operator():
+            return ops.neighbor_list("ijS", x, CUTOFF, cell, True, batch, False, None)
+
+        calls = [("python-torch", "static", static), ("python-torch", "exact", exact)]
+        if cuda and ops is not None and ops._CUDA_KERNEL:
+            calls.append(("python-torch-op", "exact", operator))
+        for interface, capacity, call in calls:
             us = median_us_per_call(call, sync, args.reps, args.min_loop_ms)
             kernels, syncs = (profile_counts(torch, call, sync, args.profile_calls) if cuda
                               else ("", ""))
             row = {"workload": "lj-pbc", "systems": systems, "n_per_system": per_system,
-                   "interface": "python-torch", "mode": "eager", "capacity": capacity,
+                   "interface": interface, "mode": "eager", "capacity": capacity,
                    "us_per_call": f"{us:.3f}", "kernels": kernels, "syncs": syncs, **machine}
             rows.append(row)
-            print(f"lj-pbc {systems:>4} x {per_system:<6} {capacity:<6} {us:10.2f} us  "
+            print(f"lj-pbc {systems:>4} x {per_system:<6} {interface:<15} {capacity:<6} "
+                  f"{us:10.2f} us  "
                   f"kernels {kernels or '-':>5}  syncs {syncs or '-':>5}  ({count} pairs)",
                   flush=True)
     if args.output:

@@ -22,8 +22,8 @@ class MemoryResource {
 struct Context {
   // A cudaStream_t; null: the legacy default stream.
   void* stream = nullptr;
-  // Null: cudaMallocAsync / cudaFreeAsync on `stream` from the device's default pool (capturable
-  // in a CUDA graph as allocation nodes).
+  // Null: stream-ordered allocations on `stream` from raycut's own pool of the device, which keeps
+  // freed blocks for the next call (capturable in a CUDA graph as allocation nodes).
   MemoryResource* memory = nullptr;
 };
 

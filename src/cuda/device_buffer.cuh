@@ -28,6 +28,11 @@ enum class Allocation {
 void* pooled_allocate(std::size_t bytes);
 // After every stream's work (the block may still be read, as cudaFree waits too).
 void pooled_free(void* p) noexcept;
+// Stream-ordered on `stream` from the same pool, waiting for nothing (a CUDA graph captures it
+// as an allocation node); free with cudaFreeAsync. Not the device's default pool: that one gives
+// its freed blocks back to the driver at every synchronisation (release threshold 0), so each
+// call would map its memory afresh. Throws out_of_memory when the pool cannot grow.
+void* pooled_allocate_async(std::size_t bytes, cudaStream_t stream);
 
 template <class T, Allocation A = Allocation::dedicated>
 class DeviceBuffer {

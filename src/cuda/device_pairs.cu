@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "core/validation.hpp"
+#include "cuda/device_buffer.cuh"
 #include "cuda/device_pairs_host.hpp"
 #include "raycut/detail/cuda/check.cuh"
 #include "raycut/device_pairs.hpp"
@@ -373,9 +374,7 @@ constexpr std::size_t align_up(std::size_t bytes) {
 
 void* allocate(const Context& ctx, std::size_t bytes) {
   if (ctx.memory) return ctx.memory->allocate(bytes, ctx.stream);
-  void* p = nullptr;
-  RAYCUT_CUDA_CHECK(cudaMallocAsync(&p, bytes, static_cast<cudaStream_t>(ctx.stream)));
-  return p;
+  return detail::cuda::pooled_allocate_async(bytes, static_cast<cudaStream_t>(ctx.stream));
 }
 
 void deallocate(const Context& ctx, void* p, std::size_t bytes) noexcept {

@@ -146,6 +146,20 @@ void* pooled_allocate(std::size_t bytes) {
   return nullptr;
 }
 
+void* pooled_allocate_async(std::size_t bytes, cudaStream_t stream) {
+  cudaMemPool_t pool = device_pool();
+  void* p = nullptr;
+  if (cudaMallocFromPoolAsync(&p, bytes, pool, stream) == cudaSuccess) return p;
+  (void)cudaGetLastError();
+  // The blocks already idle back to the device (no wait), then once more.
+  if (cudaMemPoolTrimTo(pool, 0) == cudaSuccess &&
+      cudaMallocFromPoolAsync(&p, bytes, pool, stream) == cudaSuccess)
+    return p;
+  (void)cudaGetLastError();
+  throw Error(ErrorCode::out_of_memory,
+              "device memory: " + std::to_string(bytes) + " bytes do not fit on the device");
+}
+
 // On the block's own device, which need not be the current one when the buffer dies.
 void pooled_free(void* p) noexcept {
   int current = -1;
