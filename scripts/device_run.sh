@@ -28,7 +28,8 @@
 #                the same mean degree, 10^6 uniform points on CUDA (knn.csv; docs/compatibility.md)
 #   memcheck     compute-sanitizer on the functor, list, grid-variant and periodic GPU tests
 #   python       the Python package built with the device's Python (the PyTorch operators with
-#                their CUDA kernel: RAYCUT_TORCH_CUDA=ON), and its tests ($PYTEST_FILES, or all)
+#                their CUDA kernel: RAYCUT_TORCH_CUDA=ON), and its tests ($PYTEST_FILES, or all; killed after
+#                $PYTEST_TIMEOUT seconds when set)
 #   python-bench bench/python_lists.py (beside neighbour_bench's periodic list rows, run first)
 #                and bench/python_overhead.py: python-lists.csv/.md, python-overhead.csv
 #                (docs/python.md)
@@ -174,7 +175,8 @@ while [ $# -gt 0 ]; do
     python)
       build_python
       # shellcheck disable=SC2086
-      PYTHONPATH="$PWD/build/python" "$py" -m pytest -q -rs -p no:cacheprovider \
+      PYTHONPATH="$PWD/build/python" timeout "${PYTEST_TIMEOUT:-0}" \
+        "$py" -m pytest -q -rs -p no:cacheprovider \
         ${PYTEST_FILES:-python/tests} \
         > "$res/pytest.log" 2>&1
       echo "pytest exit $?"
