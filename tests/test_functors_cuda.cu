@@ -269,6 +269,10 @@ class Triples {
     s_d_ = std::make_unique<DeviceBuffer<std::int32_t>>(3 * std::size_t{total});
     cudaMemcpy(offsets_d_.p, offsets_.data(), offsets_.size() * sizeof(std::uint32_t),
                cudaMemcpyHostToDevice);
+    // A copy from pageable memory may still be in flight when cudaMemcpy returns, ordered only
+    // with blocking streams: a pass on a non-blocking stream could read the offsets before they
+    // land (seen on an H100: row 0 began at 0xFFFFFFFF, left in the fresh allocation).
+    EXPECT_EQ(cudaDeviceSynchronize(), cudaSuccess);
   }
   // Queued on `stream`; nothing waits.
   void launch(const Engine& engine, cudaStream_t stream) const {
