@@ -176,7 +176,7 @@ while [ $# -gt 0 ]; do
       build_python
       # shellcheck disable=SC2086
       PYTHONPATH="$PWD/build/python" timeout "${PYTEST_TIMEOUT:-0}" \
-        "$py" -m pytest -q -rs -p no:cacheprovider \
+        "$py" -m pytest -v -rfEs -p no:cacheprovider \
         ${PYTEST_FILES:-python/tests} \
         > "$res/pytest.log" 2>&1
       echo "pytest exit $?"

@@ -439,6 +439,21 @@ TEST(DevicePairs, ReadPairCountNamesBadDataAndHostArgumentsFailEarly) {
   EXPECT_THROW(raycut::list_pairs_small_systems(ctx, none, 1.0, {}, buffer.view(0)), raycut::Error);
 }
 
+// The policy's crossover, as measured (device_pairs.hpp): the sizes each side of it.
+TEST(DevicePairs, SmallSystemPolicyFollowsThePairTests) {
+  EXPECT_TRUE(raycut::prefer_small_systems(1000, 1));
+  EXPECT_TRUE(raycut::prefer_small_systems(1024, 1));
+  EXPECT_FALSE(raycut::prefer_small_systems(1025, 1));
+  EXPECT_FALSE(raycut::prefer_small_systems(2000, 1));
+  EXPECT_TRUE(raycut::prefer_small_systems(32 * 100, 32));
+  EXPECT_FALSE(raycut::prefer_small_systems(256 * 100, 256));
+  EXPECT_FALSE(raycut::prefer_small_systems(512 * 128, 512));
+  EXPECT_FALSE(raycut::prefer_small_systems(10, 0));
+  EXPECT_TRUE(raycut::prefer_small_systems(0, 1));
+  // No overflow at sizes past 2^32 particles.
+  EXPECT_FALSE(raycut::prefer_small_systems(std::size_t(1) << 40, std::size_t(1) << 20));
+}
+
 TEST(DevicePairs, HostArgumentsAreCheckedBeforeAnyWork) {
   raycut::DeviceSystems none;
   std::int64_t i[4], j[4], count = 7;

@@ -126,8 +126,13 @@ def test_device_batch_index_matches_the_host_one():
             assert got.offsets.dtype == np.uint64
     empty = _systems.batch(None, 0, torch.zeros(0, dtype=torch.int64, device="cuda"))
     assert empty.offsets.tolist() == [0, 0]
-    single = _systems.batch(None, 1, torch.full((1,), 2, device="cuda"))
-    assert single.offsets.tolist() == [0, 0, 0, 1]
+    leading_empty = _systems.batch(None, 3, torch.full((3,), 2, device="cuda"))
+    assert leading_empty.offsets.tolist() == [0, 0, 0, 3]
+    # More systems than points + 1: the host renumbers the used ones densely; on the device
+    # that would mean reading the index back, so it is refused with the way out.
+    with pytest.raises(ValueError, match="renumber them densely"):
+        _systems.batch(None, 1, torch.full((1,), 2, device="cuda"))
+    assert _systems.batch(None, 1, np.array([2])).offsets.tolist() == [0, 1]
     bad = {
         "unsorted": np.array([0, 0, 2, 1, 3]),
         "negative": np.array([-1, 0, 0]),
