@@ -63,7 +63,7 @@ constexpr bool prefer_small_systems(std::size_t particles, std::size_t systems) 
 // (i, i, 0), decided in double precision from the positions as given (float32 or float64): the
 // float64 answer at every box size, with no band. Brute force within each system in one pass
 // (a warp per particle), so the work is the sum over systems of n_s^2 times the images a pair
-// has: the path for systems up to a few thousand particles (docs/streams.md gives the
+// has: the path for systems up to about a thousand particles (docs/streams.md gives the
 // crossover). Pairs come row by row (i ascending), then by j ascending, then by S
 // lexicographically.
 //
