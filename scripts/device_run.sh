@@ -28,8 +28,9 @@
 #                the same mean degree, 10^6 uniform points on CUDA (knn.csv; docs/compatibility.md)
 #   memcheck     compute-sanitizer on the functor, list, grid-variant and periodic GPU tests
 #   python       the Python package built with the device's Python (the PyTorch operators with
-#                their CUDA kernel: RAYCUT_TORCH_CUDA=ON), and its tests ($PYTEST_FILES, or all; killed after
-#                $PYTEST_TIMEOUT seconds when set)
+#                their CUDA kernel: RAYCUT_TORCH_CUDA=ON), and its tests: a pytest process per
+#                file ($PYTEST_FILES, or every file), each killed after $PYTEST_TIMEOUT seconds
+#                when set
 #   python-bench bench/python_lists.py (beside neighbour_bench's periodic list rows, run first)
 #                and bench/python_overhead.py: python-lists.csv/.md, python-overhead.csv
 #                (docs/python.md)
@@ -173,14 +174,19 @@ while [ $# -gt 0 ]; do
       fi
       ;;
     python)
+      # One process per test file, so that a crash (a segfault in one framework's runtime) hides
+      # nothing else: pytest-FILE.log each, and a line per file here.
       build_python
-      # shellcheck disable=SC2086
-      PYTHONPATH="$PWD/build/python" timeout "${PYTEST_TIMEOUT:-0}" \
-        "$py" -m pytest -v -rfEs -p no:cacheprovider \
-        ${PYTEST_FILES:-python/tests} \
-        > "$res/pytest.log" 2>&1
-      echo "pytest exit $?"
-      tail -15 "$res/pytest.log"
+      files="${PYTEST_FILES:-$(ls python/tests/test_*.py)}"
+      for f in $files; do
+        name=$(basename "$f" .py)
+        PYTHONPATH="$PWD/build/python" timeout "${PYTEST_TIMEOUT:-0}" \
+          "$py" -m pytest -v -rfEs -p no:cacheprovider "$f" > "$res/pytest-$name.log" 2>&1
+        rc=$?
+        echo "pytest $name exit $rc: $(tail -1 "$res/pytest-$name.log")"
+        grep -E "^(FAILED|ERROR) |Fatal Python" "$res/pytest-$name.log" | head -10
+        [ $rc -ge 124 ] && grep -B1 -m1 "Fatal Python" "$res/pytest-$name.log"
+      done
       ;;
     knn)
       build_python
