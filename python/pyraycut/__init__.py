@@ -504,8 +504,11 @@ _ENGINE_CACHE = [True]
 def clear_engine_cache() -> None:
     """Frees the engines that ``neighbor_list`` and ``radius`` keep between calls (one per method
     and CUDA device, each holding the structure of its last call: memory that grows to the
-    largest system it has seen). Arrays already returned are not affected."""
+    largest system it has seen), and the host list buffers kept for reuse (at most two, 256 MiB
+    together: the memory of lists whose arrays are gone, refilled by the next lists without the
+    page faults of fresh memory). Arrays already returned are not affected."""
     _ENGINES.clear()
+    _raycut.release_idle_lists()
 
 
 def set_engine_cache(enabled: bool) -> None:

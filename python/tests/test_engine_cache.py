@@ -116,3 +116,28 @@ def test_threads_get_engines_of_their_own():
     for k, x in enumerate(inputs):
         assert_same_pairs(*results[k], x, CUTOFF)
     assert len(cached()) == 1  # one idle engine per key is kept; the others were freed
+
+
+def test_dropped_host_lists_are_refilled_and_held_ones_never():
+    """A list whose arrays are all gone lends its memory to a later list (no fresh pages); one
+    still held is never written, whatever the later calls ask (other sizes and letters)."""
+    x, y = uniform(500, seed=4), uniform(800, seed=5)
+    pyraycut.clear_engine_cache()  # no buffer kept from earlier tests
+    i, j = pyraycut.neighbor_list("ij", x, CUTOFF, method="cell-list")
+    where, pairs = i.__array_interface__["data"][0], len(i)
+    del i, j
+    # Memory of the same size asked for meanwhile: malloc would hand it the freed block.
+    other = np.ones(pairs, np.int64)
+    held = pyraycut.neighbor_list("ijd", x, CUTOFF, method="cell-list")
+    assert held[0].__array_interface__["data"][0] == where  # the dropped list's memory
+    kept = [a.copy() for a in held]
+    for k in range(4):  # more pairs, fewer pairs, other letters: held stays as it was
+        z = y if k % 2 else x[:300]
+        out = pyraycut.neighbor_list("ijdD" if k % 2 else "ij", z, CUTOFF, method="cell-list")
+        assert_same_pairs(out[0], out[1], z, CUTOFF)
+        for a, b in zip(held, kept):
+            np.testing.assert_array_equal(a, b)
+    pyraycut.clear_engine_cache()
+    del held, out, other
+    i, j = pyraycut.neighbor_list("ij", x, CUTOFF, method="cell-list")
+    assert_same_pairs(i, j, x, CUTOFF)
