@@ -597,12 +597,12 @@ def _pair_quantities(letters: str, engine: Engine, half: bool, grad: bool, sourc
         if "d" in letters:
             d = torch.linalg.vector_norm(v, dim=1)
     elif recompute:
-        host = _systems.host_vectors(wide, wide, _arrays.to_numpy(i), _arrays.to_numpy(j),
-                                     None if shifts is None else _arrays.to_numpy(shifts),
-                                     batch.boxes, rows)
+        host, lengths = _systems.host_vectors(
+            wide, wide, _arrays.to_numpy(i), _arrays.to_numpy(j),
+            None if shifts is None else _arrays.to_numpy(shifts), batch.boxes, rows)
         v = _arrays.output(host, engine._like)
         if "d" in letters:
-            d = _arrays.output(np.sqrt(np.einsum("pk,pk->p", host, host)), engine._like)
+            d = _arrays.output(lengths, engine._like)
     found = {"i": i, "j": j, "d": d, "D": v, "S": shifts}
     out = tuple(found[letter] for letter in letters)
     return out[0] if len(out) == 1 else out

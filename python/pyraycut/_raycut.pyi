@@ -21,6 +21,9 @@ def device_index_summary(index: Any, stream: int) -> tuple[int, int, int, int, i
     place it decreases (N - 1 when sorted)."""
 def device_index_offsets(index: Any, systems: int, stream: int) -> Any:
     """Systems offsets (S + 1, uint64 NumPy) of a sorted 1-D int32/int64 CUDA index."""
+def pair_vectors(targets: Any, sources: Any, i: Any, j: Any, shifts: Optional[Any],
+                 cells: Optional[Any], cell_of: Optional[Any]) -> tuple[Any, Any]:
+    """(r (P, 3), its length (P,)): r = x_j - x_i + S . cell in float64 for pairs (i, j, S)."""
 def release_idle_lists() -> None:
     """Frees the host list buffers kept for reuse (pyraycut.clear_engine_cache calls it)."""
 def current_device() -> int:

@@ -273,15 +273,18 @@ def add_shifts(torch: Any, vectors: Any, shifts: Any, cell: Any, pair_systems: A
 
 def host_vectors(sources: np.ndarray, targets: np.ndarray, i: np.ndarray, j: np.ndarray,
                  shifts: Optional[np.ndarray], boxes_: Optional[Boxes],
-                 target_offsets: Any) -> np.ndarray:
-    """r_ij = x_j - x_i + S . cell in float64 from the caller's float64 (N, 3) positions (and
-    the cells as the engine took them), so that ``d`` and ``D`` carry the input's precision
-    rather than the float32 search's."""
-    vectors = sources[j] - targets[i]
-    if boxes_ is None or not boxes_.periodic or shifts is None:
-        return vectors
-    s = np.asarray(shifts, dtype=np.float64)
-    if boxes_.count == 1:
-        return vectors + s @ boxes_.cells[0]
-    systems = np.searchsorted(np.asarray(target_offsets, np.int64), i, side="right") - 1
-    return vectors + np.einsum("pk,pkl->pl", s, boxes_.cells[systems])
+                 target_offsets: Any) -> tuple:
+    """(r_ij, its length): r_ij = x_j - x_i + S . cell in float64 from the caller's float64
+    (N, 3) positions (and the cells as the engine took them), so that ``d`` and ``D`` carry the
+    input's precision rather than the float32 search's: one pass over the pairs in the
+    extension."""
+    periodic = boxes_ is not None and boxes_.periodic and shifts is not None
+    cell_of = None
+    if periodic and boxes_.count > 1:
+        cell_of = np.searchsorted(np.asarray(target_offsets, np.int64), i, side="right") - 1
+    return _raycut.pair_vectors(
+        np.ascontiguousarray(targets, np.float64), np.ascontiguousarray(sources, np.float64),
+        np.ascontiguousarray(i, np.int64), np.ascontiguousarray(j, np.int64),
+        np.ascontiguousarray(shifts) if periodic else None,
+        np.ascontiguousarray(boxes_.cells, np.float64) if periodic else None,
+        None if cell_of is None else cell_of.astype(np.int64))

@@ -40,7 +40,7 @@ import numpy as np
 from . import _letters
 from . import neighbor_list as _neighbor_list
 
-from . import _cutoffs
+from . import _cutoffs, _raycut
 
 __all__ = ["CoulombDSF", "LennardJones", "NeighborList", "neighbor_list"]
 
@@ -149,27 +149,14 @@ def neighbor_list(quantities: str, atoms: Any, cutoff: Any, self_interaction: bo
     positions, cell, pbc = _system(atoms)
     varying = _cutoffs.is_varying(cutoff)
     numbers = getattr(atoms, "numbers", None)
-    if varying:
-        # Per-atom or per-pair cutoffs: decided by the list pass in double from the float64
-        # positions as given (S then refers to them, as ASE's does).
-        i, j, S = _neighbor_list("ijS", positions, cutoff, cell=cell if pbc.any() else None,
-                                 pbc=pbc if pbc.any() else None, method=method, numbers=numbers)
-        i = np.asarray(i, dtype=np.intp)
-        j = np.asarray(j, dtype=np.intp)
-        S = np.asarray(S, dtype=np.int64)
-    elif pbc.any():
-        wrapped, n = _wrap(positions, cell, pbc)
-        i, j, S = _neighbor_list("ijS", _centred_float32(wrapped), cutoff, cell=cell, pbc=pbc,
-                                 method=method)
-        i = np.asarray(i, dtype=np.intp)
-        j = np.asarray(j, dtype=np.intp)
-        # wrapped = positions - n @ cell, so S for the positions as given is S_w + n_i - n_j.
-        S = np.asarray(S, dtype=np.int64) + n[i] - n[j]
-    else:
-        i, j = _neighbor_list("ij", _centred_float32(positions), cutoff, method=method)
-        i = np.asarray(i, dtype=np.intp)
-        j = np.asarray(j, dtype=np.intp)
-        S = np.zeros((len(i), 3), dtype=np.int64)
+    periodic = bool(pbc.any())
+    # Decided by the list pass in double from the float64 positions as given (S then refers to
+    # them, as ASE's does), per-atom and per-pair cutoffs too.
+    i, j, S = _neighbor_list("ijS", positions, cutoff, cell=cell if periodic else None,
+                             pbc=pbc if periodic else None, method=method, numbers=numbers)
+    i = np.asarray(i, dtype=np.intp)
+    j = np.asarray(j, dtype=np.intp)
+    S = np.asarray(S, dtype=np.int64)
     if self_interaction and len(positions):
         own = np.arange(len(positions), dtype=np.intp)
         if varying:  # (i, i, 0) at distance 0: kept where 0 < its cutoff, as ASE does
@@ -181,16 +168,20 @@ def neighbor_list(quantities: str, atoms: Any, cutoff: Any, self_interaction: bo
         i, j, S = i[order], j[order], S[order]
 
     out = []
-    vectors = None
+    vectors = lengths = None
     for letter in quantities:
         if letter == "i":
             out.append(i)
         elif letter == "j":
             out.append(j)
         elif letter in "dD":
-            if vectors is None:  # float64, as ASE
-                vectors = positions[j] - positions[i] + S.astype(np.float64) @ cell
-            out.append(vectors if letter == "D" else np.sqrt(np.sum(vectors * vectors, axis=1)))
+            if vectors is None:  # float64, rounded as ASE's
+                x = np.ascontiguousarray(positions)
+                vectors, lengths = _raycut.pair_vectors(
+                    x, x, np.ascontiguousarray(i, np.int64), np.ascontiguousarray(j, np.int64),
+                    S if periodic else None, np.ascontiguousarray(cell[None]) if periodic else None,
+                    None)
+            out.append(vectors if letter == "D" else lengths)
         else:
             out.append(S)
     return out[0] if len(out) == 1 else tuple(out)

@@ -295,6 +295,25 @@ def test_batch_per_system_boxes(system_method):
         assert mine == triples(*alone)
 
 
+def test_float64_batch_takes_each_pairs_own_cell(system_method):
+    """float64 positions of a batch with a cell per system: D and d from each pair's own cell in
+    float64 (the extension's one pass over the pairs), d rounded as NumPy's norm of D."""
+    if pyraycut.Engine(system_method).space != "host":
+        pytest.skip("float64 positions are decided in double on the host methods")
+    x, batch = batched(SIZES, BATCH_CELLS, BATCH_PBC)
+    x = x.astype(np.float64) + np.random.default_rng(8).random(x.shape) * 1e-4
+    i, j, d, D, S = pyraycut.neighbor_list("ijdDS", x, 0.45, cell=np.stack(BATCH_CELLS),
+                                           pbc=np.array(BATCH_PBC), batch=batch,
+                                           method=system_method)
+    assert d.dtype == np.float64 and D.dtype == np.float64 and len(i) > 0
+    cells = np.stack(BATCH_CELLS).astype(np.float64)[batch[i]]
+    r = x[j] - x[i] + np.einsum("pk,pkl->pl", S.astype(np.float64), cells)
+    np.testing.assert_allclose(D, r, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(d, np.sqrt(np.sum(D * D, axis=1)))
+    with pytest.raises(ValueError, match="outside"):
+        pyraycut._raycut.pair_vectors(x, x, i, j + len(x), S, cells[:1], None)
+
+
 def test_batch_shared_box_and_open(system_method):
     cutoff = 0.3
     sizes = [0, 40, 1, 25]
