@@ -10,13 +10,13 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
-#include <mutex>
 #include <optional>
 #include <vector>
 
 #include "arrays.hpp"
 #include "bindings.hpp"
 #include "errors.hpp"
+#include "idle_lists.hpp"
 #include "raycut/kernels.hpp"
 
 namespace raycut_py {
@@ -58,56 +58,6 @@ struct PyPairCutoffs {
     return c;
   }
 };
-
-// Host list buffers that no array uses any more, kept for the next list. Each call fills a buffer
-// of its own (the arrays of earlier calls stay valid), and a fresh one pays a page fault on every
-// page it writes: a third of a CPU list call at 10,000 particles (perf: the kernel zeroing
-// pages). A loop that drops each call's arrays after the next call alternates two buffers, so two
-// are kept, while they hold at most kept_bytes together; larger lists are freed as before.
-class IdleLists {
- public:
-  static constexpr std::size_t kept = 2, kept_bytes = std::size_t{256} << 20;
-
-  // A buffer that comes back here when the last array over it dies.
-  std::shared_ptr<raycut::NeighbourListBuffer> take() {
-    std::unique_ptr<raycut::NeighbourListBuffer> list;
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (!idle_.empty()) {
-        list = std::move(idle_.back());
-        idle_.pop_back();
-      }
-    }
-    if (!list) list = std::make_unique<raycut::NeighbourListBuffer>();
-    return {list.release(), [this](raycut::NeighbourListBuffer* done) { give_back(done); }};
-  }
-
-  void clear() {
-    std::vector<std::unique_ptr<raycut::NeighbourListBuffer>> freed;
-    std::lock_guard<std::mutex> lock(mutex_);
-    freed.swap(idle_);
-  }
-
- private:
-  void give_back(raycut::NeighbourListBuffer* done) {
-    std::unique_ptr<raycut::NeighbourListBuffer> list(done);
-    // Unfilled (a failed call), or device memory (pooled already): freed.
-    if (list->bytes() == 0 || list->space() != MemorySpace::host) return;
-    std::lock_guard<std::mutex> lock(mutex_);
-    std::size_t held = list->bytes();
-    for (const auto& l : idle_) held += l->bytes();
-    if (idle_.size() < kept && held <= kept_bytes) idle_.push_back(std::move(list));
-  }
-
-  std::mutex mutex_;
-  std::vector<std::unique_ptr<raycut::NeighbourListBuffer>> idle_;
-};
-
-// Process-wide and never destroyed: arrays may outlive the module's teardown.
-IdleLists& idle_lists() {
-  static auto* lists = new IdleLists;
-  return *lists;
-}
 
 // The list of `engine`'s positions where the method works (a buffer of its own: earlier results
 // stay valid).

@@ -37,6 +37,7 @@
 #include <tuple>
 #include <vector>
 
+#include "idle_lists.hpp"
 #include "pair_outputs.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/error.hpp"
@@ -234,13 +235,13 @@ raycut::Systems systems_of(std::vector<raycut::Box> boxes, const at::Tensor& ind
 }
 
 // One engine per thread and device, reused from call to call (its structure buffers only grow):
-// the CPU cell list, or the CUDA grid on each CUDA device. The host list buffer is reused too;
-// a CUDA list is a fresh buffer per call (from raycut's stream-ordered pool), so that a copy of
-// the last call's pairs still queued on another stream never reads a refilled buffer.
+// the CPU cell list, or the CUDA grid on each CUDA device. Lists are buffers of their own per
+// call: on the CPU recycled ones (idle_lists(), the outputs wrap them), on CUDA fresh ones from
+// raycut's stream-ordered pool, so that a copy of the last call's pairs still queued on another
+// stream never reads a refilled buffer.
 struct Work {
   explicit Work(const char* method) : engine(method) {}
   raycut::Engine engine;
-  raycut::NeighbourListBuffer list;
 };
 Work& work_for(const at::Device& device) {
   if (device.is_cpu()) {
@@ -327,6 +328,23 @@ Pairs pair_tensors(const raycut::NeighbourListBuffer& list, std::optional<std::i
   return {i, j, shifts, count.to(device)};
 }
 
+// A host list's pairs as (i, j, S, count) tensors over its own memory, no copy: the list goes
+// back to raycut_py::idle_lists() when the last of them dies.
+Pairs wrapped_pairs(const std::shared_ptr<raycut::NeighbourListBuffer>& list) {
+  const auto found = static_cast<std::int64_t>(list->pairs());
+  const at::Tensor count = at::scalar_tensor(found, at::kLong);
+  if (found == 0)
+    return {at::empty({0}, at::kLong), at::empty({0}, at::kLong), at::empty({0, 3}, at::kInt),
+            count};
+  const auto wrap = [&](const void* data, at::IntArrayRef shape, at::ScalarType type) {
+    return at::from_blob(
+        const_cast<void*>(data), shape, [owner = list](void*) mutable { owner.reset(); },
+        at::TensorOptions().dtype(type));
+  };
+  return {wrap(list->rows(), {found}, at::kLong), wrap(list->columns(), {found}, at::kLong),
+          wrap(list->shifts(), {found, 3}, at::kInt), count};
+}
+
 // Builds the engine of `x`'s device over x (and `systems`) and fills a COO list with shifts:
 // on the CPU in place, on CUDA on the current device and stream. `wide`: the float64 CPU
 // positions x was rounded from (undefined otherwise).
@@ -336,8 +354,9 @@ Pairs run(const at::Tensor& x, double cutoff, const raycut::Systems& systems, bo
   const at::Device device = x.device();
   const OnDevice on(device);
   Work& work = on.work;
-  raycut::NeighbourListBuffer fresh;
-  raycut::NeighbourListBuffer& list = device.is_cpu() ? work.list : fresh;
+  const std::shared_ptr<raycut::NeighbourListBuffer> list =
+      device.is_cpu() ? raycut_py::idle_lists().take()
+                      : std::make_shared<raycut::NeighbourListBuffer>();
   const auto space = device.is_cpu() ? raycut::MemorySpace::host : raycut::MemorySpace::device;
   try {
     if (wide.defined())
@@ -367,11 +386,12 @@ Pairs run(const at::Tensor& x, double cutoff, const raycut::Systems& systems, bo
     options.half = half;
     options.shifts = true;
     options.coo = true;
-    work.engine.neighbours(list, options);
+    work.engine.neighbours(*list, options);
   } catch (const raycut::Error& e) {
     rethrow(e);
   }
-  return pair_tensors(list, max_pairs, pad_i, pad_j, device);
+  if (device.is_cpu() && !max_pairs) return wrapped_pairs(list);
+  return pair_tensors(*list, max_pairs, pad_i, pad_j, device);
 }
 
 #ifdef RAYCUT_TORCH_CUDA

@@ -106,6 +106,35 @@ def test_batch_with_per_system_boxes_and_an_empty_system():
     assert triples(*one[:3]) == triples(*dense[:3])
 
 
+def test_outputs_own_their_list_and_dropped_ones_are_refilled():
+    """CPU outputs wrap the library's list without a copy: held ones never change, whatever
+    later calls list, and the memory of dropped ones is refilled by the next call (no fresh
+    pages), even when the same amount of memory was asked for in between."""
+    cell = 1.0 * TRICLINIC
+    x, c = periodic_system(60, cell, (True, True, True), seed=5, dtype=torch.float32)
+    y, _ = periodic_system(90, cell, (True, True, True), seed=6, dtype=torch.float32)
+    held = OPS.neighbor_list(x, 0.35, c)
+    kept = [t.clone() for t in held]
+    for z in (y, x[:30], y):
+        i, j, S, count = OPS.neighbor_list(z, 0.35, c)
+        assert int(count) == len(i) and triples(i, j, S) == reference_triples(z, cell, 0.35)
+        for a, b in zip(held, kept):
+            assert torch.equal(a, b)
+    del i, j, S, count
+    first = OPS.neighbor_list(y, 0.35, c)
+    where, pairs = first[0].data_ptr(), len(first[0])
+    del first  # the newest idle list: the next call's
+    other = torch.ones(pairs, dtype=torch.int64)  # malloc would hand it the freed block
+    again = OPS.neighbor_list(y, 0.35, c)
+    assert again[0].data_ptr() == where != other.data_ptr()
+
+
+def reference_triples(x, cell, cutoff):
+    inside, edge = reference(x.double().numpy(), x.double().numpy(), cutoff, cell, (True,) * 3)
+    assert not edge, "no pair this close to the cutoff here"
+    return inside
+
+
 def test_max_pairs_padding_and_overflow():
     x, c = periodic_system(30, np.eye(3), (True,) * 3, seed=5)
     i, j, S, count = OPS.neighbor_list(x, 0.4, c)
