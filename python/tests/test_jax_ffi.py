@@ -16,6 +16,14 @@ CELL = 0.9 * TRICLINIC
 CUTOFF = 0.45
 
 
+@pytest.fixture(autouse=True)
+def on_the_cpu():
+    """The CPU custom call, whatever device JAX takes by default: on a machine with a GPU, NumPy
+    inputs would go to the CUDA one, which python/tests/test_jax_cuda.py compares with this."""
+    with jax.default_device(jax.devices("cpu")[0]):
+        yield
+
+
 def test_jit_pairs_match_brute_force_and_padding():
     x = inside_cell(30, CELL, seed=8)
     listed = jax.jit(lambda x, c: rjax.neighbor_list(x, CUTOFF, cell=c, max_pairs=2000))
