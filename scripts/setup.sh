@@ -20,7 +20,5 @@ $SUDO apt-get install -y -qq --no-install-recommends \
   clang-format python3 python3-dev python3-venv python3-numpy python3-matplotlib \
   openmpi-bin libopenmpi-dev doxygen \
   clang libclang-rt-14-dev  # the readers' fuzz test (tests/fuzz: libFuzzer, sanitizers)
-[ -x .venv/bin/python ] || python3 -m venv .venv
-.venv/bin/python -m pip install -q --upgrade pip
-.venv/bin/python -m pip install -q -r python/requirements.txt
+scripts/python_env.sh
 echo "raycut: dependencies installed (Python: $PWD/.venv)"

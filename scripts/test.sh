@@ -5,9 +5,9 @@
 #
 # The Python used: $RAYCUT_PYTHON, else .venv/bin/python (scripts/setup.sh), else python3; it
 # needs nanobind, numpy and pytest (python/requirements.txt); without them and without .venv,
-# .venv is created as scripts/setup.sh does. RAYCUT_PYTHON_TESTS=OFF skips the
-# Python package. RAYCUT_TEST_WHEEL=1 also runs `pip install --no-build-isolation .` into that
-# Python (a second, full build of the library) and the tests on the installed package.
+# .venv is created by scripts/python_env.sh, as scripts/setup.sh does. RAYCUT_PYTHON_TESTS=OFF
+# skips the Python package. RAYCUT_TEST_WHEEL=1 also runs `pip install --no-build-isolation .`
+# into that Python (a second, full build of the library) and the tests on the installed package.
 # With torch and jax importable by that Python, the PyTorch operators and pyraycut.jax's custom
 # call are built and tested too; without them their tests are skipped, saying why.
 set -euo pipefail
@@ -22,7 +22,7 @@ if [ "$python_tests" != OFF ]; then
   if [ -z "${RAYCUT_PYTHON:-}" ] && [ ! -e .venv ] &&
      ! "$python" -c "import nanobind, numpy, pytest" 2>/dev/null; then
     echo "raycut: no .venv: creating it (python/requirements.txt, from PyPI)" >&2
-    if python3 -m venv .venv && .venv/bin/python -m pip install -q -r python/requirements.txt; then
+    if scripts/python_env.sh; then
       python="$PWD/.venv/bin/python"
     fi
   fi
