@@ -673,8 +673,9 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     among the quantities: then the caller checks the count (``check_pair_count`` where the host
     may wait), and a CUDA call on small systems never waits for the GPU (CUDA graphs capture it;
     docs/python.md, "Static capacity on CUDA"). CUDA tensors (method "auto" or "grid") take the
-    operator's CUDA kernel, where it is built, with ``max_pairs`` and under torch.compile (eager
-    calls without ``max_pairs`` keep the zero-copy path above).
+    operator's CUDA kernel, where it is built, with ``max_pairs``, under torch.compile, and for
+    lists of at most 1,024 particles, where it is faster; other eager calls keep the zero-copy
+    path above.
 
     >>> i, j, S = pyraycut.neighbor_list("ijS", x, 3.0, cell=[10.0, 10.0, 10.0], pbc=True)
     >>> i, j = pyraycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
@@ -739,7 +740,7 @@ def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any 
     >>> i, j, S = pyraycut.radius(points, queries, 0.05, cell=[1, 1, 1], quantities="ijS")
     """
     letters = _letters(quantities)
-    if _torch_ops_route(points, method, max_pairs):
+    if _torch_ops_route(points, method, max_pairs, queries=True):
         return _torch_ops().radius(letters, points, queries, cutoff, cell, pbc, batch_points,
                                    batch_queries, max_pairs)
     if "c" in letters:
@@ -794,11 +795,12 @@ def _compiling(x: Any) -> bool:
     return bool(torch.compiler.is_compiling())
 
 
-def _torch_ops_route(x: Any, method: str, max_pairs: Optional[int]) -> bool:
+def _torch_ops_route(x: Any, method: str, max_pairs: Optional[int],
+                     queries: bool = False) -> bool:
     """Whether a call goes through the PyTorch operators (pyraycut._torch.routes)."""
     if _arrays.framework_of(x) == "torch":
         ops = _torch_ops()
-        if ops is not None and ops.routes(x, method, max_pairs):
+        if ops is not None and ops.routes(x, method, max_pairs, queries):
             return True
     if max_pairs is not None:
         raise ValueError(f"max_pairs is for PyTorch tensors through the operators (built with "
