@@ -290,6 +290,28 @@ def test_without_max_pairs_small_systems_are_sized_exactly(name, dtype):
 
 
 @cuda
+@pytest.mark.parametrize("name", ["cube", "batch"])
+def test_eager_small_lists_take_the_operator(name):
+    """pyraycut.neighbor_list on CUDA tensors of at most 1,024 particles, without max_pairs: the
+    operator's pass, whose outputs torch allocates, with the pairs (and S) of the CPU operator;
+    1,025 particles keep the extension's zero-copy path (torch's allocator holds nothing)."""
+    case = CASES[name]()
+    want = reference(case, torch.float32, False)
+    x, cutoff, cell, pbc, batch = case.on("cuda", torch.float32)
+    torch.cuda.synchronize()
+    before = torch.cuda.memory_allocated()
+    i, j, s = pyraycut.neighbor_list("ijS", x, cutoff, cell=cell, pbc=pbc, batch=batch)
+    assert torch.cuda.memory_allocated() > before, "outputs not from torch: no operator"
+    assert i.is_cuda and triples(i, j, s, len(i)) == want
+    del i, j, s
+    big = torch.rand((1025, 3), device="cuda") * 10.0
+    torch.cuda.synchronize()
+    before = torch.cuda.memory_allocated()
+    i, j = pyraycut.neighbor_list("ij", big, 1.0)
+    assert len(i) > 0 and torch.cuda.memory_allocated() == before
+
+
+@cuda
 def test_torch_compile_fullgraph():
     if not hasattr(torch, "compile"):
         pytest.skip("torch.compile is not available")
