@@ -26,7 +26,8 @@
 #                bench/plot_latency.py: latency-cpp.csv, latency-python.csv, latency.png
 #   knn          bench/python_knn.py: pyraycut.torch.knn (k = 16 and 64) beside radius_graph of
 #                the same mean degree, 10^6 uniform points on CUDA (knn.csv; docs/compatibility.md)
-#   memcheck     compute-sanitizer on the functor, list, grid-variant and periodic GPU tests
+#   memcheck     compute-sanitizer on the functor, list, grid-variant and periodic GPU tests;
+#                racecheck on the small-system pass
 #   python       the Python package built with the device's Python (the PyTorch operators with
 #                their CUDA kernel: RAYCUT_TORCH_CUDA=ON), and its tests: a pytest process per
 #                file ($PYTEST_FILES, or every file), each killed after $PYTEST_TIMEOUT seconds
@@ -164,6 +165,11 @@ while [ $# -gt 0 ]; do
           > "$res/memcheck-$name.log" 2>&1
         echo "memcheck $name: exit $? ($(grep -E "ERROR SUMMARY" "$res/memcheck-$name.log"))"
       done
+      # The small-system pass shares its block scan through shared memory: racecheck too.
+      compute-sanitizer --tool racecheck --error-exitcode 9 build/tests/raycut_device_pairs_tests \
+        --gtest_filter='Where/*:Families/*uniform*' > "$res/racecheck-device-pairs.log" 2>&1
+      echo "racecheck device-pairs: exit $? ($(grep -E "ERROR SUMMARY|RACECHECK SUMMARY" \
+        "$res/racecheck-device-pairs.log" | tail -1))"
       # The distributed engine's device-resident path, one rank (MPI singleton). NCCL probes its
       # kernels' attributes with calls that fail by design: API errors are not reported here.
       if [ -x build/tests/raycut_mpi_tests ]; then

@@ -1,5 +1,6 @@
 // The stream-ordered small-system pair list (raycut/device_pairs.hpp): brute force within each
-// system, a warp per particle, every distance in double. Four launches and a memset per call,
+// system, a block per particle up to 2,048 particles and a warp per particle above, every
+// distance in double. Four launches and a memset per call,
 // all on the context's stream: count per row, scan, fill, pad. No host synchronisation and no
 // allocation outside the context's memory resource, so a CUDA graph captures it. Compiled with
 // --fmad=false (CMakeLists.txt): the device rounds every double as the host mirror below does.
@@ -24,7 +25,11 @@ namespace raycut {
 namespace {
 
 constexpr int warp_size = 32;
-constexpr int block_threads = 128;  // four rows per block
+constexpr int block_threads = 128;  // four rows per block, or one (Team)
+constexpr int block_warps = block_threads / warp_size;
+// Up to this many rows, a block per row: 2,048 rows are 8,192 warps, about what 132
+// multiprocessors keep resident.
+constexpr std::size_t rows_for_block_teams = 2048;
 constexpr unsigned all_lanes = 0xffffffffu;
 
 struct Input {
@@ -100,50 +105,74 @@ __host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
     return int(count_batch_out_of_range);
   const std::int64_t c = in.cell_count > 1 ? system : 0;
   const std::int64_t p = in.pbc_count > 1 ? system : 0;
+  // Every loop over axes is unrolled and indexes its arrays with constants only: the frame then
+  // lives in registers, where a runtime index (a Gram-Schmidt slot counter) put it and the
+  // arrays below in a 336-byte stack frame that the pair loop read from local memory.
+#pragma unroll
   for (int a = 0; a < 3; ++a) {
     f.periodic[a] = in.pbc ? in.pbc[3 * p + a] : true;
     f.any_periodic = f.any_periodic || f.periodic[a];
+#pragma unroll
     for (int k = 0; k < 3; ++k) f.row[a][k] = load<Real>(in.cells, 9 * c + 3 * a + k);
   }
   if (!f.any_periodic) return 0;
   // The basis: periodic rows as given, open ones replaced by unit vectors orthogonal to the rest
-  // (Gram-Schmidt), so that only the periodic rows decide the images.
+  // (Gram-Schmidt: the periodic rows in axis order, then the open ones), so that only the
+  // periodic rows decide the images. q[a] is axis a's orthonormal vector; it is projected out of
+  // the later axes in that same order.
   double basis[3][3], q[3][3];
-  int filled = 0;
+#pragma unroll
   for (int a = 0; a < 3; ++a) {
     if (!f.periodic[a]) continue;
     double w[3] = {f.row[a][0], f.row[a][1], f.row[a][2]};
     const double length = sqrt(dot(w, w));
     if (!isfinite(length) || length == 0) return int(count_invalid_cell);
-    for (int m = 0; m < filled; ++m) {
+#pragma unroll
+    for (int m = 0; m < a; ++m) {
+      if (!f.periodic[m]) continue;
       const double along = dot(f.row[a], q[m]);
+#pragma unroll
       for (int k = 0; k < 3; ++k) w[k] -= along * q[m][k];
     }
     const double rest = sqrt(dot(w, w));
     if (!(rest > 1e-9 * length)) return int(count_invalid_cell);
+#pragma unroll
     for (int k = 0; k < 3; ++k) {
-      q[filled][k] = w[k] / rest;
+      q[a][k] = w[k] / rest;
       basis[a][k] = f.row[a][k];
     }
-    ++filled;
   }
+#pragma unroll
   for (int a = 0; a < 3; ++a) {
     if (f.periodic[a]) continue;
     double best[3] = {0, 0, 0}, best_length = -1;
+#pragma unroll
     for (int e = 0; e < 3; ++e) {
       double w[3] = {e == 0 ? 1.0 : 0.0, e == 1 ? 1.0 : 0.0, e == 2 ? 1.0 : 0.0};
-      for (int m = 0; m < filled; ++m) {
+      // Earlier slots: every periodic axis, then the open axes before a.
+#pragma unroll
+      for (int m = 0; m < 3; ++m) {
+        if (!f.periodic[m]) continue;
         const double along = dot(w, q[m]);
+#pragma unroll
+        for (int k = 0; k < 3; ++k) w[k] -= along * q[m][k];
+      }
+#pragma unroll
+      for (int m = 0; m < a; ++m) {
+        if (f.periodic[m]) continue;
+        const double along = dot(w, q[m]);
+#pragma unroll
         for (int k = 0; k < 3; ++k) w[k] -= along * q[m][k];
       }
       const double length = sqrt(dot(w, w));
       if (length > best_length) {
         best_length = length;
+#pragma unroll
         for (int k = 0; k < 3; ++k) best[k] = w[k];
       }
     }
-    for (int k = 0; k < 3; ++k) q[filled][k] = basis[a][k] = best[k] / best_length;
-    ++filled;
+#pragma unroll
+    for (int k = 0; k < 3; ++k) q[a][k] = basis[a][k] = best[k] / best_length;
   }
   // The inverse by cofactors: basis . inverse = I, so column a of the inverse is g[a].
   const double(&m)[3][3] = basis;
@@ -156,14 +185,17 @@ __host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
        m[0][0] * m[1][1] - m[0][1] * m[1][0]}};
   const double det = m[0][0] * cof[0][0] + m[0][1] * cof[0][1] + m[0][2] * cof[0][2];
   if (!isfinite(det) || det == 0) return int(count_invalid_cell);
-  // inverse[k][a] = cof[a][k] / det, so g[a][k] = cof[a][k] / det.
+    // inverse[k][a] = cof[a][k] / det, so g[a][k] = cof[a][k] / det.
+#pragma unroll
   for (int a = 0; a < 3; ++a) {
+#pragma unroll
     for (int k = 0; k < 3; ++k) f.g[a][k] = cof[a][k] / det;
     f.reach[a] = f.periodic[a] ? in.cutoff * sqrt(dot(f.g[a], f.g[a])) : 0;
   }
   // The images a pair can have, ~prod(2 reach + 1) over the periodic axes (+ 2 for rounding):
   // past the limit a cell far thinner than the cutoff would keep the GPU busy for hours.
   double images = 1;
+#pragma unroll
   for (int a = 0; a < 3; ++a)
     if (f.periodic[a]) images *= 2 * f.reach[a] + 3;
   if (!(images <= max_images_per_pair)) return int(count_too_many_images);
@@ -192,6 +224,7 @@ template <class Real, class Visit>
 __host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f, std::int64_t i,
                                                  std::int64_t j, Visit&& visit) {
   double d[3];
+#pragma unroll
   for (int k = 0; k < 3; ++k) d[k] = load<Real>(in.xyz, 3 * j + k) - load<Real>(in.xyz, 3 * i + k);
   if (!f.any_periodic) {
     if (i == j || !(dot(d, d) < in.cutoff2)) return 0;
@@ -200,6 +233,7 @@ __host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f
     return 1;
   }
   int first[3], last[3];
+#pragma unroll
   for (int a = 0; a < 3; ++a) {
     if (!f.periodic[a]) {
       first[a] = last[a] = 0;
@@ -222,6 +256,7 @@ __host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f
           if (in.half && !(sx > 0 || (sx == 0 && (sy > 0 || (sy == 0 && sz > 0))))) continue;
         }
         double r[3];
+#pragma unroll
         for (int k = 0; k < 3; ++k) {
           r[k] = d[k];
           if (f.periodic[0]) r[k] += sx * f.row[0][k];
@@ -246,23 +281,76 @@ __host__ __device__ std::int64_t first_source(const Input& in, const Frame& f, s
   return in.half ? i : f.lo;
 }
 
-template <class Real>
+// A row's team: one warp (Warps = 1, block_threads / 32 rows per block) or the whole block
+// (Warps = block_threads / 32, one row per block). Few rows get a block each, so that the GPU
+// has enough warps to hide the latency of the pair tests (rows_per_team).
+template <int Warps>
+struct Team {
+  static constexpr int threads = Warps * warp_size;
+  static_assert(Warps == 1 || threads == block_threads, "a team is a warp or the whole block");
+  __device__ static std::int64_t row() {
+    return (std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x) / threads;
+  }
+  __device__ static int rank() { return threadIdx.x % threads; }
+  // The team's sum of v, in every thread.
+  __device__ static unsigned long long sum(unsigned long long v) {
+    for (int offset = warp_size / 2; offset > 0; offset /= 2)
+      v += __shfl_xor_sync(all_lanes, v, offset);
+    if constexpr (Warps > 1) {
+      __shared__ unsigned long long warp_sums[Warps];
+      __syncthreads();  // the last call's sums are read
+      if (threadIdx.x % warp_size == 0) warp_sums[threadIdx.x / warp_size] = v;
+      __syncthreads();
+      v = 0;
+#pragma unroll
+      for (int w = 0; w < Warps; ++w) v += warp_sums[w];
+    }
+    return v;
+  }
+  // The team's inclusive scan of v in rank order, and its total.
+  __device__ static std::uint32_t scan(std::uint32_t v, std::uint32_t& total) {
+    const int lane = threadIdx.x % warp_size;
+    for (int offset = 1; offset < warp_size; offset *= 2) {
+      const std::uint32_t other = __shfl_up_sync(all_lanes, v, offset);
+      if (lane >= offset) v += other;
+    }
+    total = __shfl_sync(all_lanes, v, warp_size - 1);
+    if constexpr (Warps > 1) {
+      __shared__ std::uint32_t warp_totals[Warps];
+      __syncthreads();  // the last call's totals are read
+      if (lane == warp_size - 1) warp_totals[threadIdx.x / warp_size] = v;
+      __syncthreads();
+      const int warp = threadIdx.x / warp_size;
+      std::uint32_t before = 0;
+      total = 0;
+#pragma unroll
+      for (int w = 0; w < Warps; ++w) {
+        if (w < warp) before += warp_totals[w];
+        total += warp_totals[w];
+      }
+      v += before;
+    }
+    return v;
+  }
+};
+
+template <class Real, int Warps>
 __global__ void count_rows(Input in, unsigned long long* counts, int* status) {
-  const std::int64_t row = (std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x) / warp_size;
-  const int lane = threadIdx.x % warp_size;
-  if (row >= in.n || (in.run_if && *in.run_if == 0)) return;  // whole warps leave together
+  using T = Team<Warps>;
+  const std::int64_t row = T::row();
+  // Whole teams leave together: their bounds are the row's.
+  if (row >= in.n || (in.run_if && *in.run_if == 0)) return;
   Frame f;
   const int bad = make_frame<Real>(in, row, f);
   if (bad) {
-    if (lane == 0) atomicMin(status, bad);
+    if (T::rank() == 0) atomicMin(status, bad);
     return;
   }
   unsigned long long c = 0;
-  for (std::int64_t j = first_source(in, f, row) + lane; j < f.hi; j += warp_size)
+  for (std::int64_t j = first_source(in, f, row) + T::rank(); j < f.hi; j += T::threads)
     c += for_each_image<Real>(in, f, row, j, NoVisit{});
-  for (int offset = warp_size / 2; offset > 0; offset /= 2)
-    c += __shfl_down_sync(all_lanes, c, offset);
-  if (lane == 0) counts[row] = c;
+  c = T::sum(c);
+  if (T::rank() == 0) counts[row] = c;
 }
 
 // Where row `row`'s list lies: its first entry (s * capacity for system s with a list per
@@ -279,10 +367,11 @@ __host__ __device__ ListSlots list_slots(const Input& in, const Frame& f, std::i
   return {static_cast<std::uint64_t>(system) * out.capacity, offsets[f.lo]};
 }
 
-template <class Real>
+template <class Real, int Warps>
 __global__ void fill_rows(Input in, const unsigned long long* offsets, StaticPairs out) {
-  const std::int64_t row = (std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x) / warp_size;
-  const int lane = threadIdx.x % warp_size;
+  using T = Team<Warps>;
+  const std::int64_t row = T::row();
+  const int rank = T::rank();
   if (row >= in.n) return;
   Frame f;
   if (make_frame<Real>(in, row, f)) return;
@@ -292,18 +381,14 @@ __global__ void fill_rows(Input in, const unsigned long long* offsets, StaticPai
   if (start >= static_cast<unsigned long long>(out.capacity) || offsets[row + 1] == offsets[row])
     return;
   unsigned long long written = start;
-  // Chunks of 32 sources in lockstep: each lane's hits go after the lower lanes' (a warp scan),
-  // so the order is j ascending whatever the scheduling.
-  for (std::int64_t base = first_source(in, f, row); base < f.hi; base += warp_size) {
-    const std::int64_t j = base + lane;
+  // Chunks of one source per thread in lockstep: each thread's hits go after the lower ranks'
+  // (a team scan), so the order is j ascending whatever the scheduling.
+  for (std::int64_t base = first_source(in, f, row); base < f.hi; base += T::threads) {
+    const std::int64_t j = base + rank;
     const std::uint32_t hits = j < f.hi ? for_each_image<Real>(in, f, row, j, NoVisit{}) : 0;
-    std::uint32_t before = hits;  // inclusive scan, then made exclusive
-    for (int offset = 1; offset < warp_size; offset *= 2) {
-      const std::uint32_t other = __shfl_up_sync(all_lanes, before, offset);
-      if (lane >= offset) before += other;
-    }
-    const std::uint32_t chunk = __shfl_sync(all_lanes, before, warp_size - 1);
-    unsigned long long at = written + before - hits;
+    std::uint32_t chunk = 0;
+    const std::uint32_t before = T::scan(hits, chunk) - hits;
+    unsigned long long at = written + before;
     if (hits)
       for_each_image<Real>(in, f, row, j, [&](const int* s) {
         if (at < static_cast<unsigned long long>(out.capacity)) {
@@ -493,23 +578,26 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
   void* scan_storage = block + counts_bytes + offsets_bytes;
   try {
     RAYCUT_CUDA_CHECK(cudaMemsetAsync(counts, 0, counts_bytes, stream));
-    const unsigned rows_blocks =
-        static_cast<unsigned>((n * warp_size + block_threads - 1) / block_threads);
     const bool wide = systems.scalar == Scalar::float64;
+    // A block per row while rows are few: a warp each would leave most of the GPU idle (1,000
+    // rows are 8 warps per multiprocessor of an H100), every warp walking all its sources.
+    const bool block_per_row = n <= rows_for_block_teams;
+    const unsigned rows_blocks = static_cast<unsigned>(
+        block_per_row ? n : (n * warp_size + block_threads - 1) / block_threads);
     if (n > 0) {
-      if (wide)
-        count_rows<double><<<rows_blocks, block_threads, 0, stream>>>(in, counts, status);
-      else
-        count_rows<float><<<rows_blocks, block_threads, 0, stream>>>(in, counts, status);
+      const auto count =
+          wide ? (block_per_row ? count_rows<double, block_warps> : count_rows<double, 1>)
+               : (block_per_row ? count_rows<float, block_warps> : count_rows<float, 1>);
+      count<<<rows_blocks, block_threads, 0, stream>>>(in, counts, status);
       RAYCUT_CUDA_CHECK_LAUNCH();
     }
     RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scan_storage, scan_bytes, counts, offsets,
                                                     static_cast<std::int64_t>(n + 1), stream));
     if (n > 0 && out.capacity > 0) {
-      if (wide)
-        fill_rows<double><<<rows_blocks, block_threads, 0, stream>>>(in, offsets, out);
-      else
-        fill_rows<float><<<rows_blocks, block_threads, 0, stream>>>(in, offsets, out);
+      const auto fill =
+          wide ? (block_per_row ? fill_rows<double, block_warps> : fill_rows<double, 1>)
+               : (block_per_row ? fill_rows<float, block_warps> : fill_rows<float, 1>);
+      fill<<<rows_blocks, block_threads, 0, stream>>>(in, offsets, out);
       RAYCUT_CUDA_CHECK_LAUNCH();
     }
     const std::size_t entries = out.capacity * std::max<std::size_t>(out.systems, 1);
