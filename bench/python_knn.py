@@ -1,7 +1,10 @@
 #!/usr/bin/env python3
-"""kNN beside the radius search of the same reach: ``pyraycut.torch.knn(x, x, k)`` on uniform
-points in a unit cube, against ``pyraycut.torch.radius_graph(x, r)`` whose r holds k points on
-average (what the kNN's first round costs at least), on PyTorch tensors of each device given.
+"""kNN beside the radius search of the same reach: ``pyraycut.torch.knn(x, x, k)`` and
+``knn_graph(x, k)`` on uniform points in a unit cube, against ``pyraycut.torch.radius_graph(x,
+r)`` whose r holds k points on average (what the kNN's first round costs at least), on PyTorch
+tensors of each device given; on the CPU also SciPy's ``cKDTree(x).query(x, k)`` (the tree
+built in the call, as raycut builds its cells; the same k nearest as ``knn(x, x, k)``) where
+SciPy is installed.
 
 Each call runs ``--reps`` times after one untimed call, the two calls taking turns (so that a busy
 machine slows them alike); CUDA is synchronised around each call. The median and the minimum
@@ -24,6 +27,11 @@ import torch
 
 import pyraycut
 import pyraycut.torch as rc
+
+try:
+    from scipy.spatial import cKDTree
+except ImportError:  # the peer is optional
+    cKDTree = None
 
 
 def device_name(device: str) -> tuple[str, str]:
@@ -64,7 +72,13 @@ def main() -> None:
                 assert edges.shape[1] == n * k, "a row without its k neighbours"
                 graph_edges = rc.radius_graph(x, r).shape[1]
                 calls = {"knn": lambda: rc.knn(x, x, k),
+                         "knn_graph": lambda: rc.knn_graph(x, k),
                          "radius_graph": lambda: rc.radius_graph(x, r)}
+                if device == "cpu" and cKDTree is not None:
+                    points = x.numpy()
+                    threads = torch.get_num_threads()
+                    calls["scipy_ckdtree"] = lambda: cKDTree(points).query(points, k,
+                                                                           workers=threads)
                 times = {name_: [] for name_ in calls}
                 for _ in range(args.reps):
                     for call, fn in calls.items():
@@ -72,7 +86,7 @@ def main() -> None:
                 for call, t in times.items():
                     rows.append({
                         "device": name, "detail": detail, "n": n, "k": k, "call": call,
-                        "edges": n * k if call == "knn" else graph_edges,
+                        "edges": graph_edges if call == "radius_graph" else n * k,
                         "ms_median": round(1e3 * statistics.median(t), 3),
                         "ms_min": round(1e3 * min(t), 3), "reps": args.reps,
                         "torch": torch.__version__, "pyraycut": pyraycut.__version__,
