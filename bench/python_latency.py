@@ -143,8 +143,10 @@ def workload(torch, systems: int, per_system: int, device: str, generator):
 
 
 def profile_counts(torch, call: Callable[[], object], sync: Callable[[], None],
-                   calls: int) -> tuple[str, str]:
-    """kernels and syncs per call (as text for the CSV) over `calls` profiled calls."""
+                   calls: int, table: Optional[str] = None) -> tuple[str, str]:
+    """kernels and syncs per call (as text for the CSV) over `calls` profiled calls; `table`: a
+    file that gets the profiler's table of where the host time went (CUDA runtime calls
+    included)."""
     from torch.profiler import ProfilerActivity, profile
 
     sync()
@@ -157,6 +159,9 @@ def profile_counts(torch, call: Callable[[], object], sync: Callable[[], None],
     kernels, syncs = count_profile(events)
     # The profiled window ends with the loop's own synchronisation: not the calls'.
     syncs = max(syncs - 1, 0)
+    if table:
+        with open(table, "w") as f:
+            f.write(prof.key_averages().table(sort_by="self_cpu_time_total", row_limit=40))
     return f"{kernels / calls:g}", f"{syncs / calls:g}"
 
 
@@ -199,6 +204,9 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
                         help="a timed loop lasts at least this long (default 2)")
     parser.add_argument("--profile-calls", type=int, default=20,
                         help="calls profiled for kernels and syncs (default 20)")
+    parser.add_argument("--profile-tables", metavar="DIR",
+                        help="write the profiler's table of each profiled case there "
+                             "(profile-SxN-interface-capacity.txt)")
     parser.add_argument("--device", choices=["cuda", "cpu"], default="cuda",
                         help="where the tensors live (cpu: a check of the script, no counts)")
     parser.add_argument("--seed", type=int, default=1)
@@ -265,8 +273,10 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
             calls.append(("python-torch-op", "exact", operator))
         for interface, capacity, call in calls:
             us = median_us_per_call(call, sync, args.reps, args.min_loop_ms)
-            kernels, syncs = (profile_counts(torch, call, sync, args.profile_calls) if cuda
-                              else ("", ""))
+            table = (os.path.join(args.profile_tables, f"profile-{systems}x{per_system}-"
+                                  f"{interface}-{capacity}.txt") if args.profile_tables else None)
+            kernels, syncs = (profile_counts(torch, call, sync, args.profile_calls, table)
+                              if cuda else ("", ""))
             row = {"workload": "lj-pbc", "systems": systems, "n_per_system": per_system,
                    "interface": interface, "mode": "eager", "capacity": capacity,
                    "us_per_call": f"{us:.3f}", "kernels": kernels, "syncs": syncs, **machine}

@@ -22,7 +22,8 @@
 #   latency      call latency of small systems and batches (docs/benchmarks.md, "Latency of small
 #                systems"): build/bench/raycut_latency_bench --crossover (static pair list eager
 #                and from a CUDA graph, the engine), bench/python_latency.py --crossover
-#                (pyraycut.neighbor_list on torch CUDA tensors, the Python package built first),
+#                (pyraycut.neighbor_list on torch CUDA tensors, the Python package built first;
+#                the profiler's table of each case in profiles/),
 #                bench/plot_latency.py: latency-cpp.csv, latency-python.csv, latency.png
 #   knn          bench/python_knn.py: pyraycut.torch.knn (k = 16 and 64) beside radius_graph of
 #                the same mean degree, 10^6 uniform points on CUDA (knn.csv; docs/compatibility.md)
@@ -139,8 +140,10 @@ while [ $# -gt 0 ]; do
         echo "build/bench/raycut_latency_bench was not built (needs CUDA)"
       fi
       build_python
+      mkdir -p "$res/profiles"
       PYTHONPATH="$PWD/build/python" "$py" bench/python_latency.py --crossover \
-        --output "$res/latency-python.csv" > "$res/latency-python.log" 2>&1
+        --output "$res/latency-python.csv" --profile-tables "$res/profiles" \
+        > "$res/latency-python.log" 2>&1
       echo "python_latency exit $?"
       grep -E "^lj-pbc|python_latency" "$res/latency-python.log" | head -30
       csvs=()
