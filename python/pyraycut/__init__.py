@@ -674,8 +674,8 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     may wait), and a CUDA call on small systems never waits for the GPU (CUDA graphs capture it;
     docs/python.md, "Static capacity on CUDA"). CUDA tensors (method "auto" or "grid") take the
     operator's CUDA kernel, where it is built, with ``max_pairs``, under torch.compile, and for
-    lists of at most 1,024 particles, where it is faster; other eager calls keep the zero-copy
-    path above.
+    small systems, where it is faster (N^2 <= 2^20 B, B the systems of a (B, 3, 3) cell, else
+    1: about 1,000 particles alone); other eager calls keep the zero-copy path above.
 
     >>> i, j, S = pyraycut.neighbor_list("ijS", x, 3.0, cell=[10.0, 10.0, 10.0], pbc=True)
     >>> i, j = pyraycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
@@ -691,7 +691,7 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
         cutoffs = _cutoffs.PairCutoffs(
             cutoff, n if n is not None else _points(_arrays.to_host(positions)), numbers)
         cutoff, pair_cutoffs = cutoffs.search_cutoff(), cutoffs.arrays()
-    elif _torch_ops_route(positions, method, max_pairs):
+    elif _torch_ops_route(positions, method, max_pairs, cell=cell, pbc=pbc):
         return _torch_ops().neighbor_list(letters, positions, cutoff, cell, pbc, batch, half,
                                           max_pairs)
     if "c" in letters:
@@ -795,12 +795,12 @@ def _compiling(x: Any) -> bool:
     return bool(torch.compiler.is_compiling())
 
 
-def _torch_ops_route(x: Any, method: str, max_pairs: Optional[int],
-                     queries: bool = False) -> bool:
+def _torch_ops_route(x: Any, method: str, max_pairs: Optional[int], queries: bool = False,
+                     cell: Any = None, pbc: Any = None) -> bool:
     """Whether a call goes through the PyTorch operators (pyraycut._torch.routes)."""
     if _arrays.framework_of(x) == "torch":
         ops = _torch_ops()
-        if ops is not None and ops.routes(x, method, max_pairs, queries):
+        if ops is not None and ops.routes(x, method, max_pairs, queries, cell, pbc):
             return True
     if max_pairs is not None:
         raise ValueError(f"max_pairs is for PyTorch tensors through the operators (built with "

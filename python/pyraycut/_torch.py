@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from typing import Any, Optional
 
+import numpy as np
 import torch
 
 from . import _arrays
@@ -83,26 +84,41 @@ def _fake_pairs(like: torch.Tensor, max_pairs: Optional[int]) -> tuple:
 _CUDA_KERNEL = torch._C._dispatch_has_kernel_for_dispatch_key("raycut::neighbor_list", "CUDA")
 
 
-def routes(x: Any, method: str, max_pairs: Optional[int] = None, queries: bool = False) -> bool:
+def routes(x: Any, method: str, max_pairs: Optional[int] = None, queries: bool = False,
+           cell: Any = None, pbc: Any = None) -> bool:
     """Whether a call on ``x`` goes through the operators: PyTorch tensors on a device they have
     a kernel for, with the method that kernel runs (the CPU cell list, the CUDA grid) or
     ``"auto"``. CUDA tensors take the operator where only it serves, static capacity
     (``max_pairs``) and tracing (torch.compile), and where it is faster: neighbour lists (not
-    ``queries``) of at most ``_SMALL_CUDA_SYSTEM`` particles, which it lists in one
-    stream-ordered pass (4-5x faster than the extension at 128 and 1,000 particles). Other eager calls keep the extension's
-    zero-copy path (the library's own device buffers wrapped, no copy into torch's)."""
+    ``queries``) of systems small enough for its stream-ordered pass (``_small_systems``; 4-5x
+    faster than the extension at 128 and 1,000 particles). Other eager calls keep the
+    extension's zero-copy path (the library's own device buffers wrapped, no copy into
+    torch's)."""
     if not isinstance(x, torch.Tensor):
         return False
     if x.device.type == "cpu":
         return method in ("auto", "cell-list")
     return (x.device.type == "cuda" and _CUDA_KERNEL and method in ("auto", "grid") and
             (max_pairs is not None or torch.compiler.is_compiling() or
-             (not queries and x.shape[0] <= _SMALL_CUDA_SYSTEM)))
+             (not queries and _small_systems(x, cell, pbc))))
 
 
-# The size up to which the operator's small-system pass serves any batch: N^2 <= 2^20 B
-# (raycut::prefer_small_systems) holds with B = 1, so no batch index is read to decide.
-_SMALL_CUDA_SYSTEM = 1024
+def _small_systems(x: torch.Tensor, cell: Any, pbc: Any) -> bool:
+    """Whether the operator lists these positions with its small-system pass: the operator's own
+    rule (raycut::prefer_small_systems, N^2 <= 2^20 B), with B the number of cells of a (B, 3, 3)
+    cell and 1 otherwise (the batch index is data on the device, never read to decide); pbc
+    without a cell stays on the engine there."""
+    if pbc is not None and cell is None:
+        return False
+    shape = getattr(cell, "shape", None)
+    if shape is None and cell is not None and not isinstance(cell, (int, float)):
+        shape = np.shape(cell)
+    systems = shape[0] if shape is not None and len(shape) == 3 else 1
+    return x.shape[0] ** 2 <= _SMALL_SYSTEM_PAIR_TESTS * systems
+
+
+# raycut::small_system_pair_tests (raycut/device_pairs.hpp).
+_SMALL_SYSTEM_PAIR_TESTS = 1 << 20
 
 
 def _cell(cell: Any, like: torch.Tensor) -> Optional[torch.Tensor]:

@@ -294,7 +294,7 @@ def test_without_max_pairs_small_systems_are_sized_exactly(name, dtype):
 def test_eager_small_lists_take_the_operator(name):
     """pyraycut.neighbor_list on CUDA tensors of at most 1,024 particles, without max_pairs: the
     operator's pass, whose outputs torch allocates, with the pairs (and S) of the CPU operator;
-    1,025 particles keep the extension's zero-copy path (torch's allocator holds nothing)."""
+    1,025 particles alone keep the extension's zero-copy path (torch's allocator holds nothing)."""
     case = CASES[name]()
     want = reference(case, torch.float32, False)
     x, cutoff, cell, pbc, batch = case.on("cuda", torch.float32)
@@ -372,3 +372,19 @@ def test_the_count_letter_comes_with_the_operator():
     assert count.dim() == 0 and int(count) == len(i)
     i, count = pyraycut.neighbor_list("ic", x, 0.5, max_pairs=200)
     assert count.dim() == 0 and int(count) == int((i < 10).sum())
+
+
+@pytest.mark.skipif(not OPS, reason="the operators are not built")
+def test_small_systems_rule_is_the_operators():
+    """pyraycut sends eager CUDA lists to the operator where its small-system pass takes them:
+    N^2 <= 2^20 B (raycut::prefer_small_systems), B from a (B, 3, 3) cell, else 1."""
+    from pyraycut import _torch
+
+    def small(n, cell=None, pbc=None):
+        return _torch._small_systems(torch.zeros((n, 3)), cell, pbc)
+
+    assert small(1024) and not small(1025)
+    assert small(1025, cell=torch.eye(3)) is False
+    assert small(1448, cell=np.zeros((2, 3, 3))) and not small(1449, cell=np.zeros((2, 3, 3)))
+    assert small(1448, cell=[[[1, 0, 0]] * 3] * 2)
+    assert not small(10, pbc=True), "pbc without a cell stays on the engine"
