@@ -42,17 +42,20 @@ unsigned blocks_for(std::size_t work) {
       std::clamp<std::size_t>((work + block_threads - 1) / block_threads, 1, 4096));
 }
 
-// XLA's scratch memory as the pass's memory resource. XLA frees it when the handler returns, in
-// the order of its stream, after the work queued here: nothing to do on deallocate.
+// XLA's scratch memory as the pass's memory resource. XLA hands it back to its allocator when
+// the handler returns, while the work queued here may still run: safe because whatever XLA puts
+// in that memory next runs on this same stream, after it. Nothing to do on deallocate.
 class ScratchResource final : public raycut::MemoryResource {
  public:
   explicit ScratchResource(ffi::ScratchAllocator& scratch) : scratch_(scratch) {}
   void* allocate(std::size_t bytes, void*) override {
-    const std::optional<void*> p = scratch_.Allocate(std::max<std::size_t>(bytes, 1), 256);
+    // 16 bytes: the largest alignment XLA's FFI accepts (it refuses more, and the reason does
+    // not reach the handler); its device allocator aligns blocks far more than that anyway.
+    const std::optional<void*> p = scratch_.Allocate(std::max<std::size_t>(bytes, 1), 16);
     if (!p || !*p)
-      throw raycut::Error(
-          raycut::ErrorCode::out_of_memory,
-          "XLA's scratch allocator could not give " + std::to_string(bytes) + " bytes");
+      throw raycut::Error(raycut::ErrorCode::out_of_memory,
+                          "XLA's scratch allocator gave no " + std::to_string(bytes) +
+                              " bytes (16-byte aligned): device memory is short");
     return *p;
   }
   void deallocate(void*, std::size_t, void*) noexcept override {}

@@ -27,8 +27,10 @@ namespace {
 constexpr int warp_size = 32;
 constexpr int block_threads = 128;  // four rows per block, or one (Team)
 constexpr int block_warps = block_threads / warp_size;
-// Up to this many rows, a block per row: 2,048 rows are 8,192 warps, about what 132
-// multiprocessors keep resident.
+// Up to this many rows, a block per row. At ~120 registers a thread an H100 multiprocessor holds
+// 16 warps, 2,112 in all: below that many rows a warp per row leaves warps idle and walks all
+// n sources in each, where a block per row walks n / 128 per thread in ceil(4 n / 2,112)
+// waves, never longer (half as long at 1,000 rows).
 constexpr std::size_t rows_for_block_teams = 2048;
 constexpr unsigned all_lanes = 0xffffffffu;
 
@@ -283,7 +285,7 @@ __host__ __device__ std::int64_t first_source(const Input& in, const Frame& f, s
 
 // A row's team: one warp (Warps = 1, block_threads / 32 rows per block) or the whole block
 // (Warps = block_threads / 32, one row per block). Few rows get a block each, so that the GPU
-// has enough warps to hide the latency of the pair tests (rows_per_team).
+// has enough warps to hide the latency of the pair tests (rows_for_block_teams).
 template <int Warps>
 struct Team {
   static constexpr int threads = Warps * warp_size;
@@ -335,7 +337,8 @@ struct Team {
 };
 
 template <class Real, int Warps>
-__global__ void count_rows(Input in, unsigned long long* counts, int* status) {
+__global__ __launch_bounds__(block_threads) void count_rows(Input in, unsigned long long* counts,
+                                                            int* status) {
   using T = Team<Warps>;
   const std::int64_t row = T::row();
   // Whole teams leave together: their bounds are the row's.
@@ -368,7 +371,9 @@ __host__ __device__ ListSlots list_slots(const Input& in, const Frame& f, std::i
 }
 
 template <class Real, int Warps>
-__global__ void fill_rows(Input in, const unsigned long long* offsets, StaticPairs out) {
+__global__ __launch_bounds__(block_threads) void fill_rows(Input in,
+                                                           const unsigned long long* offsets,
+                                                           StaticPairs out) {
   using T = Team<Warps>;
   const std::int64_t row = T::row();
   const int rank = T::rank();
