@@ -56,11 +56,12 @@ def _by_row_nearest_first(i: torch.Tensor, d: torch.Tensor,
 
 def _keep_nearest(i: torch.Tensor, j: torch.Tensor, d: torch.Tensor, k: Optional[int],
                   rows: int, on_overflow: str) -> tuple[torch.Tensor, torch.Tensor]:
-    """At most k entries per row i: the nearest (ties by j), in (i, d, j) order."""
-    order = _by_row_nearest_first(i, d, (j,))
-    i, j = i[order], j[order]
+    """At most k entries per row i: the nearest (ties by j), in (i, d, j) order; k None: every
+    entry, in the order given (no cap, nothing to sort: the sort was a third of radius_graph)."""
     if k is None:
         return i, j
+    order = _by_row_nearest_first(i, d, (j,))
+    i, j = i[order], j[order]
     counts = torch.bincount(i, minlength=rows)
     over = int((counts > k).sum())
     if over == 0:
@@ -91,6 +92,9 @@ def radius(x: torch.Tensor, y: torch.Tensor, r: float, batch_x: Any = None, batc
     """For each point of ``y``, the points of ``x`` within ``r``: ``edge_index`` (2, E) with
     row 0 indexing ``y`` and row 1 indexing ``x`` (torch_cluster.radius)."""
     _check_overflow_mode(on_overflow)
+    if max_num_neighbors is None:  # no cap: no distances, nothing to order
+        i, j = _radius_pairs(x, y, r, batch_points=batch_x, batch_queries=batch_y)
+        return torch.stack([i, j])
     i, j, d = _radius_pairs(x, y, r, batch_points=batch_x, batch_queries=batch_y,
                             quantities="ijd")
     i, j = _keep_nearest(i, j, d.detach(), max_num_neighbors, len(y), on_overflow)
@@ -103,17 +107,37 @@ def radius_graph(x: torch.Tensor, r: float, batch: Any = None, loop: bool = Fals
     """Every pair of points of ``x`` within ``r`` as ``edge_index`` (2, E): with
     ``flow="source_to_target"`` row 0 holds the neighbour (source) and row 1 the centre (target),
     as torch_cluster.radius_graph. ``loop``: each point is its own neighbour too (counted in the
-    cap, as the nearest)."""
+    cap, as the nearest). Edges come centre by centre (ascending); within a centre, nearest
+    first with ``max_num_neighbors``, else in the list's order (its own edge first)."""
     _check_overflow_mode(on_overflow)
     _check_flow(flow)
-    i, j, d = neighbor_list("ijd", x, r, batch=batch)
-    d = d.detach()
-    if loop:
-        own = torch.arange(len(x), device=i.device)
-        i, j = torch.cat([i, own]), torch.cat([j, own])
-        d = torch.cat([d, torch.zeros(len(x), dtype=d.dtype, device=d.device)])
-    i, j = _keep_nearest(i, j, d, max_num_neighbors, len(x), on_overflow)
+    if max_num_neighbors is None:  # no cap: no distances, nothing to order
+        i, j = neighbor_list("ij", x, r, batch=batch)
+        if loop:
+            i, j = _with_loops(i, j, len(x))
+    else:
+        i, j, d = neighbor_list("ijd", x, r, batch=batch)
+        d = d.detach()
+        if loop:
+            own = torch.arange(len(x), device=i.device)
+            i, j = torch.cat([i, own]), torch.cat([j, own])
+            d = torch.cat([d, torch.zeros(len(x), dtype=d.dtype, device=d.device)])
+        i, j = _keep_nearest(i, j, d, max_num_neighbors, len(x), on_overflow)
     return torch.stack([j, i] if flow == "source_to_target" else [i, j])
+
+
+def _with_loops(i: torch.Tensor, j: torch.Tensor, n: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """The rows (i ascending) with each point's own edge first in its row, where a sorted list
+    would put it (the nearest), without sorting."""
+    own = torch.arange(n, device=i.device)
+    counts = torch.bincount(i, minlength=n)
+    out_i = torch.empty(len(i) + n, dtype=i.dtype, device=i.device)
+    out_j = torch.empty_like(out_i)
+    at_own = torch.cumsum(counts, 0) - counts + own  # the row's start, after the rows before
+    at = torch.arange(len(i), device=i.device) + i + 1  # one own edge per row up to i's
+    out_i[at_own], out_j[at_own] = own, own
+    out_i[at], out_j[at] = i, j
+    return out_i, out_j
 
 
 def _system_sizes(batch: Any, n: int, systems: int, device: torch.device) -> torch.Tensor:

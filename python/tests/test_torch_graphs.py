@@ -110,3 +110,18 @@ def test_rows_nearest_first_breaks_ties_by_index_then_shift(dtype):
     order = rt._nearest_first(i, j, d, s).tolist()
     key = [(int(i[e]), float(d[e]), int(j[e]), *s[e].tolist(), e) for e in range(n)]
     assert order == [t[-1] for t in sorted(key)]
+
+
+def test_uncapped_radius_graph_rows_stay_in_order_with_each_loop_first():
+    """No max_num_neighbors: the list's rows as they come (i ascending), nothing sorted by
+    distance; with loop, each point's own edge opens its row, and the edges are the list's plus
+    one loop per point."""
+    x = torch.rand(300, 3, generator=torch.Generator().manual_seed(8))
+    i, j = rt.radius_graph(x, 0.2, loop=True, flow="target_to_source")
+    assert bool((i[1:] >= i[:-1]).all())
+    first = torch.ones(len(i), dtype=torch.bool)
+    first[1:] = i[1:] != i[:-1]
+    assert torch.equal(i[first], torch.arange(300)) and torch.equal(j[first], i[first])
+    li, lj = pyraycut.neighbor_list("ij", x, 0.2)
+    assert sorted(zip(i[~first].tolist(), j[~first].tolist())) == sorted(zip(li.tolist(),
+                                                                             lj.tolist()))
