@@ -629,10 +629,10 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
       computed in float64 from them);
     - ``"D"``: vectors ``r_ij = x_j - x_i + S @ cell`` (P, 3) float32 (float64 likewise);
     - ``"S"``: image shifts S (P, 3) int32 (zeros on open axes and without a cell);
-    - ``"c"``: the pair count, a 0-d int64 tensor on the positions' device (PyTorch tensors that
-      go through the operator: CPU ones, and CUDA ones with ``max_pairs``): with ``max_pairs``
-      the list is valid iff 0 <= c <= max_pairs. Asking for it is taking
-      charge of the check: raycut then reads nothing back (see below).
+    - ``"c"``: the pair count, a 0-d int64 tensor on the positions' device (PyTorch tensors:
+      asking for it sends the call through the operator): with ``max_pairs`` the list is valid
+      iff 0 <= c <= max_pairs. Asking for it is taking charge of the check: raycut then reads
+      nothing back (see below).
 
     ``cutoff``: one number, or per atom or per pair as ASE takes them: a sequence of N radii
     (pair (i, j) within ``r_i + r_j``), ``{(Z1, Z2): rc}`` (pair cutoffs by species; pairs of
@@ -691,12 +691,14 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
         cutoffs = _cutoffs.PairCutoffs(
             cutoff, n if n is not None else _points(_arrays.to_host(positions)), numbers)
         cutoff, pair_cutoffs = cutoffs.search_cutoff(), cutoffs.arrays()
-    elif _torch_ops_route(positions, method, max_pairs, cell=cell, pbc=pbc):
+    elif _torch_ops_route(positions, method, max_pairs, cell=cell, pbc=pbc,
+                          count="c" in letters):
         return _torch_ops().neighbor_list(letters, positions, cutoff, cell, pbc, batch, half,
                                           max_pairs)
     if "c" in letters:
         raise ValueError("the quantity 'c' (the pair count) comes with PyTorch tensors through "
-                         "torch.ops.raycut (CPU tensors, or CUDA tensors with max_pairs)")
+                         "torch.ops.raycut (CPU tensors with method 'auto' or 'cell-list', CUDA "
+                         "tensors with 'auto' or 'grid' where its CUDA kernel is built)")
     grad = _requires_grad(positions) or (_arrays.framework_of(positions) == "torch"
                                          and _requires_grad(cell))
     search = _search_input(positions, grad)
@@ -740,12 +742,13 @@ def radius(points: Any, queries: Any, cutoff: float, cell: Any = None, pbc: Any 
     >>> i, j, S = pyraycut.radius(points, queries, 0.05, cell=[1, 1, 1], quantities="ijS")
     """
     letters = _letters(quantities)
-    if _torch_ops_route(points, method, max_pairs, queries=True):
+    if _torch_ops_route(points, method, max_pairs, queries=True, count="c" in letters):
         return _torch_ops().radius(letters, points, queries, cutoff, cell, pbc, batch_points,
                                    batch_queries, max_pairs)
     if "c" in letters:
         raise ValueError("the quantity 'c' (the pair count) comes with PyTorch tensors through "
-                         "torch.ops.raycut (CPU tensors, or CUDA tensors with max_pairs)")
+                         "torch.ops.raycut (CPU tensors with method 'auto' or 'cell-list', CUDA "
+                         "tensors with 'auto' or 'grid' where its CUDA kernel is built)")
     torch_in = _arrays.framework_of(points) == "torch"
     grad = torch_in and (_requires_grad(points) or _requires_grad(queries) or
                          _requires_grad(cell))
@@ -796,11 +799,11 @@ def _compiling(x: Any) -> bool:
 
 
 def _torch_ops_route(x: Any, method: str, max_pairs: Optional[int], queries: bool = False,
-                     cell: Any = None, pbc: Any = None) -> bool:
+                     cell: Any = None, pbc: Any = None, count: bool = False) -> bool:
     """Whether a call goes through the PyTorch operators (pyraycut._torch.routes)."""
     if _arrays.framework_of(x) == "torch":
         ops = _torch_ops()
-        if ops is not None and ops.routes(x, method, max_pairs, queries, cell, pbc):
+        if ops is not None and ops.routes(x, method, max_pairs, queries, cell, pbc, count):
             return True
     if max_pairs is not None:
         raise ValueError(f"max_pairs is for PyTorch tensors through the operators (built with "

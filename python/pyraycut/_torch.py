@@ -85,22 +85,22 @@ _CUDA_KERNEL = torch._C._dispatch_has_kernel_for_dispatch_key("raycut::neighbor_
 
 
 def routes(x: Any, method: str, max_pairs: Optional[int] = None, queries: bool = False,
-           cell: Any = None, pbc: Any = None) -> bool:
+           cell: Any = None, pbc: Any = None, count: bool = False) -> bool:
     """Whether a call on ``x`` goes through the operators: PyTorch tensors on a device they have
     a kernel for, with the method that kernel runs (the CPU cell list, the CUDA grid) or
     ``"auto"``. CUDA tensors take the operator where only it serves, static capacity
-    (``max_pairs``) and tracing (torch.compile), and where it is faster: neighbour lists (not
-    ``queries``) of systems small enough for its stream-ordered pass (``_small_systems``; 4-5x
-    faster than the extension at 128 and 1,000 particles). Other eager calls keep the
-    extension's zero-copy path (the library's own device buffers wrapped, no copy into
-    torch's)."""
+    (``max_pairs``), tracing (torch.compile) and the pair ``count``, and, with method
+    ``"auto"``, where it is faster: neighbour lists (not ``queries``) of systems small enough
+    for its stream-ordered pass (``_small_systems``; 4-5x faster than the extension at 128 and
+    1,000 particles). Other eager calls keep the extension's zero-copy path (the library's own
+    device buffers wrapped, no copy into torch's), an explicit ``"grid"`` among them."""
     if not isinstance(x, torch.Tensor):
         return False
     if x.device.type == "cpu":
         return method in ("auto", "cell-list")
     return (x.device.type == "cuda" and _CUDA_KERNEL and method in ("auto", "grid") and
-            (max_pairs is not None or torch.compiler.is_compiling() or
-             (not queries and _small_systems(x, cell, pbc))))
+            (max_pairs is not None or count or torch.compiler.is_compiling() or
+             (method == "auto" and not queries and _small_systems(x, cell, pbc))))
 
 
 def _small_systems(x: torch.Tensor, cell: Any, pbc: Any) -> bool:
@@ -108,7 +108,7 @@ def _small_systems(x: torch.Tensor, cell: Any, pbc: Any) -> bool:
     rule (raycut::prefer_small_systems, N^2 <= 2^20 B), with B the number of cells of a (B, 3, 3)
     cell and 1 otherwise (the batch index is data on the device, never read to decide); pbc
     without a cell stays on the engine there."""
-    if pbc is not None and cell is None:
+    if (pbc is not None and cell is None) or x.dim() != 2:  # bad shapes: the extension says why
         return False
     shape = getattr(cell, "shape", None)
     if shape is None and cell is not None and not isinstance(cell, (int, float)):
@@ -167,13 +167,14 @@ def _pbc(pbc: Any, cell: Optional[torch.Tensor], like: torch.Tensor) -> Optional
     return flags
 
 
-def _index(batch: Any, name: str) -> Optional[torch.Tensor]:
+def _index(batch: Any, name: str, device: torch.device) -> Optional[torch.Tensor]:
+    """A system index as int64 on the positions' device (a host one is copied there)."""
     if batch is None:
         return None
     b = batch if isinstance(batch, torch.Tensor) else torch.as_tensor(batch)
     if b.is_floating_point() or b.dtype == torch.bool:
         raise ValueError(f"{name} must be integers (the system of each particle), got {b.dtype}")
-    return b.to(torch.int64)
+    return b.to(device=device, dtype=torch.int64)
 
 
 def _check_capacity(count: torch.Tensor, max_pairs: Optional[int], letters: str) -> None:
@@ -229,7 +230,7 @@ def neighbor_list(letters: str, positions: torch.Tensor, cutoff: float, cell: An
                   batch: Any, half: bool, max_pairs: Optional[int]) -> Any:
     _floating(positions, "positions")
     c = _cell(cell, positions)
-    b = _index(batch, "batch")
+    b = _index(batch, "batch", positions.device)
     i, j, shifts, count = torch.ops.raycut.neighbor_list(
         positions.detach(), float(cutoff), None if c is None else c.detach(),
         _pbc(pbc, c, positions), b, bool(half), max_pairs)
@@ -247,11 +248,11 @@ def radius(letters: str, points: torch.Tensor, queries: Any, cutoff: float, cell
                          f"{type(queries).__name__}")
     _floating(queries, "queries")
     c = _cell(cell, points)
-    bq = _index(batch_queries, "batch_queries")
+    bq = _index(batch_queries, "batch_queries", points.device)
     i, j, shifts, count = torch.ops.raycut.radius(
         points.detach(), queries.detach().to(points.dtype), float(cutoff),
         None if c is None else c.detach(), _pbc(pbc, c, points),
-        _index(batch_points, "batch_points"), bq, max_pairs)
+        _index(batch_points, "batch_points", points.device), bq, max_pairs)
     _check_capacity(count, max_pairs, letters)
     return _quantities(
         letters, i, j, shifts, count,

@@ -491,6 +491,18 @@ Pairs small_systems_pairs(const at::Tensor& positions, double cutoff,
   return {i, j, shifts, count};
 }
 
+// The first particle with a NaN or infinite coordinate, named as the engine names it: bad data
+// shows as a count code on the device, and its row is looked up only here, on the error's path.
+// NaN comes first: the pass keeps the most negative code, which may be another error's.
+void name_non_finite(const at::Tensor& positions) {
+  const at::Tensor rows = at::isfinite(positions).all(1).logical_not().nonzero();
+  if (rows.size(0) == 0) return;
+  const std::int64_t i = rows[0][0].item<std::int64_t>();
+  const at::Tensor p = positions[i].to(at::kDouble).cpu();
+  TORCH_CHECK_VALUE(false, "non-finite coordinate (NaN or infinite) at positions index ", i, ": (",
+                    p[0].item<double>(), ", ", p[1].item<double>(), ", ", p[2].item<double>(), ")");
+}
+
 // Exact sizing on the small-system pass: one pass into a capacity guessed from this thread's
 // last list on the device, one read-back of the count (which also raises for bad input), and a
 // second pass only when the guess was short. The outputs are the first `count` entries.
@@ -507,6 +519,7 @@ Pairs exact_small_systems_pairs(const at::Tensor& positions, double cutoff,
   try {
     count = raycut::read_pair_count(ctx, std::get<3>(pairs).data_ptr<std::int64_t>());
   } catch (const raycut::Error& e) {
+    if (e.code() == raycut::ErrorCode::invalid_input) name_non_finite(positions);
     rethrow(e);
   }
   guess = count;
