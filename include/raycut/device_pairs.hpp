@@ -62,8 +62,8 @@ constexpr bool prefer_small_systems(std::size_t particles, std::size_t systems) 
 // Every pair (i, j, S) of the same system with r = x_j - x_i + S . cell, |r| < cutoff, except
 // (i, i, 0), decided in double precision from the positions as given (float32 or float64): the
 // float64 answer at every box size, with no band. Brute force within each system in one pass
-// (a block or a warp per particle), so the work is the sum over systems of n_s^2 times the images a pair
-// has: the path for systems up to about a thousand particles (docs/streams.md gives the
+// (a block or a warp per particle), so the work is the sum over systems of n_s^2 times the images a
+// pair has: the path for systems up to about a thousand particles (docs/streams.md gives the
 // crossover). Pairs come row by row (i ascending), then by j ascending, then by S
 // lexicographically.
 //
