@@ -68,6 +68,28 @@ class ScratchResource final : public raycut::MemoryResource {
   ffi::ScratchAllocator& scratch_;
 };
 
+// XLA's device for the handler's scope: XLA calls it on a thread whose current device may be
+// another GPU than the one that owns its stream (jax.pmap, several GPUs), and the pass, CUB and
+// the launches here all use the current one.
+class DeviceGuard {
+ public:
+  explicit DeviceGuard(std::int32_t device) {
+    if (cudaGetDevice(&previous_) == cudaSuccess && previous_ != device &&
+        cudaSetDevice(device) == cudaSuccess)
+      return;
+    previous_ = -1;  // already there, or unknown: nothing to restore
+    (void)cudaGetLastError();
+  }
+  ~DeviceGuard() {
+    if (previous_ >= 0) cudaSetDevice(previous_);
+  }
+  DeviceGuard(const DeviceGuard&) = delete;
+  DeviceGuard& operator=(const DeviceGuard&) = delete;
+
+ private:
+  int previous_ = -1;
+};
+
 __global__ void widen(const float* in, double* out, std::size_t count) {
   for (std::size_t k = blockIdx.x * std::size_t{blockDim.x} + threadIdx.x; k < count;
        k += std::size_t{gridDim.x} * blockDim.x)
@@ -197,7 +219,7 @@ ffi::Error pass_and_narrow(cudaStream_t stream, ScratchResource& scratch,
 // exact even when other systems overflow their slots; then one kernel narrows all of them to
 // local int32 indices.
 ffi::Error neighbor_list(cudaStream_t stream, ffi::ScratchAllocator scratch_allocator,
-                         ffi::Buffer<ffi::F32> positions, ffi::AnyBuffer cell,
+                         std::int32_t device, ffi::Buffer<ffi::F32> positions, ffi::AnyBuffer cell,
                          ffi::Buffer<ffi::PRED> pbc, float cutoff, std::int64_t half,
                          ffi::ResultBuffer<ffi::S32> i, ffi::ResultBuffer<ffi::S32> j,
                          ffi::ResultBuffer<ffi::S32> shifts, ffi::ResultBuffer<ffi::S32> count) {
@@ -210,6 +232,7 @@ ffi::Error neighbor_list(cudaStream_t stream, ffi::ScratchAllocator scratch_allo
   if (ffi::Error error = check_indices(n); error.failure()) return error;
   if (systems == 0) return ffi::Error::Success();
   const std::size_t k = i->element_count() / systems;
+  const DeviceGuard on_device(device);
   ScratchResource scratch(scratch_allocator);
   try {
     Coordinates at;
@@ -238,10 +261,11 @@ ffi::Error neighbor_list(cudaStream_t stream, ffi::ScratchAllocator scratch_allo
 // A ragged batch: one pass over all systems (the batch widened to int64 on the device), global
 // indices, padding i = j = N, one count.
 ffi::Error ragged_neighbor_list(cudaStream_t stream, ffi::ScratchAllocator scratch_allocator,
-                                ffi::Buffer<ffi::F32> positions, ffi::Buffer<ffi::S32> batch,
-                                ffi::AnyBuffer cell, ffi::Buffer<ffi::PRED> pbc, float cutoff,
-                                std::int64_t half, ffi::ResultBuffer<ffi::S32> i,
-                                ffi::ResultBuffer<ffi::S32> j, ffi::ResultBuffer<ffi::S32> shifts,
+                                std::int32_t device, ffi::Buffer<ffi::F32> positions,
+                                ffi::Buffer<ffi::S32> batch, ffi::AnyBuffer cell,
+                                ffi::Buffer<ffi::PRED> pbc, float cutoff, std::int64_t half,
+                                ffi::ResultBuffer<ffi::S32> i, ffi::ResultBuffer<ffi::S32> j,
+                                ffi::ResultBuffer<ffi::S32> shifts,
                                 ffi::ResultBuffer<ffi::S32> count) {
   std::size_t n = 0, systems = 0;
   if (ffi::Error error =
@@ -255,6 +279,7 @@ ffi::Error ragged_neighbor_list(cudaStream_t stream, ffi::ScratchAllocator scrat
         "raycut.jax.neighbor_list: a ragged batch of N = " + std::to_string(n) +
         " particles needs at least one system (cell (B, 3, 3) with B >= 1), got B = 0");
   const std::size_t k = i->element_count();
+  const DeviceGuard on_device(device);
   ScratchResource scratch(scratch_allocator);
   try {
     Coordinates at;
@@ -287,10 +312,14 @@ ffi::Error ragged_neighbor_list(cudaStream_t stream, ffi::ScratchAllocator scrat
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(
     RaycutNeighborListCuda, neighbor_list,
-    raycut_jax::neighbor_list_signature(
-        ffi::Ffi::Bind().Ctx<ffi::PlatformStream<cudaStream_t>>().Ctx<ffi::ScratchAllocator>()));
+    raycut_jax::neighbor_list_signature(ffi::Ffi::Bind()
+                                            .Ctx<ffi::PlatformStream<cudaStream_t>>()
+                                            .Ctx<ffi::ScratchAllocator>()
+                                            .Ctx<ffi::DeviceOrdinal>()));
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(
     RaycutRaggedNeighborListCuda, ragged_neighbor_list,
-    raycut_jax::ragged_neighbor_list_signature(
-        ffi::Ffi::Bind().Ctx<ffi::PlatformStream<cudaStream_t>>().Ctx<ffi::ScratchAllocator>()));
+    raycut_jax::ragged_neighbor_list_signature(ffi::Ffi::Bind()
+                                                   .Ctx<ffi::PlatformStream<cudaStream_t>>()
+                                                   .Ctx<ffi::ScratchAllocator>()
+                                                   .Ctx<ffi::DeviceOrdinal>()));
