@@ -5,6 +5,7 @@
 #
 #   scripts/device_run.sh [tests REGEX] [bench] [lists] [periodic] [sph] [python] [python-bench]
 #                         [mpi] [mpi-scaling] [memcheck] [grid-suites] [latency] [knn]
+#                         [roofline]
 #                         results: ${OUT:-/tmp/raycut-out}/results.tgz
 #
 #   tests REGEX  ctest -R REGEX (e.g. "GridVariants|grid_|Sph"; "." for everything, ~6 min),
@@ -27,6 +28,8 @@
 #                bench/plot_latency.py: latency-cpp.csv, latency-python.csv, latency.png
 #   knn          bench/python_knn.py: pyraycut.torch.knn (k = 16 and 64) beside radius_graph of
 #                the same mean degree, 10^6 uniform points on CUDA (knn.csv; docs/compatibility.md)
+#   roofline     ncu (Nsight Compute) metrics of the periodic workloads' and the small pass's
+#                kernels: ncu-periodic.csv, ncu-small.csv (docs/benchmarks.md's roofline)
 #   memcheck     compute-sanitizer on the functor, list, grid-variant and periodic GPU tests;
 #                racecheck on the small-system pass
 #   python       the Python package built with the device's Python (the PyTorch operators with
@@ -181,6 +184,24 @@ while [ $# -gt 0 ]; do
           > "$res/memcheck-mpi-device.log" 2>&1
         echo "memcheck mpi-device: exit $? ($(grep -E "ERROR SUMMARY" "$res/memcheck-mpi-device.log"))"
       fi
+      ;;
+    roofline)
+      # Nsight Compute over the periodic workloads (2^20 LJ liquid: full and half lists with S,
+      # lj_forces; the batches) and the small-system pass at 1,000 particles: each kernel's time,
+      # DRAM and L2 bytes, instructions and achieved throughput, for docs/benchmarks.md's
+      # roofline (#34). --clock-control none: the clocks stay as the machine runs them.
+      metrics=gpu__time_duration.sum,dram__bytes_read.sum,dram__bytes_write.sum,lts__t_bytes.sum
+      metrics=$metrics,sm__inst_executed.sum,sm__throughput.avg.pct_of_peak_sustained_elapsed
+      metrics=$metrics,gpu__compute_memory_throughput.avg.pct_of_peak_sustained_elapsed
+      metrics=$metrics,sm__warps_active.avg.pct_of_peak_sustained_active
+      ncu=(ncu --clock-control none --csv --metrics "$metrics" --launch-count 400)
+      timeout 300 "${ncu[@]}" build/bench/neighbour_bench --methods grid --no-suite --periodic \
+        --modes prepared --reps 1 > "$res/ncu-periodic.csv" 2> "$res/ncu-periodic.log"
+      echo "ncu periodic exit $? ($(wc -l < "$res/ncu-periodic.csv") lines)"
+      timeout 120 "${ncu[@]}" build/bench/raycut_latency_bench --sizes 1000 --batches none \
+        --reps 1 --min-loop-ms 0.001 > "$res/ncu-small.csv" 2> "$res/ncu-small.log"
+      echo "ncu small pass exit $? ($(wc -l < "$res/ncu-small.csv") lines)"
+      tail -3 "$res/ncu-periodic.log" "$res/ncu-small.log"
       ;;
     python)
       # One process per test file, so that a crash (a segfault in one framework's runtime) hides
