@@ -187,9 +187,8 @@ __host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
        m[0][0] * m[1][1] - m[0][1] * m[1][0]}};
   const double det = m[0][0] * cof[0][0] + m[0][1] * cof[0][1] + m[0][2] * cof[0][2];
   if (!isfinite(det) || det == 0) return int(count_invalid_cell);
-    // inverse[k][a] = cof[a][k] / det, so g[a][k] = cof[a][k] / det.
 #pragma unroll
-  for (int a = 0; a < 3; ++a) {
+  for (int a = 0; a < 3; ++a) {  // inverse[k][a] = cof[a][k] / det, so g[a][k] = cof[a][k] / det
 #pragma unroll
     for (int k = 0; k < 3; ++k) f.g[a][k] = cof[a][k] / det;
     f.reach[a] = f.periodic[a] ? in.cutoff * sqrt(dot(f.g[a], f.g[a])) : 0;
