@@ -388,3 +388,13 @@ def test_small_systems_rule_is_the_operators():
     assert small(1448, cell=np.zeros((2, 3, 3))) and not small(1449, cell=np.zeros((2, 3, 3)))
     assert small(1448, cell=[[[1, 0, 0]] * 3] * 2)
     assert not small(10, pbc=True), "pbc without a cell stays on the engine"
+
+
+@cuda
+def test_the_count_comes_with_any_size_on_cuda():
+    """"c" sends a CUDA call through the operator at any size: the small pass below the rule,
+    the engine's grid above it, each with the count of its pairs."""
+    for n in (200, 3000):
+        x = torch.rand((n, 3), device="cuda", generator=None) * (n / 0.8442) ** (1 / 3)
+        i, j, count = pyraycut.neighbor_list("ijc", x, 2.5)
+        assert count.is_cuda and count.dim() == 0 and int(count) == len(i) == len(j) > 0
