@@ -99,7 +99,7 @@ void for_each_in_range(const Images& images, std::size_t i, const float* target_
         Vec3 r{x[t] - xi, y[t] - yi, z[t] - zi};
         float d2 = r2[t];
         if (in_range_of(images, cutoff_squared, static_cast<std::uint32_t>(i), j, r, d2))
-          on_pair(j, r, d2);
+          on_pair(j, r, d2, run.image ? run.image + b + t : nullptr);
       }
     }
   }
@@ -133,11 +133,11 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const RunsO
     const typename Images::Target ti = images.target(i);
     for_each_in_range(
         images, i, target_xyz, cutoff_squared, runs_of,
-        [&](std::size_t point, Vec3 r, float r2) {
+        [&](std::size_t point, Vec3 r, float r2, const PointImage* entry) {
           const auto k = static_cast<std::uint32_t>(point);
           std::uint32_t j;
           Shift s{};
-          if (resolve(f, images, ti, true, i, k, k, j, s)) apply(f, acc, i, j, r, r2, s);
+          if (resolve(f, images, ti, true, i, k, k, j, s, entry)) apply(f, acc, i, j, r, r2, s);
         },
         lowest_source_of(f, i));
     f.finish(i, acc);

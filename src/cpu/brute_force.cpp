@@ -18,6 +18,7 @@ class BruteForceCpu final : public HostMethod<BruteForceCpu> {
               z_.data() + first,
               order_.empty() ? nullptr : order_.data() + first,
               nullptr,
+              nullptr,
               first,
               system_start_[s + 1] - first};
     return 1;

@@ -52,25 +52,26 @@ struct UnreadImages {
   RAYCUT_HD Target target(std::uint32_t) const { return {}; }
 };
 
-// Candidate point k (at `index` in the image table: k, or its slot for the grid) of target i
-// (`ti` from images.target()), `in` by the shared predicate: whether functor f takes it, with j
-// (the caller's source; a valid index 0 when not taken, for calls fed r2 = +inf) and s set. A
-// query point is never a source.
+// Candidate point k (at `index` in the image table: k, or its slot for the grid; or `entry`, its
+// entry where the pass holds it) of target i (`ti` from images.target()), `in` by the shared
+// predicate: whether functor f takes it, with j (the caller's source; a valid index 0 when not
+// taken, for calls fed r2 = +inf) and s set. A query point is never a source.
 template <class F, class Images>
 RAYCUT_HD bool resolve(const F& f, const Images& images, const typename Images::Target& ti, bool in,
                        std::uint32_t i, std::uint32_t k, std::uint32_t index, std::uint32_t& j,
-                       Shift& s) {
+                       Shift& s, const PointImage* entry = nullptr) {
   if constexpr (Images::active) {
     (void)k;
     j = 0;
     if (!in) return false;
-    const PointImage p = images.image[index];
+    const PointImage p = entry ? *entry : images.image[index];
     if (p.source == not_a_source) return false;
     j = p.source;
     s = {p.shift[0] - ti.shift[0], p.shift[1] - ti.shift[1], p.shift[2] - ti.shift[2]};
   } else {
     (void)ti;
     (void)index;
+    (void)entry;
     j = k;
   }
   return in && accepts(f, i, j, s);

@@ -65,6 +65,9 @@ struct CandidateRun {
   // The caller's particle each point is (its source, for an image), readable as x is; null: not
   // given. With it a half list drops the candidates below its row before any scalar work.
   const std::uint32_t* source;
+  // The points' image-table entries in run order (null: the pass reads the table by point): a
+  // list's j and S then come from memory read in sequence, not from the caller's order at random.
+  const PointImage* image;
   std::uint32_t first;
   std::size_t count;
   std::uint32_t point(std::size_t t) const {
