@@ -22,6 +22,7 @@ import numpy as np
 import torch
 
 from . import _arrays
+from . import _raycut
 from . import _systems
 from . import check_pair_count
 
@@ -114,11 +115,7 @@ def _small_systems(x: torch.Tensor, cell: Any, pbc: Any) -> bool:
     if shape is None and cell is not None and not isinstance(cell, (int, float)):
         shape = np.shape(cell)
     systems = shape[0] if shape is not None and len(shape) == 3 else 1
-    return x.shape[0] ** 2 <= _SMALL_SYSTEM_PAIR_TESTS * systems
-
-
-# raycut::small_system_pair_tests (raycut/device_pairs.hpp).
-_SMALL_SYSTEM_PAIR_TESTS = 1 << 20
+    return _raycut.prefer_small_systems(x.shape[0], systems)
 
 
 def _cell(cell: Any, like: torch.Tensor) -> Optional[torch.Tensor]:

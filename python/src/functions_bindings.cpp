@@ -13,6 +13,7 @@
 #include "arrays.hpp"
 #include "bindings.hpp"
 #include "errors.hpp"
+#include "raycut/device_pairs.hpp"
 #include "raycut/engine.hpp"
 
 #if defined(RAYCUT_PY_CUDA)
@@ -108,6 +109,10 @@ void bind_functions(nb::module_& m) {
   m.def("kernel_catalogue", &kernel_catalogue,
         "The built-in kernels: name, parameters, per-particle inputs and outputs of each.");
   m.def("auto_method", &raycut::auto_method, "What method='auto' picks on this machine.");
+  m.def("prefer_small_systems", &raycut::prefer_small_systems, nb::arg("particles"),
+        nb::arg("systems"),
+        "Whether the stream-ordered small-system pass serves this many particles in this many "
+        "systems (raycut::prefer_small_systems).");
   m.def("pair_vectors", &pair_vectors<std::int32_t>, nb::arg("targets"), nb::arg("sources"),
         nb::arg("i"), nb::arg("j"), nb::arg("shifts").none(), nb::arg("cells").none(),
         nb::arg("cell_of").none(),
