@@ -18,6 +18,11 @@
 #                (2^20) and batches of 512 x 128 and 64 x 4096 periodic cubes; lists with shifts,
 #                lj_forces; cold and prepared; PERIODIC_METHODS (default grid) picks the methods.
 #                periodic.csv/.md (with lists.csv's tables too when the lists step ran before)
+#   baseline-periodic
+#                the periodic workloads (as in periodic) on an earlier revision and on this
+#                tree, alternately, twice each, on the same GPU: BASELINE_SRC is that revision's
+#                source (git archive REV | tar -x -C .scratch/baseline, carried); its
+#                neighbour_bench is built there. baseline-periodic-K.csv, current-periodic-K.csv
 #   sph          the article's SPH run with every GPU method, and the validation scenarios
 #   grid-suites  both suites with grid and grid-paper beside the paper's grid (no regression)
 #   latency      call latency of small systems and batches (docs/benchmarks.md, "Latency of small
@@ -322,6 +327,24 @@ while [ $# -gt 0 ]; do
         --large-reps 2 -o "$res/bench-surface-grids.csv" "${paper[@]}" \
         > "$res/bench-surface-grids.log" 2>&1
       grep -E "grid " "$res/bench-uniform-grids.log" | tail -8
+      ;;
+    baseline-periodic)
+      src="${BASELINE_SRC:?BASELINE_SRC: an earlier revision, as a source tree}"
+      (cd "$src" && BUILD_DIR=build BUILD_TARGETS=neighbour_bench scripts/configure.sh \
+        -DCMAKE_CUDA_ARCHITECTURES=90) > "$res/baseline-build.log" 2>&1 ||
+        { tail -20 "$res/baseline-build.log"; src=""; }
+      step "baseline built"
+      for k in 1 2; do
+        [ -n "$src" ] || break
+        for tree in baseline current; do
+          bin=build/bench/neighbour_bench
+          [ "$tree" = baseline ] && bin="$src/build/bench/neighbour_bench"
+          "$bin" --methods grid --no-suite --periodic --out "$res/$tree-periodic-$k.csv" \
+            > "$res/$tree-periodic-$k.log" 2>&1
+          echo "$tree $k: exit $?"
+          grep -E "^(lj-liquid-pbc|batch-pbc) " "$res/$tree-periodic-$k.log" | head -12
+        done
+      done
       ;;
     sph)
       for m in grid grid-paper optix-aabb-sorted optix-aabb optix-spheres optix-triangles; do
