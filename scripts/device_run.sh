@@ -74,6 +74,11 @@ build_python() {
   BUILD_DIR=build scripts/configure.sh -DRAYCUT_BUILD_PYTHON=ON -DPython_EXECUTABLE="$py" \
     -DRAYCUT_TORCH_CUDA=ON \
     > "$res/python-build.log" 2>&1 || tail -20 "$res/python-build.log"
+  # A module with its own static libstdc++ breaks number formatting (python/shared_libstdcxx.cmake).
+  for m in build/python/pyraycut/*.so; do
+    nm -C --defined-only "$m" 2>/dev/null | grep -q "std::ostream::_M_insert<long>" &&
+      echo "warning: $m holds a static libstdc++"
+  done
 }
 
 BUILD_DIR=build scripts/configure.sh -DCMAKE_CUDA_ARCHITECTURES=90 > "$res/build.log" 2>&1 ||
