@@ -217,6 +217,15 @@ while [ $# -gt 0 ]; do
       # One process per test file, so that a crash (a segfault in one framework's runtime) hides
       # nothing else: pytest-FILE.log each, and a line per file here.
       build_python
+      # AOTInductor (test_example_model) compiles the model with $CXX, else g++. A g++ without a
+      # shared libstdc++ gives the package a static copy of its own (python/shared_libstdcxx.cmake
+      # says what that breaks): then the system's compiler, where it has one.
+      echo "g++: $(command -v g++), libstdc++.so: $(g++ -print-file-name=libstdc++.so)"
+      if [ -z "${CXX:-}" ] && [[ "$(g++ -print-file-name=libstdc++.so)" != /* ]] &&
+        [[ "$(/usr/bin/g++ -print-file-name=libstdc++.so 2>/dev/null)" == /* ]]; then
+        export CXX=/usr/bin/g++
+        echo "CXX=$CXX for AOTInductor"
+      fi
       files="${PYTEST_FILES:-$(ls python/tests/test_*.py)}"
       for f in $files; do
         name=$(basename "$f" .py)
