@@ -144,10 +144,13 @@ def _any_true(values: Any) -> bool:
     return bool(values)
 
 
-def _pbc(pbc: Any, cell: Optional[torch.Tensor], like: torch.Tensor) -> Optional[torch.Tensor]:
-    """pbc as a bool tensor on the positions' device (one bool is made there: a CUDA call then
-    copies nothing from the host). Host values without a cell are checked here and dropped when
-    all False, so that the operator never has to read a device tensor to check them."""
+def _pbc(pbc: Any, cell: Optional[torch.Tensor], like: torch.Tensor,
+         on_device: bool) -> Optional[torch.Tensor]:
+    """pbc as a bool tensor: on the positions' device where the operator's CUDA pass reads it
+    there (``on_device``: the small-system pass, and compiled code, so that the call copies
+    nothing from the host), else on the host, where the engine reads it without waiting for the
+    GPU. Host values without a cell are checked here and dropped when all False, so that the
+    operator never has to read a device tensor to check them."""
     if pbc is None:
         return None
     if cell is None and not isinstance(pbc, torch.Tensor):
@@ -155,10 +158,13 @@ def _pbc(pbc: Any, cell: Optional[torch.Tensor], like: torch.Tensor) -> Optional
             raise ValueError("pbc without a cell: periodic axes need their lattice vectors (pass "
                              "cell, rows a, b, c)")
         return None
+    device = like.device if on_device else None
     if isinstance(pbc, bool):
-        flags = torch.full((3,), pbc, dtype=torch.bool, device=like.device)
+        flags = torch.full((3,), pbc, dtype=torch.bool, device=device)
+    elif isinstance(pbc, torch.Tensor) and not on_device:
+        flags = pbc.to(dtype=torch.bool)  # a device tensor stays there: moving it would wait
     else:
-        flags = torch.as_tensor(pbc).to(device=like.device, dtype=torch.bool)
+        flags = torch.as_tensor(pbc).to(device=device, dtype=torch.bool)
     if flags.dim() == 0:
         flags = flags.expand(3)
     return flags
@@ -228,9 +234,11 @@ def neighbor_list(letters: str, positions: torch.Tensor, cutoff: float, cell: An
     _floating(positions, "positions")
     c = _cell(cell, positions)
     b = _index(batch, "batch", positions.device)
+    on_device = positions.is_cuda and (torch.compiler.is_compiling() or
+                                       _small_systems(positions, c, pbc))
     i, j, shifts, count = torch.ops.raycut.neighbor_list(
         positions.detach(), float(cutoff), None if c is None else c.detach(),
-        _pbc(pbc, c, positions), b, bool(half), max_pairs)
+        _pbc(pbc, c, positions, on_device), b, bool(half), max_pairs)
     _check_capacity(count, max_pairs, letters)
     return _quantities(
         letters, i, j, shifts, count,
@@ -248,7 +256,8 @@ def radius(letters: str, points: torch.Tensor, queries: Any, cutoff: float, cell
     bq = _index(batch_queries, "batch_queries", points.device)
     i, j, shifts, count = torch.ops.raycut.radius(
         points.detach(), queries.detach().to(points.dtype), float(cutoff),
-        None if c is None else c.detach(), _pbc(pbc, c, points),
+        None if c is None else c.detach(),
+        _pbc(pbc, c, points, points.is_cuda and torch.compiler.is_compiling()),
         _index(batch_points, "batch_points", points.device), bq, max_pairs)
     _check_capacity(count, max_pairs, letters)
     return _quantities(

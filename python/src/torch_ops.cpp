@@ -130,11 +130,14 @@ std::vector<raycut::Box> boxes_of(const std::optional<at::Tensor>& cell,
   }
   const at::Tensor& c = *cell;
   check_cell(c);
-  const at::Tensor cells = c.reshape({-1, 3, 3}).to(at::kDouble).cpu().contiguous();
-  at::Tensor flags = at::ones({1, 3}, at::kBool);
+  // To the host first: a device cell costs one copy and no conversion kernel there.
+  const at::Tensor cells = c.reshape({-1, 3, 3}).cpu().to(at::kDouble).contiguous();
+  at::Tensor flags;
   if (pbc) {
     check_pbc(*pbc);
     flags = pbc->reshape({-1, 3}).cpu().contiguous();
+  } else {
+    flags = at::ones({1, 3}, at::kBool);
   }
   check_system_counts(cells.size(0), flags.size(0));
   const std::int64_t count = std::max(cells.size(0), flags.size(0));
