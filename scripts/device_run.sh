@@ -74,7 +74,7 @@ build_python() {
   BUILD_DIR=build scripts/configure.sh -DRAYCUT_BUILD_PYTHON=ON -DPython_EXECUTABLE="$py" \
     -DRAYCUT_TORCH_CUDA=ON \
     > "$res/python-build.log" 2>&1 || tail -20 "$res/python-build.log"
-  # A module with its own static libstdc++ breaks number formatting (python/shared_libstdcxx.cmake).
+  # A module with its own static libstdc++ breaks number formatting (cmake/shared_libstdcxx.cmake).
   for m in build/python/pyraycut/*.so; do
     nm -C --defined-only "$m" 2>/dev/null | grep -q "std::ostream::_M_insert<long>" &&
       echo "warning: $m holds a static libstdc++"
@@ -218,7 +218,7 @@ while [ $# -gt 0 ]; do
       # nothing else: pytest-FILE.log each, and a line per file here.
       build_python
       # AOTInductor (test_example_model) compiles the model with $CXX, else g++. A g++ without a
-      # shared libstdc++ gives the package a static copy of its own (python/shared_libstdcxx.cmake
+      # shared libstdc++ gives the package a static copy of its own (cmake/shared_libstdcxx.cmake
       # says what that breaks): then the system's compiler, where it has one.
       echo "g++: $(command -v g++), libstdc++.so: $(g++ -print-file-name=libstdc++.so)"
       if [ -z "${CXX:-}" ] && [[ "$(g++ -print-file-name=libstdc++.so)" != /* ]] &&

@@ -179,7 +179,7 @@ def test_radius_op_periodic_batched_and_padded():
 def test_op_errors_name_the_argument():
     x = torch.rand(10, 3)
     # The numbers in the message too: a module with its own static libstdc++ writes none
-    # (python/shared_libstdcxx.cmake).
+    # (cmake/shared_libstdcxx.cmake).
     with pytest.raises(ValueError, match=r"positions must have shape \(N, 3\), got \[10, 2\]"):
         OPS.neighbor_list(torch.rand(10, 2), 0.3)
     with pytest.raises(ValueError, match="float32 or float64"):
