@@ -170,14 +170,21 @@ def _pbc(pbc: Any, cell: Optional[torch.Tensor], like: torch.Tensor,
     return flags
 
 
-def _index(batch: Any, name: str, device: torch.device) -> Optional[torch.Tensor]:
-    """A system index as int64 on the positions' device (a host one is copied there)."""
+def _index(batch: Any, name: str, device: Optional[torch.device]) -> Optional[torch.Tensor]:
+    """A system index as int64 on ``device`` (a host one is copied there), or where it is for
+    None: the engine reads it on the host, where a host index costs no copy and no wait."""
     if batch is None:
         return None
     b = batch if isinstance(batch, torch.Tensor) else torch.as_tensor(batch)
     if b.is_floating_point() or b.dtype == torch.bool:
         raise ValueError(f"{name} must be integers (the system of each particle), got {b.dtype}")
     return b.to(device=device, dtype=torch.int64)
+
+
+def _on(index: Optional[torch.Tensor], like: torch.Tensor, needed: bool) -> Optional[torch.Tensor]:
+    """The index on the positions' device where the pair vectors need it (per-system cells), made
+    before the operator's work is queued, so that the copy does not wait for it."""
+    return index.to(like.device) if index is not None and needed else index
 
 
 def _check_capacity(count: torch.Tensor, max_pairs: Optional[int], letters: str) -> None:
@@ -233,16 +240,20 @@ def neighbor_list(letters: str, positions: torch.Tensor, cutoff: float, cell: An
                   batch: Any, half: bool, max_pairs: Optional[int]) -> Any:
     _floating(positions, "positions")
     c = _cell(cell, positions)
-    b = _index(batch, "batch", positions.device)
+    # Where the operator's CUDA pass reads pbc and batch on the device (the small-system pass,
+    # compiled code); elsewhere the engine reads them on the host.
     on_device = positions.is_cuda and (torch.compiler.is_compiling() or
                                        _small_systems(positions, c, pbc))
+    b = _index(batch, "batch", positions.device if on_device else None)
+    vectors_batch = _on(b, positions, c is not None and ("d" in letters or "D" in letters))
     i, j, shifts, count = torch.ops.raycut.neighbor_list(
         positions.detach(), float(cutoff), None if c is None else c.detach(),
         _pbc(pbc, c, positions, on_device), b, bool(half), max_pairs)
     _check_capacity(count, max_pairs, letters)
     return _quantities(
         letters, i, j, shifts, count,
-        lambda: _vectors(positions, positions, i, j, shifts, c, b, max_pairs is not None))
+        lambda: _vectors(positions, positions, i, j, shifts, c, vectors_batch,
+                         max_pairs is not None))
 
 
 def radius(letters: str, points: torch.Tensor, queries: Any, cutoff: float, cell: Any, pbc: Any,
@@ -253,14 +264,18 @@ def radius(letters: str, points: torch.Tensor, queries: Any, cutoff: float, cell
                          f"{type(queries).__name__}")
     _floating(queries, "queries")
     c = _cell(cell, points)
-    bq = _index(batch_queries, "batch_queries", points.device)
+    # The operator's engine reads pbc and the batches on the host (compiled code keeps them on
+    # the device).
+    on_device = points.is_cuda and torch.compiler.is_compiling()
+    device = points.device if on_device else None
+    bq = _index(batch_queries, "batch_queries", device)
+    vectors_batch = _on(bq, points, c is not None and ("d" in letters or "D" in letters))
     i, j, shifts, count = torch.ops.raycut.radius(
         points.detach(), queries.detach().to(points.dtype), float(cutoff),
-        None if c is None else c.detach(),
-        _pbc(pbc, c, points, points.is_cuda and torch.compiler.is_compiling()),
-        _index(batch_points, "batch_points", points.device), bq, max_pairs)
+        None if c is None else c.detach(), _pbc(pbc, c, points, on_device),
+        _index(batch_points, "batch_points", device), bq, max_pairs)
     _check_capacity(count, max_pairs, letters)
     return _quantities(
         letters, i, j, shifts, count,
-        lambda: _vectors(points, queries.to(points.dtype), i, j, shifts, c, bq,
+        lambda: _vectors(points, queries.to(points.dtype), i, j, shifts, c, vectors_batch,
                          max_pairs is not None))
