@@ -158,11 +158,9 @@ def _pbc(pbc: Any, cell: Optional[torch.Tensor], like: torch.Tensor,
             raise ValueError("pbc without a cell: periodic axes need their lattice vectors (pass "
                              "cell, rows a, b, c)")
         return None
-    device = like.device if on_device else None
+    device = like.device if on_device else None  # None: a tensor stays where it is
     if isinstance(pbc, bool):
         flags = torch.full((3,), pbc, dtype=torch.bool, device=device)
-    elif isinstance(pbc, torch.Tensor) and not on_device:
-        flags = pbc.to(dtype=torch.bool)  # a device tensor stays there: moving it would wait
     else:
         flags = torch.as_tensor(pbc).to(device=device, dtype=torch.bool)
     if flags.dim() == 0:
