@@ -344,8 +344,10 @@ while [ $# -gt 0 ]; do
       ;;
     baseline-periodic)
       src="${BASELINE_SRC:?BASELINE_SRC: an earlier revision, as a source tree}"
-      (cd "$src" && BUILD_DIR=build BUILD_TARGETS=neighbour_bench scripts/configure.sh \
-        -DCMAKE_CUDA_ARCHITECTURES=90) > "$res/baseline-build.log" 2>&1 ||
+      # cmake itself, not that revision's configure.sh (which may build every target).
+      { cmake -S "$src" -B "$src/build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
+        -DCMAKE_CUDA_ARCHITECTURES=90 && cmake --build "$src/build" -j"$(nproc)" \
+        --target neighbour_bench; } > "$res/baseline-build.log" 2>&1 ||
         { tail -20 "$res/baseline-build.log"; src=""; }
       step "baseline built"
       for k in 1 2; do
