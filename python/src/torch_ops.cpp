@@ -245,6 +245,22 @@ raycut::Systems systems_of(std::vector<raycut::Box> boxes, const at::Tensor& ind
 struct Work {
   explicit Work(const char* method) : engine(method) {}
   raycut::Engine engine;
+
+  // On CUDA, the last call's list again while the stream is the same (the copies out of it were
+  // queued there before the next fill): no allocation per call, and no free, which waits for the
+  // whole device. It keeps the largest list's memory until the thread ends, as the engine keeps
+  // its own.
+  std::shared_ptr<raycut::NeighbourListBuffer> device_list() {
+    if (!list_ || list_stream_ != engine.stream()) {
+      list_ = std::make_shared<raycut::NeighbourListBuffer>();
+      list_stream_ = engine.stream();
+    }
+    return list_;
+  }
+
+ private:
+  std::shared_ptr<raycut::NeighbourListBuffer> list_;
+  void* list_stream_ = nullptr;
 };
 Work& work_for(const at::Device& device) {
   if (device.is_cpu()) {
@@ -316,10 +332,15 @@ Pairs pair_tensors(const raycut::NeighbourListBuffer& list, std::optional<std::i
     return {i, j, shifts, count};
   }
   const auto on_device = at::TensorOptions().device(device);
-  at::Tensor i = at::full({size}, pad_i, on_device.dtype(at::kLong));
-  at::Tensor j = at::full({size}, pad_j, on_device.dtype(at::kLong));
-  at::Tensor shifts = at::zeros({size, 3}, on_device.dtype(at::kInt));
   const std::int64_t kept = std::min(found, size);
+  // Padding only past the pairs: an exact list is all copy, no fill before it.
+  const bool padded = kept < size;
+  at::Tensor i = padded ? at::full({size}, pad_i, on_device.dtype(at::kLong))
+                        : at::empty({size}, on_device.dtype(at::kLong));
+  at::Tensor j = padded ? at::full({size}, pad_j, on_device.dtype(at::kLong))
+                        : at::empty({size}, on_device.dtype(at::kLong));
+  at::Tensor shifts = padded ? at::zeros({size, 3}, on_device.dtype(at::kInt))
+                             : at::empty({size, 3}, on_device.dtype(at::kInt));
   if (kept > 0) {
     auto wrap = [&](const void* data, at::IntArrayRef shape, at::ScalarType type) {
       return at::from_blob(const_cast<void*>(data), shape, on_device.dtype(type));
@@ -358,8 +379,7 @@ Pairs run(const at::Tensor& x, double cutoff, const raycut::Systems& systems, bo
   const OnDevice on(device);
   Work& work = on.work;
   const std::shared_ptr<raycut::NeighbourListBuffer> list =
-      device.is_cpu() ? raycut_py::idle_lists().take()
-                      : std::make_shared<raycut::NeighbourListBuffer>();
+      device.is_cpu() ? raycut_py::idle_lists().take() : work.device_list();
   const auto space = device.is_cpu() ? raycut::MemorySpace::host : raycut::MemorySpace::device;
   try {
     if (wide.defined())
