@@ -333,14 +333,9 @@ Pairs pair_tensors(const raycut::NeighbourListBuffer& list, std::optional<std::i
   }
   const auto on_device = at::TensorOptions().device(device);
   const std::int64_t kept = std::min(found, size);
-  // Padding only past the pairs: an exact list is all copy, no fill before it.
-  const bool padded = kept < size;
-  at::Tensor i = padded ? at::full({size}, pad_i, on_device.dtype(at::kLong))
-                        : at::empty({size}, on_device.dtype(at::kLong));
-  at::Tensor j = padded ? at::full({size}, pad_j, on_device.dtype(at::kLong))
-                        : at::empty({size}, on_device.dtype(at::kLong));
-  at::Tensor shifts = padded ? at::zeros({size, 3}, on_device.dtype(at::kInt))
-                             : at::empty({size, 3}, on_device.dtype(at::kInt));
+  at::Tensor i = at::empty({size}, on_device.dtype(at::kLong));
+  at::Tensor j = at::empty({size}, on_device.dtype(at::kLong));
+  at::Tensor shifts = at::empty({size, 3}, on_device.dtype(at::kInt));
   if (kept > 0) {
     auto wrap = [&](const void* data, at::IntArrayRef shape, at::ScalarType type) {
       return at::from_blob(const_cast<void*>(data), shape, on_device.dtype(type));
@@ -348,6 +343,11 @@ Pairs pair_tensors(const raycut::NeighbourListBuffer& list, std::optional<std::i
     i.narrow(0, 0, kept).copy_(wrap(list.rows(), {kept}, at::kLong));
     j.narrow(0, 0, kept).copy_(wrap(list.columns(), {kept}, at::kLong));
     shifts.narrow(0, 0, kept).copy_(wrap(list.shifts(), {kept, 3}, at::kInt));
+  }
+  if (kept < size) {  // padding past the pairs only
+    i.narrow(0, kept, size - kept).fill_(pad_i);
+    j.narrow(0, kept, size - kept).fill_(pad_j);
+    shifts.narrow(0, kept, size - kept).zero_();
   }
   return {i, j, shifts, count.to(device)};
 }
