@@ -277,11 +277,20 @@ def output(array: Any, like: Like) -> Any:
     framework and device: zero-copy where it already is there, a copy to the caller's device
     when the method worked elsewhere; float arrays in float64 for float64 inputs (a copy)."""
     out = _output(array, like)
-    if like.float64 and out is not None and str(out.dtype).endswith("float32"):
+    if like.float64 and out is not None and _is_float32(out):
         if like.framework == "torch":
             return out.to(_torch().float64)
         return out.astype("float64")
     return out
+
+
+def _is_float32(x: Any) -> bool:
+    """Whether an output array holds float32 (a dtype comparison: its str() costs ~3 us)."""
+    if isinstance(x, np.ndarray):
+        return x.dtype == np.float32
+    if type(x).__module__.startswith("torch"):
+        return x.dtype is _torch().float32
+    return str(x.dtype).endswith("float32")
 
 
 def _output(array: Any, like: Like) -> Any:

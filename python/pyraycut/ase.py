@@ -107,7 +107,9 @@ def _centred_float32(positions: np.ndarray) -> np.ndarray:
 def _system(atoms: Any) -> tuple:
     """(positions (N, 3) float64, cell (3, 3) float64, pbc (3,) bool) of an Atoms."""
     try:
-        pbc = np.broadcast_to(np.asarray(atoms.pbc, dtype=bool), (3,)).copy()
+        pbc = np.asarray(atoms.pbc, dtype=bool)
+        # ASE's own pbc is (3,) already; broadcast_to costs more than the rest of this here.
+        pbc = pbc.copy() if pbc.shape == (3,) else np.broadcast_to(pbc, (3,)).copy()
         positions = np.asarray(atoms.positions, dtype=np.float64).reshape(-1, 3)
     except AttributeError:
         raise TypeError(f"atoms must be an ase.Atoms (or have positions and pbc), got "

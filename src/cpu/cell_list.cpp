@@ -217,15 +217,25 @@ class CellListCpu final : public HostMethod<CellListCpu> {
                                  entries.begin());
     cell_keys_.clear();
     cell_start_.clear();
+    holds_target_.clear();
     cell_of_particle_.resize(n);
+    const auto targets = static_cast<std::uint32_t>(points.targets);
     for (std::size_t a = 0, b = sources; a < sources || b < n;) {
       const CellKey k = b == n || (a < sources && entries[a].key < entries[b].key) ? entries[a].key
                                                                                    : entries[b].key;
       const auto c = static_cast<std::uint32_t>(cell_keys_.size());
       cell_keys_.push_back(k);
       cell_start_.push_back(static_cast<std::uint32_t>(a));
-      for (; a < sources && entries[a].key == k; ++a) cell_of_particle_[order_[a]] = c;
-      for (; b < n && entries[b].key == k; ++b) cell_of_particle_[order_[b]] = c;
+      bool target = false;
+      for (; a < sources && entries[a].key == k; ++a) {
+        cell_of_particle_[order_[a]] = c;
+        target |= order_[a] < targets;
+      }
+      for (; b < n && entries[b].key == k; ++b) {
+        cell_of_particle_[order_[b]] = c;
+        target |= order_[b] < targets;
+      }
+      holds_target_.push_back(target);
     }
     cell_start_.push_back(static_cast<std::uint32_t>(sources));
     find_neighbour_cells();
@@ -236,12 +246,13 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     return order_.size();
   }
 
-  // Each cell's candidates as slot ranges (runs_), from the non-empty cells within one cell of
-  // it (itself included), in key order. A far label has no neighbours along its axis. For each row
-  // (dz, dy) around a cell, the first key at or after (system, z + dz, y + dy, x - 1) only moves
-  // forward from cell to cell (keys ascend, and adding one offset keeps their order), so a cursor
-  // per row finds it in amortised O(1) where a binary search per neighbour cost 15 comparisons of
-  // 32-byte keys (2026-12-02, the 200,000-particle periodic liquid's cells, one thread: 27-34
+  // Each target cell's candidates as slot ranges (runs_), from the non-empty cells within one cell
+  // of it (itself included), in key order. A far label has no neighbours along its axis. For each
+  // row (dz, dy) around a cell, the first key at or after (system, z + dz, y + dy, x - 1) only
+  // moves forward from cell to cell (keys ascend, and adding one offset keeps their order), so a
+  // cursor per row finds it in amortised O(1) where a binary search per neighbour cost 15
+  // comparisons of 32-byte keys (2026-12-02, the 200,000-particle periodic liquid's cells, one
+  // thread: 27-34
   // -> 3.2-5 ms). Two walks, one to count and one to fill, each over chunks of cells in parallel.
   void find_neighbour_cells() {
     const std::size_t cells = cell_keys_.size();
@@ -281,7 +292,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     }
   }
 
-  // emit(c, nc) for every neighbour nc of every cell c, in ascending nc per cell.
+  // emit(c, nc) for every neighbour nc of every cell c holding a target, in ascending nc per cell.
   template <class Emit>
   void walk_neighbour_cells(Emit&& emit) const {
     const std::size_t cells = cell_keys_.size();
@@ -291,6 +302,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
       std::size_t cursor[3][3];
       bool started[3][3] = {};
       for (std::size_t c = begin; c < std::min(cells, begin + chunk); ++c) {
+        if (!holds_target_[c]) continue;  // no target asks for its candidates
         const CellKey k = cell_keys_[c];
         const int rz = (k.z & far_tag) ? 0 : 1, ry = (k.y & far_tag) ? 0 : 1,
                   rx = (k.x & far_tag) ? 0 : 1;
@@ -327,6 +339,10 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   std::vector<std::uint32_t> sorted_source_;           // the caller's particle of each slot
   std::vector<PointImage> sorted_image_;               // with images: each slot's table entry
   std::vector<CellKey> cell_keys_;                     // non-empty cells, ascending
+  // Per cell: whether it holds a target. Only those get neighbour runs: a cell of images alone
+  // (or of sources alone, with query targets) is never asked, and a small periodic box has
+  // mostly such cells (one atom of a primitive cell with a cutoff of 5: 1 of 45 cells).
+  std::vector<bool> holds_target_;
   std::vector<std::uint32_t> cell_start_;        // cell c's sources: slots [start[c], start[c+1])
   std::vector<std::uint32_t> cell_of_particle_;  // particle index -> cell
   struct SlotRange {
