@@ -252,8 +252,8 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   // moves forward from cell to cell (keys ascend, and adding one offset keeps their order), so a
   // cursor per row finds it in amortised O(1) where a binary search per neighbour cost 15
   // comparisons of 32-byte keys (2026-12-02, the 200,000-particle periodic liquid's cells, one
-  // thread: 27-34
-  // -> 3.2-5 ms). Two walks, one to count and one to fill, each over chunks of cells in parallel.
+  // thread: 27-34 -> 3.2-5 ms). Two walks, one to count and one to fill, each over chunks of cells
+  // in parallel.
   void find_neighbour_cells() {
     const std::size_t cells = cell_keys_.size();
     std::vector<std::uint32_t> counts(cells);
