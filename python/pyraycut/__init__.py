@@ -111,6 +111,8 @@ def cuda_available() -> bool:
 
 
 def _cutoff(cutoff: Any) -> float:
+    if type(cutoff) in (float, int):  # the usual case, before the checks of the others
+        return float(cutoff)
     if getattr(cutoff, "shape", None) == () and not isinstance(cutoff, (str, bytes)):
         dtype = getattr(cutoff, "dtype", "")
         _arrays._refuse_complex("cutoff", dtype, "complex" in str(dtype))
@@ -144,6 +146,7 @@ class Engine:
 
     def __init__(self, method: str = "auto") -> None:
         self._engine = _raycut.Engine(method)
+        self._stream = 0  # the CUDA stream last given to the engine (0: the default)
         self._like = _arrays.HOST
         self._wide = False  # built from float64 host positions (decided in double)
         self._queries = False
@@ -187,8 +190,11 @@ class Engine:
     def _call(self, like: _arrays.Like, function, *args, **kwargs):
         """function(*args, **kwargs) on the caller's CUDA device and stream (one lookup per API
         call: at 1,000 particles each costs a visible share of the call)."""
+        if like.host and self._stream == 0:  # host arrays, the default stream set already
+            return function(*args, **kwargs)
         with _arrays.device_context(like):
-            self._engine.set_stream(_arrays.stream_of(like))
+            self._stream = _arrays.stream_of(like)
+            self._engine.set_stream(self._stream)
             return function(*args, **kwargs)
 
     def build(self, positions: Any, cutoff: float, *, cell: Any = None, pbc: Any = None,
@@ -204,6 +210,11 @@ class Engine:
         without boxes, batches or queries.
         """
         x, like = _arrays.prepare(positions)
+        self._build(x, like, positions, cutoff, cell, pbc, batch, queries, batch_queries)
+
+    def _build(self, x: Any, like: _arrays.Like, positions: Any, cutoff: float, cell: Any,
+               pbc: Any, batch: Any, queries: Any, batch_queries: Any) -> None:
+        """build() on positions already prepared (x, like: ``_arrays.prepare(positions)``)."""
         n = _points(x)
         boxes = _systems.boxes(cell, pbc)
         q = None
@@ -361,6 +372,8 @@ class Engine:
         like = self._like
         out = self._call(like, self._engine.pairs, bool(half), bool(distances), bool(vectors),
                          like.host, bool(shifts), **(cutoffs or {}))
+        if like is _arrays.HOST:  # NumPy float32 in, NumPy out: nothing to convert
+            return out
         return tuple(_arrays.output(a, like) for a in out)
 
 
@@ -704,8 +717,8 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     search = _search_input(positions, grad)
     x, like = _arrays.prepare(search)
     engine, key = _take_engine(method, like)
-    # The search input itself, not x: float64 host positions are decided in double.
-    engine.build(search, cutoff, cell=_host_cell(cell), pbc=pbc, batch=batch)
+    # The search input itself beside x: float64 host positions are decided in double.
+    engine._build(x, like, search, cutoff, _host_cell(cell), pbc, batch, None, None)
     engine._like = like  # the caller's dtype: x may be its float32 conversion
     wide = _arrays.float64_host(search) if engine._wide and not grad else None
     out = _pair_quantities(letters, engine, half, grad, positions, positions, cell, wide,

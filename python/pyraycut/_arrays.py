@@ -33,6 +33,7 @@ class Like:
 
 
 HOST = Like("numpy")
+HOST_FLOAT64 = Like("numpy", float64=True)
 
 
 def framework_of(x: Any) -> str:
@@ -104,7 +105,7 @@ def prepare(x: Any, name: str = "positions", points: bool = True) -> tuple[Any, 
                             f"({e})") from None
         if points and array.size == 0 and array.ndim < 2:
             array = array.reshape(0, 3)  # [] -> no particles
-        return array, (Like("numpy", float64=True) if wide else HOST)
+        return array, (HOST_FLOAT64 if wide else HOST)
     if framework == "torch":
         if x.requires_grad:  # DLPack refuses tensors that require grad; the list does not need it
             x = x.detach()

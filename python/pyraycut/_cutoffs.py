@@ -17,8 +17,8 @@ import numpy as np
 
 def is_varying(cutoff: Any) -> bool:
     """Whether ``cutoff`` is per atom or per pair (anything but one number)."""
-    if isinstance(cutoff, _numbers.Real):  # first: torch.compile traces a float as a SymFloat
-        return False
+    if type(cutoff) in (float, int) or isinstance(cutoff, _numbers.Real):
+        return False  # first: torch.compile traces a float as a SymFloat
     return isinstance(cutoff, dict) or (not isinstance(cutoff, (str, bytes)) and
                                         hasattr(cutoff, "__len__") and np.ndim(cutoff) > 0)
 

@@ -21,13 +21,13 @@ class Boxes:
     cells: np.ndarray
     pbc: np.ndarray
 
+    def __post_init__(self) -> None:
+        # Some axis repeats: asked several times a call, and pbc.any() costs ~1 us each.
+        self.periodic = bool(self.pbc.any())
+
     @property
     def count(self) -> int:
         return len(self.cells)
-
-    @property
-    def periodic(self) -> bool:
-        return bool(self.pbc.any())
 
 
 def _flags(pbc: Any) -> np.ndarray:
