@@ -13,6 +13,8 @@ the versions, and to a table of times relative to pyraycut's. Checks that every 
 same pairs (i, j, S). Set OMP_NUM_THREADS=1 to compare with the single-threaded peers.
 
     OMP_NUM_THREADS=1 python bench/small_cells.py [--rounds 7] [--calls 200] [--ase] [--out FILE]
+                                                  [--png FILE]
+    python bench/small_cells.py --plot FILE.csv --png FILE.png    (the figure of a CSV)
 """
 from __future__ import annotations
 
@@ -90,7 +92,13 @@ def main() -> None:
     parser.add_argument("--calls", type=int, default=200)
     parser.add_argument("--ase", action="store_true", help="ASE's own list too (slow)")
     parser.add_argument("--out", help="CSV file")
+    parser.add_argument("--png", help="a bar chart of the best times (matplotlib)")
+    parser.add_argument("--plot", help="draw --png from this CSV instead of measuring")
     args = parser.parse_args()
+    if args.plot:
+        with open(args.plot, newline="") as f:
+            plot(list(csv.DictReader(f)), args.png)
+        return
     libs = libraries(args.ase)
     machine = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores"
     threads = os.environ.get("OMP_NUM_THREADS", "all")
@@ -126,6 +134,35 @@ def main() -> None:
             writer = csv.DictWriter(f, fieldnames=list(rows[0]))
             writer.writeheader()
             writer.writerows(rows)
+    if args.png:
+        plot(rows, args.png)
+
+
+def plot(rows: list[dict], png: str) -> None:
+    """Best time per call of each library, per structure (log scale)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = list(dict.fromkeys(r["structure"] for r in rows))
+    libs = list(dict.fromkeys(r["library"] for r in rows))
+    best = {(r["structure"], r["library"]): float(r["best_us"]) for r in rows}
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    width = 0.8 / len(libs)
+    for k, lib in enumerate(libs):
+        ax.bar([s + k * width for s in range(len(names))],
+               [best.get((name, lib), float("nan")) for name in names], width, label=lib)
+    ax.set_xticks([s + 0.4 - width / 2 for s in range(len(names))])
+    ax.set_xticklabels(names, rotation=30, ha="right", fontsize=8)
+    ax.set_yscale("log")
+    ax.set_ylabel("us per call (best round)")
+    first = rows[0]
+    ax.set_title(f"neighbor_list('ijS') of small cells, {first['machine']}, "
+                 f"threads {first['threads']}", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(png, dpi=120)
 
 
 if __name__ == "__main__":
