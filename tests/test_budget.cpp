@@ -3,6 +3,7 @@
 // cutoffs checked as given in double; distances that agree with their vectors at every scale
 // of the supported cutoff range; the padded report's largest row.
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <chrono>
 #include <cmath>
@@ -119,6 +120,40 @@ TEST(MemoryBudget, ListLargerThanTheBudgetIsRefusedBeforeAllocation) {
     EXPECT_TRUE(contains(message, "RAYCUT_MAX_MEMORY=300M")) << message;
     EXPECT_LT(seconds, 20.0) << method << ": the refusal comes after the count pass only";
   }
+}
+
+// A list within the budget whose rows would not fit it if made in one pass (the rows take as
+// much again, and grow by doubling: 23 MB of list, rows growing from 16.8 to 33.5 MB against a
+// budget of 31.5 MB): made in two passes instead, the same list, and no error.
+TEST(MemoryBudget, ListWhoseOnePassRowsPassTheBudgetIsMadeInTwoPasses) {
+  const std::size_t n = 20000;
+  std::vector<float> xyz(3 * n);
+  std::uint64_t state = 12345;
+  for (float& v : xyz) {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    v = static_cast<float>(state >> 40) / static_cast<float>(1 << 24);
+  }
+  const raycut::ListOptions options{.distances = true};
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);  // one thread's rows: the growth above, whatever the machine
+  Engine engine("cell-list");
+  engine.build({xyz.data(), n, MemorySpace::host}, 0.125f);
+  const raycut::NeighbourList unbudgeted = engine.neighbours(options);
+  // More entries than 2^21 (the rows then double to 2^22: 33.5 MB), within the budget.
+  ASSERT_GT(unbudgeted.indices.size(), std::size_t{1} << 21);
+  ASSERT_LT(unbudgeted.indices.size() * 8.0, 28e6);
+  raycut::NeighbourList budgeted;
+  {
+    Budget b("30M");
+    Engine tight("cell-list");
+    tight.build({xyz.data(), n, MemorySpace::host}, 0.125f);
+    budgeted = tight.neighbours(options);
+    EXPECT_EQ(tight.neighbours(options).indices, budgeted.indices);  // the next list, too
+  }
+  omp_set_num_threads(threads);
+  EXPECT_EQ(budgeted.offsets, unbudgeted.offsets);
+  EXPECT_EQ(budgeted.indices, unbudgeted.indices);
+  EXPECT_EQ(budgeted.distances, unbudgeted.distances);
 }
 
 TEST(MemoryBudget, PaddedKFarAboveNIsRefusedNamingTheKThatIsEnough) {

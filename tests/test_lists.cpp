@@ -48,6 +48,35 @@ TEST_P(Lists, PreparedBufferAllocatesOnce) {
   EXPECT_GT(buffer.pairs(), 0u);
 }
 
+// One engine asked for every set of outputs in turn (some the same size per entry: S and D), as
+// a step loop of several models would: each list equals that of an engine asked once.
+TEST_P(Lists, EveryOutputSetInTurnOnOneEngine) {
+  const raycut::PointCloud cloud = raycut::make_family("uniform", 2000, 1.0f, 9);
+  const raycut::Systems box = raycut::Systems::periodic(raycut::Box::orthorhombic(1, 1, 1));
+  Engine engine(GetParam());
+  if (!raycut::method_capabilities(GetParam()).periodic_boxes) GTEST_SKIP() << "no periodic boxes";
+  engine.build({cloud.xyz.data(), cloud.size(), MemorySpace::host}, 0.15f, box);
+  // Bits: 1 distances, 2 vectors, 4 shifts, 8 half. S after D and D after S: the same bytes.
+  const int order[] = {4, 2, 5, 3, 6, 1, 0, 7, 12, 10, 13, 11, 14, 9, 8, 15};
+  for (int round = 0; round < 2; ++round)
+    for (const int set : order) {
+      const raycut::ListOptions options{.half = (set & 8) != 0,
+                                        .distances = (set & 1) != 0,
+                                        .vectors = (set & 2) != 0,
+                                        .shifts = (set & 4) != 0};
+      Engine fresh(GetParam());
+      fresh.build({cloud.xyz.data(), cloud.size(), MemorySpace::host}, 0.15f, box);
+      const raycut::NeighbourList expected = fresh.neighbours(options);
+      const raycut::NeighbourList got = engine.neighbours(options);
+      ASSERT_GT(expected.indices.size(), 0u);
+      EXPECT_EQ(got.offsets, expected.offsets) << "set " << set;
+      EXPECT_EQ(got.indices, expected.indices) << "set " << set;
+      EXPECT_EQ(got.distances, expected.distances) << "set " << set;
+      EXPECT_EQ(got.vectors, expected.vectors) << "set " << set;
+      EXPECT_EQ(got.shifts, expected.shifts) << "set " << set;
+    }
+}
+
 TEST_P(Lists, EmptyAndSingleParticle) {
   for (std::size_t n : {0, 1}) {
     const std::vector<float> xyz(3 * n, 0.5f);

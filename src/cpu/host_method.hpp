@@ -20,6 +20,7 @@
 #include "core/list_storage.hpp"
 #include "core/method.hpp"
 #include "core/validation.hpp"
+#include "cpu/list_rows.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/host_memory.hpp"
 #include "raycut/kernels.hpp"
@@ -70,12 +71,20 @@ class HostMethod : public Method {
     return std::make_unique<HostPaddedStorage>();
   }
 
-  // Two passes (count, then fill) so the list is exactly sized and built in parallel.
+  // One pass into rows per thread, then copied into place (list_rows.hpp); two passes (count,
+  // then fill in place) where the rows would not fit the memory budget.
   void neighbours(ListStorage& storage, const ListOptions& options) override {
     auto& list = static_cast<HostListStorage&>(storage);
     std::uint64_t* offsets = list.prepare_offsets(n_, options);
     const ListFilter filter = list_filter(options);
+    const RowFields fields{options.shifts, options.distances, options.vectors};
+    if (rows_.collect(n_, filter, fields, [&](const auto& f) { run(f); })) {
+      rows_.scan(offsets);
+      rows_.copy_into(list.prepare_fill(offsets[n_], filter));
+      return;
+    }
     count_rows(filter, offsets);
+    rows_.note_two_pass_list(offsets[n_], fields);
     run(list.prepare_fill(offsets[n_], filter));
   }
 
@@ -84,10 +93,17 @@ class HostMethod : public Method {
     if (n == 0) return finish_static_pairs(out, 0);
     std::vector<std::uint64_t> offsets(n_ + 1);
     const ListFilter filter = list_filter(options);
-    count_rows(filter, offsets.data());
     ListFill fill{filter, offsets.data(), nullptr, nullptr, nullptr, out.shifts, out.i, out.j};
     fill.capacity = out.capacity;
-    run(fill);
+    const RowFields fields{out.shifts != nullptr};
+    if (rows_.collect(n_, filter, fields, [&](const auto& f) { run(f); })) {
+      rows_.scan(offsets.data());
+      rows_.copy_into(fill);
+    } else {
+      count_rows(filter, offsets.data());
+      rows_.note_two_pass_list(offsets[n_], fields);
+      run(fill);
+    }
     finish_static_pairs(out, offsets[n_]);
   }
 
@@ -193,6 +209,7 @@ class HostMethod : public Method {
   ImageTables images_;
   float cutoff_squared_ = 0;
   Results results_;
+  ListRows rows_;  // the one-pass lists' rows, kept between lists
 };
 
 }  // namespace raycut::detail
