@@ -345,13 +345,15 @@ class Engine {
   Results compute(Kernel kernel, const KernelOptions& options = {});
 
   // The CSR neighbour list of the built positions, where the method works (device memory for
-  // GPU methods), into reusable buffers: exact sizes by a count pass, a scan and a fill pass.
+  // GPU methods), into reusable buffers, sized exactly: on the GPU a count pass, a scan and a
+  // fill pass; on the CPU one pass into rows per thread, then copied into place.
   void neighbours(NeighbourListBuffer& list, const ListOptions& options = {});
   // The same, copied to the host.
   NeighbourList neighbours(const ListOptions& options = {});
   // The pairs (i, j[, S]) as COO entries into a static capacity (`out`, in the memory where the
-  // method works: Engine::space()), rows in ascending order: the count pass, a scan and the fill
-  // pass, with no read-back and no allocation that grows with the pairs. out.count gets the
+  // method works: Engine::space()), rows in ascending order: on the GPU the count pass, a scan
+  // and the fill pass, with no read-back and no allocation that grows with the pairs (the CPU
+  // lists as neighbours() does, then copies the rows up to the capacity). out.count gets the
   // true count (valid iff <= out.capacity); entries past it are padding (i = j =
   // out.pad_index, S = 0). GPU methods queue it on the engine's stream and return without
   // waiting. ListOptions: half and cutoffs (S when out.shifts is set); distances, vectors and
