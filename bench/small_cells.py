@@ -1,16 +1,17 @@
 #!/usr/bin/env python3
-"""Neighbour lists of the small periodic cells that machine-learned potentials are trained on
-(a data loader lists every structure of a dataset, one at a time, on the CPU): ASE's
+"""Neighbour lists of the small periodic cells that machine-learned potentials are trained on (a
+data loader lists every structure of a dataset, one at a time, on the CPU): ASE's
 ``neighbor_list("ijS", atoms, cutoff)`` as computed by ``pyraycut.ase``, vesin
 (``vesin.ase_neighbor_list``), matscipy (``matscipy.neighbours.neighbour_list``) and, with
 ``--ase``, ASE itself, each where installed.
 
 The structures are rattled (0.05 A) bulk cells from a primitive 1-atom cell to 256 atoms, a slab
-with vacuum and a molecule (open, in a box), at cutoffs of 5 and 6 A. Each call runs after one untimed call, the
-libraries taking turns in every round (a busy machine slows them alike); the best of the rounds
-(each the mean over ``--calls`` calls) and the median go to a CSV (``--out``) with the machine and
-the versions, and to a table of times relative to pyraycut's. Checks that every library gives the
-same pairs (i, j, S). Set OMP_NUM_THREADS=1 to compare with the single-threaded peers.
+with vacuum and a molecule (open, in a box), at cutoffs of 5 and 6 A. Each call runs after one
+untimed call, the libraries taking turns in every round (a busy machine slows them alike); the
+best of the rounds (each the mean over ``--calls`` calls) and the median go to a CSV (``--out``)
+with the machine and the versions, and to a table of times relative to pyraycut's. Checks that
+every library gives the same pairs (i, j, S). Set OMP_NUM_THREADS=1 to compare with the
+single-threaded peers.
 
     OMP_NUM_THREADS=1 python bench/small_cells.py [--rounds 7] [--calls 200] [--ase] [--out FILE]
                                                   [--png FILE]
@@ -73,7 +74,8 @@ def libraries(with_ase: bool) -> dict:
 
 def pair_set(result) -> set:
     i, j, s = result
-    return set(zip(np.asarray(i).tolist(), np.asarray(j).tolist(), map(tuple, np.asarray(s).tolist())))
+    return set(zip(np.asarray(i).tolist(), np.asarray(j).tolist(),
+                   map(tuple, np.asarray(s).tolist())))
 
 
 def versions() -> str:

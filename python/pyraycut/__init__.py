@@ -519,9 +519,9 @@ def clear_engine_cache() -> None:
     and CUDA device, each holding the structure of its last call: memory that grows to the
     largest system it has seen; a CPU engine also keeps the rows of its last list, up to
     256 MiB, so that the next list is made in one pass without fresh memory), and the host list
-    buffers kept for reuse (at most two, 256 MiB
-    together: the memory of lists whose arrays are gone, refilled by the next lists without the
-    page faults of fresh memory). Arrays already returned are not affected."""
+    buffers kept for reuse (at most two, 256 MiB together: the memory of lists whose arrays are
+    gone, refilled by the next lists without the page faults of fresh memory). Arrays already
+    returned are not affected."""
     _ENGINES.clear()
     _raycut.release_idle_lists()
 

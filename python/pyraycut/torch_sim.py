@@ -53,8 +53,8 @@ def neighbor_list(positions: torch.Tensor, cell: torch.Tensor, pbc: Any, cutoff:
     - ``self_interaction``: also list (i, i) with zero shift for every atom, after the pairs.
 
     Returns ``mapping`` (2, P) int64 (row 0 the centre atom i, row 1 its neighbour j, sorted by
-    i, the self pairs after them), ``system_mapping`` (P,) int64, and ``shifts_idx`` (P, 3) in the cell's dtype. An atom's
-    own periodic images (i, i, S != 0) are pairs like any other.
+    i, the self pairs after them), ``system_mapping`` (P,) int64, and ``shifts_idx`` (P, 3) in
+    the cell's dtype. An atom's own periodic images (i, i, S != 0) are pairs like any other.
     """
     if not isinstance(system_idx, torch.Tensor) or system_idx.dim() != 1 or \
             system_idx.shape[0] != positions.shape[0]:
