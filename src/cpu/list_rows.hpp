@@ -53,10 +53,7 @@ class ListRows {
     threads_.resize(static_cast<std::size_t>(std::max(1, omp_get_max_threads())));
     for (Buffers& b : threads_) b.used = 0;
     failed_.store(false, std::memory_order_relaxed);
-    if (filter.filters())
-      run(Append<true>{filter, this});
-    else
-      run(Append<false>{filter, this});  // full lists: no filter to ask per pair
+    run(Append{filter, this});
     if (failed_.load(std::memory_order_relaxed)) {
       release();
       too_large_ = true;
@@ -155,18 +152,13 @@ class ListRows {
     }
   }
 
-  // The pass's functor: row i's entries appended to its thread's buffers, with the fields held
-  // by value (read through ListRows, they were reloaded for every pair).
-  template <bool Filtered>
+  // The pass's functor: row i's entries appended to its thread's buffers.
   struct Append : ListFilter {
     struct Accumulator {
       Buffers* buffers = nullptr;
       std::uint32_t count = 0;
     };
     using options = functor_options<option::accepts, option::init>;
-    bool accepts(std::uint32_t i, std::uint32_t j, const Shift& s) const {
-      return !Filtered || ListFilter::accepts(i, j, s);
-    }
     ListRows* rows;
     RowFields fields;
     Append(const ListFilter& filter, ListRows* r)
@@ -181,7 +173,7 @@ class ListRows {
     }
     void operator()(Accumulator& a, std::uint32_t i, std::uint32_t j, Vec3 r, float r2,
                     const Shift& s) const {
-      if (Filtered && !within(i, j, s, r2)) return;
+      if (!within(i, j, s, r2)) return;
       Buffers& b = *a.buffers;
       if (b.used == b.capacity && (rows->failed_.load(std::memory_order_relaxed) || !rows->grow(b)))
         return;
