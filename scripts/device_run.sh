@@ -72,8 +72,9 @@ build_python() {
   [ -n "${python_built:-}" ] && return
   python_built=1
   BUILD_DIR=build scripts/configure.sh -DRAYCUT_BUILD_PYTHON=ON -DPython_EXECUTABLE="$py" \
-    -DRAYCUT_TORCH_CUDA=ON \
+    -DRAYCUT_TORCH_CUDA=ON -DCMAKE_CUDA_ARCHITECTURES=90 \
     > "$res/python-build.log" 2>&1 || tail -20 "$res/python-build.log"
+  step "python built"
   # A module with its own static libstdc++ breaks number formatting (cmake/shared_libstdcxx.cmake).
   for m in build/python/pyraycut/*.so; do
     nm -C --defined-only "$m" 2>/dev/null | grep -q "std::ostream::_M_insert<long>" &&
@@ -81,9 +82,13 @@ build_python() {
   done
 }
 
-BUILD_DIR=build scripts/configure.sh -DCMAKE_CUDA_ARCHITECTURES=90 > "$res/build.log" 2>&1 ||
-  { tail -40 "$res/build.log"; exit 1; }
-step "built"
+# SKIP_MAIN_BUILD=1: no build of every target first (a call of Python steps alone, with
+# BUILD_TARGETS="raycut_python_modules raycut_python_package": the Python build makes those).
+if [ -z "${SKIP_MAIN_BUILD:-}" ]; then
+  BUILD_DIR=build scripts/configure.sh -DCMAKE_CUDA_ARCHITECTURES=90 > "$res/build.log" 2>&1 ||
+    { tail -40 "$res/build.log"; exit 1; }
+  step "built"
+fi
 raycut=build/apps/raycut
 paper=()
 if [ -f .deps/paper/Cuda-version/cudaLJ.cu ] &&
