@@ -71,21 +71,12 @@ class HostMethod : public Method {
     return std::make_unique<HostPaddedStorage>();
   }
 
-  // One pass into rows per thread, then copied into place (list_rows.hpp); two passes (count,
-  // then fill in place) where the rows would not fit the memory budget.
   void neighbours(ListStorage& storage, const ListOptions& options) override {
     auto& list = static_cast<HostListStorage&>(storage);
     std::uint64_t* offsets = list.prepare_offsets(n_, options);
     const ListFilter filter = list_filter(options);
-    const RowFields fields{options.shifts, options.distances, options.vectors};
-    if (rows_.collect(n_, filter, fields, [&](const auto& f) { run(f); })) {
-      rows_.scan(offsets);
-      rows_.copy_into(list.prepare_fill(offsets[n_], filter));
-      return;
-    }
-    count_rows(filter, offsets);
-    rows_.note_two_pass_list(offsets[n_], fields);
-    run(list.prepare_fill(offsets[n_], filter));
+    list_into(filter, RowFields{options.shifts, options.distances, options.vectors}, offsets,
+              [&](std::uint64_t pairs) { return list.prepare_fill(pairs, filter); });
   }
 
   void static_neighbours(const StaticPairs& out, const ListOptions& options,
@@ -95,15 +86,8 @@ class HostMethod : public Method {
     const ListFilter filter = list_filter(options);
     ListFill fill{filter, offsets.data(), nullptr, nullptr, nullptr, out.shifts, out.i, out.j};
     fill.capacity = out.capacity;
-    const RowFields fields{out.shifts != nullptr};
-    if (rows_.collect(n_, filter, fields, [&](const auto& f) { run(f); })) {
-      rows_.scan(offsets.data());
-      rows_.copy_into(fill);
-    } else {
-      count_rows(filter, offsets.data());
-      rows_.note_two_pass_list(offsets[n_], fields);
-      run(fill);
-    }
+    list_into(filter, RowFields{out.shifts != nullptr}, offsets.data(),
+              [&](std::uint64_t) { return fill; });
     finish_static_pairs(out, offsets[n_]);
   }
 
@@ -186,6 +170,22 @@ class HostMethod : public Method {
     if (images_.exact) filter.cutoffs.exact = *images_.exact;
     return filter;
   }
+  // A list's offsets (n + 1) and entries, into the fill that fill_at(pairs) returns: one pass
+  // into rows per thread, then copied into place (list_rows.hpp); two passes (count, then fill in
+  // place) where the rows would not fit.
+  template <class FillAt>
+  void list_into(const ListFilter& filter, RowFields fields, std::uint64_t* offsets,
+                 FillAt&& fill_at) {
+    if (rows_.collect(n_, filter, fields, [&](const auto& f) { run(f); })) {
+      rows_.scan(offsets);
+      rows_.copy_into(fill_at(offsets[n_]));
+      return;
+    }
+    count_rows(filter, offsets);
+    rows_.note_two_pass_list(offsets[n_], fields);
+    run(fill_at(offsets[n_]));
+  }
+
   // The count pass into offsets[1 .. n], then their running sum: offsets[i] is row i's first.
   void count_rows(const ListFilter& filter, std::uint64_t* offsets) const {
     require_host_memory(4.0 * static_cast<double>(n_),
