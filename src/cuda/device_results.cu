@@ -8,6 +8,7 @@
 #include "core/validation.hpp"
 #include "cuda/device_results.cuh"
 #include "cuda/runtime.hpp"
+#include "raycut/host_memory.hpp"
 
 namespace raycut::detail::cuda {
 namespace {
@@ -92,6 +93,11 @@ std::size_t DeviceListStorage::bytes() const {
 }
 
 NeighbourList DeviceListStorage::to_host() const {
+  // The host copy is budgeted as every host allocation is (RAYCUT_MAX_MEMORY): a list that fits
+  // the device may not fit the host, and overcommit would let the copy be killed, not refused.
+  require_host_memory(
+      8.0 * static_cast<double>(n + 1) + bytes_per_entry(options) * static_cast<double>(pairs),
+      "a host copy of a neighbour list of " + std::to_string(pairs) + " pairs");
   NeighbourList list;
   copy_to_host(list.offsets, offsets, n + 1);
   if (options.coo) {
@@ -244,6 +250,10 @@ void DeviceListStorage::publish() {
 }
 
 std::vector<std::uint32_t> DevicePaddedStorage::indices_to_host() const {
+  // With its shifts, which the callers copy next (budgeted as the CSR copy is, in to_host).
+  require_host_memory(
+      (shifts ? 16.0 : 4.0) * static_cast<double>(n) * k,
+      "a host copy of a padded neighbour list of " + std::to_string(n) + " x " + std::to_string(k));
   std::vector<std::uint32_t> host;
   copy_to_host(host, indices, n * std::size_t{k});
   return host;
