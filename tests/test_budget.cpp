@@ -156,6 +156,30 @@ TEST(MemoryBudget, ListWhoseOnePassRowsPassTheBudgetIsMadeInTwoPasses) {
   EXPECT_EQ(budgeted.distances, unbudgeted.distances);
 }
 
+// A GPU list fits the device but not the host budget: its copy to the host (what NumPy outputs
+// and Engine::neighbours(options) hand back) is refused before it allocates.
+TEST(MemoryBudget, HostCopyOfADeviceListBeyondTheBudgetIsRefused) {
+  if (!raycut::cuda_device_available()) GTEST_SKIP() << "no CUDA device";
+  const std::size_t n = 20000;
+  std::vector<float> xyz(3 * n);
+  std::uint64_t state = 12345;
+  for (float& v : xyz) {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    v = static_cast<float>(state >> 40) / static_cast<float>(1 << 24);
+  }
+  const raycut::ListOptions options{.distances = true};
+  Engine engine("grid");
+  engine.build({xyz.data(), n, MemorySpace::host}, 0.125f);
+  const std::size_t pairs = engine.neighbours(options).indices.size();
+  ASSERT_GT(pairs * 8.0, 20.0 * 1024 * 1024);  // above the 16 MiB that is never compared
+  Budget b("20M");
+  const std::string message =
+      error_message(ErrorCode::out_of_memory, [&] { (void)engine.neighbours(options); });
+  EXPECT_TRUE(contains(message, "a host copy of a neighbour list of " + std::to_string(pairs)))
+      << message;
+  EXPECT_TRUE(contains(message, "RAYCUT_MAX_MEMORY=20M")) << message;
+}
+
 TEST(MemoryBudget, PaddedKFarAboveNIsRefusedNamingTheKThatIsEnough) {
   const std::size_t n = 50;
   std::vector<float> xyz(3 * n);
