@@ -50,6 +50,17 @@ std::vector<std::string> cpu_methods() {
   return out;
 }
 
+// n points in the unit cube from a fixed 64-bit LCG: the same cloud on every machine.
+std::vector<float> unit_cube_cloud(std::size_t n) {
+  std::vector<float> xyz(3 * n);
+  std::uint64_t state = 12345;
+  for (float& v : xyz) {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    v = static_cast<float>(state >> 40) / static_cast<float>(1 << 24);
+  }
+  return xyz;
+}
+
 TEST(MemoryBudget, EnvironmentValueWithSuffixes) {
   {
     Budget b("300M");
@@ -127,12 +138,7 @@ TEST(MemoryBudget, ListLargerThanTheBudgetIsRefusedBeforeAllocation) {
 // budget of 31.5 MB): made in two passes instead, the same list, and no error.
 TEST(MemoryBudget, ListWhoseOnePassRowsPassTheBudgetIsMadeInTwoPasses) {
   const std::size_t n = 20000;
-  std::vector<float> xyz(3 * n);
-  std::uint64_t state = 12345;
-  for (float& v : xyz) {
-    state = state * 6364136223846793005ull + 1442695040888963407ull;
-    v = static_cast<float>(state >> 40) / static_cast<float>(1 << 24);
-  }
+  const std::vector<float> xyz = unit_cube_cloud(n);
   const raycut::ListOptions options{.distances = true};
   const int threads = omp_get_max_threads();
   omp_set_num_threads(1);  // one thread's rows: the growth above, whatever the machine
@@ -161,12 +167,7 @@ TEST(MemoryBudget, ListWhoseOnePassRowsPassTheBudgetIsMadeInTwoPasses) {
 TEST(MemoryBudget, HostCopyOfADeviceListBeyondTheBudgetIsRefused) {
   if (!raycut::cuda_device_available()) GTEST_SKIP() << "no CUDA device";
   const std::size_t n = 20000;
-  std::vector<float> xyz(3 * n);
-  std::uint64_t state = 12345;
-  for (float& v : xyz) {
-    state = state * 6364136223846793005ull + 1442695040888963407ull;
-    v = static_cast<float>(state >> 40) / static_cast<float>(1 << 24);
-  }
+  const std::vector<float> xyz = unit_cube_cloud(n);
   const raycut::ListOptions options{.distances = true};
   Engine engine("grid");
   engine.build({xyz.data(), n, MemorySpace::host}, 0.125f);
