@@ -40,6 +40,13 @@
 //                         within(i, j, const Shift& s, float r2) const: whether the call writes
 //                         the pair (a list with per-pair cutoffs drops some), asked before the
 //                         positions are given
+//   repeatable            a target's pairs may be visited twice, from init, and only the
+//                         second visit finished: operator() writes nothing but the Accumulator
+//                         (with emits_entries: the entry it is handed). A periodic GPU grid pass
+//                         then decides in float the pairs outside the float band, and visits the
+//                         few targets with a candidate in it again in a second launch, in
+//                         double: no double arithmetic in its loop, whose registers it would
+//                         double (without the option it decides them inline)
 //
 // Why a list of types rather than optional members found by name: C++ cannot tell a misspelt
 // member (`vanishes_at_infinty`, `combin`) from one that is not there, so an optional member
@@ -73,6 +80,7 @@ struct init {};
 struct accepts {};
 struct combine {};
 struct emits_entries {};
+struct repeatable {};
 }  // namespace option
 
 namespace detail {
@@ -81,14 +89,14 @@ inline constexpr bool one_of = (std::is_same_v<Option, Known> || ...);
 template <class Option>
 inline constexpr bool known_option =
     one_of<Option, option::vanishes_at_infinity, option::init, option::accepts, option::combine,
-           option::emits_entries>;
+           option::emits_entries, option::repeatable>;
 }  // namespace detail
 
 template <class... Options>
 struct functor_options {
   static_assert((detail::known_option<Options> && ...),
                 "raycut::functor_options: every option must be one of raycut::option::"
-                "vanishes_at_infinity, init, accepts, combine, emits_entries");
+                "vanishes_at_infinity, init, accepts, combine, emits_entries, repeatable");
   template <class Option>
   static constexpr bool has = detail::one_of<Option, Options...>;
 };
@@ -234,6 +242,8 @@ template <class F>
 struct has_accepts : std::bool_constant<detail::opts_into<F, option::accepts>> {};
 template <class F>
 struct emits_entries : std::bool_constant<detail::opts_into<F, option::emits_entries>> {};
+template <class F>
+struct repeatable : std::bool_constant<detail::opts_into<F, option::repeatable>> {};
 
 namespace detail {
 
@@ -265,7 +275,7 @@ constexpr bool check_functor() {
     static_assert(!is_functor_options<typename options_of<F>::type>::value ||
                       options_known<typename options_of<F>::type>::value,
                   "raycut functor: every option must be one of raycut::option::"
-                  "vanishes_at_infinity, init, accepts, combine, emits_entries");
+                  "vanishes_at_infinity, init, accepts, combine, emits_entries, repeatable");
     static_assert(!names_vanishes_at_infinity<F>::value && !names_emits_entries<F>::value,
                   "raycut functor: vanishes_at_infinity and emits_entries are not members; name "
                   "them in `using options = raycut::functor_options<raycut::option::...>`");

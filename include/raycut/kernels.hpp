@@ -128,7 +128,7 @@ RAYCUT_HD float fast_reciprocal(float b) {
 
 struct CountKernel {
   using Accumulator = std::uint32_t;
-  using options = functor_options<option::combine>;
+  using options = functor_options<option::combine, option::repeatable>;
   std::uint32_t* count;
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, Vec3, float) const { ++acc; }
   RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
@@ -142,7 +142,8 @@ struct CountKernel {
 // vanish at r2 = +inf (w = 0), so a pair out of range can be fed r2 = +inf instead of a branch.
 struct LennardJonesKernel {
   using Accumulator = float;
-  using options = functor_options<option::vanishes_at_infinity, option::combine>;
+  using options =
+      functor_options<option::vanishes_at_infinity, option::combine, option::repeatable>;
   float sigma6;               // sigma^6
   float four_epsilon_sigma6;  // 4 eps sigma^6
   float* energy;
@@ -197,7 +198,8 @@ struct EnergyForceVirial {
 // scales as 1 / sigma^2 (docs/limits.md).
 struct LennardJonesForceKernel {
   using Accumulator = EnergyForceVirial;
-  using options = functor_options<option::vanishes_at_infinity, option::combine>;
+  using options =
+      functor_options<option::vanishes_at_infinity, option::combine, option::repeatable>;
   float sigma2;        // sigma^2
   float four_epsilon;  // 4 eps
   float* energy;       // 1 per target
@@ -227,7 +229,7 @@ struct SmoothKernel {
   struct Accumulator {
     float energy = 0, f[3] = {0, 0, 0};
   };
-  using options = functor_options<option::combine>;
+  using options = functor_options<option::combine, option::repeatable>;
   float cutoff_squared;
   float* energy;
   float* force;
@@ -251,7 +253,7 @@ struct SmoothKernel {
 // rho_i contribution m W_poly6(r, h) = m 315 / (64 pi h^9) (h^2 - r^2)^3 (Mueller et al. 2003).
 struct SphDensityKernel {
   using Accumulator = float;
-  using options = functor_options<option::combine>;
+  using options = functor_options<option::combine, option::repeatable>;
   float mass_poly6;  // m 315 / (64 pi h^9)
   float h_squared;
   float* density;
@@ -271,7 +273,7 @@ struct SphForceKernel {
   struct Accumulator {
     float f[3] = {0, 0, 0};
   };
-  using options = functor_options<option::combine>;
+  using options = functor_options<option::combine, option::repeatable>;
   float mass, h, spiky;  // spiky = 45 / (pi h^6)
   float viscosity;
   SphInputs in;
@@ -316,7 +318,7 @@ struct SphForceKernel {
 // Coincident pairs (r = 0) give non-finite terms (1 / r): the physics, as for lj.
 struct CoulombDsfKernel {
   using Accumulator = EnergyForceVirial;
-  using options = functor_options<option::combine>;
+  using options = functor_options<option::combine, option::repeatable>;
   float alpha;                   // a
   float alpha_squared;           // a^2
   float two_alpha_over_sqrt_pi;  // 2 a / sqrt(pi)

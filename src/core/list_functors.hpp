@@ -48,7 +48,7 @@ struct PairCutoffFilter {
 // (j, i, -S), the one with i < j, or i == j and S lexicographically positive (a self-image;
 // (i, i, 0) never reaches a functor); per-pair cutoffs keep the pairs within their own.
 struct ListFilter {
-  using options = functor_options<option::accepts>;
+  using options = functor_options<option::accepts, option::repeatable>;
   bool half = false;
   PairCutoffFilter cutoffs;
   RAYCUT_HD bool accepts(std::uint32_t i, std::uint32_t j, const Shift& s) const {
@@ -67,7 +67,7 @@ struct ListFilter {
 // The full list's count reads no source (no lookup with images); a filtered list's reads them.
 struct ListCount {
   using Accumulator = std::uint32_t;
-  using options = functor_options<option::combine>;
+  using options = functor_options<option::combine, option::repeatable>;
   std::uint32_t* counts;
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, Vec3, float) const { ++acc; }
   RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
@@ -76,7 +76,7 @@ struct ListCount {
 
 struct FilteredListCount : ListFilter {
   using Accumulator = std::uint32_t;
-  using options = functor_options<option::accepts, option::combine>;
+  using options = functor_options<option::accepts, option::combine, option::repeatable>;
   std::uint32_t* counts;
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t i, std::uint32_t j, Vec3, float r2,
                             const Shift& s) const {
@@ -111,7 +111,8 @@ RAYCUT_HD float pair_distance(Vec3 r, float r2) {
 // Row i written from offsets[i]; distances, vectors and shifts where asked (null otherwise).
 struct ListFill : ListFilter {
   using Accumulator = std::uint64_t;  // the next entry of the row
-  using options = functor_options<option::accepts, option::init, option::emits_entries>;
+  using options =
+      functor_options<option::accepts, option::init, option::emits_entries, option::repeatable>;
   const std::uint64_t* offsets;
   std::uint32_t* indices;
   float* distances;
@@ -161,7 +162,7 @@ struct PaddedOverflow {
 // counts[i] the true count, and the overflow recorded, never hidden.
 struct PaddedFill : ListFilter {
   using Accumulator = std::uint32_t;  // the row's next entry (its count so far)
-  using options = functor_options<option::accepts, option::emits_entries>;
+  using options = functor_options<option::accepts, option::emits_entries, option::repeatable>;
   std::uint32_t k;
   std::uint32_t n;
   std::uint32_t* indices;
@@ -237,9 +238,10 @@ struct PaddedNearestFill : PaddedFill {
     bool bounded;         // the buffer was cut to K: row[K - 1] is the farthest kept
     NearestEntry* row;    // the buffer, capacity() entries
   };
-  using options = functor_options<option::accepts, option::init>;  // entries written at finish
-  const float* xyz;                                                // the points, without images
-  ExactImages exact;                                               // with images (exact.image set)
+  using options = functor_options<option::accepts, option::init,
+                                  option::repeatable>;  // entries written at finish
+  const float* xyz;                                     // the points, without images
+  ExactImages exact;                                    // with images (exact.image set)
   std::uint32_t capacity() const { return 2 * k + 64; }
   Accumulator init(std::uint32_t) const {
     thread_local std::vector<NearestEntry> scratch;

@@ -302,6 +302,7 @@ const PointImage* SlotImages::on(void* stream_ptr) const {
 
 const DeferredImages* GridTables::slot_images(const PointImage* by_point) {
   slot_images_.reset(order_, n_, by_point);
+  band_targets_.resize(std::size_t{n_} + 1);
   return &slot_images_;
 }
 
@@ -316,6 +317,7 @@ GridPass GridTables::pass(const GridPlan& plan) const {
                      row_keys_.data(),  reinterpret_cast<const std::uint32_t*>(row_cells_.data()),
                      row_mask_,         row_shift_};
   p.kernel = plan.kernel;
+  p.band_targets = band_targets_.size() > n_ ? band_targets_.data() : nullptr;
   return p;
 }
 

@@ -155,6 +155,9 @@ struct GridPass {
   DenseTablePass dense_table;
   CompactTablePass compact_table;
   GridKernel kernel = GridKernel::thread;
+  // With images: room for the slots of every target whose candidates reach the float band
+  // (band_targets[0] their count, then the slots), decided by a second launch; null without.
+  std::uint32_t* band_targets = nullptr;
 };
 
 // Points with images (src/core/images.hpp): per point k the caller's source index (or

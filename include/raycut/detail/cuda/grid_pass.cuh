@@ -11,7 +11,10 @@
 
 #include <cuda_runtime.h>
 
+#include <algorithm>
 #include <cstdint>
+#include <cstdlib>
+#include <type_traits>
 
 #include "raycut/detail/cuda/visit.cuh"
 #include "raycut/detail/pair_pass.hpp"
@@ -198,6 +201,67 @@ __device__ __forceinline__ void for_each_candidate(const float4* __restrict__ po
   }
 }
 
+// The float band, deferred (docs/grid.md, "Registers"). With images the predicate decides the
+// few pairs of the float band in double (in_range_of), and inlined into a traversal that double
+// arithmetic doubles its registers (32-56 to 64-128) and halves its warps. So for a functor that
+// allows it (option::repeatable), the traversal decides in float only the pairs outside the band
+// and notes whether a candidate fell in it; such a target is left unfinished, its slot listed,
+// and grid_band_kernel, a second launch, computes it whole with the exact predicate.
+template <class F>
+inline constexpr bool defers_band = repeatable<F>::value;
+
+// RAYCUT_GRID_INLINE_BAND=1: every pass decides the band inline, as a functor without the option
+// does (for measuring one against the other in one process: docs/grid.md, "Registers").
+inline bool band_inline_requested() {
+  static const bool inline_band = [] {
+    const char* v = std::getenv("RAYCUT_GRID_INLINE_BAND");
+    return v != nullptr && v[0] == '1';
+  }();
+  return inline_band;
+}
+
+struct BandTargets {
+  Slot* list;  // list[0]: how many; then their slots
+  __device__ __forceinline__ void add(Slot t) const { list[1 + atomicAdd(list, 1u)] = t; }
+};
+
+// in_range_of, or with Defer the float decision outside the band, `band` set for a candidate in
+// it (then out here: its target is computed again).
+template <bool Defer, class Images>
+__device__ __forceinline__ bool in_range_or_band(const Images& images, float cutoff_squared,
+                                                 std::uint32_t i, std::uint32_t k, Vec3& r,
+                                                 float& r2, bool& band) {
+  if constexpr (Defer) {
+    const bool in = r2 < images.exact.float_in;
+    band |= !in && r2 < images.exact.float_out;
+    return in;
+  } else {
+    return in_range_of(images, cutoff_squared, i, k, r, r2);
+  }
+}
+
+// Target t of a thread's own: every candidate through f; false (and nothing finished) when
+// Defer found a candidate in the band.
+template <bool Defer, class F, class Table, class Images>
+__device__ __forceinline__ bool grid_thread_target(const float4* __restrict__ pos, Slot t,
+                                                   const GridGeometry& view, const Table& table,
+                                                   float cutoff_squared, const F& f,
+                                                   const Images& images) {
+  const float4 p = pos[t];
+  const std::uint32_t i = original_index(p);
+  const typename Images::Target ti = images.target(t);
+  typename F::Accumulator acc = initial_state(f, i);
+  bool band = false;
+  for_each_candidate(pos, t, p, view, table, [&](const float4& q, Slot s, Vec3 r, float r2) {
+    const std::uint32_t k = original_index(q);
+    const bool in = in_range_or_band<Defer>(images, cutoff_squared, i, k, r, r2, band);
+    visit(f, acc, in, i, k, s, r, r2, images, ti);
+  });
+  if (Defer && band) return false;
+  f.finish(i, acc);
+  return true;
+}
+
 // One thread per target. ManyRegisters: the registers it wants (fewer warps, each with more
 // loads in flight), for dense boxes.
 // The slot of the t-th target: targets lists them when only some points are targets.
@@ -205,23 +269,27 @@ __device__ __forceinline__ Slot target_slot(const Slot* targets, Slot t) {
   return targets ? targets[t] : t;
 }
 
-template <bool ManyRegisters, class F, class Table, class Images>
+template <bool ManyRegisters, bool Defer, class F, class Table, class Images>
 __global__ void __launch_bounds__(grid_block_size, ManyRegisters ? 1 : 0)
     grid_thread_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n,
-                       GridGeometry view, Table table, float cutoff_squared, F f, Images images) {
+                       GridGeometry view, Table table, float cutoff_squared, F f, Images images,
+                       BandTargets band) {
   const Slot tid = blockIdx.x * grid_block_size + threadIdx.x;
   if (tid >= n) return;
   const Slot t = target_slot(targets, tid);
-  const float4 p = pos[t];
-  const std::uint32_t i = original_index(p);
-  const typename Images::Target ti = images.target(t);
-  typename F::Accumulator acc = initial_state(f, i);
-  for_each_candidate(pos, t, p, view, table, [&](const float4& q, Slot s, Vec3 r, float r2) {
-    const std::uint32_t k = original_index(q);
-    const bool in = in_range_of(images, cutoff_squared, i, k, r, r2);
-    visit(f, acc, in, i, k, s, r, r2, images, ti);
-  });
-  f.finish(i, acc);
+  if (!grid_thread_target<Defer>(pos, t, view, table, cutoff_squared, f, images)) band.add(t);
+}
+
+// The targets a deferring launch left (BandTargets), each computed whole with the exact
+// predicate; a grid-stride loop, since only the device knows how many.
+template <class F, class Table, class Images>
+__global__ void __launch_bounds__(grid_block_size)
+    grid_band_kernel(const float4* __restrict__ pos, GridGeometry view, Table table,
+                     float cutoff_squared, F f, Images images, BandTargets band) {
+  const Slot count = band.list[0];
+  for (Slot k = blockIdx.x * grid_block_size + threadIdx.x; k < count;
+       k += gridDim.x * grid_block_size)
+    grid_thread_target<false>(pos, band.list[1 + k], view, table, cutoff_squared, f, images);
 }
 
 constexpr int grid_max_rows = 49;  // (2 reach + 1)^2 rows for reach <= 3
@@ -275,10 +343,11 @@ __device__ __forceinline__ Slot flatten_rows(const GridGeometry& view, const Tab
 // neighbouring lanes read neighbouring sources. The lanes' states are combined in a fixed order
 // (combine_lanes): results do not change between runs. For functors with a combine(): small
 // inputs, where a thread per target would not fill the GPU.
-template <int G, class F, class Table, class Images>
+template <int G, bool Defer, class F, class Table, class Images>
 __global__ void __launch_bounds__(grid_block_size)
     grid_group_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n,
-                      GridGeometry view, Table table, float cutoff_squared, F f, Images images) {
+                      GridGeometry view, Table table, float cutoff_squared, F f, Images images,
+                      BandTargets band_targets) {
   constexpr int groups = grid_block_size / G;
   __shared__ uint2 rows[groups][grid_max_rows];
   const int group = threadIdx.x / G, lane = threadIdx.x % G;
@@ -295,6 +364,7 @@ __global__ void __launch_bounds__(grid_block_size)
   const std::uint32_t i = original_index(p);
   const typename Images::Target ti = images.target(t);
   typename F::Accumulator acc{};
+  bool band = false;
   int r = 0;
   uint2 row = rows[group][0];
   for (Slot first = lane; first < group_total; first += U * G) {
@@ -317,11 +387,21 @@ __global__ void __launch_bounds__(grid_block_size)
       Vec3 d{q[u].x - p.x, q[u].y - p.y, q[u].z - p.z};
       float r2 = squared_distance(d.x, d.y, d.z);
       const std::uint32_t k = original_index(q[u]);
-      const bool in = in_range_of(images, cutoff_squared, i, k, d, r2) && s[u] != t;
+      const bool in =
+          in_range_or_band<Defer>(images, cutoff_squared, i, k, d, r2, band) && s[u] != t;
       visit(f, acc, in, i, k, s[u], d, r2, images, ti);
     }
   }
   combine_lanes<G, F>(acc);
+  if constexpr (Defer) {  // the group's lanes: G consecutive bits of the warp's ballot
+    const unsigned lanes = __ballot_sync(0xffffffffu, band);
+    const unsigned group_lanes =
+        G == 32 ? 0xffffffffu : ((1u << G) - 1u) << ((threadIdx.x % 32) / G * G);
+    if (lanes & group_lanes) {
+      if (active && lane == 0) band_targets.add(t);
+      return;
+    }
+  }
   if (active && lane == 0) {
     typename F::Accumulator total_state = initial_state(f, i);
     F::combine(total_state, acc);
@@ -334,10 +414,11 @@ __global__ void __launch_bounds__(grid_block_size)
 // writes the target's entries together: coalesced stores instead of one scattered store per
 // entry per thread (docs/benchmarks.md, "Neighbour lists"). Entries within a row keep the
 // order of the candidates, the same on every run.
-template <class F, class Table, class Images>
+template <bool Defer, class F, class Table, class Images>
 __global__ void __launch_bounds__(grid_block_size)
     grid_emit_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n, GridGeometry view,
-                     Table table, float cutoff_squared, F f, Images images) {
+                     Table table, float cutoff_squared, F f, Images images,
+                     BandTargets band_targets) {
   constexpr int G = 32, groups = grid_block_size / G;
   __shared__ uint2 rows[groups][grid_max_rows];
   const int group = threadIdx.x / G, lane = threadIdx.x % G;
@@ -352,6 +433,7 @@ __global__ void __launch_bounds__(grid_block_size)
   typename F::Accumulator next{};
   if (active) next = initial_state(f, i);
   const unsigned lanes_below = (1u << lane) - 1u;
+  bool band = false;
   int r = 0;
   uint2 row = rows[group][0];
   for (Slot first = 0; first < total; first += G) {  // the same trip count on every lane
@@ -368,7 +450,7 @@ __global__ void __launch_bounds__(grid_block_size)
       d = Vec3{q.x - p.x, q.y - p.y, q.z - p.z};
       r2 = squared_distance(d.x, d.y, d.z);
       const std::uint32_t k = original_index(q);
-      const bool in = in_range_of(images, cutoff_squared, i, k, d, r2) && s != t;
+      const bool in = in_range_or_band<Defer>(images, cutoff_squared, i, k, d, r2, band) && s != t;
       // A pair the functor drops (per-pair cutoffs) takes no place: it would leave a hole.
       take = resolve(f, images, ti, in, i, k, s, j, shift) && f.within(i, j, shift, r2);
     }
@@ -378,6 +460,12 @@ __global__ void __launch_bounds__(grid_block_size)
       apply(f, at, i, j, d, r2, shift);
     }
     next += __popc(taken);
+  }
+  if constexpr (Defer) {  // the whole warp's target: its entries so far are written again
+    if (__any_sync(0xffffffffu, band)) {
+      if (active && lane == 0) band_targets.add(t);
+      return;
+    }
   }
   if (active && lane == 0) f.finish(i, next);
 }
@@ -390,11 +478,14 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
   const Slot* targets = g.targets;
   const Slot n = static_cast<Slot>(pass.n);
   const float c2 = pass.cutoff_squared;
-  const auto launch = [&](const auto& table, const auto& images) {
+  const BandTargets band{g.band_targets};
+  const auto launch = [&](const auto& table, const auto& images, auto defer) {
+    constexpr bool Defer = decltype(defer)::value;
     if constexpr (emits_entries<F>::value) {
       if (g.geometry.grid.reach <= 3) {  // the flattened row table holds (2 * 3 + 1)^2 rows
-        grid_emit_kernel<<<blocks_for(std::uint64_t{n} * 32, grid_block_size), grid_block_size, 0,
-                           stream>>>(pos, targets, n, g.geometry, table, c2, f, images);
+        grid_emit_kernel<Defer>
+            <<<blocks_for(std::uint64_t{n} * 32, grid_block_size), grid_block_size, 0, stream>>>(
+                pos, targets, n, g.geometry, table, c2, f, images, band);
         return;
       }
     }
@@ -404,19 +495,21 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
     const auto group = [&](auto lanes) {
       if constexpr (has_combine<F>::value) {
         constexpr int G = decltype(lanes)::value;
-        grid_group_kernel<G>
+        grid_group_kernel<G, Defer>
             <<<blocks_for(std::uint64_t{n} * G, grid_block_size), grid_block_size, 0, stream>>>(
-                pos, targets, n, g.geometry, table, c2, f, images);
+                pos, targets, n, g.geometry, table, c2, f, images, band);
       }
     };
     switch (kernel) {
       case GridKernel::thread:
-        grid_thread_kernel<false><<<blocks_for(n, grid_block_size), grid_block_size, 0, stream>>>(
-            pos, targets, n, g.geometry, table, c2, f, images);
+        grid_thread_kernel<false, Defer>
+            <<<blocks_for(n, grid_block_size), grid_block_size, 0, stream>>>(
+                pos, targets, n, g.geometry, table, c2, f, images, band);
         break;
       case GridKernel::thread_many_registers:
-        grid_thread_kernel<true><<<blocks_for(n, grid_block_size), grid_block_size, 0, stream>>>(
-            pos, targets, n, g.geometry, table, c2, f, images);
+        grid_thread_kernel<true, Defer>
+            <<<blocks_for(n, grid_block_size), grid_block_size, 0, stream>>>(
+                pos, targets, n, g.geometry, table, c2, f, images, band);
         break;
       case GridKernel::lanes4:
         group(std::integral_constant<int, 4>{});
@@ -432,13 +525,35 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
         break;
     }
   };
+  // The band's targets: a second launch, as many blocks as a few waves need (it loops).
+  const auto launch_deferred = [&](const auto& table, const auto& images) {
+    RAYCUT_CUDA_CHECK(cudaMemsetAsync(band.list, 0, sizeof(Slot), stream));
+    launch(table, images, std::true_type{});
+    RAYCUT_CUDA_CHECK_LAUNCH();
+    const unsigned blocks = std::min(blocks_for(n, grid_block_size), 2048u);
+    if (blocks > 0)
+      grid_band_kernel<<<blocks, grid_block_size, 0, stream>>>(pos, g.geometry, table, c2, f,
+                                                               images, band);
+  };
+  const auto run = [&](const auto& table, const auto& images) {
+    using Images = std::decay_t<decltype(images)>;
+    if constexpr (Images::banded && defers_band<F>) {
+      // Not where every pair is decided in double (exact vectors: float_in = 0), which would
+      // leave every target to the second launch.
+      if (band.list && images.exact.float_in > 0 && !band_inline_requested()) {
+        launch_deferred(table, images);
+        return;
+      }
+    }
+    launch(table, images, std::false_type{});
+  };
   with_images<F>(
       pass,
       [&](const auto& images) {
         if (g.dense)
-          launch(DenseTable{g.dense_table.start}, images);
+          run(DenseTable{g.dense_table.start}, images);
         else
-          launch(CompactTable{g.compact_table}, images);
+          run(CompactTable{g.compact_table}, images);
       },
       stream);
   RAYCUT_CUDA_CHECK_LAUNCH();
