@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 #include <vector>
 
 #include "raycut/detail/images.hpp"
@@ -125,7 +126,11 @@ struct ListFill : ListFilter {
   RAYCUT_HD Accumulator init(std::uint32_t i) const { return offsets[i]; }
   RAYCUT_HD void operator()(Accumulator& slot, std::uint32_t i, std::uint32_t j, Vec3 r, float r2,
                             const Shift& s) const {
-    if (!within(i, j, s, r2)) return;
+    if (within(i, j, s, r2)) write(slot, i, j, r, r2, s);
+  }
+  // The entry at `slot`, the pair already kept.
+  RAYCUT_HD void write(Accumulator& slot, std::uint32_t i, std::uint32_t j, Vec3 r, float r2,
+                       const Shift& s) const {
     if (slot >= capacity) {
       ++slot;
       return;
@@ -151,6 +156,36 @@ struct ListFill : ListFilter {
   }
   RAYCUT_HD void finish(std::uint32_t, Accumulator&) const {}
 };
+
+// The count and the fill of a list without per-pair cutoffs, for a GPU traversal: within() is
+// constant, so PairCutoffFilter's double arithmetic is not compiled into the kernel, where it
+// would set the register count of every list (64 against 40 for the grid's fill: docs/grid.md,
+// "Registers"). Made from the general functor when its cutoffs are inactive.
+struct PlainFilteredListCount : FilteredListCount {
+  RAYCUT_HD bool within(std::uint32_t, std::uint32_t, const Shift&, float) const { return true; }
+  RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, std::uint32_t, Vec3, float,
+                            const Shift&) const {
+    ++acc;
+  }
+};
+struct PlainListFill : ListFill {
+  RAYCUT_HD bool within(std::uint32_t, std::uint32_t, const Shift&, float) const { return true; }
+  RAYCUT_HD void operator()(Accumulator& slot, std::uint32_t i, std::uint32_t j, Vec3 r, float r2,
+                            const Shift& s) const {
+    write(slot, i, j, r, r2, s);
+  }
+};
+
+// Runs run(f), or run(f) as its Plain functor above where f has no per-pair cutoffs.
+template <class F, class Run>
+void run_without_idle_cutoffs(const F& f, Run&& run) {
+  if constexpr (std::is_same_v<F, ListFill>) {
+    if (!f.cutoffs.active()) return run(PlainListFill{f});
+  } else if constexpr (std::is_same_v<F, FilteredListCount>) {
+    if (!f.cutoffs.active()) return run(PlainFilteredListCount{f});
+  }
+  run(f);
+}
 
 // What a padded pass reports, in the method's memory: rows over K, the largest count.
 struct PaddedOverflow {

@@ -7,6 +7,7 @@
 #include <string>
 
 #include "core/images.hpp"
+#include "core/list_functors.hpp"
 
 #include "cuda/device_results.cuh"
 #include "cuda/grid_common.cuh"
@@ -74,7 +75,7 @@ class Grid final : public CudaPairMethod<Grid> {
   }
   template <class F>
   void run(const F& f) const {
-    run_grid(pair_pass(), f, stream_);
+    run_without_idle_cutoffs(f, [&](const auto& g) { run_grid(pair_pass(), g, stream_); });
   }
 
  private:
