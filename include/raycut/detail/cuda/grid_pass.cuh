@@ -280,18 +280,6 @@ __global__ void __launch_bounds__(grid_block_size, ManyRegisters ? 1 : 0)
   if (!grid_thread_target<Defer>(pos, t, view, table, cutoff_squared, f, images)) band.add(t);
 }
 
-// The targets a deferring launch left (BandTargets), each computed whole with the exact
-// predicate; a grid-stride loop, since only the device knows how many.
-template <class F, class Table, class Images>
-__global__ void __launch_bounds__(grid_block_size)
-    grid_band_kernel(const float4* __restrict__ pos, GridGeometry view, Table table,
-                     float cutoff_squared, F f, Images images, BandTargets band) {
-  const Slot count = band.list[0];
-  for (Slot k = blockIdx.x * grid_block_size + threadIdx.x; k < count;
-       k += gridDim.x * grid_block_size)
-    grid_thread_target<false>(pos, band.list[1 + k], view, table, cutoff_squared, f, images);
-}
-
 constexpr int grid_max_rows = 49;  // (2 reach + 1)^2 rows for reach <= 3
 
 // G lanes share target t's candidates, flattened into one list: the lanes find the rows' ranges
@@ -343,20 +331,17 @@ __device__ __forceinline__ Slot flatten_rows(const GridGeometry& view, const Tab
 // neighbouring lanes read neighbouring sources. The lanes' states are combined in a fixed order
 // (combine_lanes): results do not change between runs. For functors with a combine(): small
 // inputs, where a thread per target would not fill the GPU.
+// Target t of a group of G lanes (rows: the group's shared row table; an inactive group's
+// lanes take part in the shuffles and finish nothing). False (nothing finished) when Defer found
+// a candidate in the band.
 template <int G, bool Defer, class F, class Table, class Images>
-__global__ void __launch_bounds__(grid_block_size)
-    grid_group_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n,
-                      GridGeometry view, Table table, float cutoff_squared, F f, Images images,
-                      BandTargets band_targets) {
-  constexpr int groups = grid_block_size / G;
-  __shared__ uint2 rows[groups][grid_max_rows];
-  const int group = threadIdx.x / G, lane = threadIdx.x % G;
-  const Slot tid =
-      static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / G);
-  const bool active = tid < n;  // no early return: every lane takes part in the shuffles
-  const Slot t = active ? target_slot(targets, tid) : 0;
+__device__ __forceinline__ bool grid_group_target(const float4* __restrict__ pos, Slot t,
+                                                  bool active, const GridGeometry& view,
+                                                  const Table& table, float cutoff_squared,
+                                                  const F& f, const Images& images, uint2* rows,
+                                                  int lane) {
   const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
-  const Slot group_total = flatten_rows<G>(view, table, locate(view, p), active, lane, rows[group]);
+  const Slot group_total = flatten_rows<G>(view, table, locate(view, p), active, lane, rows);
 
   // Unrolled by U: the slots of U candidates first (the row walk only moves forward), then U
   // independent loads in flight, then the U tests.
@@ -366,14 +351,14 @@ __global__ void __launch_bounds__(grid_block_size)
   typename F::Accumulator acc{};
   bool band = false;
   int r = 0;
-  uint2 row = rows[group][0];
+  uint2 row = rows[0];
   for (Slot first = lane; first < group_total; first += U * G) {
     Slot s[U];
 #pragma unroll
     for (int u = 0; u < U; ++u) {
       const Slot fl = first + u * G;
       if (fl < group_total) {
-        while (fl >= row.y) row = rows[group][++r];
+        while (fl >= row.y) row = rows[++r];
         s[u] = row.x + fl;
       } else {
         s[u] = t;  // a valid slot; skipped below
@@ -397,16 +382,32 @@ __global__ void __launch_bounds__(grid_block_size)
     const unsigned lanes = __ballot_sync(0xffffffffu, band);
     const unsigned group_lanes =
         G == 32 ? 0xffffffffu : ((1u << G) - 1u) << ((threadIdx.x % 32) / G * G);
-    if (lanes & group_lanes) {
-      if (active && lane == 0) band_targets.add(t);
-      return;
-    }
+    if (lanes & group_lanes) return false;
   }
   if (active && lane == 0) {
     typename F::Accumulator total_state = initial_state(f, i);
     F::combine(total_state, acc);
     f.finish(i, total_state);
   }
+  return true;
+}
+
+template <int G, bool Defer, class F, class Table, class Images>
+__global__ void __launch_bounds__(grid_block_size)
+    grid_group_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n,
+                      GridGeometry view, Table table, float cutoff_squared, F f, Images images,
+                      BandTargets band) {
+  constexpr int groups = grid_block_size / G;
+  __shared__ uint2 rows[groups][grid_max_rows];
+  const int group = threadIdx.x / G, lane = threadIdx.x % G;
+  const Slot tid =
+      static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / G);
+  const bool active = tid < n;  // no early return: every lane takes part in the shuffles
+  const Slot t = active ? target_slot(targets, tid) : 0;
+  if (!grid_group_target<G, Defer>(pos, t, active, view, table, cutoff_squared, f, images,
+                                   rows[group], lane) &&
+      active && lane == 0)
+    band.add(t);
 }
 
 // A warp per target for functors that emit entries (lists): the 32 lanes take 32 consecutive
@@ -414,20 +415,17 @@ __global__ void __launch_bounds__(grid_block_size)
 // writes the target's entries together: coalesced stores instead of one scattered store per
 // entry per thread (docs/benchmarks.md, "Neighbour lists"). Entries within a row keep the
 // order of the candidates, the same on every run.
+// Target t of a warp (rows: the warp's shared row table; active is uniform over the warp).
+// False (nothing finished) when Defer found a candidate in the band.
 template <bool Defer, class F, class Table, class Images>
-__global__ void __launch_bounds__(grid_block_size)
-    grid_emit_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n, GridGeometry view,
-                     Table table, float cutoff_squared, F f, Images images,
-                     BandTargets band_targets) {
-  constexpr int G = 32, groups = grid_block_size / G;
-  __shared__ uint2 rows[groups][grid_max_rows];
-  const int group = threadIdx.x / G, lane = threadIdx.x % G;
-  const Slot tid =
-      static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / G);
-  const bool active = tid < n;  // the whole warp shares t: uniform
-  const Slot t = active ? target_slot(targets, tid) : 0;
+__device__ __forceinline__ bool grid_emit_target(const float4* __restrict__ pos, Slot t,
+                                                 bool active, const GridGeometry& view,
+                                                 const Table& table, float cutoff_squared,
+                                                 const F& f, const Images& images, uint2* rows,
+                                                 int lane) {
+  constexpr int G = 32;
   const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
-  const Slot total = flatten_rows<G>(view, table, locate(view, p), active, lane, rows[group]);
+  const Slot total = flatten_rows<G>(view, table, locate(view, p), active, lane, rows);
   const std::uint32_t i = original_index(p);
   const typename Images::Target ti = images.target(t);
   typename F::Accumulator next{};
@@ -435,7 +433,7 @@ __global__ void __launch_bounds__(grid_block_size)
   const unsigned lanes_below = (1u << lane) - 1u;
   bool band = false;
   int r = 0;
-  uint2 row = rows[group][0];
+  uint2 row = rows[0];
   for (Slot first = 0; first < total; first += G) {  // the same trip count on every lane
     const Slot fl = first + lane;
     bool take = false;
@@ -444,7 +442,7 @@ __global__ void __launch_bounds__(grid_block_size)
     Vec3 d{0, 0, 0};
     float r2 = 0;
     if (fl < total) {
-      while (fl >= row.y) row = rows[group][++r];
+      while (fl >= row.y) row = rows[++r];
       const Slot s = row.x + fl;
       const float4 q = pos[s];
       d = Vec3{q.x - p.x, q.y - p.y, q.z - p.z};
@@ -461,13 +459,62 @@ __global__ void __launch_bounds__(grid_block_size)
     }
     next += __popc(taken);
   }
-  if constexpr (Defer) {  // the whole warp's target: its entries so far are written again
-    if (__any_sync(0xffffffffu, band)) {
-      if (active && lane == 0) band_targets.add(t);
-      return;
-    }
-  }
+  // The whole warp's target: its entries so far are written again.
+  if (Defer && __any_sync(0xffffffffu, band)) return false;
   if (active && lane == 0) f.finish(i, next);
+  return true;
+}
+
+template <bool Defer, class F, class Table, class Images>
+__global__ void __launch_bounds__(grid_block_size)
+    grid_emit_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n, GridGeometry view,
+                     Table table, float cutoff_squared, F f, Images images, BandTargets band) {
+  constexpr int groups = grid_block_size / 32;
+  __shared__ uint2 rows[groups][grid_max_rows];
+  const int group = threadIdx.x / 32, lane = threadIdx.x % 32;
+  const Slot tid =
+      static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / 32);
+  const bool active = tid < n;  // the whole warp shares t: uniform
+  const Slot t = active ? target_slot(targets, tid) : 0;
+  if (!grid_emit_target<Defer>(pos, t, active, view, table, cutoff_squared, f, images, rows[group],
+                               lane) &&
+      active && lane == 0)
+    band.add(t);
+}
+
+// The targets a deferring launch left (BandTargets), each computed whole with the exact
+// predicate. A warp per target, as the widest kernel the functor has (a target's traversal
+// alone, by one thread, takes longer than the whole first launch); a grid-stride loop, since
+// only the device knows how many.
+template <class F, class Table, class Images>
+__global__ void __launch_bounds__(grid_block_size)
+    grid_band_kernel(const float4* __restrict__ pos, GridGeometry view, Table table,
+                     float cutoff_squared, F f, Images images, BandTargets band) {
+  constexpr int groups = grid_block_size / 32;
+  __shared__ uint2 rows[groups][grid_max_rows];
+  const int group = threadIdx.x / 32, lane = threadIdx.x % 32;
+  const Slot count = band.list[0];
+  const bool flat = view.grid.reach <= 3;  // the row table holds (2 * 3 + 1)^2 rows
+  for (Slot k = (blockIdx.x * grid_block_size + threadIdx.x) / 32; k < count;
+       k += gridDim.x * groups) {  // k is uniform over the warp
+    const Slot t = band.list[1 + k];
+    if constexpr (emits_entries<F>::value) {
+      if (flat) {
+        grid_emit_target<false>(pos, t, true, view, table, cutoff_squared, f, images, rows[group],
+                                lane);
+        continue;
+      }
+    }
+    if constexpr (has_combine<F>::value) {
+      if (flat) {
+        grid_group_target<32, false>(pos, t, true, view, table, cutoff_squared, f, images,
+                                     rows[group], lane);
+        continue;
+      }
+    }
+    if (lane == 0) grid_thread_target<false>(pos, t, view, table, cutoff_squared, f, images);
+    __syncwarp();
+  }
 }
 
 // Runs functor f for every target of the grid pass `pass`, on `stream`.
@@ -530,7 +577,7 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
     RAYCUT_CUDA_CHECK(cudaMemsetAsync(band.list, 0, sizeof(Slot), stream));
     launch(table, images, std::true_type{});
     RAYCUT_CUDA_CHECK_LAUNCH();
-    const unsigned blocks = std::min(blocks_for(n, grid_block_size), 2048u);
+    const unsigned blocks = std::min(blocks_for(std::uint64_t{n} * 32, grid_block_size), 2048u);
     if (blocks > 0)
       grid_band_kernel<<<blocks, grid_block_size, 0, stream>>>(pos, g.geometry, table, c2, f,
                                                                images, band);
