@@ -3,11 +3,12 @@
 # every result in one tarball (for machines that hand back few files). What this project's device
 # sessions ran, in one place.
 #
-#   scripts/device_run.sh [tests REGEX] [bench] [lists] [periodic] [sph] [python] [python-bench]
+#   [PREBUILT=ARCHIVE] scripts/device_run.sh [gtest FILTER] [tests REGEX] [bench] [lists] [periodic] [sph] [python] [python-bench]
 #                         [mpi] [mpi-scaling] [memcheck] [grid-suites] [latency] [knn]
 #                         [roofline]
 #                         results: ${OUT:-/tmp/raycut-out}/results.tgz
 #
+#   gtest FILTER the gtest binaries with --gtest_filter=FILTER (also with PREBUILT, below)
 #   tests REGEX  ctest -R REGEX (e.g. "GridVariants|grid_|Sph"; "." for everything, ~6 min),
 #                less those matching $TESTS_EXCLUDE; ctest-K.log for the K-th tests step
 #   bench        both suites, every GPU method, plus the paper's grid when its source is in
@@ -69,6 +70,17 @@ step() { echo "[$(($(date +%s) - start)) s] $*"; }
 # The Python package in the same build tree, with the device's Python (torch, cupy, jax there);
 # once per run.
 py="${RAYCUT_PYTHON:-/opt/torch/.venv/bin/python}"
+# PREBUILT=ARCHIVE: the binaries and the Python package built on a machine like this one
+# (scripts/device_prebuild.sh), carried as one archive and unpacked into build/ here: no build, a
+# call of seconds instead of minutes. Its tests run as gtest binaries (build/tests/*; ctest's
+# files name the other machine's paths), its Python steps on the package in build/python.
+if [ -n "${PREBUILT:-}" ]; then
+  tar -xJf "$PREBUILT" || { echo "PREBUILT=$PREBUILT: cannot unpack"; exit 1; }
+  export LD_LIBRARY_PATH="/usr/local/cuda/lib64:${LD_LIBRARY_PATH:-}"
+  SKIP_MAIN_BUILD=1
+  python_built=1
+  step "unpacked $PREBUILT"
+fi
 build_python() {
   [ -n "${python_built:-}" ] && return
   python_built=1
@@ -106,6 +118,19 @@ while [ $# -gt 0 ]; do
         > "$res/ctest-$runs.log" 2>&1)
       grep -E "tests passed|tests failed" "$res/ctest-$runs.log"
       grep -E "\(Failed\)|\(Timeout\)" "$res/ctest-$runs.log" | head -20
+      shift
+      ;;
+    gtest)
+      # The gtest binaries ($GTEST_BINARIES, default below) with --gtest_filter=FILTER, a process
+      # each: no ctest files needed, so PREBUILT runs them too. gtest-BINARY.log each.
+      for name in ${GTEST_BINARIES:-raycut_tests raycut_grid_variant_tests \
+        raycut_functor_cuda_tests raycut_device_pairs_tests}; do
+        [ -x "build/tests/$name" ] || { echo "$name: not built"; continue; }
+        timeout "${GTEST_TIMEOUT:-300}" "build/tests/$name" --gtest_filter="$2" \
+          > "$res/gtest-$name.log" 2>&1
+        echo "$name exit $?: $(grep -E '^\[  PASSED  \]' "$res/gtest-$name.log")"
+        grep -E '^\[  FAILED  \] [A-Za-z]' "$res/gtest-$name.log" | head -10
+      done
       shift
       ;;
     bench)
