@@ -3,8 +3,8 @@
 # every result in one tarball (for machines that hand back few files). What this project's device
 # sessions ran, in one place.
 #
-#   [PREBUILT=ARCHIVE] scripts/device_run.sh [gtest FILTER] [tests REGEX] [bench] [lists] [periodic] [sph] [python] [python-bench]
-#                         [mpi] [mpi-scaling] [memcheck] [grid-suites] [latency] [knn]
+#   [PREBUILT=ARCHIVE] scripts/device_run.sh [gtest FILTER] [tests REGEX] [bench] [lists]
+#                         [periodic] [sph] [python] [python-bench] [mpi] [mpi-scaling] [memcheck] [grid-suites] [latency] [knn]
 #                         [roofline]
 #                         results: ${OUT:-/tmp/raycut-out}/results.tgz
 #
