@@ -4,8 +4,8 @@
 # sessions ran, in one place.
 #
 #   [PREBUILT=ARCHIVE] scripts/device_run.sh [gtest FILTER] [tests REGEX] [bench] [lists]
-#                         [periodic] [sph] [python] [python-bench] [mpi] [mpi-scaling] [memcheck] [grid-suites] [latency] [knn]
-#                         [roofline]
+#                         [periodic] [sph] [python] [python-bench] [mpi] [mpi-scaling]
+#                         [memcheck] [grid-suites] [latency] [knn] [roofline]
 #                         results: ${OUT:-/tmp/raycut-out}/results.tgz
 #
 #   gtest FILTER the gtest binaries with --gtest_filter=FILTER (also with PREBUILT, below)
