@@ -79,8 +79,8 @@ class GridTables {
   SlotImages slot_images_;
   // GridPass::band_targets, made with slot_images_; scratch that every pass writes.
   mutable DeviceBuffer<std::uint32_t> band_targets_;
-  DeviceBuffer<std::uint32_t> selected_;      // its count (device; the number is known)
-  DeviceBuffer<std::uint32_t> start_;         // dense: per cell; compact: per non-empty cell
+  DeviceBuffer<std::uint32_t> selected_;  // its count (device; the number is known)
+  DeviceBuffer<std::uint32_t> start_;     // dense: per cell; compact: per non-empty cell
   DeviceBuffer<std::uint64_t> cell_keys_, row_keys_;
   DeviceBuffer<uint2> row_cells_;
   std::uint64_t row_mask_ = 0;
