@@ -11,6 +11,7 @@
 
 #include "cuda/device_results.cuh"
 #include "cuda/grid_common.cuh"
+#include "cuda/grid_list_passes.hpp"
 #include "cuda/grid_policy.hpp"
 #include "cuda/grid_tables.cuh"
 #include "cuda/methods.hpp"
@@ -18,6 +19,9 @@
 #include "raycut/predicate.hpp"
 
 namespace raycut::detail::cuda {
+
+RAYCUT_GRID_LIST_FUNCTORS(RAYCUT_GRID_DECLARE_RUN)
+
 namespace {
 
 // The cutoff, or the band's reach (band_reach) when wider, rounded up to a float.
