@@ -483,9 +483,9 @@ __global__ void __launch_bounds__(grid_block_size)
 }
 
 // The targets a deferring launch left (BandTargets), each computed whole with the exact
-// predicate. A warp per target, as the widest kernel the functor has (a target's traversal
-// alone, by one thread, takes longer than the whole first launch); a grid-stride loop, since
-// only the device knows how many.
+// predicate. A warp per target, through the functor's warp-wide body where it has one: a
+// target walked by one thread took as long as the whole first launch (110-290 us on an H100,
+// docs/grid.md); a grid-stride loop, since only the device knows how many.
 template <class F, class Table, class Images>
 __global__ void __launch_bounds__(grid_block_size)
     grid_band_kernel(const float4* __restrict__ pos, GridGeometry view, Table table,
