@@ -6,9 +6,9 @@
 #
 #   scripts/device_prebuild.sh [TARGET...]     default: the GPU tests, the benchmarks and the
 #                                              Python package
-#   DEVICE_PYTHON: a Python of the device's version with the device's torch (the device has
-#                  3.12 and torch 2.11.0+cu130: a 3.12 venv with `pip install torch==2.11.0
-#                  nanobind numpy jax`; default /work/py312/bin/python)
+#   DEVICE_PYTHON: a Python of the device's version with the device's torch, required (the
+#                  device has 3.12 and torch 2.11.0+cu130: a 3.12 venv with `pip install
+#                  torch==2.11.0 nanobind numpy jax`; pyenv provides a 3.12)
 #   BUILD_DIR: the build tree (default build-device)
 #   ARCHIVE: where the archive goes (default .scratch/prebuilt.tar.xz; carry it)
 #
@@ -16,7 +16,7 @@
 # working tree (64 MiB). The device's libstdc++ and glibc run binaries built here (Debian 12).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-py="${DEVICE_PYTHON:-/work/py312/bin/python}"
+py="${DEVICE_PYTHON:?DEVICE_PYTHON: a Python of the device version with its torch (see above)}"
 archive="${ARCHIVE:-.scratch/prebuilt.tar.xz}"
 build="${BUILD_DIR:-build-device}"
 targets=("$@")
