@@ -40,8 +40,9 @@
 #                racecheck on the small-system pass
 #   python       the Python package built with the device's Python (the PyTorch operators with
 #                their CUDA kernel: RAYCUT_TORCH_CUDA=ON), and its tests: a pytest process per
-#                file ($PYTEST_FILES, or every file), each killed after $PYTEST_TIMEOUT seconds
-#                when set; a file that crashes runs again to its first failure with native
+#                file ($PYTEST_FILES, or every file), each killed after $PYTEST_FILE_TIMEOUT seconds
+#                when set (not PYTEST_TIMEOUT: pytest-timeout reads that as a per-test limit,
+#                and its SIGALRM landing in native code crashed AOTInductor's loader); a file that crashes runs again to its first failure with native
 #                frames printed (scripts/segv_backtrace.c): pytest-FILE-native.log
 #   python-bench bench/python_lists.py (beside neighbour_bench's periodic list rows, run first)
 #                and bench/python_overhead.py: python-lists.csv/.md, python-overhead.csv
@@ -260,19 +261,20 @@ while [ $# -gt 0 ]; do
       files="${PYTEST_FILES:-$(ls python/tests/test_*.py)}"
       for f in $files; do
         name=$(basename "$f" .py)
-        PYTHONPATH="$PWD/build/python" timeout "${PYTEST_TIMEOUT:-0}" \
+        PYTHONPATH="$PWD/build/python" timeout "${PYTEST_FILE_TIMEOUT:-0}" \
           "$py" -m pytest -v -rfEs -p no:cacheprovider "$f" > "$res/pytest-$name.log" 2>&1
         rc=$?
         echo "pytest $name exit $rc: $(tail -1 "$res/pytest-$name.log")"
         grep -E "^(FAILED|ERROR) |Fatal Python" "$res/pytest-$name.log" | head -10
         [ $rc -ge 124 ] && grep -B1 -m1 "Fatal Python" "$res/pytest-$name.log"
         # A crash (no gdb here): the file again up to its first failure, with the native frames
-        # (scripts/segv_backtrace.c) in pytest-FILE-native.log.
+        # (scripts/segv_backtrace.c) in pytest-FILE-native.log; -s, as pytest's capture of fd 2 would
+        # drop the frames with the process.
         if [ $rc -eq 139 ] || [ $rc -eq 134 ] || [ $rc -eq 135 ]; then
           [ -f build/segv_backtrace.so ] ||
             cc -shared -fPIC -O1 -o build/segv_backtrace.so scripts/segv_backtrace.c
           LD_PRELOAD="$PWD/build/segv_backtrace.so" PYTHONPATH="$PWD/build/python" \
-            timeout "${PYTEST_TIMEOUT:-0}" "$py" -m pytest -x -v -p no:cacheprovider "$f" \
+            timeout "${PYTEST_FILE_TIMEOUT:-0}" "$py" -m pytest -x -s -v -p no:cacheprovider "$f" \
             > "$res/pytest-$name-native.log" 2>&1
           grep -A24 -m1 "native backtrace" "$res/pytest-$name-native.log" | cut -c1-160
         fi

@@ -20,7 +20,8 @@ static void on_crash(int sig) {
   raise(sig);
 }
 
-__attribute__((constructor)) static void install(void) {
+// Exported too: call it again (ctypes) where a later library has replaced the handler.
+__attribute__((constructor)) void segv_backtrace_install(void) {
   void* warm[1];
   backtrace(warm, 1);  // loads libgcc's unwinder now, not inside the handler
   struct sigaction action;

@@ -46,6 +46,36 @@ _RAGGED_TARGET = "raycut_ragged_neighbor_list"
 LIBRARY = _arrays.built_library("_jax_ffi", "pyraycut.jax's custom call is", "jax",
                                 "RAYCUT_BUILD_JAX")
 _library = ctypes.cdll.LoadLibrary(LIBRARY)
+
+
+def _xla_ffi_api_version() -> Optional[tuple]:
+    """The XLA FFI API version of this process's jaxlib, from its own headers (None if absent)."""
+    import os
+    import re
+
+    try:
+        with open(os.path.join(jax.ffi.include_dir(), "xla", "ffi", "api", "c_api.h")) as header:
+            text = header.read()
+    except OSError:
+        return None
+    found = [re.search(rf"#define XLA_FFI_API_{part}\s+(\d+)", text) for part in ("MAJOR", "MINOR")]
+    return None if None in found else tuple(int(match.group(1)) for match in found)
+
+
+def _check_xla_ffi_api() -> None:
+    """Refuses a jaxlib older than the one the custom call was built with: XLA would accept the
+    registration and then fail to create its CPU client, breaking every JAX computation."""
+    built = divmod(_library.RaycutXlaFfiApiVersion(), 1000)
+    running = _xla_ffi_api_version()
+    if running is not None and (running[0] != built[0] or running[1] < built[1]):
+        raise ImportError(
+            f"pyraycut.jax: {LIBRARY} was built against XLA FFI API {built[0]}.{built[1]}, but "
+            f"this process's jaxlib {jax.__version__} speaks {running[0]}.{running[1]}; rebuild "
+            "raycut's Python package with this jax (pip install --no-build-isolation .), or "
+            "install the jax it was built with")
+
+
+_check_xla_ffi_api()
 jax.ffi.register_ffi_target(_TARGET, jax.ffi.pycapsule(_library.RaycutNeighborList),
                             platform="cpu")
 jax.ffi.register_ffi_target(_RAGGED_TARGET,

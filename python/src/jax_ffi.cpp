@@ -194,3 +194,8 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(RaycutNeighborList, neighbor_list,
 
 XLA_FFI_DEFINE_HANDLER_SYMBOL(RaycutRaggedNeighborList, ragged_neighbor_list,
                               raycut_jax::ragged_neighbor_list_signature(ffi::Ffi::Bind()));
+
+// The XLA FFI API version of the headers this library was built with, major * 1000 + minor.
+// pyraycut.jax refuses to register the handlers with a jaxlib whose API is older: XLA refuses
+// them only when it creates its CPU client, which then fails for every JAX computation.
+extern "C" int RaycutXlaFfiApiVersion() { return XLA_FFI_API_MAJOR * 1000 + XLA_FFI_API_MINOR; }

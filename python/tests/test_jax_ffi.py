@@ -78,6 +78,16 @@ def test_errors():
         rjax.neighbor_list(jnp.zeros((4, 3)), -1.0, max_pairs=10)[3].block_until_ready()
 
 
+def test_an_older_xla_ffi_api_is_refused_before_registration(monkeypatch):
+    built = divmod(rjax._library.RaycutXlaFfiApiVersion(), 1000)
+    assert rjax._xla_ffi_api_version() >= built  # this process's jaxlib took the handlers
+    monkeypatch.setattr(rjax, "_xla_ffi_api_version", lambda: (built[0], built[1] - 1))
+    with pytest.raises(ImportError, match=rf"XLA FFI API {built[0]}\.{built[1]}.*rebuild"):
+        rjax._check_xla_ffi_api()
+    monkeypatch.setattr(rjax, "_xla_ffi_api_version", lambda: (built[0], built[1] + 1))
+    rjax._check_xla_ffi_api()  # a newer jaxlib keeps older handlers working
+
+
 def test_vmap_is_one_batched_search_with_per_system_outputs():
     xs = np.stack([inside_cell(20, CELL, seed=s) for s in (30, 31, 32)])
     cells = np.stack([CELL, 1.1 * CELL, 0.9 * CELL]).astype(np.float32)
