@@ -11,6 +11,9 @@
 #                  torch==2.11.0 nanobind numpy jax`; pyenv provides a 3.12)
 #   BUILD_DIR: the build tree (default build-device)
 #   ARCHIVE: where the archive goes (default .scratch/prebuilt.tar.xz; carry it)
+#   BASELINE_SRC: an earlier revision's source tree (git archive REV | tar -x -C DIR): its
+#                 neighbour_bench goes in as build/bench/neighbour_bench_baseline, for
+#                 device_run.sh's baseline-periodic step
 #
 # Binaries are stripped; the archive must stay under the device tool's carry limit with the
 # working tree (64 MiB). The device's libstdc++ and glibc run binaries built here (Debian 12).
@@ -33,6 +36,13 @@ for f in "$build"/bench/* "$build"/tests/*; do
   dir=$(basename "$(dirname "$f")")
   cp "$f" "$stage/build/$dir/" && strip "$stage/build/$dir/$(basename "$f")"
 done
+if [ -n "${BASELINE_SRC:-}" ]; then
+  cmake -S "$BASELINE_SRC" -B "$BASELINE_SRC/build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
+    -DCMAKE_CUDA_ARCHITECTURES=90 > /dev/null
+  cmake --build "$BASELINE_SRC/build" -j"$(nproc)" --target neighbour_bench
+  cp "$BASELINE_SRC/build/bench/neighbour_bench" "$stage/build/bench/neighbour_bench_baseline"
+  strip "$stage/build/bench/neighbour_bench_baseline"
+fi
 [ -d "$build/python" ] && cp -r "$build/python" "$stage/build/python" &&
   find "$stage/build/python" -name '*.so' -exec strip --strip-unneeded {} +
 mkdir -p "$(dirname "$archive")"

@@ -5,7 +5,7 @@
 #
 #   [PREBUILT=ARCHIVE] scripts/device_run.sh [gtest FILTER] [tests REGEX] [bench] [lists]
 #                         [periodic] [sph] [python] [python-bench] [mpi] [mpi-scaling]
-#                         [memcheck] [grid-suites] [latency] [knn] [roofline]
+#                         [memcheck] [grid-suites] [latency] [compiled] [knn] [roofline]
 #                         results: ${OUT:-/tmp/raycut-out}/results.tgz
 #
 #   gtest FILTER the gtest binaries with --gtest_filter=FILTER (also with PREBUILT, below)
@@ -21,9 +21,10 @@
 #                periodic.csv/.md (with lists.csv's tables too when the lists step ran before)
 #   baseline-periodic
 #                the periodic workloads (as in periodic) on an earlier revision and on this
-#                tree, alternately, twice each, on the same GPU: BASELINE_SRC is that revision's
-#                source (git archive REV | tar -x -C .scratch/baseline, carried); its
-#                neighbour_bench is built there. baseline-periodic-K.csv, current-periodic-K.csv
+#                tree, alternately, $ROUNDS times each (default 2), on the same GPU:
+#                BASELINE_SRC is that revision's source (git archive REV | tar -x -C
+#                .scratch/baseline, carried); its neighbour_bench is built there, unless the
+#                PREBUILT archive has it. baseline-periodic-K.csv, current-periodic-K.csv
 #   sph          the article's SPH run with every GPU method, and the validation scenarios
 #   grid-suites  both suites with grid and grid-paper beside the paper's grid (no regression)
 #   latency      call latency of small systems and batches (docs/benchmarks.md, "Latency of small
@@ -32,6 +33,10 @@
 #                (pyraycut.neighbor_list on torch CUDA tensors, the Python package built first;
 #                the profiler's table of each case in profiles/),
 #                bench/plot_latency.py: latency-cpp.csv, latency-python.csv, latency.png
+#   compiled     bench/python_compiled.py: an LJ step eager, under torch.compile(fullgraph) and
+#                replayed as a CUDA graph (mode="reduce-overhead"), and the operator alone, beside
+#                raycut_latency_bench's C++ rows, at COMPILED_SIZES (default 1000,10000,1048576):
+#                compiled-python.csv, compiled-cpp.csv
 #   knn          bench/python_knn.py: pyraycut.torch.knn (k = 16 and 64) beside radius_graph of
 #                the same mean degree, 10^6 uniform points on CUDA (knn.csv; docs/compatibility.md)
 #   roofline     ncu (Nsight Compute) metrics of the periodic workloads' and the small pass's
@@ -41,8 +46,8 @@
 #   python       the Python package built with the device's Python (the PyTorch operators with
 #                their CUDA kernel: RAYCUT_TORCH_CUDA=ON), and its tests: a pytest process per
 #                file ($PYTEST_FILES, or every file), each killed after $PYTEST_FILE_TIMEOUT seconds
-#                when set (not PYTEST_TIMEOUT: pytest-timeout reads that as a per-test limit,
-#                and its SIGALRM landing in native code crashed AOTInductor's loader); a file that crashes runs again to its first failure with native
+#                when set (not PYTEST_TIMEOUT, which pytest-timeout takes as its per-test
+#                limit); a file that crashes runs again to its first failure with native
 #                frames printed (scripts/segv_backtrace.c): pytest-FILE-native.log
 #   python-bench bench/python_lists.py (beside neighbour_bench's periodic list rows, run first)
 #                and bench/python_overhead.py: python-lists.csv/.md, python-overhead.csv
@@ -196,6 +201,21 @@ while [ $# -gt 0 ]; do
         [ -f "$csv" ] && csvs+=("$csv")
       done
       [ ${#csvs[@]} -gt 0 ] && "$py" bench/plot_latency.py "${csvs[@]}" --png "$res/latency.png"
+      ;;
+    compiled)
+      # The operator's cost over the C++ call, and a compiled LJ step against eager (#31's
+      # performance): the C++ rows at the same sizes first, in the same run.
+      sizes="${COMPILED_SIZES:-1000,10000,1048576}"
+      [ -x build/bench/raycut_latency_bench ] &&
+        build/bench/raycut_latency_bench --sizes "$sizes" --batches none \
+          --output "$res/compiled-cpp.csv" > "$res/compiled-cpp.log" 2>&1
+      echo "raycut_latency_bench exit $?"
+      awk '/^workload /{f=1} f' "$res/compiled-cpp.log"
+      build_python
+      PYTHONPATH="$PWD/build/python" "$py" bench/python_compiled.py --sizes "$sizes" \
+        --output "$res/compiled-python.csv" > "$res/compiled-python.log" 2>&1
+      echo "python_compiled exit $?"
+      grep -E "^lj-pbc|python_compiled" "$res/compiled-python.log" | head -20
       ;;
     memcheck)
       # compute-sanitizer on the pair-pass paths: user functors, lists, the grid's variants.
@@ -386,18 +406,24 @@ while [ $# -gt 0 ]; do
       grep -E "grid " "$res/bench-uniform-grids.log" | tail -8
       ;;
     baseline-periodic)
-      src="${BASELINE_SRC:?BASELINE_SRC: an earlier revision, as a source tree}"
-      # cmake itself, not that revision's configure.sh (which may build every target).
-      { cmake -S "$src" -B "$src/build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
-        -DCMAKE_CUDA_ARCHITECTURES=90 && cmake --build "$src/build" -j"$(nproc)" \
-        --target neighbour_bench; } > "$res/baseline-build.log" 2>&1 ||
-        { tail -20 "$res/baseline-build.log"; src=""; }
-      step "baseline built"
-      for k in 1 2; do
-        [ -n "$src" ] || break
+      # A prebuilt archive may carry the baseline's binary (scripts/device_prebuild.sh with
+      # BASELINE_SRC): then nothing is built here.
+      baseline_bin=build/bench/neighbour_bench_baseline
+      if [ ! -x "$baseline_bin" ]; then
+        src="${BASELINE_SRC:?BASELINE_SRC: an earlier revision, as a source tree}"
+        baseline_bin="$src/build/bench/neighbour_bench"
+        # cmake itself, not that revision's configure.sh (which may build every target).
+        { cmake -S "$src" -B "$src/build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
+          -DCMAKE_CUDA_ARCHITECTURES=90 && cmake --build "$src/build" -j"$(nproc)" \
+          --target neighbour_bench; } > "$res/baseline-build.log" 2>&1 ||
+          { tail -20 "$res/baseline-build.log"; baseline_bin=""; }
+        step "baseline built"
+      fi
+      for k in $(seq "${ROUNDS:-2}"); do
+        [ -n "$baseline_bin" ] || break
         for tree in baseline current; do
           bin=build/bench/neighbour_bench
-          [ "$tree" = baseline ] && bin="$src/build/bench/neighbour_bench"
+          [ "$tree" = baseline ] && bin="$baseline_bin"
           "$bin" --methods grid --no-suite --periodic --out "$res/$tree-periodic-$k.csv" \
             > "$res/$tree-periodic-$k.log" 2>&1
           echo "$tree $k: exit $?"
