@@ -59,44 +59,16 @@ def lj_step(torch):
 def main(argv: Optional[list[str]] = None) -> list[dict]:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--output", help="CSV file (appended to when it has the same columns)")
     parser.add_argument("--sizes", type=latency.parse_sizes, default=[1000, 10000, 100000],
                         help="particles per system (default 1000,10000,100000)")
-    parser.add_argument("--reps", type=int, default=30, help="timed loops (default 30)")
-    parser.add_argument("--min-loop-ms", type=latency.positive, default=2.0,
-                        help="a timed loop lasts at least this long (default 2)")
-    parser.add_argument("--profile-calls", type=int, default=20,
-                        help="calls profiled for kernels and syncs (default 20)")
-    parser.add_argument("--device", choices=["cuda", "cpu"], default="cuda",
-                        help="where the tensors live (cpu: a check of the script, no counts)")
-    parser.add_argument("--seed", type=int, default=1)
-    args = parser.parse_args(argv)
-    if args.reps < 1:
-        parser.error(f"--reps must be >= 1, got {args.reps}")
-    if args.profile_calls < 1:
-        parser.error(f"--profile-calls must be >= 1, got {args.profile_calls}")
-    if args.output:
-        latency.appends_to(args.output)  # refused before measuring, not after
-
-    try:
-        import torch
-    except ImportError:
-        print("python_compiled: PyTorch is not installed: nothing to measure", file=sys.stderr)
-        raise SystemExit(77)
+    args = latency.parse_timing_arguments(parser, argv)
+    torch, sync, machine = latency.torch_on_the_device(args, "python_compiled")
     import pyraycut
 
     if pyraycut._torch_ops() is None:
         print("python_compiled: raycut's PyTorch operators are not built", file=sys.stderr)
         raise SystemExit(77)
     cuda = args.device == "cuda"
-    if cuda and not torch.cuda.is_available():
-        print("python_compiled: no CUDA device (torch.cuda.is_available() is False): nothing to "
-              "measure (--device cpu checks the script on the CPU)", file=sys.stderr)
-        raise SystemExit(77)
-    sync = torch.cuda.synchronize if cuda else (lambda: None)
-    machine = {"gpu": torch.cuda.get_device_name() if cuda else "none",
-               "driver": latency.nvidia_driver_version() if cuda else "none",
-               "cuda": (torch.version.cuda or "none") if cuda else "none"}
     print(f"lj-pbc compiled steps on torch {args.device} tensors ({machine['gpu']}, driver "
           f"{machine['driver']}, CUDA {machine['cuda']}, torch {torch.__version__}), "
           f"{args.reps} reps, loops >= {args.min_loop_ms:g} ms")

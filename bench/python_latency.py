@@ -187,26 +187,17 @@ def write_rows(path: str, rows: list[dict]) -> None:
         writer.writerows(rows)
 
 
-def main(argv: Optional[list[str]] = None) -> list[dict]:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+def parse_timing_arguments(parser: argparse.ArgumentParser,
+                           argv: Optional[list[str]]) -> argparse.Namespace:
+    """Adds the options every latency script shares (--output, --reps, --min-loop-ms,
+    --profile-calls, --device, --seed) to ``parser`` and parses ``argv``; refuses a bad count or
+    an --output of other columns before anything is measured."""
     parser.add_argument("--output", help="CSV file (appended to when it has the same columns)")
-    parser.add_argument("--sizes", type=parse_sizes, default=[128, 1000, 10000, 100000],
-                        help="single systems, particles each (default 128,1000,10000,100000)")
-    parser.add_argument("--batches", type=parse_batches,
-                        default=[(32, 100), (256, 100), (512, 128)],
-                        help="batches SxN, comma-separated, or 'none' "
-                             "(default 32x100,256x100,512x128)")
-    parser.add_argument("--crossover", action="store_true",
-                        help="also single systems of 2000, 4000 and 8000 particles")
     parser.add_argument("--reps", type=int, default=30, help="timed loops (default 30)")
     parser.add_argument("--min-loop-ms", type=positive, default=2.0,
                         help="a timed loop lasts at least this long (default 2)")
     parser.add_argument("--profile-calls", type=int, default=20,
                         help="calls profiled for kernels and syncs (default 20)")
-    parser.add_argument("--profile-tables", metavar="DIR",
-                        help="write the profiler's table of each profiled case there "
-                             "(profile-SxN-interface-capacity.txt)")
     parser.add_argument("--device", choices=["cuda", "cpu"], default="cuda",
                         help="where the tensors live (cpu: a check of the script, no counts)")
     parser.add_argument("--seed", type=int, default=1)
@@ -217,23 +208,48 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
         parser.error(f"--profile-calls must be >= 1, got {args.profile_calls}")
     if args.output:
         appends_to(args.output)  # refused before measuring, not after
+    return args
 
+
+def torch_on_the_device(args: argparse.Namespace, script: str) -> tuple:
+    """(torch, sync, machine) for --device; exits 77 without PyTorch or without a CUDA device.
+    ``machine``: the CSV's gpu, driver and cuda columns."""
     try:
         import torch
     except ImportError:
-        print("python_latency: PyTorch is not installed: nothing to measure", file=sys.stderr)
+        print(f"{script}: PyTorch is not installed: nothing to measure", file=sys.stderr)
         raise SystemExit(77)
-    import pyraycut
-
     cuda = args.device == "cuda"
     if cuda and not torch.cuda.is_available():
-        print("python_latency: no CUDA device (torch.cuda.is_available() is False): nothing to "
+        print(f"{script}: no CUDA device (torch.cuda.is_available() is False): nothing to "
               "measure (--device cpu checks the script on the CPU)", file=sys.stderr)
         raise SystemExit(77)
     sync = torch.cuda.synchronize if cuda else (lambda: None)
     machine = {"gpu": torch.cuda.get_device_name() if cuda else "none",
                "driver": nvidia_driver_version() if cuda else "none",
                "cuda": (torch.version.cuda or "none") if cuda else "none"}
+    return torch, sync, machine
+
+
+def main(argv: Optional[list[str]] = None) -> list[dict]:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--sizes", type=parse_sizes, default=[128, 1000, 10000, 100000],
+                        help="single systems, particles each (default 128,1000,10000,100000)")
+    parser.add_argument("--batches", type=parse_batches,
+                        default=[(32, 100), (256, 100), (512, 128)],
+                        help="batches SxN, comma-separated, or 'none' "
+                             "(default 32x100,256x100,512x128)")
+    parser.add_argument("--crossover", action="store_true",
+                        help="also single systems of 2000, 4000 and 8000 particles")
+    parser.add_argument("--profile-tables", metavar="DIR",
+                        help="write the profiler's table of each profiled case there "
+                             "(profile-SxN-interface-capacity.txt)")
+    args = parse_timing_arguments(parser, argv)
+    torch, sync, machine = torch_on_the_device(args, "python_latency")
+    import pyraycut
+
+    cuda = args.device == "cuda"
     print(f"lj-pbc latency, pyraycut.neighbor_list on torch {args.device} tensors "
           f"({machine['gpu']}, driver {machine['driver']}, CUDA {machine['cuda']}), "
           f"{args.reps} reps, loops >= {args.min_loop_ms:g} ms")

@@ -198,4 +198,6 @@ XLA_FFI_DEFINE_HANDLER_SYMBOL(RaycutRaggedNeighborList, ragged_neighbor_list,
 // The XLA FFI API version of the headers this library was built with, major * 1000 + minor.
 // pyraycut.jax refuses to register the handlers with a jaxlib whose API is older: XLA refuses
 // them only when it creates its CPU client, which then fails for every JAX computation.
-extern "C" int RaycutXlaFfiApiVersion() { return XLA_FFI_API_MAJOR * 1000 + XLA_FFI_API_MINOR; }
+extern "C" int RaycutXlaFfiApiVersion() {
+  return XLA_FFI_API_MAJOR * 1000 + XLA_FFI_API_MINOR;
+}

@@ -233,3 +233,22 @@ def test_python_latency_runs_tiny_on_the_cpu(tmp_path, capsys):
     with pytest.raises(SystemExit, match="holds other columns"):
         bench.main(args[:-1] + [str(other)])
     assert "wrote 4 rows" in capsys.readouterr().out
+
+
+def test_python_compiled_runs_tiny_on_the_cpu(tmp_path):
+    """bench/python_compiled.py with PyTorch CPU tensors: the operator's row and the LJ step
+    eager and compiled (checked against eager inside the script), in the latency CSV's columns."""
+    pytest.importorskip("torch", reason="PyTorch is not installed")
+    import pyraycut
+
+    if pyraycut._torch_ops() is None:
+        pytest.skip("raycut's PyTorch operators are not built (the build's Python had no torch)")
+    bench = load_bench("python_compiled")
+    out = tmp_path / "compiled.csv"
+    rows = bench.main(["--device", "cpu", "--sizes", "40", "--reps", "1", "--min-loop-ms",
+                       "0.05", "--output", str(out)])
+    assert [(r["interface"], r["mode"]) for r in rows] == [
+        ("python-torch-op", "eager"), ("python-torch-step", "eager"),
+        ("python-torch-step", "compiled")]
+    assert all(r["capacity"] == "static" and float(r["us_per_call"]) > 0 for r in rows)
+    assert out.read_text().startswith(LATENCY_HEADER)
