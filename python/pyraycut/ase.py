@@ -37,10 +37,8 @@ from typing import Any
 
 import numpy as np
 
-from . import _letters
+from . import _arrays, _cutoffs, _letters, _put_back, _raycut, _take_engine
 from . import neighbor_list as _neighbor_list
-
-from . import _cutoffs, _raycut
 
 __all__ = ["CoulombDSF", "LennardJones", "NeighborList", "neighbor_list"]
 
@@ -135,6 +133,27 @@ def _engine_on(atoms: Any, cutoff: float, method: str) -> Any:
     return engine
 
 
+def _pairs(positions: np.ndarray, cutoff: Any, cell: np.ndarray, pbc: np.ndarray,
+           periodic: bool, method: str, numbers: Any) -> tuple:
+    """(i, j, S) of ``pyraycut.neighbor_list("ijS", ...)`` over an Atoms' arrays. For one plain
+    number as the cutoff the engine's build and pairs are called directly: an Atoms' arrays are
+    already in the shapes the extension takes ((N, 3) float64, a (3, 3) cell, 3 flags), and the
+    general route's parsing of every other input form was half of a 1-atom cell's call. The
+    library checks the same things either way (finite positions, the cutoff, the cell)."""
+    if type(cutoff) not in (float, int):  # per-atom or per-pair cutoffs, numpy scalars
+        return _neighbor_list("ijS", positions, cutoff, cell=cell if periodic else None,
+                              pbc=pbc if periodic else None, method=method, numbers=numbers)
+    engine, key = _take_engine(method, _arrays.HOST)
+    wide = np.ascontiguousarray(positions, dtype=np.float64)  # pairs decided in double
+    engine._call(_arrays.HOST, engine._engine.build, wide.astype(np.float32), float(cutoff),
+                 np.ascontiguousarray(cell).reshape(1, 3, 3) if periodic else None,
+                 pbc.reshape(1, 3) if periodic else None, None, None, None, wide)
+    i, j, _, _, S = engine._call(_arrays.HOST, engine._engine.pairs, False, False, False, True,
+                                 True)
+    _put_back(key, engine)
+    return i, j, S
+
+
 def neighbor_list(quantities: str, atoms: Any, cutoff: Any, self_interaction: bool = False,
                   method: str = "auto") -> Any:
     """``ase.neighborlist.neighbor_list(quantities, atoms, cutoff, self_interaction)``, computed
@@ -154,8 +173,7 @@ def neighbor_list(quantities: str, atoms: Any, cutoff: Any, self_interaction: bo
     periodic = bool(pbc.any())
     # Decided by the list pass in double from the float64 positions as given (S then refers to
     # them, as ASE's does), per-atom and per-pair cutoffs too.
-    i, j, S = _neighbor_list("ijS", positions, cutoff, cell=cell if periodic else None,
-                             pbc=pbc if periodic else None, method=method, numbers=numbers)
+    i, j, S = _pairs(positions, cutoff, cell, pbc, periodic, method, numbers)
     i = np.asarray(i, dtype=np.intp)
     j = np.asarray(j, dtype=np.intp)
     S = np.asarray(S, dtype=np.int64)

@@ -112,6 +112,41 @@ def test_drop_in_bad_input():
         pyraycut.ase.neighbor_list("ij", atoms, 1.0)
 
 
+def test_one_number_cutoffs_take_the_direct_route_with_the_general_routes_answers():
+    """pyraycut.ase calls the engine directly for one plain number as the cutoff (an Atoms'
+    arrays need no parsing): the same pairs and the same refusals as pyraycut.neighbor_list."""
+    from ase import Atoms
+    from ase.build import bulk, molecule
+
+    def general(atoms, cutoff):
+        periodic = bool(atoms.pbc.any())
+        return pyraycut.neighbor_list("ijS", atoms.positions, cutoff,
+                                      cell=atoms.cell.array if periodic else None,
+                                      pbc=atoms.pbc if periodic else None)
+
+    slab = bulk("Cu", "fcc", a=3.6, cubic=True).repeat((2, 2, 1))
+    slab.pbc = (True, True, False)
+    cases = [bulk("Cu", "fcc", a=3.6), slab, molecule("CH3CH2OH"), Atoms()]
+    for atoms, cutoff in zip(cases, (5.0, 4, 2.0, 3.0)):
+        atoms.rattle(0.05, seed=2)
+        for want, got in zip(general(atoms, cutoff),
+                             pyraycut.ase.neighbor_list("ijS", atoms, cutoff)):
+            assert np.array_equal(np.asarray(want), got), atoms
+    bad = bulk("Cu", "fcc", a=3.6).repeat(2)
+    for cutoff in (1e-50, 1e39, float("nan")):
+        with pytest.raises(ValueError) as want:
+            general(bad, cutoff)
+        with pytest.raises(ValueError) as got:
+            pyraycut.ase.neighbor_list("ij", bad, cutoff)
+        assert str(got.value) == str(want.value)
+    bad.positions[3, 1] = np.inf
+    with pytest.raises(ValueError, match="3") as got:
+        pyraycut.ase.neighbor_list("ij", bad, 3.0)
+    with pytest.raises(ValueError) as want:
+        general(bad, 3.0)
+    assert str(got.value) == str(want.value)
+
+
 # ---- periodic ----------------------------------------------------------------------------------
 
 
