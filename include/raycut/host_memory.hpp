@@ -4,6 +4,7 @@
 #pragma once
 
 #include <string>
+#include <type_traits>
 
 #include "raycut/error.hpp"
 
@@ -35,5 +36,18 @@ double available_host_memory();
 // is available (RAYCUT_MAX_MEMORY=300M; ...)". Requests below 16 MiB are not compared with the
 // system's figures (reading them costs more than such an allocation), only with RAYCUT_MAX_MEMORY.
 void require_host_memory(double bytes, const std::string& what);
+
+// Whether require_host_memory compares `bytes` with the budget at all: 16 MiB or more, or any
+// request while RAYCUT_MAX_MEMORY is set.
+bool host_memory_checked(double bytes);
+
+// The same, with <what> made by `describe()` only when the request is compared: for the checks
+// on every call's path, where formatting messages that are almost never shown was 8 % of the
+// instructions of a 1-atom cell's build and list (callgrind; 12.1 -> 11.0 us a call).
+template <class Describe,
+          std::enable_if_t<std::is_invocable_r_v<std::string, Describe>, int> = 0>  // C++17: nvcc
+void require_host_memory(double bytes, Describe&& describe) {
+  if (host_memory_checked(bytes)) require_host_memory(bytes, std::string(describe()));
+}
 
 }  // namespace raycut

@@ -29,9 +29,10 @@ Error half_with_queries() {
 // allocates (device methods check the free device memory themselves).
 void require_build_memory(const detail::Method& m, const std::string& method, std::size_t points) {
   if (m.space() != MemorySpace::host) return;
-  require_host_memory(detail::host_build_bytes_per_point * static_cast<double>(points),
-                      "method '" + method + "' over " + std::to_string(points) + " points (~" +
-                          detail::number(detail::host_build_bytes_per_point) + " B each)");
+  require_host_memory(detail::host_build_bytes_per_point * static_cast<double>(points), [&] {
+    return "method '" + method + "' over " + std::to_string(points) + " points (~" +
+           detail::number(detail::host_build_bytes_per_point) + " B each)";
+  });
 }
 
 using Clock = std::chrono::steady_clock;

@@ -128,11 +128,11 @@ void HostImagePoints::expand(const ImagePlan& plan, const float* sources, const 
   // cutoff makes ~(4/3) pi (C / L)^3 images per particle.
   const double point_bytes = 3 * sizeof(float) + sizeof(PointImage) +
                              (systems > 1 ? sizeof(std::uint32_t) : 0) + host_build_bytes_per_point;
-  require_host_memory(
-      point_bytes * static_cast<double>(total),
-      "periodic images and the method's structure over them: " + std::to_string(total) +
-          " points for " + std::to_string(targets) + " targets (~" + number(point_bytes) +
-          " B each; a box far thinner than the cutoff makes many images)");
+  require_host_memory(point_bytes * static_cast<double>(total), [&] {
+    return "periodic images and the method's structure over them: " + std::to_string(total) +
+           " points for " + std::to_string(targets) + " targets (~" + number(point_bytes) +
+           " B each; a box far thinner than the cutoff makes many images)";
+  });
   try {
     xyz_.resize(3 * total);
     image_.resize(total);

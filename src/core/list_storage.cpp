@@ -41,8 +41,9 @@ std::uint64_t* HostListStorage::prepare_offsets(std::size_t targets,
   n = targets;
   options = list_options;
   if (offsets_.size() < targets + 1)
-    require_host_memory(8.0 * static_cast<double>(targets + 1 - offsets_.size()),
-                        "the offsets of a neighbour list of " + std::to_string(targets) + " rows");
+    require_host_memory(8.0 * static_cast<double>(targets + 1 - offsets_.size()), [&] {
+      return "the offsets of a neighbour list of " + std::to_string(targets) + " rows";
+    });
   offsets_.resize(targets + 1);
   publish();
   return offsets_.data();
@@ -89,8 +90,10 @@ ListFill HostListStorage::prepare_fill(std::uint64_t entries, const ListFilter& 
       (options.distances ? growth(distances_.size(), count, 4) : 0.0) +
       (options.vectors ? growth(vectors_.size(), 3 * count, 4) : 0.0) +
       (options.shifts ? growth(shifts_.size(), 3 * count, 4) : 0.0);
-  const std::string what = "a neighbour list of " + std::to_string(entries) + " pairs (" +
-                           format_bytes(bytes_per_entry(options)) + " each)";
+  const auto what = [&] {
+    return "a neighbour list of " + std::to_string(entries) + " pairs (" +
+           format_bytes(bytes_per_entry(options)) + " each)";
+  };
   require_host_memory(more, what);
   try {
     if (!options.coo && indices_.size() < entries) indices_.resize(entries);
@@ -101,7 +104,7 @@ ListFill HostListStorage::prepare_fill(std::uint64_t entries, const ListFilter& 
     if (options.shifts && shifts_.size() < 3 * entries) shifts_.resize(3 * entries);
   } catch (const std::bad_alloc&) {
     throw Error(ErrorCode::out_of_memory,
-                "not enough host memory for " + what + ": " + format_bytes(more) + " more");
+                "not enough host memory for " + what() + ": " + format_bytes(more) + " more");
   }
   publish();
   return {filter,

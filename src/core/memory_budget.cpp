@@ -169,8 +169,12 @@ double available_host_memory() {
   return host_memory_budget().bytes;
 }
 
+bool host_memory_checked(double bytes) {
+  return bytes >= checked_from || environment_value() != nullptr;
+}
+
 void require_host_memory(double bytes, const std::string& what) {
-  if (!(bytes >= checked_from) && environment_value() == nullptr) return;
+  if (!host_memory_checked(bytes)) return;
   const MemoryBudget budget = host_memory_budget();
   if (bytes <= budget.bytes) return;
   using detail::format_bytes;

@@ -117,7 +117,7 @@ void allocate_indices(NeighbourList& list, std::uint64_t pairs) {
                      " pairs need " + format_bytes(static_cast<double>(pairs) * 4));
   };
   require_host_memory(static_cast<double>(pairs) * 4,
-                      "a neighbour list of " + std::to_string(pairs) + " pairs");
+                      [&] { return "a neighbour list of " + std::to_string(pairs) + " pairs"; });
   try {
     list.indices.resize(pairs);
   } catch (const std::bad_alloc&) {

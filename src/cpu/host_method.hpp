@@ -188,8 +188,9 @@ class HostMethod : public Method {
 
   // The count pass into offsets[1 .. n], then their running sum: offsets[i] is row i's first.
   void count_rows(const ListFilter& filter, std::uint64_t* offsets) const {
-    require_host_memory(4.0 * static_cast<double>(n_),
-                        "the row counts of a neighbour list of " + std::to_string(n_) + " rows");
+    require_host_memory(4.0 * static_cast<double>(n_), [&] {
+      return "the row counts of a neighbour list of " + std::to_string(n_) + " rows";
+    });
     std::vector<std::uint32_t> counts(n_);
     count_list(filter, counts.data(), [&](const auto& f) { run(f); });
     offsets[0] = 0;
