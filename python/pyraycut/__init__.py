@@ -365,6 +365,19 @@ class Engine:
         out = (_arrays.output(indices, like), _arrays.output(counts, like), report)
         return out + (_arrays.output(s, like),) if shifts else out
 
+    def _host_system_pairs(self, wide: np.ndarray, cutoff: float, cells: Optional[np.ndarray],
+                           flags: Optional[np.ndarray]) -> tuple:
+        """(i, j, S) of one system on the host given as the extension takes it: float64 (N, 3)
+        C-contiguous positions (the pairs decided in double from them), cells (1, 3, 3) float64
+        and flags (1, 3) bool, or None for an open system. No parsing of other input forms:
+        for callers whose inputs are in these shapes already (pyraycut.ase's Atoms). Leaves the
+        engine for another build, not for Engine.pairs."""
+        self._call(_arrays.HOST, self._engine.build, wide.astype(np.float32), cutoff, cells, flags,
+                   None, None, None, wide)
+        i, j, _, _, shifts = self._call(_arrays.HOST, self._engine.pairs, False, False, False,
+                                        True, True)
+        return i, j, shifts
+
     def _pairs(self, half: bool, distances: bool, vectors: bool, shifts: bool = False,
                cutoffs: Optional[dict] = None) -> tuple:
         """COO pairs; ``cutoffs``: per-pair cutoffs (``_cutoffs.PairCutoffs.arrays()``)."""

@@ -144,14 +144,12 @@ def _pairs(positions: np.ndarray, cutoff: Any, cell: np.ndarray, pbc: np.ndarray
         return _neighbor_list("ijS", positions, cutoff, cell=cell if periodic else None,
                               pbc=pbc if periodic else None, method=method, numbers=numbers)
     engine, key = _take_engine(method, _arrays.HOST)
-    wide = np.ascontiguousarray(positions, dtype=np.float64)  # pairs decided in double
-    engine._call(_arrays.HOST, engine._engine.build, wide.astype(np.float32), float(cutoff),
-                 np.ascontiguousarray(cell).reshape(1, 3, 3) if periodic else None,
-                 pbc.reshape(1, 3) if periodic else None, None, None, None, wide)
-    i, j, _, _, S = engine._call(_arrays.HOST, engine._engine.pairs, False, False, False, True,
-                                 True)
+    pairs = engine._host_system_pairs(
+        np.ascontiguousarray(positions, dtype=np.float64), float(cutoff),
+        np.ascontiguousarray(cell).reshape(1, 3, 3) if periodic else None,
+        pbc.reshape(1, 3) if periodic else None)
     _put_back(key, engine)
-    return i, j, S
+    return pairs
 
 
 def neighbor_list(quantities: str, atoms: Any, cutoff: Any, self_interaction: bool = False,
