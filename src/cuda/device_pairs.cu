@@ -1,7 +1,7 @@
 // The stream-ordered small-system pair list (raycut/device_pairs.hpp): brute force within each
 // system, a block per particle up to 2,048 particles and a warp per particle above, every
-// distance in double. Four launches and a memset per call,
-// all on the context's stream: count per row, scan, fill, pad. No host synchronisation and no
+// distance in double. Five launches and a memset per call, all on the context's stream: the
+// lattices (one per cell), count per row, scan, fill, pad. No host synchronisation and no
 // allocation outside the context's memory resource, so a CUDA graph captures it. Compiled with
 // --fmad=false (CMakeLists.txt): the device rounds every double as the host mirror below does.
 #include <cuda_runtime.h>
@@ -48,10 +48,12 @@ struct Input {
   std::int64_t systems = 0;     // StaticPairs::systems: a list per system (0: one list)
 };
 
-// What a row needs to enumerate its pairs: its system's particles, and where periodic, the
-// lattice rows and the reciprocal vectors that bound each pair's images.
-struct Frame {
-  std::int64_t lo = 0, hi = 0;  // the row's system: particles [lo, hi)
+// A cell and its pbc row, as the pairs of its systems need them: the lattice rows, and the
+// reciprocal vectors that bound each pair's images. Computed once per cell (lattices_kernel), not
+// per row: the Gram-Schmidt, the inverse and their square roots and divisions in double were
+// more instructions than a row's pair tests at a thousand particles.
+struct Lattice {
+  int code = 0;  // a count code (raycut/device_pairs.hpp) when the cell is bad; its rows report it
   bool periodic[3] = {false, false, false};
   bool any_periodic = false;
   double row[3][3] = {};  // lattice rows (periodic ones only used)
@@ -60,6 +62,13 @@ struct Frame {
   // r = d + S . cell, r . g[a] = f_a + S_a, so |f_a + S_a| <= |r| |g[a]| < cutoff |g[a]|.
   double g[3][3] = {};
   double reach[3] = {};  // cutoff |g[a]| on periodic axes, 0 on open ones
+};
+
+// What a row needs to enumerate its pairs: its system's particles, its own position, and its
+// system's lattice.
+struct Frame : Lattice {
+  std::int64_t lo = 0, hi = 0;  // the row's system: particles [lo, hi)
+  double xi[3] = {};            // the row's position
 };
 
 template <class Real>
@@ -85,31 +94,24 @@ __host__ __device__ std::int64_t bound(const std::int64_t* batch, std::int64_t n
   return lo;
 }
 
-// The row's frame, or a negative count code (raycut/device_pairs.hpp) for bad input of this row.
-template <class Real>
-__host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
-  for (int k = 0; k < 3; ++k)
-    if (!isfinite(load<Real>(in.xyz, 3 * i + k))) return int(count_non_finite_position);
-  std::int64_t system = 0;
-  f.lo = 0;
-  f.hi = in.n;
-  if (in.batch) {
-    system = in.batch[i];
-    if (i + 1 < in.n && in.batch[i + 1] < system) return int(count_unsorted_batch);
-    f.lo = bound(in.batch, in.n, system, false);
-    f.hi = bound(in.batch, in.n, system, true);
-  }
-  if (system < 0 || (in.systems > 0 && system >= in.systems))  // open systems too
-    return int(count_batch_out_of_range);
+// The lattices a call computes: one per cell, or per pbc row where those are more (0: open).
+__host__ __device__ std::int64_t lattice_count(const Input& in) {
   if (!in.cells) return 0;
-  if ((in.cell_count > 1 && system >= in.cell_count) ||
-      (in.pbc_count > 1 && system >= in.pbc_count))
-    return int(count_batch_out_of_range);
-  const std::int64_t c = in.cell_count > 1 ? system : 0;
-  const std::int64_t p = in.pbc_count > 1 ? system : 0;
-  // Every loop over axes is unrolled and indexes its arrays with constants only: the frame then
+  return in.cell_count > in.pbc_count ? in.cell_count : in.pbc_count;
+}
+
+// The lattice of systems with index s (cell s or 0, pbc row s or 0); its code says if it is bad.
+template <class Real>
+__host__ __device__ void make_lattice(const Input& in, std::int64_t s, Lattice& f) {
+  const std::int64_t c = in.cell_count > 1 ? s : 0;
+  const std::int64_t p = in.pbc_count > 1 ? s : 0;
+  if (c >= in.cell_count || (in.pbc && p >= in.pbc_count)) {
+    f.code = int(count_batch_out_of_range);
+    return;
+  }
+  // Every loop over axes is unrolled and indexes its arrays with constants only: the lattice then
   // lives in registers, where a runtime index (a Gram-Schmidt slot counter) put it and the
-  // arrays below in a 336-byte stack frame that the pair loop read from local memory.
+  // arrays below in a 336-byte stack frame.
 #pragma unroll
   for (int a = 0; a < 3; ++a) {
     f.periodic[a] = in.pbc ? in.pbc[3 * p + a] : true;
@@ -117,7 +119,7 @@ __host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
 #pragma unroll
     for (int k = 0; k < 3; ++k) f.row[a][k] = load<Real>(in.cells, 9 * c + 3 * a + k);
   }
-  if (!f.any_periodic) return 0;
+  if (!f.any_periodic) return;
   // The basis: periodic rows as given, open ones replaced by unit vectors orthogonal to the rest
   // (Gram-Schmidt: the periodic rows in axis order, then the open ones), so that only the
   // periodic rows decide the images. q[a] is axis a's orthonormal vector; it is projected out of
@@ -128,7 +130,10 @@ __host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
     if (!f.periodic[a]) continue;
     double w[3] = {f.row[a][0], f.row[a][1], f.row[a][2]};
     const double length = sqrt(dot(w, w));
-    if (!isfinite(length) || length == 0) return int(count_invalid_cell);
+    if (!isfinite(length) || length == 0) {
+      f.code = int(count_invalid_cell);
+      return;
+    }
 #pragma unroll
     for (int m = 0; m < a; ++m) {
       if (!f.periodic[m]) continue;
@@ -137,7 +142,10 @@ __host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
       for (int k = 0; k < 3; ++k) w[k] -= along * q[m][k];
     }
     const double rest = sqrt(dot(w, w));
-    if (!(rest > 1e-9 * length)) return int(count_invalid_cell);
+    if (!(rest > 1e-9 * length)) {
+      f.code = int(count_invalid_cell);
+      return;
+    }
 #pragma unroll
     for (int k = 0; k < 3; ++k) {
       q[a][k] = w[k] / rest;
@@ -186,7 +194,10 @@ __host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
       {m[0][1] * m[1][2] - m[0][2] * m[1][1], m[0][2] * m[1][0] - m[0][0] * m[1][2],
        m[0][0] * m[1][1] - m[0][1] * m[1][0]}};
   const double det = m[0][0] * cof[0][0] + m[0][1] * cof[0][1] + m[0][2] * cof[0][2];
-  if (!isfinite(det) || det == 0) return int(count_invalid_cell);
+  if (!isfinite(det) || det == 0) {
+    f.code = int(count_invalid_cell);
+    return;
+  }
 #pragma unroll
   for (int a = 0; a < 3; ++a) {  // inverse[k][a] = cof[a][k] / det, so g[a][k] = cof[a][k] / det
 #pragma unroll
@@ -199,8 +210,44 @@ __host__ __device__ int make_frame(const Input& in, std::int64_t i, Frame& f) {
 #pragma unroll
   for (int a = 0; a < 3; ++a)
     if (f.periodic[a]) images *= 2 * f.reach[a] + 3;
-  if (!(images <= max_images_per_pair)) return int(count_too_many_images);
-  return 0;
+  if (!(images <= max_images_per_pair)) f.code = int(count_too_many_images);
+}
+
+template <class Real>
+__global__ void lattices_kernel(Input in, Lattice* lattices, std::int64_t count) {
+  const std::int64_t s = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (s >= count || (in.run_if && *in.run_if == 0)) return;
+  Lattice f;
+  make_lattice<Real>(in, s, f);
+  lattices[s] = f;
+}
+
+// The row's frame, or a negative count code (raycut/device_pairs.hpp) for bad input of this row.
+template <class Real>
+__host__ __device__ int make_frame(const Input& in, std::int64_t i, const Lattice* lattices,
+                                   Frame& f) {
+#pragma unroll
+  for (int k = 0; k < 3; ++k) {
+    f.xi[k] = load<Real>(in.xyz, 3 * i + k);
+    if (!isfinite(f.xi[k])) return int(count_non_finite_position);
+  }
+  std::int64_t system = 0;
+  f.lo = 0;
+  f.hi = in.n;
+  if (in.batch) {
+    system = in.batch[i];
+    if (i + 1 < in.n && in.batch[i + 1] < system) return int(count_unsorted_batch);
+    f.lo = bound(in.batch, in.n, system, false);
+    f.hi = bound(in.batch, in.n, system, true);
+  }
+  if (system < 0 || (in.systems > 0 && system >= in.systems))  // open systems too
+    return int(count_batch_out_of_range);
+  if (!in.cells) return 0;
+  if ((in.cell_count > 1 && system >= in.cell_count) ||
+      (in.pbc_count > 1 && system >= in.pbc_count))
+    return int(count_batch_out_of_range);
+  static_cast<Lattice&>(f) = lattices[in.cell_count > 1 || in.pbc_count > 1 ? system : 0];
+  return f.code;
 }
 
 // The shifts [first, last] along one periodic axis from their bounds in double; false: none. A
@@ -226,7 +273,7 @@ __host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f
                                                  std::int64_t j, Visit&& visit) {
   double d[3];
 #pragma unroll
-  for (int k = 0; k < 3; ++k) d[k] = load<Real>(in.xyz, 3 * j + k) - load<Real>(in.xyz, 3 * i + k);
+  for (int k = 0; k < 3; ++k) d[k] = load<Real>(in.xyz, 3 * j + k) - f.xi[k];
   if (!f.any_periodic) {
     if (i == j || !(dot(d, d) < in.cutoff2)) return 0;
     const int zero[3] = {0, 0, 0};
@@ -336,14 +383,15 @@ struct Team {
 };
 
 template <class Real, int Warps>
-__global__ __launch_bounds__(block_threads) void count_rows(Input in, unsigned long long* counts,
+__global__ __launch_bounds__(block_threads) void count_rows(Input in, const Lattice* lattices,
+                                                            unsigned long long* counts,
                                                             int* status) {
   using T = Team<Warps>;
   const std::int64_t row = T::row();
   // Whole teams leave together: their bounds are the row's.
   if (row >= in.n || (in.run_if && *in.run_if == 0)) return;
   Frame f;
-  const int bad = make_frame<Real>(in, row, f);
+  const int bad = make_frame<Real>(in, row, lattices, f);
   if (bad) {
     if (T::rank() == 0) atomicMin(status, bad);
     return;
@@ -370,15 +418,15 @@ __host__ __device__ ListSlots list_slots(const Input& in, const Frame& f, std::i
 }
 
 template <class Real, int Warps>
-__global__ __launch_bounds__(block_threads) void fill_rows(Input in,
+__global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Lattice* lattices,
                                                            const unsigned long long* offsets,
                                                            StaticPairs out) {
   using T = Team<Warps>;
   const std::int64_t row = T::row();
   const int rank = T::rank();
-  if (row >= in.n) return;
+  if (row >= in.n || (in.run_if && *in.run_if == 0)) return;
   Frame f;
-  if (make_frame<Real>(in, row, f)) return;
+  if (make_frame<Real>(in, row, lattices, f)) return;
   // A list per system: this system's entries from s * capacity, counted from its first row.
   const ListSlots slots = list_slots(in, f, row, offsets, out);
   const unsigned long long start = offsets[row] - slots.origin;
@@ -525,10 +573,13 @@ void host_pass(const Input& in, const StaticPairs& out) {
   if (in.run_if && *in.run_if == 0) return;
   const std::size_t lists = out.systems ? out.systems : 1;
   std::vector<std::uint64_t> written(lists, 0);  // by list
+  std::vector<Lattice> lattices(static_cast<std::size_t>(lattice_count(in)));
+  for (std::size_t s = 0; s < lattices.size(); ++s)
+    make_lattice<Real>(in, static_cast<std::int64_t>(s), lattices[s]);
   int status = 0;
   for (std::int64_t row = 0; row < in.n; ++row) {
     Frame f;
-    if (const int bad = make_frame<Real>(in, row, f)) {
+    if (const int bad = make_frame<Real>(in, row, lattices.data(), f)) {
       status = std::min(status, bad);
       continue;
     }
@@ -566,20 +617,23 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
   const std::size_t n = systems.size;
 
   const auto stream = static_cast<cudaStream_t>(ctx.stream);
-  // Temporaries in one block: per-row counts (and a zero past them), offsets, the status word
-  // and the scan's storage.
+  // Temporaries in one block: per-row counts (and a zero past them), offsets, the status word,
+  // the lattices and the scan's storage.
   std::size_t scan_bytes = 0;
   RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(
       nullptr, scan_bytes, static_cast<unsigned long long*>(nullptr),
       static_cast<unsigned long long*>(nullptr), static_cast<std::int64_t>(n + 1), stream));
   const std::size_t counts_bytes = align_up((n + 1) * sizeof(unsigned long long) + sizeof(int));
   const std::size_t offsets_bytes = align_up((n + 1) * sizeof(unsigned long long));
-  const std::size_t bytes = counts_bytes + offsets_bytes + align_up(scan_bytes);
+  const auto lattices_wanted = static_cast<std::size_t>(lattice_count(in));
+  const std::size_t lattices_bytes = align_up(lattices_wanted * sizeof(Lattice));
+  const std::size_t bytes = counts_bytes + offsets_bytes + lattices_bytes + align_up(scan_bytes);
   char* block = static_cast<char*>(allocate(ctx, bytes));
   auto* counts = reinterpret_cast<unsigned long long*>(block);
   auto* status = reinterpret_cast<int*>(counts + n + 1);
   auto* offsets = reinterpret_cast<unsigned long long*>(block + counts_bytes);
-  void* scan_storage = block + counts_bytes + offsets_bytes;
+  auto* lattices = reinterpret_cast<Lattice*>(block + counts_bytes + offsets_bytes);
+  void* scan_storage = block + counts_bytes + offsets_bytes + lattices_bytes;
   try {
     RAYCUT_CUDA_CHECK(cudaMemsetAsync(counts, 0, counts_bytes, stream));
     const bool wide = systems.scalar == Scalar::float64;
@@ -588,11 +642,17 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
     const bool block_per_row = n <= rows_for_block_teams;
     const unsigned rows_blocks = static_cast<unsigned>(
         block_per_row ? n : (n * warp_size + block_threads - 1) / block_threads);
+    if (n > 0 && lattices_wanted > 0) {
+      const auto lattice = wide ? lattices_kernel<double> : lattices_kernel<float>;
+      lattice<<<static_cast<unsigned>((lattices_wanted + 63) / 64), 64, 0, stream>>>(
+          in, lattices, static_cast<std::int64_t>(lattices_wanted));
+      RAYCUT_CUDA_CHECK_LAUNCH();
+    }
     if (n > 0) {
       const auto count =
           wide ? (block_per_row ? count_rows<double, block_warps> : count_rows<double, 1>)
                : (block_per_row ? count_rows<float, block_warps> : count_rows<float, 1>);
-      count<<<rows_blocks, block_threads, 0, stream>>>(in, counts, status);
+      count<<<rows_blocks, block_threads, 0, stream>>>(in, lattices, counts, status);
       RAYCUT_CUDA_CHECK_LAUNCH();
     }
     RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scan_storage, scan_bytes, counts, offsets,
@@ -601,7 +661,7 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
       const auto fill =
           wide ? (block_per_row ? fill_rows<double, block_warps> : fill_rows<double, 1>)
                : (block_per_row ? fill_rows<float, block_warps> : fill_rows<float, 1>);
-      fill<<<rows_blocks, block_threads, 0, stream>>>(in, offsets, out);
+      fill<<<rows_blocks, block_threads, 0, stream>>>(in, lattices, offsets, out);
       RAYCUT_CUDA_CHECK_LAUNCH();
     }
     const std::size_t entries = out.capacity * std::max<std::size_t>(out.systems, 1);
