@@ -64,6 +64,9 @@ usage: raycut_latency_bench [options]
   --all                the small path on every workload (default: where
                        raycut::prefer_small_systems says so)
   --crossover          also single systems of 2000, 4000 and 8000 particles, every path
+  --search S           the small path's sources: automatic (default), all-pairs or cells
+                       (the rows' interface is then cpp-all-pairs or cpp-cells, and the
+                       engine's rows are left out)
   --reps R             timed repetitions of each loop (default 30, at least 1)
   --min-loop-ms T      a timed loop lasts at least this long (default 2)
   --seed S             positions' random seed (default 1)
@@ -85,6 +88,8 @@ struct Options {
   std::vector<std::pair<std::size_t, std::size_t>> batches = {{32, 100}, {256, 100}, {512, 128}};
   bool all = false;
   bool crossover = false;
+  raycut::SourceSearch search = raycut::SourceSearch::automatic;
+  std::string search_name;  // as given; empty for automatic
   int reps = 30;
   double min_loop_ms = 2.0;
   std::uint64_t seed = 1;
@@ -140,6 +145,16 @@ Options parse(int argc, char** argv, bool& help) {
       o.all = true;
     } else if (arg == "--crossover") {
       o.crossover = true;
+    } else if (arg == "--search") {
+      o.search_name = value();
+      if (o.search_name == "all-pairs")
+        o.search = raycut::SourceSearch::all_pairs;
+      else if (o.search_name == "cells")
+        o.search = raycut::SourceSearch::cells;
+      else if (o.search_name == "automatic")
+        o.search_name.clear();
+      else
+        throw BadArgument(arg + ": '" + o.search_name + "' is not automatic, all-pairs or cells");
     } else if (arg == "--reps") {
       o.reps = static_cast<int>(std::min<std::size_t>(parse_count(value(), arg), 1 << 20));
     } else if (arg == "--min-loop-ms") {
@@ -308,13 +323,15 @@ std::int64_t measure_small(const Workload& w, DeviceWorkload& d, cudaStream_t st
   const raycut::Context ctx{stream, nullptr};
   const auto pad = static_cast<std::int64_t>(d.n);
   raycut::StaticPairBuffer sizing(1024, ctx);
+  raycut::PairOptions options;
+  options.search = o.search;
   const std::int64_t count =
-      raycut::list_pairs_small_systems_growing(ctx, d.small, kCutoff, {}, sizing);
+      raycut::list_pairs_small_systems_growing(ctx, d.small, kCutoff, options, sizing);
   sizing = {};
   const auto capacity = static_cast<std::size_t>(std::ceil(1.25 * static_cast<double>(count)));
   raycut::StaticPairBuffer pairs(std::max<std::size_t>(capacity, 1), ctx);
   const raycut::StaticPairs out = pairs.view(pad);
-  auto call = [&] { raycut::list_pairs_small_systems(ctx, d.small, kCutoff, {}, out); };
+  auto call = [&] { raycut::list_pairs_small_systems(ctx, d.small, kCutoff, options, out); };
   auto sync = [&] { check_cuda(cudaStreamSynchronize(stream), "cudaStreamSynchronize"); };
 
   // The graph first: its kernel count and whether it captured describe the eager call too.
@@ -337,7 +354,8 @@ std::int64_t measure_small(const Workload& w, DeviceWorkload& d, cudaStream_t st
       capture_error.empty() ? std::to_string(kernel_nodes(graph)) : std::string();
   const std::string syncs = capture_error.empty() ? "0" : "";
 
-  Row row{"lj-pbc", w.systems, w.per_system, "cpp", "eager", "static", 0, kernels, syncs};
+  const std::string interface = o.search_name.empty() ? "cpp" : "cpp-" + o.search_name;
+  Row row{"lj-pbc", w.systems, w.per_system, interface, "eager", "static", 0, kernels, syncs};
   row.us = us_per_call(call, sync, o.reps, o.min_loop_ms);
   rows.push_back(row);
   checks.expect(
@@ -455,6 +473,7 @@ int run(const Options& o) {
         small_count = measure_small(w, d, stream, o, rows, checks);
       else
         std::printf("  small path skipped (prefer_small_systems is false; --all measures it)\n");
+      if (!o.search_name.empty()) continue;  // a forced search: its small-path rows only
       const std::uint64_t engine_count = measure_engine(w, d, stream, o, rows);
       // The engine decides in float32 and the small path in double: a pair exactly at the
       // cutoff could differ in principle, so a difference is reported, not failed.

@@ -6,10 +6,17 @@ small systems"), in the same CSV columns.
 Workload ``lj-pbc``: a periodic Lennard-Jones liquid, density 0.8442, cutoff 2.5, positions
 uniform random in a cube of side (n / 0.8442)^(1/3) per system, float32; single systems
 (``--sizes``) and batches (``--batches SxN``: S systems of N particles, each its own cube, one
-cell per system, ``batch`` the sorted int64 system index). Each workload is measured twice:
+cell per system, ``batch`` the sorted int64 system index). Each workload is measured so:
 
 - capacity ``exact``: ``neighbor_list("ijS", x, 2.5, cell=..., pbc=True, batch=...)``;
-- capacity ``static``: the same with ``max_pairs`` = 1.25 x the true count (found once);
+- capacity ``static``: ``neighbor_list("ijSc", ..., max_pairs=K)``, K = 1.25 x the true count
+  (found once): the count comes back as a tensor for the caller to check, so the call reads
+  nothing back (the static-capacity contract);
+- capacity ``static-checked``: ``"ijS"`` with the same ``max_pairs``: the package checks the
+  count itself, which reads it back (one wait a call);
+- mode ``graph``, capacity ``static``: the ``static`` call captured once in a CUDA graph
+  (``torch.cuda.graph``) and replayed (CUDA only; a row only where the capture succeeds, which
+  proves the call does not synchronise; the calls that plan on the host cannot be captured);
 - interface ``python-torch-op``, capacity ``exact``: the operator ``torch.ops.raycut``'s Python
   wrapper called directly in eager mode (where its CUDA kernel is built), against the package's
   zero-copy path above: which of the two eager CUDA calls should take.
@@ -142,6 +149,27 @@ def workload(torch, systems: int, per_system: int, device: str, generator):
     return x.to(device), cell.to(device), batch
 
 
+def captured(torch, call: Callable[[], object]) -> Optional[Callable[[], object]]:
+    """`call` captured in a CUDA graph (after one warm-up call on a side stream, as PyTorch asks),
+    as a function that replays it; None when the capture fails: the call synchronises or
+    allocates outside the graph's pool (printed, so the missing row is explained)."""
+    stream = torch.cuda.Stream()
+    stream.wait_stream(torch.cuda.current_stream())
+    with torch.cuda.stream(stream):
+        call()
+    torch.cuda.current_stream().wait_stream(stream)
+    graph = torch.cuda.CUDAGraph()
+    try:
+        with torch.cuda.graph(graph):
+            call()
+    except Exception as e:  # noqa: BLE001 - any failure means no graph row, said why
+        print(f"  no CUDA graph: the capture failed ({type(e).__name__}: {str(e)[:120]})",
+              flush=True)
+        torch.cuda.synchronize()
+        return None
+    return graph.replay
+
+
 def profile_counts(torch, call: Callable[[], object], sync: Callable[[], None],
                    calls: int, table: Optional[str] = None) -> tuple[str, str]:
     """kernels and syncs per call (as text for the CSV) over `calls` profiled calls; `table`: a
@@ -271,11 +299,15 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
         max_pairs = max(math.ceil(1.25 * count), 1)
 
         def static():
+            return pyraycut.neighbor_list("ijSc", x, CUTOFF, cell=cell, pbc=True, batch=batch,
+                                          max_pairs=max_pairs)
+
+        def static_checked():
             return pyraycut.neighbor_list("ijS", x, CUTOFF, cell=cell, pbc=True, batch=batch,
                                           max_pairs=max_pairs)
 
         try:
-            entries = len(static()[0])
+            entries = len(static_checked()[0])
         except ValueError as e:  # max_pairs needs the operators (built with torch)
             raise SystemExit(f"python_latency: max_pairs on {args.device} tensors: {e}") from None
         if entries != max_pairs:
@@ -284,20 +316,28 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
         def operator():
             return ops.neighbor_list("ijS", x, CUTOFF, cell, True, batch, False, None)
 
-        calls = [("python-torch", "static", static), ("python-torch", "exact", exact)]
+        calls = [("python-torch", "eager", "static", static),
+                 ("python-torch", "eager", "static-checked", static_checked),
+                 ("python-torch", "eager", "exact", exact)]
+        if cuda:
+            replay = captured(torch, static)
+            if replay is not None:
+                calls.append(("python-torch", "graph", "static", replay))
         if cuda and ops is not None and ops._CUDA_KERNEL:
-            calls.append(("python-torch-op", "exact", operator))
-        for interface, capacity, call in calls:
+            calls.append(("python-torch-op", "eager", "exact", operator))
+        for interface, mode, capacity, call in calls:
             us = median_us_per_call(call, sync, args.reps, args.min_loop_ms)
             table = (os.path.join(args.profile_tables, f"profile-{systems}x{per_system}-"
-                                  f"{interface}-{capacity}.txt") if args.profile_tables else None)
+                                  f"{interface}-{mode}-{capacity}.txt")
+                     if args.profile_tables else None)
             kernels, syncs = (profile_counts(torch, call, sync, args.profile_calls, table)
                               if cuda else ("", ""))
             row = {"workload": "lj-pbc", "systems": systems, "n_per_system": per_system,
-                   "interface": interface, "mode": "eager", "capacity": capacity,
+                   "interface": interface, "mode": mode, "capacity": capacity,
                    "us_per_call": f"{us:.3f}", "kernels": kernels, "syncs": syncs, **machine}
             rows.append(row)
-            print(f"lj-pbc {systems:>4} x {per_system:<6} {interface:<15} {capacity:<6} "
+            print(f"lj-pbc {systems:>4} x {per_system:<6} {interface:<15} {mode:<5} "
+                  f"{capacity:<14} "
                   f"{us:10.2f} us  "
                   f"kernels {kernels or '-':>5}  syncs {syncs or '-':>5}  ({count} pairs)",
                   flush=True)

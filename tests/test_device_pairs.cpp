@@ -66,22 +66,38 @@ struct HostPairs {
 // Where a test runs the pass: on the GPU, or its enumeration on the host
 // (detail::list_pairs_small_systems_on_host: the same arithmetic, order and codes), which
 // machines without a GPU run.
-enum class Where { host, device };
+// and how a row finds its sources (every particle of its system, or the cells around it: the
+// same pairs, in an order of their own).
+enum class Place { host, device };
+struct Where {
+  Place place = Place::device;
+  raycut::SourceSearch search = raycut::SourceSearch::all_pairs;
+};
 
-void PrintTo(Where w, std::ostream* os) {
-  *os << (w == Where::host ? "host" : "device");
+std::string name_of(const Where& w) {
+  return std::string(w.place == Place::host ? "host" : "device") +
+         (w.search == raycut::SourceSearch::cells ? "_cells" : "_all_pairs");
 }
 
-bool available(Where where) {
-  return where == Where::host || have_gpu();
+void PrintTo(const Where& w, std::ostream* os) {
+  *os << name_of(w);
 }
+
+bool available(const Where& where) {
+  return where.place == Place::host || have_gpu();
+}
+
+const auto every_where = ::testing::Values(Where{Place::host, raycut::SourceSearch::all_pairs},
+                                           Where{Place::host, raycut::SourceSearch::cells},
+                                           Where{Place::device, raycut::SourceSearch::all_pairs},
+                                           Where{Place::device, raycut::SourceSearch::cells});
 
 // The pass over one batch: positions (Real), per-system boxes, batch values. The count as
 // written (negative codes included), the pairs and a few padding entries past them.
 template <class Real>
 HostPairs run_pass(const std::vector<Real>& xyz, const std::vector<Box>& boxes,
                    const std::vector<std::int64_t>& batch, double cutoff, bool half,
-                   std::size_t capacity, Where where = Where::device) {
+                   std::size_t capacity, Where where = {}) {
   const std::size_t n = xyz.size() / 3;
   std::vector<Real> cells;
   std::vector<std::uint8_t> pbc;
@@ -104,21 +120,22 @@ HostPairs run_pass(const std::vector<Real>& xyz, const std::vector<Box>& boxes,
     s.batch = batch.empty() ? nullptr : static_cast<const std::int64_t*>(b);
   };
   HostPairs out;
-  if (where == Where::host) {
+  const raycut::PairOptions options{half, where.search};
+  if (where.place == Place::host) {
     describe(xyz.data(), cells.data(), pbc.data(), batch.data());
     out.i.resize(capacity);
     out.j.resize(capacity);
     out.shifts.resize(3 * capacity);
     raycut::StaticPairs to{out.i.data(), out.j.data(), out.shifts.data(),
                            &out.count,   capacity,     std::int64_t(n)};
-    raycut::detail::list_pairs_small_systems_on_host(s, cutoff, {half}, to);
+    raycut::detail::list_pairs_small_systems_on_host(s, cutoff, options, to);
     return out;
   }
   DeviceVector d_xyz(xyz), d_cells(cells), d_pbc(pbc), d_batch(batch);
   describe(d_xyz.p, d_cells.p, d_pbc.p, d_batch.p);
   raycut::Context ctx;
   raycut::StaticPairBuffer buffer(capacity, ctx);
-  raycut::list_pairs_small_systems(ctx, s, cutoff, {half}, buffer.view(std::int64_t(n)));
+  raycut::list_pairs_small_systems(ctx, s, cutoff, options, buffer.view(std::int64_t(n)));
   out.count = to_host(buffer.count(), 1)[0];
   const std::size_t copied =
       std::min(capacity, std::size_t(std::max<std::int64_t>(out.count, 0)) + 8);
@@ -251,6 +268,59 @@ TEST_P(DevicePairsOn, EveryFamilyAgainstTheDoubleOracle) {
   }
 }
 
+// Systems large enough for several cells a side (the families above mostly fit one): periodic,
+// triclinic, a slab (its open axis cut by its extent), an open cloud, a batch of three boxes,
+// and unwrapped float64, each against the oracle; with cells, a row's pairs then come cell by
+// cell, which shows that the cells were used.
+TEST_P(DevicePairsOn, LargerSystemsAgainstTheDoubleOracle) {
+  const Where where = GetParam();
+  if (!available(where)) GTEST_SKIP() << "no CUDA device";
+  for (bool half : {false, true}) {
+    SCOPED_TRACE(half ? "half" : "full");
+    expect_exact(uniform(1200, 0, 15, 40), {cubic(15)}, {}, 2.5, half, "cube, 6 cells a side",
+                 where);
+    Box tri;
+    tri.cell[0][0] = 14;
+    tri.cell[1][0] = 3;
+    tri.cell[1][1] = 13;
+    tri.cell[2][0] = -2;
+    tri.cell[2][1] = 2;
+    tri.cell[2][2] = 12;
+    tri.pbc[0] = tri.pbc[1] = tri.pbc[2] = true;
+    expect_exact(uniform(1000, 0, 13, 41), {tri}, {}, 2.2, half, "triclinic", where);
+    Box slab = cubic(14);
+    slab.pbc[2] = false;
+    std::vector<float> slab_xyz = uniform(800, 0, 14, 42);
+    for (std::size_t k = 2; k < slab_xyz.size(); k += 3) slab_xyz[k] *= 6.0f / 14.0f;
+    expect_exact(slab_xyz, {slab}, {}, 2.0, half, "slab", where);
+    expect_exact(uniform(1000, -6, 6, 43), {}, {}, 1.5, half, "open cloud", where);
+    std::vector<float> batch_xyz;
+    std::vector<std::int64_t> batch;
+    std::vector<Box> boxes;
+    for (int s = 0; s < 3; ++s) {
+      const double l = 10.0 + s;
+      const std::vector<float> part = uniform(400, 0, l, 44 + s);
+      batch_xyz.insert(batch_xyz.end(), part.begin(), part.end());
+      batch.insert(batch.end(), 400, s);
+      boxes.push_back(cubic(l));
+    }
+    expect_exact(batch_xyz, boxes, batch, 2.5, half, "batch of three boxes", where);
+    std::mt19937 rng(45);
+    std::uniform_real_distribution<double> u(0, 12);
+    std::uniform_int_distribution<int> wraps(-1000, 1000);
+    std::vector<double> far(3 * 800);
+    for (double& v : far) v = u(rng) + 12.0 * wraps(rng);
+    expect_exact(far, {cubic(12)}, {}, 2.0, half, "float64 unwrapped by 1000 boxes", where);
+  }
+  const HostPairs cube =
+      run_pass(uniform(1200, 0, 15, 40), {cubic(15)}, {}, 2.5, false, 1 << 20, where);
+  bool ascending = true;
+  for (std::int64_t p = 1; p < cube.count; ++p)
+    if (cube.i[p] == cube.i[p - 1] && cube.j[p] < cube.j[p - 1]) ascending = false;
+  EXPECT_EQ(ascending, where.search == raycut::SourceSearch::all_pairs)
+      << "all pairs list j ascending in a row; cells, cell by cell";
+}
+
 TEST_P(DevicePairsOn, CapacityShortByOneIsReportedAndTheRestIsExact) {
   const Where where = GetParam();
   if (!available(where)) GTEST_SKIP() << "no CUDA device";
@@ -265,7 +335,7 @@ TEST_P(DevicePairsOn, CapacityShortByOneIsReportedAndTheRestIsExact) {
     ASSERT_EQ(cut.j[p], exact.j[p]) << p;
     ASSERT_EQ(cut.shifts[3 * p + 2], exact.shifts[3 * p + 2]) << p;
   }
-  if (where == Where::host) return;
+  if (where.place == Place::host) return;
   // The growing helper starts from nothing and ends with every pair.
   DeviceVector d_xyz(xyz);
   std::vector<double> cell = {5.3, 0, 0, 0, 5.3, 0, 0, 0, 5.3};
@@ -307,7 +377,7 @@ TEST_P(DevicePairsOn, AListPerSystemEqualsAPassPerSystem) {
   std::size_t first = 0;
   for (std::size_t s = 0; s < systems; ++s) {
     const std::vector<float> part(xyz.begin() + 3 * first, xyz.begin() + 3 * (first + sizes[s]));
-    alone[s] = run_pass(part, {boxes[s]}, {}, cutoff, false, 1 << 14, Where::host);
+    alone[s] = run_pass(part, {boxes[s]}, {}, cutoff, false, 1 << 14, {Place::host, where.search});
     for (auto& v : {&alone[s].i, &alone[s].j})
       for (std::int64_t& x : *v) x += std::int64_t(first);
     first += sizes[s];
@@ -327,14 +397,15 @@ TEST_P(DevicePairsOn, AListPerSystemEqualsAPassPerSystem) {
   raycut::DeviceSystems sys;
   sys.size = n;
   sys.cell_count = sys.pbc_count = systems;
-  if (where == Where::host) {
+  const raycut::PairOptions options{false, where.search};
+  if (where.place == Place::host) {
     sys.positions = xyz.data();
     sys.cells = cells.data();
     sys.pbc = reinterpret_cast<const bool*>(pbc.data());
     sys.batch = batch.data();
     raycut::StaticPairs out{i.data(), j.data(), shifts.data(), count.data(), k, std::int64_t(n)};
     out.systems = systems;
-    raycut::detail::list_pairs_small_systems_on_host(sys, cutoff, {}, out);
+    raycut::detail::list_pairs_small_systems_on_host(sys, cutoff, options, out);
   } else {
     DeviceVector d_xyz(xyz), d_cells(cells), d_pbc(pbc), d_batch(batch), d_i(i), d_j(j),
         d_count(count), d_shifts(shifts);
@@ -349,7 +420,7 @@ TEST_P(DevicePairsOn, AListPerSystemEqualsAPassPerSystem) {
                             k,
                             std::int64_t(n)};
     out.systems = systems;
-    raycut::list_pairs_small_systems(raycut::Context{}, sys, cutoff, {}, out);
+    raycut::list_pairs_small_systems(raycut::Context{}, sys, cutoff, options, out);
     CUDA_OK(cudaDeviceSynchronize());
     i = to_host(out.i, systems * k);
     j = to_host(out.j, systems * k);
@@ -544,10 +615,8 @@ TEST_P(DevicePairsOn, PairsAtTheCutoffAreDecidedAsOnTheHost) {
   EXPECT_EQ(std::vector<std::int64_t>(found.j.begin(), found.j.begin() + found.count), j);
 }
 
-INSTANTIATE_TEST_SUITE_P(Where, DevicePairsOn, ::testing::Values(Where::host, Where::device),
-                         [](const auto& info) {
-                           return std::string(info.param == Where::host ? "host" : "device");
-                         });
+INSTANTIATE_TEST_SUITE_P(Where, DevicePairsOn, every_where,
+                         [](const auto& info) { return name_of(info.param); });
 
 // A step (positions copied in, the pass) captured in global mode, replayed 1,000 times over new
 // positions, against the eager pass on the same positions, bit for bit.
@@ -698,12 +767,10 @@ std::vector<std::string> unscaled_families() {
 }
 
 INSTANTIATE_TEST_SUITE_P(Families, DevicePairsFamilies,
-                         ::testing::Combine(::testing::ValuesIn(unscaled_families()),
-                                            ::testing::Values(Where::host, Where::device)),
+                         ::testing::Combine(::testing::ValuesIn(unscaled_families()), every_where),
                          [](const auto& info) {
                            std::string name =
-                               std::get<0>(info.param) +
-                               (std::get<1>(info.param) == Where::host ? "_host" : "_device");
+                               std::get<0>(info.param) + "_" + name_of(std::get<1>(info.param));
                            for (char& ch : name)
                              if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
                            return name;

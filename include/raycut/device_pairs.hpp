@@ -37,10 +37,30 @@ struct DeviceSystems {
   const std::int64_t* batch = nullptr;
 };
 
+// Which sources a row of the small-system pass tests (the results are the same; the work is not).
+enum class SourceSearch {
+  // cells where a system is large enough to gain from them (small_pass_uses_cells), else every
+  // particle of the system
+  automatic,
+  all_pairs,  // every particle of the row's system: n_s^2 tests, the least fixed cost
+  // the particles of the 27 cells around the row's own, cells at least a cutoff wide along each
+  // lattice axis: about 27 cells' worth of tests a row, for four more launches (a sort)
+  cells,
+};
+
+// The automatic choice: cells when the systems hold 512 particles or more on average (the host
+// knows the number of systems from the cells, the pbc rows or a list per system, else takes 1).
+inline constexpr double cells_from_particles_per_system = 512;
+constexpr bool small_pass_uses_cells(std::size_t particles, std::size_t systems) {
+  return static_cast<double>(particles) >=
+         cells_from_particles_per_system * static_cast<double>(systems > 0 ? systems : 1);
+}
+
 struct PairOptions {
   // Each pair once: of (i, j, S) and (j, i, -S), the one with i < j, or i == j and S
   // lexicographically positive.
   bool half = false;
+  SourceSearch search = SourceSearch::automatic;
   // A device int read by the pass's kernels: 0 leaves the outputs as they are (the pass does no
   // work), anything else runs it. Null: always run. What lets a captured step rebuild a list only
   // when needed (DeviceVerletList) without a conditional on the host.
@@ -61,11 +81,12 @@ constexpr bool prefer_small_systems(std::size_t particles, std::size_t systems) 
 
 // Every pair (i, j, S) of the same system with r = x_j - x_i + S . cell, |r| < cutoff, except
 // (i, i, 0), decided in double precision from the positions as given (float32 or float64): the
-// float64 answer at every box size, with no band. Brute force within each system in one pass
-// (a block or a warp per particle), so the work is the sum over systems of n_s^2 times the images a
-// pair has: the path for systems up to about a thousand particles (docs/streams.md gives the
-// crossover). Pairs come row by row (i ascending), then by j ascending, then by S
-// lexicographically.
+// float64 answer at every box size, with no band. A row's sources are its system's particles, or
+// those of the cells around its own (PairOptions::search), each pair's images bounded and decided
+// in double (docs/streams.md gives the crossover with the Engine). Pairs come row by row (i
+// ascending); within a row, by j ascending (all pairs) or cell by cell in a fixed order, j
+// ascending within a cell (cells); then by S lexicographically. The same input always gives the
+// same bytes.
 //
 // Queues everything on ctx.stream and returns without waiting. Host-side argument errors
 // (cutoff not finite and positive, null arrays, counts that do not fit) throw Error before any

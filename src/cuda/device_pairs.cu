@@ -5,11 +5,13 @@
 // allocation outside the context's memory resource, so a CUDA graph captures it. Compiled with
 // --fmad=false (CMakeLists.txt): the device rounds every double as the host mirror below does.
 #include <cuda_runtime.h>
+#include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <string>
 #include <utility>
 #include <vector>
@@ -46,6 +48,7 @@ struct Input {
   bool half = false;
   const int* run_if = nullptr;  // PairOptions::run_if
   std::int64_t systems = 0;     // StaticPairs::systems: a list per system (0: one list)
+  bool by_cells = false;        // the sources by cells (PairOptions::search)
 };
 
 // A cell and its pbc row, as the pairs of its systems need them: the lattice rows, and the
@@ -60,8 +63,10 @@ struct Lattice {
   // g[a]: column a of the inverse of the basis (periodic rows, open ones completed by an
   // orthonormal complement): f_a = d . g[a] is d's coordinate along row a, and for every image
   // r = d + S . cell, r . g[a] = f_a + S_a, so |f_a + S_a| <= |r| |g[a]| < cutoff |g[a]|.
-  double g[3][3] = {};
-  double reach[3] = {};  // cutoff |g[a]| on periodic axes, 0 on open ones
+  double g[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  // cutoff |g[a]|: no pair within the cutoff is farther apart than this along axis a (open axes
+  // too: the cells use it)
+  double reach[3] = {};
 };
 
 // What a row needs to enumerate its pairs: its system's particles, its own position, and its
@@ -109,9 +114,11 @@ __host__ __device__ void make_lattice(const Input& in, std::int64_t s, Lattice& 
     f.code = int(count_batch_out_of_range);
     return;
   }
-  // Every loop over axes is unrolled and indexes its arrays with constants only: the lattice then
-  // lives in registers, where a runtime index (a Gram-Schmidt slot counter) put it and the
-  // arrays below in a 336-byte stack frame.
+#pragma unroll
+  for (int a = 0; a < 3; ++a) f.reach[a] = in.cutoff;  // the axes themselves, while all open
+    // Every loop over axes is unrolled and indexes its arrays with constants only: the lattice then
+    // lives in registers, where a runtime index (a Gram-Schmidt slot counter) put it and the
+    // arrays below in a 336-byte stack frame.
 #pragma unroll
   for (int a = 0; a < 3; ++a) {
     f.periodic[a] = in.pbc ? in.pbc[3 * p + a] : true;
@@ -202,7 +209,7 @@ __host__ __device__ void make_lattice(const Input& in, std::int64_t s, Lattice& 
   for (int a = 0; a < 3; ++a) {  // inverse[k][a] = cof[a][k] / det, so g[a][k] = cof[a][k] / det
 #pragma unroll
     for (int k = 0; k < 3; ++k) f.g[a][k] = cof[a][k] / det;
-    f.reach[a] = f.periodic[a] ? in.cutoff * sqrt(dot(f.g[a], f.g[a])) : 0;
+    f.reach[a] = in.cutoff * sqrt(dot(f.g[a], f.g[a]));
   }
   // The images a pair can have, ~prod(2 reach + 1) over the periodic axes (+ 2 for rounding):
   // past the limit a cell far thinner than the cutoff would keep the GPU busy for hours.
@@ -242,7 +249,11 @@ __host__ __device__ int make_frame(const Input& in, std::int64_t i, const Lattic
   }
   if (system < 0 || (in.systems > 0 && system >= in.systems))  // open systems too
     return int(count_batch_out_of_range);
-  if (!in.cells) return 0;
+  if (!in.cells) {
+#pragma unroll
+    for (int a = 0; a < 3; ++a) f.reach[a] = in.cutoff;
+    return 0;
+  }
   if ((in.cell_count > 1 && system >= in.cell_count) ||
       (in.pbc_count > 1 && system >= in.pbc_count))
     return int(count_batch_out_of_range);
@@ -329,6 +340,265 @@ __host__ __device__ std::int64_t first_source(const Input& in, const Frame& f, s
   return in.half ? i : f.lo;
 }
 
+// ---- Cells (SourceSearch::cells) ------------------------------------------------------------
+// Each system gets a grid over its particles' coordinates along the lattice axes, c_a = x . g[a]:
+// periodic axes wrapped into [0, 1), open ones over the system's extent. A pair within the
+// cutoff is less than reach[a] apart along axis a (|r . g[a]| <= |r| |g[a]|), so with cells at
+// least that wide, plus the rounding of c_a, its particles lie in neighbouring cells (across
+// the wrap on periodic axes). A periodic axis gets 1 cell or at least 3 (with 2, the cells
+// before and after a row's own are the same one, and its sources would come twice). A system's
+// cells are at most its particles, so system s's cells are numbered from its first particle lo
+// on: one table of N cell starts serves every system, and no host ever needs their number.
+
+// Order-preserving 64-bit image of a double: atomicMax over it is the maximum, whatever the
+// order of the updates (so a system's extent is the same on every run).
+__host__ __device__ inline unsigned long long ordered(double v) {
+#ifdef __CUDA_ARCH__
+  const auto b = static_cast<unsigned long long>(__double_as_longlong(v));
+#else
+  unsigned long long b;
+  std::memcpy(&b, &v, sizeof b);
+#endif
+  return b >> 63 ? ~b : b | (1ull << 63);
+}
+__host__ __device__ inline double from_ordered(unsigned long long u) {
+  const unsigned long long b = u >> 63 ? u & ~(1ull << 63) : ~u;
+#ifdef __CUDA_ARCH__
+  return __longlong_as_double(static_cast<long long>(b));
+#else
+  double v;
+  std::memcpy(&v, &b, sizeof v);
+  return v;
+#endif
+}
+
+// Per system, at slot lo (its first particle), 9 maxima: of c_a, of -c_a, and of the size
+// sum_k |x_k| |g[a][k]| that bounds c_a's rounding. 0 (below every ordered value) before.
+constexpr int extent_words = 9;
+
+// Row i's coordinate along axis a and the size that bounds its rounding.
+__host__ __device__ inline double axis_coordinate(const Frame& f, int a, double& size) {
+  size = fabs(f.xi[0] * f.g[a][0]) + fabs(f.xi[1] * f.g[a][1]) + fabs(f.xi[2] * f.g[a][2]);
+  return f.xi[0] * f.g[a][0] + f.xi[1] * f.g[a][1] + f.xi[2] * f.g[a][2];
+}
+
+// A system's grid: cells per axis, and the map from a coordinate to a cell.
+struct CellGrid {
+  int m[3] = {1, 1, 1};
+  double low[3] = {0, 0, 0};    // open axes: the extent's low end
+  double scale[3] = {0, 0, 0};  // cells per unit of c_a
+};
+
+// The grid of row f's system, from its extents: the same on the host and the device, and for
+// every row of the system (a function of the system's lattice, extents and size only).
+__host__ __device__ inline CellGrid make_cell_grid(const Frame& f,
+                                                   const unsigned long long* extents) {
+  const unsigned long long* e = extents + extent_words * f.lo;
+  const double particles = static_cast<double>(f.hi - f.lo);
+  CellGrid grid;
+  double m[3], span[3];
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    const double high = from_ordered(e[a]), low = -from_ordered(e[3 + a]);
+    const double size = from_ordered(e[6 + a]);
+    // A cell is reach[a] wide, plus a relative margin and the rounding of c_a at both ends
+    // (each c_a within ~4e-16 of its size, the wrap and the scaling within an ulp of a cell).
+    const double width = f.reach[a] * (1 + 1e-6) + 1e-14 * (1 + size);
+    span[a] = f.periodic[a] ? 1.0 : high - low;
+    grid.low[a] = f.periodic[a] ? 0.0 : low;
+    double cells = span[a] / width;  // NaN or infinite for bad data: one cell below
+    cells = cells >= 1 ? floor(fmin(cells, particles)) : 1;
+    if (f.periodic[a] && cells < 3) cells = 1;
+    m[a] = cells;
+  }
+  // At most one cell per particle: halve the most divided axis until the cells fit.
+  while (m[0] * m[1] * m[2] > particles) {
+    const int a = m[0] >= m[1] && m[0] >= m[2] ? 0 : (m[1] >= m[2] ? 1 : 2);
+    const double halved = floor(m[a] / 2);
+    m[a] = f.periodic[a] && halved < 3 ? 1 : fmax(halved, 1);
+  }
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    grid.m[a] = static_cast<int>(m[a]);
+    grid.scale[a] = span[a] > 0 ? m[a] / span[a] : 0;
+  }
+  return grid;
+}
+
+// The cell of coordinate c along axis a (periodic: wrapped first).
+__host__ __device__ inline int cell_along(const Frame& f, const CellGrid& grid, int a, double c) {
+  const double at = (f.periodic[a] ? c - floor(c) : c - grid.low[a]) * grid.scale[a];
+  const int last = grid.m[a] - 1;
+  if (!(at > 0)) return 0;  // NaN too: bad rows report their code
+  return at < last ? static_cast<int>(at) : last;
+}
+
+// Row f's own cell, per axis.
+__host__ __device__ inline void own_cell(const Frame& f, const CellGrid& grid, int cell[3]) {
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    double size;
+    cell[a] = cell_along(f, grid, a, axis_coordinate(f, a, size));
+  }
+}
+
+// A row's sources with cells: up to 18 runs of consecutive slots of the sorted particles (per
+// row of 3 cells along x, one run, or two across the wrap), walked as one list.
+struct CellSources {
+  static constexpr int max_runs = 18;
+  const std::uint32_t* sorted = nullptr;  // the particles by cell (stable: by index within one)
+  std::int64_t half_from = 0;             // half lists: sources below the row are skipped
+  int runs = 0;
+  std::uint32_t first[max_runs], size[max_runs];
+  std::uint32_t total = 0;
+
+  __host__ __device__ void add(std::uint32_t begin, std::uint32_t end) {
+    if (end <= begin) return;
+    first[runs] = begin;
+    size[runs] = end - begin;
+    total += end - begin;
+    ++runs;
+  }
+  // The k-th source (k < total), or -1 for one a half list skips.
+  __host__ __device__ std::int64_t source(std::uint32_t k) const {
+    int r = 0;
+    while (k >= size[r]) k -= size[r++];
+    const std::int64_t j = sorted[first[r] + k];
+    return j < half_from ? -1 : j;
+  }
+};
+
+// The 27 cells around row f's own (fewer on axes of one cell, or at an open axis's ends), in a
+// fixed order: z, then y, then x, each from -1 to +1.
+__host__ __device__ inline void gather_cell_sources(const Input& in, const Frame& f,
+                                                    std::int64_t row,
+                                                    const unsigned long long* extents,
+                                                    const std::uint32_t* sorted,
+                                                    const std::uint32_t* starts, CellSources& out) {
+  const CellGrid grid = make_cell_grid(f, extents);
+  int own[3];
+  own_cell(f, grid, own);
+  out.sorted = sorted;
+  out.half_from = in.half ? row : 0;
+  const int mx = grid.m[0], my = grid.m[1];
+  // Cells x0..x1 of the row (y, z) have consecutive numbers: one run of sorted slots (x1 + 1 is
+  // the next row's first cell, or the system's last cell + 1: starts has N + 1 entries).
+  const auto run = [&](int x0, int x1, int y, int z) {
+    const std::int64_t row_cells = f.lo + (static_cast<std::int64_t>(z) * my + y) * mx;
+    out.add(starts[row_cells + x0], starts[row_cells + x1 + 1]);
+  };
+  // The neighbouring cell d (-1, 0, 1) along axis a, or -1 where there is none.
+  const auto step = [&](int a, int d) {
+    if (grid.m[a] == 1) return d == 0 ? 0 : -1;
+    const int c = own[a] + d;
+    if (f.periodic[a]) return (c + grid.m[a]) % grid.m[a];
+    return c >= 0 && c < grid.m[a] ? c : -1;
+  };
+  const int x = own[0];
+  for (int dz = -1; dz <= 1; ++dz) {
+    const int z = step(2, dz);
+    if (z < 0) continue;
+    for (int dy = -1; dy <= 1; ++dy) {
+      const int y = step(1, dy);
+      if (y < 0) continue;
+      if (mx == 1) {
+        run(0, 0, y, z);
+      } else if (!f.periodic[0]) {
+        run(x > 0 ? x - 1 : 0, x < mx - 1 ? x + 1 : mx - 1, y, z);
+      } else if (x == 0) {  // across the wrap: the last cell, then cells 0 and 1
+        run(mx - 1, mx - 1, y, z);
+        run(0, 1, y, z);
+      } else if (x == mx - 1) {  // the last two cells, then cell 0
+        run(mx - 2, mx - 1, y, z);
+        run(0, 0, y, z);
+      } else {
+        run(x - 1, x + 1, y, z);
+      }
+    }
+  }
+}
+
+// The sources of a row with every particle of its system (SourceSearch::all_pairs): j ascending.
+struct SystemSources {
+  std::int64_t first = 0;
+  std::uint32_t total = 0;
+  __host__ __device__ std::int64_t source(std::uint32_t k) const { return first + k; }
+};
+
+// Where the cells live during a call (null pointers: all pairs).
+struct CellTable {
+  const unsigned long long* extents = nullptr;
+  const std::uint32_t* sorted = nullptr;
+  const std::uint32_t* starts = nullptr;
+};
+
+// Calls use(sources) with row f's sources, by cells or by system.
+template <bool Cells, class Use>
+__host__ __device__ inline void with_sources(const Input& in, const Frame& f, std::int64_t row,
+                                             const CellTable& cells, Use&& use) {
+  if constexpr (Cells) {
+    CellSources sources;
+    gather_cell_sources(in, f, row, cells.extents, cells.sorted, cells.starts, sources);
+    use(sources);
+  } else {
+    const std::int64_t first = first_source(in, f, row);
+    use(SystemSources{first, static_cast<std::uint32_t>(f.hi - first)});
+  }
+}
+
+// The extents of every system (slot lo), for its grid.
+template <class Real>
+__global__ void extents_kernel(Input in, const Lattice* lattices, unsigned long long* extents) {
+  const std::int64_t i = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= in.n || (in.run_if && *in.run_if == 0)) return;
+  Frame f;
+  if (make_frame<Real>(in, i, lattices, f)) return;
+  unsigned long long* e = extents + extent_words * f.lo;
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    double size;
+    const double c = axis_coordinate(f, a, size);
+    atomicMax(e + a, ordered(c));
+    atomicMax(e + 3 + a, ordered(-c));
+    atomicMax(e + 6 + a, ordered(size));
+  }
+}
+
+// Each particle's cell number (lo + its cell in the system's grid) and index, to be sorted.
+template <class Real>
+__global__ void cell_keys_kernel(Input in, const Lattice* lattices,
+                                 const unsigned long long* extents, std::uint32_t* keys,
+                                 std::uint32_t* index) {
+  const std::int64_t i = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (i >= in.n) return;
+  index[i] = static_cast<std::uint32_t>(i);
+  keys[i] = static_cast<std::uint32_t>(i);  // bad rows: their own number; the count reports them
+  if (in.run_if && *in.run_if == 0) return;
+  Frame f;
+  if (make_frame<Real>(in, i, lattices, f)) return;
+  const CellGrid grid = make_cell_grid(f, extents);
+  int c[3];
+  own_cell(f, grid, c);
+  keys[i] = static_cast<std::uint32_t>(
+      f.lo + (static_cast<std::int64_t>(c[2]) * grid.m[1] + c[1]) * grid.m[0] + c[0]);
+}
+
+// starts[b]: the first sorted slot whose cell number is >= b, for b in [0, n].
+__global__ void cell_starts_kernel(const std::uint32_t* sorted_keys, std::int64_t n,
+                                   std::uint32_t* starts) {
+  const std::int64_t b = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  if (b > n) return;
+  std::int64_t lo = 0, hi = n;
+  while (lo < hi) {
+    const std::int64_t mid = lo + (hi - lo) / 2;
+    if (sorted_keys[mid] < static_cast<std::uint64_t>(b))
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  starts[b] = static_cast<std::uint32_t>(lo);
+}
+
 // A row's team: one warp (Warps = 1, block_threads / 32 rows per block) or the whole block
 // (Warps = block_threads / 32, one row per block). Few rows get a block each, so that the GPU
 // has enough warps to hide the latency of the pair tests (rows_for_block_teams).
@@ -382,8 +652,9 @@ struct Team {
   }
 };
 
-template <class Real, int Warps>
+template <class Real, int Warps, bool Cells>
 __global__ __launch_bounds__(block_threads) void count_rows(Input in, const Lattice* lattices,
+                                                            CellTable cells,
                                                             unsigned long long* counts,
                                                             int* status) {
   using T = Team<Warps>;
@@ -397,8 +668,12 @@ __global__ __launch_bounds__(block_threads) void count_rows(Input in, const Latt
     return;
   }
   unsigned long long c = 0;
-  for (std::int64_t j = first_source(in, f, row) + T::rank(); j < f.hi; j += T::threads)
-    c += for_each_image<Real>(in, f, row, j, NoVisit{});
+  with_sources<Cells>(in, f, row, cells, [&](const auto& sources) {
+    for (std::uint32_t k = T::rank(); k < sources.total; k += T::threads) {
+      const std::int64_t j = sources.source(k);
+      if (j >= 0) c += for_each_image<Real>(in, f, row, j, NoVisit{});
+    }
+  });
   c = T::sum(c);
   if (T::rank() == 0) counts[row] = c;
 }
@@ -417,8 +692,9 @@ __host__ __device__ ListSlots list_slots(const Input& in, const Frame& f, std::i
   return {static_cast<std::uint64_t>(system) * out.capacity, offsets[f.lo]};
 }
 
-template <class Real, int Warps>
+template <class Real, int Warps, bool Cells>
 __global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Lattice* lattices,
+                                                           CellTable cells,
                                                            const unsigned long long* offsets,
                                                            StaticPairs out) {
   using T = Team<Warps>;
@@ -434,27 +710,31 @@ __global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Latti
     return;
   unsigned long long written = start;
   // Chunks of one source per thread in lockstep: each thread's hits go after the lower ranks'
-  // (a team scan), so the order is j ascending whatever the scheduling.
-  for (std::int64_t base = first_source(in, f, row); base < f.hi; base += T::threads) {
-    const std::int64_t j = base + rank;
-    const std::uint32_t hits = j < f.hi ? for_each_image<Real>(in, f, row, j, NoVisit{}) : 0;
-    std::uint32_t chunk = 0;
-    const std::uint32_t before = T::scan(hits, chunk) - hits;
-    unsigned long long at = written + before;
-    if (hits)
-      for_each_image<Real>(in, f, row, j, [&](const int* s) {
-        if (at < static_cast<unsigned long long>(out.capacity)) {
-          const std::uint64_t e = slots.first + at;
-          out.i[e] = row;
-          out.j[e] = j;
-          if (out.shifts)
-            for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = s[k];
-        }
-        ++at;
-      });
-    written += chunk;
-    if (written >= static_cast<unsigned long long>(out.capacity)) return;
-  }
+  // (a team scan), so the order is the sources' whatever the scheduling. Every thread of the
+  // team takes every chunk (the scan waits for all of them).
+  with_sources<Cells>(in, f, row, cells, [&](const auto& sources) {
+    for (std::uint32_t base = 0; base < sources.total; base += T::threads) {
+      const std::uint32_t k = base + rank;
+      const std::int64_t j = k < sources.total ? sources.source(k) : -1;
+      const std::uint32_t hits = j >= 0 ? for_each_image<Real>(in, f, row, j, NoVisit{}) : 0;
+      std::uint32_t chunk = 0;
+      const std::uint32_t before = T::scan(hits, chunk) - hits;
+      unsigned long long at = written + before;
+      if (hits)
+        for_each_image<Real>(in, f, row, j, [&](const int* s) {
+          if (at < static_cast<unsigned long long>(out.capacity)) {
+            const std::uint64_t e = slots.first + at;
+            out.i[e] = row;
+            out.j[e] = j;
+            if (out.shifts)
+              for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = s[k];
+          }
+          ++at;
+        });
+      written += chunk;
+      if (written >= static_cast<unsigned long long>(out.capacity)) return;
+    }
+  });
 }
 
 // The count (or the first error code), and padding from the count to the capacity.
@@ -563,12 +843,63 @@ Input make_input(const DeviceSystems& systems, double cutoff, const PairOptions&
   in.half = options.half;
   in.run_if = options.run_if;
   in.systems = static_cast<std::int64_t>(out.systems);
+  const std::size_t known_systems = std::max({out.systems, systems.cells ? systems.cell_count : 0,
+                                              systems.pbc ? systems.pbc_count : 0, std::size_t(1)});
+  in.by_cells =
+      options.search == SourceSearch::cells || (options.search == SourceSearch::automatic &&
+                                                small_pass_uses_cells(systems.size, known_systems));
   return in;
 }
 
+// The cells of a call on the host, as the kernels make them: extents, then each particle's cell
+// number, a stable sort by it, and the first slot of every cell number.
+template <class Real>
+struct HostCells {
+  std::vector<unsigned long long> extents;
+  std::vector<std::uint32_t> sorted, starts;
+  HostCells(const Input& in, const std::vector<Lattice>& lattices) {
+    const auto n = static_cast<std::size_t>(in.n);
+    extents.assign(extent_words * n, 0);
+    for (std::int64_t i = 0; i < in.n; ++i) {
+      Frame f;
+      if (make_frame<Real>(in, i, lattices.data(), f)) continue;
+      unsigned long long* e = extents.data() + extent_words * f.lo;
+      for (int a = 0; a < 3; ++a) {
+        double size;
+        const double c = axis_coordinate(f, a, size);
+        e[a] = std::max(e[a], ordered(c));
+        e[3 + a] = std::max(e[3 + a], ordered(-c));
+        e[6 + a] = std::max(e[6 + a], ordered(size));
+      }
+    }
+    std::vector<std::uint32_t> keys(n);
+    for (std::int64_t i = 0; i < in.n; ++i) {
+      keys[i] = static_cast<std::uint32_t>(i);
+      Frame f;
+      if (make_frame<Real>(in, i, lattices.data(), f)) continue;
+      const CellGrid grid = make_cell_grid(f, extents.data());
+      int c[3];
+      own_cell(f, grid, c);
+      keys[i] = static_cast<std::uint32_t>(
+          f.lo + (static_cast<std::int64_t>(c[2]) * grid.m[1] + c[1]) * grid.m[0] + c[0]);
+    }
+    sorted.resize(n);
+    for (std::size_t i = 0; i < n; ++i) sorted[i] = static_cast<std::uint32_t>(i);
+    std::stable_sort(sorted.begin(), sorted.end(),
+                     [&](std::uint32_t a, std::uint32_t b) { return keys[a] < keys[b]; });
+    starts.resize(n + 1);
+    std::size_t slot = 0;
+    for (std::size_t b = 0; b <= n; ++b) {
+      while (slot < n && keys[sorted[slot]] < b) ++slot;
+      starts[b] = static_cast<std::uint32_t>(slot);
+    }
+  }
+  CellTable table() const { return {extents.data(), sorted.data(), starts.data()}; }
+};
+
 // The same enumeration, row after row on the host, in the same order and with the same codes:
 // what lets a machine without a GPU test the pass's arithmetic (cuda/device_pairs_host.hpp).
-template <class Real>
+template <class Real, bool Cells>
 void host_pass(const Input& in, const StaticPairs& out) {
   if (in.run_if && *in.run_if == 0) return;
   const std::size_t lists = out.systems ? out.systems : 1;
@@ -576,6 +907,9 @@ void host_pass(const Input& in, const StaticPairs& out) {
   std::vector<Lattice> lattices(static_cast<std::size_t>(lattice_count(in)));
   for (std::size_t s = 0; s < lattices.size(); ++s)
     make_lattice<Real>(in, static_cast<std::int64_t>(s), lattices[s]);
+  CellTable cells;
+  std::vector<HostCells<Real>> made;  // only with Cells
+  if (Cells) cells = made.emplace_back(in, lattices).table();
   int status = 0;
   for (std::int64_t row = 0; row < in.n; ++row) {
     Frame f;
@@ -585,17 +919,22 @@ void host_pass(const Input& in, const StaticPairs& out) {
     }
     const std::size_t list = out.systems && in.batch ? std::size_t(in.batch[row]) : 0;
     std::uint64_t& at = written[list];
-    for (std::int64_t j = first_source(in, f, row); j < f.hi; ++j)
-      for_each_image<Real>(in, f, row, j, [&](const int* s) {
-        if (at < out.capacity) {
-          const std::uint64_t e = list * out.capacity + at;
-          out.i[e] = row;
-          out.j[e] = j;
-          if (out.shifts)
-            for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = s[k];
-        }
-        ++at;
-      });
+    with_sources<Cells>(in, f, row, cells, [&](const auto& sources) {
+      for (std::uint32_t k = 0; k < sources.total; ++k) {
+        const std::int64_t j = sources.source(k);
+        if (j < 0) continue;
+        for_each_image<Real>(in, f, row, j, [&](const int* s) {
+          if (at < out.capacity) {
+            const std::uint64_t e = list * out.capacity + at;
+            out.i[e] = row;
+            out.j[e] = j;
+            if (out.shifts)
+              for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = s[k];
+          }
+          ++at;
+        });
+      }
+    });
   }
   for (std::size_t list = 0; list < lists; ++list) {
     const std::uint64_t kept =
@@ -609,61 +948,138 @@ void host_pass(const Input& in, const StaticPairs& out) {
   }
 }
 
+template <class Real>
+void host_pass(const Input& in, const StaticPairs& out) {
+  if (in.by_cells)
+    host_pass<Real, true>(in, out);
+  else
+    host_pass<Real, false>(in, out);
+}
+
+}  // namespace
+
+namespace {
+
+// The row passes of one instantiation: count per row, the scan into offsets, fill.
+template <class Real, bool Cells>
+void row_passes(const Input& in, const Lattice* lattices, const CellTable& cells,
+                unsigned long long* counts, int* status, unsigned long long* offsets,
+                void* scan_storage, std::size_t scan_bytes, const StaticPairs& out,
+                cudaStream_t stream) {
+  const auto n = static_cast<std::size_t>(in.n);
+  // A block per row while rows are few: a warp each would leave most of the GPU idle (1,000
+  // rows are 8 warps per multiprocessor of an H100), every warp walking all its sources.
+  const bool block_per_row = n <= rows_for_block_teams;
+  const unsigned rows_blocks = static_cast<unsigned>(
+      block_per_row ? n : (n * warp_size + block_threads - 1) / block_threads);
+  if (n > 0) {
+    const auto count =
+        block_per_row ? count_rows<Real, block_warps, Cells> : count_rows<Real, 1, Cells>;
+    count<<<rows_blocks, block_threads, 0, stream>>>(in, lattices, cells, counts, status);
+    RAYCUT_CUDA_CHECK_LAUNCH();
+  }
+  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scan_storage, scan_bytes, counts, offsets,
+                                                  static_cast<std::int64_t>(n + 1), stream));
+  if (n > 0 && out.capacity > 0) {
+    const auto fill =
+        block_per_row ? fill_rows<Real, block_warps, Cells> : fill_rows<Real, 1, Cells>;
+    fill<<<rows_blocks, block_threads, 0, stream>>>(in, lattices, cells, offsets, out);
+    RAYCUT_CUDA_CHECK_LAUNCH();
+  }
+}
+
+// The cells of every system (SourceSearch::cells): extents, cell numbers, a stable radix sort of
+// the particles by them, and the first slot of every cell number.
+template <class Real>
+void make_cells(const Input& in, const Lattice* lattices, unsigned long long* extents,
+                std::uint32_t* keys, std::uint32_t* sorted_keys, std::uint32_t* index,
+                std::uint32_t* sorted, std::uint32_t* starts, void* sort_storage,
+                std::size_t sort_bytes, int key_bits, cudaStream_t stream) {
+  const auto n = static_cast<std::size_t>(in.n);
+  const auto blocks = static_cast<unsigned>((n + 255) / 256);
+  extents_kernel<Real><<<blocks, 256, 0, stream>>>(in, lattices, extents);
+  RAYCUT_CUDA_CHECK_LAUNCH();
+  cell_keys_kernel<Real><<<blocks, 256, 0, stream>>>(in, lattices, extents, keys, index);
+  RAYCUT_CUDA_CHECK_LAUNCH();
+  RAYCUT_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(sort_storage, sort_bytes, keys, sorted_keys,
+                                                    index, sorted, static_cast<std::int64_t>(n), 0,
+                                                    key_bits, stream));
+  cell_starts_kernel<<<static_cast<unsigned>((n + 1 + 255) / 256), 256, 0, stream>>>(sorted_keys,
+                                                                                     in.n, starts);
+  RAYCUT_CUDA_CHECK_LAUNCH();
+}
+
 }  // namespace
 
 void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, double cutoff,
                               const PairOptions& options, const StaticPairs& out) {
   const Input in = make_input(systems, cutoff, options, out);
   const std::size_t n = systems.size;
+  const bool wide = systems.scalar == Scalar::float64;
+  const bool by_cells = in.by_cells && n > 0;
 
   const auto stream = static_cast<cudaStream_t>(ctx.stream);
-  // Temporaries in one block: per-row counts (and a zero past them), offsets, the status word,
-  // the lattices and the scan's storage.
-  std::size_t scan_bytes = 0;
+  // Temporaries in one block: per-row counts (and a zero past them), the status word and the
+  // systems' extents (zeroed together), offsets, the lattices, the cells' arrays, and the scan's
+  // and the sort's storage.
+  std::size_t scan_bytes = 0, sort_bytes = 0;
   RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(
       nullptr, scan_bytes, static_cast<unsigned long long*>(nullptr),
       static_cast<unsigned long long*>(nullptr), static_cast<std::int64_t>(n + 1), stream));
+  int key_bits = 1;
+  while (key_bits < 32 && (std::uint64_t(1) << key_bits) < n) ++key_bits;
+  if (by_cells)
+    RAYCUT_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(
+        nullptr, sort_bytes, static_cast<std::uint32_t*>(nullptr),
+        static_cast<std::uint32_t*>(nullptr), static_cast<std::uint32_t*>(nullptr),
+        static_cast<std::uint32_t*>(nullptr), static_cast<std::int64_t>(n), 0, key_bits, stream));
   const std::size_t counts_bytes = align_up((n + 1) * sizeof(unsigned long long) + sizeof(int));
+  const std::size_t extents_bytes =
+      by_cells ? align_up(extent_words * n * sizeof(unsigned long long)) : 0;
   const std::size_t offsets_bytes = align_up((n + 1) * sizeof(unsigned long long));
   const auto lattices_wanted = static_cast<std::size_t>(lattice_count(in));
   const std::size_t lattices_bytes = align_up(lattices_wanted * sizeof(Lattice));
-  const std::size_t bytes = counts_bytes + offsets_bytes + lattices_bytes + align_up(scan_bytes);
+  const std::size_t slots_bytes = by_cells ? align_up(n * sizeof(std::uint32_t)) : 0;
+  const std::size_t starts_bytes = by_cells ? align_up((n + 1) * sizeof(std::uint32_t)) : 0;
+  const std::size_t bytes = counts_bytes + extents_bytes + offsets_bytes + lattices_bytes +
+                            4 * slots_bytes + starts_bytes + align_up(scan_bytes) +
+                            align_up(sort_bytes);
   char* block = static_cast<char*>(allocate(ctx, bytes));
-  auto* counts = reinterpret_cast<unsigned long long*>(block);
+  char* at = block;
+  const auto take = [&](std::size_t size) {
+    char* p = at;
+    at += size;
+    return p;
+  };
+  auto* counts = reinterpret_cast<unsigned long long*>(take(counts_bytes));
   auto* status = reinterpret_cast<int*>(counts + n + 1);
-  auto* offsets = reinterpret_cast<unsigned long long*>(block + counts_bytes);
-  auto* lattices = reinterpret_cast<Lattice*>(block + counts_bytes + offsets_bytes);
-  void* scan_storage = block + counts_bytes + offsets_bytes + lattices_bytes;
+  auto* extents = reinterpret_cast<unsigned long long*>(take(extents_bytes));
+  auto* offsets = reinterpret_cast<unsigned long long*>(take(offsets_bytes));
+  auto* lattices = reinterpret_cast<Lattice*>(take(lattices_bytes));
+  auto* keys = reinterpret_cast<std::uint32_t*>(take(slots_bytes));
+  auto* sorted_keys = reinterpret_cast<std::uint32_t*>(take(slots_bytes));
+  auto* index = reinterpret_cast<std::uint32_t*>(take(slots_bytes));
+  auto* sorted = reinterpret_cast<std::uint32_t*>(take(slots_bytes));
+  auto* starts = reinterpret_cast<std::uint32_t*>(take(starts_bytes));
+  void* scan_storage = take(align_up(scan_bytes));
+  void* sort_storage = take(align_up(sort_bytes));
   try {
-    RAYCUT_CUDA_CHECK(cudaMemsetAsync(counts, 0, counts_bytes, stream));
-    const bool wide = systems.scalar == Scalar::float64;
-    // A block per row while rows are few: a warp each would leave most of the GPU idle (1,000
-    // rows are 8 warps per multiprocessor of an H100), every warp walking all its sources.
-    const bool block_per_row = n <= rows_for_block_teams;
-    const unsigned rows_blocks = static_cast<unsigned>(
-        block_per_row ? n : (n * warp_size + block_threads - 1) / block_threads);
+    RAYCUT_CUDA_CHECK(cudaMemsetAsync(counts, 0, counts_bytes + extents_bytes, stream));
     if (n > 0 && lattices_wanted > 0) {
       const auto lattice = wide ? lattices_kernel<double> : lattices_kernel<float>;
       lattice<<<static_cast<unsigned>((lattices_wanted + 63) / 64), 64, 0, stream>>>(
           in, lattices, static_cast<std::int64_t>(lattices_wanted));
       RAYCUT_CUDA_CHECK_LAUNCH();
     }
-    if (n > 0) {
-      const auto count =
-          wide ? (block_per_row ? count_rows<double, block_warps> : count_rows<double, 1>)
-               : (block_per_row ? count_rows<float, block_warps> : count_rows<float, 1>);
-      count<<<rows_blocks, block_threads, 0, stream>>>(in, lattices, counts, status);
-      RAYCUT_CUDA_CHECK_LAUNCH();
+    const CellTable cells{extents, sorted, starts};
+    if (by_cells) {
+      const auto make = wide ? make_cells<double> : make_cells<float>;
+      make(in, lattices, extents, keys, sorted_keys, index, sorted, starts, sort_storage,
+           sort_bytes, key_bits, stream);
     }
-    RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scan_storage, scan_bytes, counts, offsets,
-                                                    static_cast<std::int64_t>(n + 1), stream));
-    if (n > 0 && out.capacity > 0) {
-      const auto fill =
-          wide ? (block_per_row ? fill_rows<double, block_warps> : fill_rows<double, 1>)
-               : (block_per_row ? fill_rows<float, block_warps> : fill_rows<float, 1>);
-      fill<<<rows_blocks, block_threads, 0, stream>>>(in, lattices, offsets, out);
-      RAYCUT_CUDA_CHECK_LAUNCH();
-    }
+    const auto rows = wide ? (by_cells ? row_passes<double, true> : row_passes<double, false>)
+                           : (by_cells ? row_passes<float, true> : row_passes<float, false>);
+    rows(in, lattices, cells, counts, status, offsets, scan_storage, scan_bytes, out, stream);
     const std::size_t entries = out.capacity * std::max<std::size_t>(out.systems, 1);
     const std::size_t pad_blocks =
         std::min<std::size_t>((std::max(entries, out.systems) + 255) / 256 + 1, 1024);
