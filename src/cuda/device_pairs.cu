@@ -279,12 +279,19 @@ __host__ __device__ bool shift_range(double low, double high, int& first, int& l
 
 // Calls visit(S) for every in-range image (i, j, S) of row i, in lexicographic order of S;
 // returns how many.
-template <class Real, class Visit>
+// A source of a row: its index (-1: none, or one that a half list skips) and its position.
+struct Source {
+  std::int64_t j = -1;
+  double x[3] = {};
+};
+
+template <class Visit>
 __host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f, std::int64_t i,
-                                                 std::int64_t j, Visit&& visit) {
+                                                 const Source& source, Visit&& visit) {
+  const std::int64_t j = source.j;
   double d[3];
 #pragma unroll
-  for (int k = 0; k < 3; ++k) d[k] = load<Real>(in.xyz, 3 * j + k) - f.xi[k];
+  for (int k = 0; k < 3; ++k) d[k] = source.x[k] - f.xi[k];
   if (!f.any_periodic) {
     if (i == j || !(dot(d, d) < in.cutoff2)) return 0;
     const int zero[3] = {0, 0, 0};
@@ -442,11 +449,14 @@ __host__ __device__ inline void own_cell(const Frame& f, const CellGrid& grid, i
   }
 }
 
-// A row's sources with cells: up to 18 runs of consecutive slots of the sorted particles (per
-// row of 3 cells along x, one run, or two across the wrap), walked as one list.
+// A row's sources with cells: up to 18 runs of consecutive slots of the particles sorted by
+// cell (per row of 3 cells along x, one run, or two across the wrap), walked as one list. The
+// positions are read in the same sorted order, so a run's are consecutive in memory.
+template <class Real>
 struct CellSources {
   static constexpr int max_runs = 18;
   const std::uint32_t* sorted = nullptr;  // the particles by cell (stable: by index within one)
+  const Real* sorted_xyz = nullptr;       // their positions, in that order
   std::int64_t half_from = 0;             // half lists: sources below the row are skipped
   int runs = 0;
   std::uint32_t first[max_runs], size[max_runs];
@@ -459,27 +469,56 @@ struct CellSources {
     total += end - begin;
     ++runs;
   }
-  // The k-th source (k < total), or -1 for one a half list skips.
-  __host__ __device__ std::int64_t source(std::uint32_t k) const {
-    int r = 0;
-    while (k >= size[r]) k -= size[r++];
-    const std::int64_t j = sorted[first[r] + k];
-    return j < half_from ? -1 : j;
+  // Where the k-th source is: a run and an offset in it; advanced by a team's stride at a time,
+  // so that a walk costs a step per run, not a search per source.
+  struct Cursor {
+    int run = 0;
+    std::uint32_t offset = 0;
+  };
+  __host__ __device__ void advance(Cursor& c, std::uint32_t by) const {
+    c.offset += by;
+    while (c.run < runs && c.offset >= size[c.run]) c.offset -= size[c.run++];
   }
+  __host__ __device__ Cursor cursor(std::uint32_t k) const {
+    Cursor c;
+    advance(c, k);
+    return c;
+  }
+  __host__ __device__ Source at(const Cursor& c) const {
+    const std::uint32_t slot = first[c.run] + c.offset;
+    Source s;
+    s.j = sorted[slot];
+    if (s.j < half_from) {
+      s.j = -1;
+      return s;
+    }
+#pragma unroll
+    for (int k = 0; k < 3; ++k) s.x[k] = static_cast<double>(sorted_xyz[3 * std::size_t(slot) + k]);
+    return s;
+  }
+};
+
+// Where the cells live during a call (null pointers: all pairs).
+struct CellTable {
+  const unsigned long long* extents = nullptr;
+  const std::uint32_t* sorted = nullptr;
+  const std::uint32_t* starts = nullptr;
+  const void* sorted_xyz = nullptr;  // Real, (N, 3), in sorted order
 };
 
 // The 27 cells around row f's own (fewer on axes of one cell, or at an open axis's ends), in a
 // fixed order: z, then y, then x, each from -1 to +1.
+template <class Real>
 __host__ __device__ inline void gather_cell_sources(const Input& in, const Frame& f,
-                                                    std::int64_t row,
-                                                    const unsigned long long* extents,
-                                                    const std::uint32_t* sorted,
-                                                    const std::uint32_t* starts, CellSources& out) {
-  const CellGrid grid = make_cell_grid(f, extents);
+                                                    std::int64_t row, const CellTable& cells,
+                                                    CellSources<Real>& out) {
+  const CellGrid grid = make_cell_grid(f, cells.extents);
   int own[3];
   own_cell(f, grid, own);
-  out.sorted = sorted;
+  out.sorted = cells.sorted;
+  out.sorted_xyz = static_cast<const Real*>(cells.sorted_xyz);
   out.half_from = in.half ? row : 0;
+  const std::uint32_t* starts = cells.starts;
   const int mx = grid.m[0], my = grid.m[1];
   // Cells x0..x1 of the row (y, z) have consecutive numbers: one run of sorted slots (x1 + 1 is
   // the next row's first cell, or the system's last cell + 1: starts has N + 1 entries).
@@ -519,30 +558,34 @@ __host__ __device__ inline void gather_cell_sources(const Input& in, const Frame
 }
 
 // The sources of a row with every particle of its system (SourceSearch::all_pairs): j ascending.
+template <class Real>
 struct SystemSources {
+  const void* xyz = nullptr;
   std::int64_t first = 0;
   std::uint32_t total = 0;
-  __host__ __device__ std::int64_t source(std::uint32_t k) const { return first + k; }
-};
-
-// Where the cells live during a call (null pointers: all pairs).
-struct CellTable {
-  const unsigned long long* extents = nullptr;
-  const std::uint32_t* sorted = nullptr;
-  const std::uint32_t* starts = nullptr;
+  using Cursor = std::int64_t;  // the source itself
+  __host__ __device__ Cursor cursor(std::uint32_t k) const { return first + k; }
+  __host__ __device__ void advance(Cursor& c, std::uint32_t by) const { c += by; }
+  __host__ __device__ Source at(Cursor j) const {
+    Source s;
+    s.j = j;
+#pragma unroll
+    for (int k = 0; k < 3; ++k) s.x[k] = load<Real>(xyz, 3 * j + k);
+    return s;
+  }
 };
 
 // Calls use(sources) with row f's sources, by cells or by system.
-template <bool Cells, class Use>
+template <class Real, bool Cells, class Use>
 __host__ __device__ inline void with_sources(const Input& in, const Frame& f, std::int64_t row,
                                              const CellTable& cells, Use&& use) {
   if constexpr (Cells) {
-    CellSources sources;
-    gather_cell_sources(in, f, row, cells.extents, cells.sorted, cells.starts, sources);
+    CellSources<Real> sources;
+    gather_cell_sources(in, f, row, cells, sources);
     use(sources);
   } else {
     const std::int64_t first = first_source(in, f, row);
-    use(SystemSources{first, static_cast<std::uint32_t>(f.hi - first)});
+    use(SystemSources<Real>{in.xyz, first, static_cast<std::uint32_t>(f.hi - first)});
   }
 }
 
@@ -583,10 +626,14 @@ __global__ void cell_keys_kernel(Input in, const Lattice* lattices,
       f.lo + (static_cast<std::int64_t>(c[2]) * grid.m[1] + c[1]) * grid.m[0] + c[0]);
 }
 
-// starts[b]: the first sorted slot whose cell number is >= b, for b in [0, n].
-__global__ void cell_starts_kernel(const std::uint32_t* sorted_keys, std::int64_t n,
-                                   std::uint32_t* starts) {
+// starts[b]: the first sorted slot whose cell number is >= b, for b in [0, n]; and the
+// positions in sorted order (slot b < n).
+template <class Real>
+__global__ void cell_starts_kernel(const Input in, const std::uint32_t* sorted_keys,
+                                   const std::uint32_t* sorted, std::uint32_t* starts,
+                                   Real* sorted_xyz) {
   const std::int64_t b = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  const std::int64_t n = in.n;
   if (b > n) return;
   std::int64_t lo = 0, hi = n;
   while (lo < hi) {
@@ -597,6 +644,10 @@ __global__ void cell_starts_kernel(const std::uint32_t* sorted_keys, std::int64_
       hi = mid;
   }
   starts[b] = static_cast<std::uint32_t>(lo);
+  if (b == n) return;
+  const Real* xyz = static_cast<const Real*>(in.xyz);
+#pragma unroll
+  for (int k = 0; k < 3; ++k) sorted_xyz[3 * b + k] = xyz[3 * std::int64_t(sorted[b]) + k];
 }
 
 // A row's team: one warp (Warps = 1, block_threads / 32 rows per block) or the whole block
@@ -668,10 +719,12 @@ __global__ __launch_bounds__(block_threads) void count_rows(Input in, const Latt
     return;
   }
   unsigned long long c = 0;
-  with_sources<Cells>(in, f, row, cells, [&](const auto& sources) {
-    for (std::uint32_t k = T::rank(); k < sources.total; k += T::threads) {
-      const std::int64_t j = sources.source(k);
-      if (j >= 0) c += for_each_image<Real>(in, f, row, j, NoVisit{});
+  with_sources<Real, Cells>(in, f, row, cells, [&](const auto& sources) {
+    auto at = sources.cursor(T::rank());
+    for (std::uint32_t k = T::rank(); k < sources.total;
+         k += T::threads, sources.advance(at, T::threads)) {
+      const Source source = sources.at(at);
+      if (source.j >= 0) c += for_each_image(in, f, row, source, NoVisit{});
     }
   });
   c = T::sum(c);
@@ -712,16 +765,18 @@ __global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Latti
   // Chunks of one source per thread in lockstep: each thread's hits go after the lower ranks'
   // (a team scan), so the order is the sources' whatever the scheduling. Every thread of the
   // team takes every chunk (the scan waits for all of them).
-  with_sources<Cells>(in, f, row, cells, [&](const auto& sources) {
-    for (std::uint32_t base = 0; base < sources.total; base += T::threads) {
-      const std::uint32_t k = base + rank;
-      const std::int64_t j = k < sources.total ? sources.source(k) : -1;
-      const std::uint32_t hits = j >= 0 ? for_each_image<Real>(in, f, row, j, NoVisit{}) : 0;
+  with_sources<Real, Cells>(in, f, row, cells, [&](const auto& sources) {
+    auto cursor = sources.cursor(rank);
+    for (std::uint32_t base = 0; base < sources.total;
+         base += T::threads, sources.advance(cursor, T::threads)) {
+      const Source source = base + rank < sources.total ? sources.at(cursor) : Source{};
+      const std::int64_t j = source.j;
+      const std::uint32_t hits = j >= 0 ? for_each_image(in, f, row, source, NoVisit{}) : 0;
       std::uint32_t chunk = 0;
       const std::uint32_t before = T::scan(hits, chunk) - hits;
       unsigned long long at = written + before;
       if (hits)
-        for_each_image<Real>(in, f, row, j, [&](const int* s) {
+        for_each_image(in, f, row, source, [&](const int* s) {
           if (at < static_cast<unsigned long long>(out.capacity)) {
             const std::uint64_t e = slots.first + at;
             out.i[e] = row;
@@ -857,6 +912,7 @@ template <class Real>
 struct HostCells {
   std::vector<unsigned long long> extents;
   std::vector<std::uint32_t> sorted, starts;
+  std::vector<Real> sorted_xyz;
   HostCells(const Input& in, const std::vector<Lattice>& lattices) {
     const auto n = static_cast<std::size_t>(in.n);
     extents.assign(extent_words * n, 0);
@@ -893,8 +949,14 @@ struct HostCells {
       while (slot < n && keys[sorted[slot]] < b) ++slot;
       starts[b] = static_cast<std::uint32_t>(slot);
     }
+    const Real* xyz = static_cast<const Real*>(in.xyz);
+    sorted_xyz.resize(3 * n);
+    for (std::size_t p = 0; p < n; ++p)
+      for (int k = 0; k < 3; ++k) sorted_xyz[3 * p + k] = xyz[3 * std::size_t(sorted[p]) + k];
   }
-  CellTable table() const { return {extents.data(), sorted.data(), starts.data()}; }
+  CellTable table() const {
+    return {extents.data(), sorted.data(), starts.data(), sorted_xyz.data()};
+  }
 };
 
 // The same enumeration, row after row on the host, in the same order and with the same codes:
@@ -919,11 +981,13 @@ void host_pass(const Input& in, const StaticPairs& out) {
     }
     const std::size_t list = out.systems && in.batch ? std::size_t(in.batch[row]) : 0;
     std::uint64_t& at = written[list];
-    with_sources<Cells>(in, f, row, cells, [&](const auto& sources) {
-      for (std::uint32_t k = 0; k < sources.total; ++k) {
-        const std::int64_t j = sources.source(k);
+    with_sources<Real, Cells>(in, f, row, cells, [&](const auto& sources) {
+      auto cursor = sources.cursor(0);
+      for (std::uint32_t k = 0; k < sources.total; ++k, sources.advance(cursor, 1)) {
+        const Source source = sources.at(cursor);
+        const std::int64_t j = source.j;
         if (j < 0) continue;
-        for_each_image<Real>(in, f, row, j, [&](const int* s) {
+        for_each_image(in, f, row, source, [&](const int* s) {
           if (at < out.capacity) {
             const std::uint64_t e = list * out.capacity + at;
             out.i[e] = row;
@@ -993,7 +1057,7 @@ void row_passes(const Input& in, const Lattice* lattices, const CellTable& cells
 template <class Real>
 void make_cells(const Input& in, const Lattice* lattices, unsigned long long* extents,
                 std::uint32_t* keys, std::uint32_t* sorted_keys, std::uint32_t* index,
-                std::uint32_t* sorted, std::uint32_t* starts, void* sort_storage,
+                std::uint32_t* sorted, std::uint32_t* starts, void* sorted_xyz, void* sort_storage,
                 std::size_t sort_bytes, int key_bits, cudaStream_t stream) {
   const auto n = static_cast<std::size_t>(in.n);
   const auto blocks = static_cast<unsigned>((n + 255) / 256);
@@ -1004,8 +1068,8 @@ void make_cells(const Input& in, const Lattice* lattices, unsigned long long* ex
   RAYCUT_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(sort_storage, sort_bytes, keys, sorted_keys,
                                                     index, sorted, static_cast<std::int64_t>(n), 0,
                                                     key_bits, stream));
-  cell_starts_kernel<<<static_cast<unsigned>((n + 1 + 255) / 256), 256, 0, stream>>>(sorted_keys,
-                                                                                     in.n, starts);
+  cell_starts_kernel<Real><<<static_cast<unsigned>((n + 1 + 255) / 256), 256, 0, stream>>>(
+      in, sorted_keys, sorted, starts, static_cast<Real*>(sorted_xyz));
   RAYCUT_CUDA_CHECK_LAUNCH();
 }
 
@@ -1041,9 +1105,11 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
   const std::size_t lattices_bytes = align_up(lattices_wanted * sizeof(Lattice));
   const std::size_t slots_bytes = by_cells ? align_up(n * sizeof(std::uint32_t)) : 0;
   const std::size_t starts_bytes = by_cells ? align_up((n + 1) * sizeof(std::uint32_t)) : 0;
+  const std::size_t sorted_xyz_bytes =
+      by_cells ? align_up(3 * n * (wide ? sizeof(double) : sizeof(float))) : 0;
   const std::size_t bytes = counts_bytes + extents_bytes + offsets_bytes + lattices_bytes +
-                            4 * slots_bytes + starts_bytes + align_up(scan_bytes) +
-                            align_up(sort_bytes);
+                            4 * slots_bytes + starts_bytes + sorted_xyz_bytes +
+                            align_up(scan_bytes) + align_up(sort_bytes);
   char* block = static_cast<char*>(allocate(ctx, bytes));
   char* at = block;
   const auto take = [&](std::size_t size) {
@@ -1061,6 +1127,7 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
   auto* index = reinterpret_cast<std::uint32_t*>(take(slots_bytes));
   auto* sorted = reinterpret_cast<std::uint32_t*>(take(slots_bytes));
   auto* starts = reinterpret_cast<std::uint32_t*>(take(starts_bytes));
+  void* sorted_xyz = take(sorted_xyz_bytes);
   void* scan_storage = take(align_up(scan_bytes));
   void* sort_storage = take(align_up(sort_bytes));
   try {
@@ -1071,11 +1138,11 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
           in, lattices, static_cast<std::int64_t>(lattices_wanted));
       RAYCUT_CUDA_CHECK_LAUNCH();
     }
-    const CellTable cells{extents, sorted, starts};
+    const CellTable cells{extents, sorted, starts, sorted_xyz};
     if (by_cells) {
       const auto make = wide ? make_cells<double> : make_cells<float>;
-      make(in, lattices, extents, keys, sorted_keys, index, sorted, starts, sort_storage,
-           sort_bytes, key_bits, stream);
+      make(in, lattices, extents, keys, sorted_keys, index, sorted, starts, sorted_xyz,
+           sort_storage, sort_bytes, key_bits, stream);
     }
     const auto rows = wide ? (by_cells ? row_passes<double, true> : row_passes<double, false>)
                            : (by_cells ? row_passes<float, true> : row_passes<float, false>);
