@@ -153,9 +153,10 @@ __host__ __device__ void make_lattice(const Input& in, std::int64_t s, Lattice& 
       f.code = int(count_invalid_cell);
       return;
     }
+    const double inverse_rest = 1 / rest;  // one division, not three: a long chain in double
 #pragma unroll
     for (int k = 0; k < 3; ++k) {
-      q[a][k] = w[k] / rest;
+      q[a][k] = w[k] * inverse_rest;
       basis[a][k] = f.row[a][k];
     }
   }
@@ -188,8 +189,9 @@ __host__ __device__ void make_lattice(const Input& in, std::int64_t s, Lattice& 
         for (int k = 0; k < 3; ++k) best[k] = w[k];
       }
     }
+    const double inverse_length = 1 / best_length;
 #pragma unroll
-    for (int k = 0; k < 3; ++k) q[a][k] = basis[a][k] = best[k] / best_length;
+    for (int k = 0; k < 3; ++k) q[a][k] = basis[a][k] = best[k] * inverse_length;
   }
   // The inverse by cofactors: basis . inverse = I, so column a of the inverse is g[a].
   const double(&m)[3][3] = basis;
@@ -205,10 +207,11 @@ __host__ __device__ void make_lattice(const Input& in, std::int64_t s, Lattice& 
     f.code = int(count_invalid_cell);
     return;
   }
+  const double inverse_det = 1 / det;
 #pragma unroll
   for (int a = 0; a < 3; ++a) {  // inverse[k][a] = cof[a][k] / det, so g[a][k] = cof[a][k] / det
 #pragma unroll
-    for (int k = 0; k < 3; ++k) f.g[a][k] = cof[a][k] / det;
+    for (int k = 0; k < 3; ++k) f.g[a][k] = cof[a][k] * inverse_det;
     f.reach[a] = in.cutoff * sqrt(dot(f.g[a], f.g[a]));
   }
   // The images a pair can have, ~prod(2 reach + 1) over the periodic axes (+ 2 for rounding):
@@ -590,21 +593,37 @@ __host__ __device__ inline void with_sources(const Input& in, const Frame& f, st
 }
 
 // The extents of every system (slot lo), for its grid.
+// A warp whose particles are all of one system (most, but for a batch's boundaries) reduces its
+// maxima first: one atomic per word and warp instead of 32 on the same address.
 template <class Real>
 __global__ void extents_kernel(Input in, const Lattice* lattices, unsigned long long* extents) {
   const std::int64_t i = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-  if (i >= in.n || (in.run_if && *in.run_if == 0)) return;
+  if (in.run_if && *in.run_if == 0) return;  // the whole grid alike
   Frame f;
-  if (make_frame<Real>(in, i, lattices, f)) return;
-  unsigned long long* e = extents + extent_words * f.lo;
+  const bool valid = i < in.n && make_frame<Real>(in, i, lattices, f) == 0;
+  unsigned long long word[extent_words];
 #pragma unroll
   for (int a = 0; a < 3; ++a) {
-    double size;
-    const double c = axis_coordinate(f, a, size);
-    atomicMax(e + a, ordered(c));
-    atomicMax(e + 3 + a, ordered(-c));
-    atomicMax(e + 6 + a, ordered(size));
+    double size = 0;
+    const double c = valid ? axis_coordinate(f, a, size) : 0;
+    word[a] = valid ? ordered(c) : 0;
+    word[3 + a] = valid ? ordered(-c) : 0;
+    word[6 + a] = valid ? ordered(size) : 0;
   }
+  const std::int64_t lo = valid ? f.lo : -1;
+  const std::int64_t first_lo = __shfl_sync(all_lanes, lo, 0);
+  if (__all_sync(all_lanes, lo == first_lo && valid)) {
+#pragma unroll
+    for (int w = 0; w < extent_words; ++w)
+      for (int offset = warp_size / 2; offset > 0; offset /= 2)
+        word[w] = max(word[w], __shfl_xor_sync(all_lanes, word[w], offset));
+    if (threadIdx.x % warp_size != 0) return;
+  } else if (!valid) {
+    return;
+  }
+  unsigned long long* e = extents + extent_words * lo;
+#pragma unroll
+  for (int w = 0; w < extent_words; ++w) atomicMax(e + w, word[w]);
 }
 
 // Each particle's cell number (lo + its cell in the system's grid) and index, to be sorted.
