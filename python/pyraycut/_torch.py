@@ -238,9 +238,11 @@ def neighbor_list(letters: str, positions: torch.Tensor, cutoff: float, cell: An
                   batch: Any, half: bool, max_pairs: Optional[int]) -> Any:
     _floating(positions, "positions")
     c = _cell(cell, positions)
-    # Where the operator's CUDA pass reads pbc and batch on the device (the small-system pass,
-    # compiled code); elsewhere the engine reads them on the host.
+    # Where the operator's CUDA pass reads pbc and batch on the device (the small-system pass:
+    # small systems, compiled code, and any size while a CUDA graph is being captured, where the
+    # engine cannot run); elsewhere the engine reads them on the host.
     on_device = positions.is_cuda and (torch.compiler.is_compiling() or
+                                       torch.cuda.is_current_stream_capturing() or
                                        _small_systems(positions, c, pbc))
     b = _index(batch, "batch", positions.device if on_device else None)
     vectors_batch = _on(b, positions, c is not None and ("d" in letters or "D" in letters))

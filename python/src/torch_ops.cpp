@@ -21,6 +21,7 @@
 
 #ifdef RAYCUT_TORCH_CUDA
 #include <c10/cuda/CUDACachingAllocator.h>
+#include <c10/cuda/CUDAGraphsC10Utils.h>
 #include <c10/cuda/CUDAGuard.h>
 #include <c10/cuda/CUDAStream.h>
 
@@ -433,12 +434,17 @@ class CachingAllocatorMemory final : public raycut::MemoryResource {
 };
 
 // Whether a neighbor_list call takes the stream-ordered small-system pass: CUDA tensors, systems
-// small enough by raycut's policy. The number of systems is what the host
-// knows: B of a (B, 3, 3) cell, else 1 (the batch's is data-dependent and is never read back).
-// pbc without a cell stays on the engine, which checks that no axis is periodic.
+// small enough by raycut's policy, or any size while the current stream is being captured into a
+// CUDA graph (torch.cuda.graph, torch.compile's "reduce-overhead"): the engine plans on the host
+// and cannot be captured, the pass can (with cells from 2,048 particles a system). The number of
+// systems is what the host knows: B of a (B, 3, 3) cell, else 1 (the batch's is data-dependent
+// and is never read back). pbc without a cell stays on the engine, which checks that no axis is
+// periodic.
 bool takes_small_systems_pass(const at::Tensor& positions, const std::optional<at::Tensor>& cell,
                               const std::optional<at::Tensor>& pbc) {
   if (!positions.is_cuda() || (pbc && !cell)) return false;
+  if (c10::cuda::currentStreamCaptureStatusMayInitCtx() != c10::cuda::CaptureStatus::None)
+    return true;
   const std::int64_t systems = cell && cell->dim() == 3 ? cell->size(0) : 1;
   return raycut::prefer_small_systems(static_cast<std::size_t>(positions.size(0)),
                                       static_cast<std::size_t>(systems));

@@ -367,6 +367,42 @@ def test_compiled_step_replays_as_a_cuda_graph():
     assert counters["inductor"]["cudagraph_skips"] == 0, dict(counters["inductor"])
 
 
+@cuda
+def test_a_large_system_is_captured_in_a_cuda_graph():
+    """Above the small-system policy an eager call takes the engine, which plans on the host and
+    cannot be captured; while a graph is being captured the same call takes the stream-ordered
+    pass (with cells at 3,000 particles): the capture succeeds, and its replays list the eager
+    call's pairs on moved positions."""
+    n, side, cutoff = 3000, 15.2, 2.5
+    assert not pyraycut._raycut.prefer_small_systems(n, 1)
+    generator = torch.Generator(device="cuda").manual_seed(11)
+    x = torch.rand((n, 3), device="cuda", generator=generator) * side
+    cell = side * torch.eye(3, device="cuda")
+    eager = pyraycut.neighbor_list("ijS", x, cutoff, cell=cell, pbc=True)
+    max_pairs = len(eager[0]) + 2000
+
+    def call(positions):
+        return pyraycut.neighbor_list("ijSc", positions, cutoff, cell=cell, pbc=True,
+                                      max_pairs=max_pairs)
+
+    work = x.clone()
+    side_stream = torch.cuda.Stream()
+    side_stream.wait_stream(torch.cuda.current_stream())
+    with torch.cuda.stream(side_stream):
+        call(work)  # warm-up, as torch.cuda.graph asks
+    torch.cuda.current_stream().wait_stream(side_stream)
+    graph = torch.cuda.CUDAGraph()
+    with torch.cuda.graph(graph):
+        i, j, shifts, count = call(work)
+    for step in range(3):
+        moved = x + 0.1 * step * torch.randn(x.shape, device="cuda", generator=generator)
+        work.copy_(moved)
+        graph.replay()
+        want = pyraycut.neighbor_list("ijS", moved, cutoff, cell=cell, pbc=True)
+        assert int(count) == len(want[0]) <= max_pairs, step
+        assert triples(i, j, shifts, int(count)) == triples(*want, len(want[0])), step
+
+
 def test_check_pair_count_names_bad_input_and_overflow():
     assert pyraycut.check_pair_count(torch.tensor(12), 12) == 12
     with pytest.raises(pyraycut.CapacityError, match="at least 13"):

@@ -490,13 +490,11 @@ struct CellSources {
   __host__ __device__ Source at(const Cursor& c) const {
     const std::uint32_t slot = first[c.run] + c.offset;
     Source s;
+    // Both loads depend on the slot only: issued together, not one after the other.
     s.j = sorted[slot];
-    if (s.j < half_from) {
-      s.j = -1;
-      return s;
-    }
 #pragma unroll
     for (int k = 0; k < 3; ++k) s.x[k] = static_cast<double>(sorted_xyz[3 * std::size_t(slot) + k]);
+    if (s.j < half_from) s.j = -1;
     return s;
   }
 };
