@@ -4,6 +4,10 @@ float64 brute force over explicit images), TorchScript, torch.compile(fullgraph=
 dynamic sizes and no recompilation, torch.export with a dynamic N, an AOTInductor package, and
 gradcheck / gradgradcheck of an energy with respect to positions and cell. Skipped (with the
 reason) without PyTorch or where the operators were not built."""
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from test_periodic import TRICLINIC, inside_cell, reference, triples
@@ -289,9 +293,26 @@ def test_export_dynamic_n_and_aoti_package(tmp_path):
     torch.testing.assert_close(program.module()(x2, c2), PairCount()(x2, c2))
     path = torch._inductor.aoti_compile_and_package(program,
                                                     package_path=str(tmp_path / "pairs.pt2"))
-    runner = torch._inductor.aoti_load_package(path)
-    for x3, c3 in (periodic_system(25, np.eye(3), (True,) * 3, seed=25), (x2, c2)):
-        torch.testing.assert_close(runner(x3, c3), PairCount()(x3, c3))
+    # Loaded and run in a process of its own, as a deployment loads it: in this one, after the
+    # file's torch.compile and TorchScript tests, AOTInductor's loader crashed on a GPU machine
+    # (std::regex in the package's parse_device_str; docs/python.md, "AOTInductor"), and the
+    # same load passed in a fresh process.
+    inputs = [periodic_system(25, np.eye(3), (True,) * 3, seed=25), (x2, c2)]
+    torch.save(inputs, tmp_path / "inputs.pt")
+    script = (
+        "import sys, torch, pyraycut\n"
+        "pyraycut._torch_ops()  # registers torch.ops.raycut\n"
+        "runner = torch._inductor.aoti_load_package(sys.argv[1])\n"
+        "inputs = torch.load(sys.argv[2])\n"
+        "torch.save([runner(x, c) for x, c in inputs], sys.argv[3])\n")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    done = subprocess.run([sys.executable, "-c", script, path, str(tmp_path / "inputs.pt"),
+                           str(tmp_path / "outputs.pt")], env=env, capture_output=True,
+                          text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    outputs = torch.load(tmp_path / "outputs.pt")
+    for (x3, c3), got in zip(inputs, outputs):
+        torch.testing.assert_close(got, PairCount()(x3, c3))
 
 
 # ---- gradients ---------------------------------------------------------------------------------
