@@ -20,15 +20,16 @@ Systems of different sizes go in one ragged batch instead: ``batch`` (N,) gives 
 system (sorted), with a cell per system; the pairs come back in one list with global indices.
 
 On a CUDA GPU the same call runs the library's stream-ordered small-system pass
-(raycut::list_pairs_small_systems: brute force within each system, decided in double precision)
+(raycut::list_pairs_small_systems: within each system every particle, or from 2,048 particles a
+system the 27 cells around each, decided in double precision)
 on XLA's stream, with XLA's scratch memory, and never waits for the GPU. Under ``jax.vmap`` it
 runs one pass with a list per system (each system's own K slots and count), so that every
 system's count is exact. Bad data that only the GPU sees
 is not an error of the call there: the count comes back negative instead (-1: a non-finite
 position, -2: an unsorted ``batch``, -3: a degenerate periodic cell, -4: a ``batch`` index outside
-[0, B), -5: a cell so thin that a pair has over 2^24 images), with the pairs all padding. The pass suits systems of up to a few thousand particles;
-larger ones take it too (correct, slower than the library's grids, which synchronise with the
-host and so cannot run inside an XLA program yet).
+[0, B), -5: a cell so thin that a pair has over 2^24 images), with the pairs all padding. Larger systems take it
+too, with cells (10^4 atoms in about 0.37 ms on an H100, 2.4x the library's grid, which
+synchronises with the host and so cannot run inside an XLA program yet).
 """
 from __future__ import annotations
 

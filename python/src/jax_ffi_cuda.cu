@@ -13,8 +13,9 @@
 //   outside [0, B)) cannot be an error of the call without reading the device: the count is the
 //   library's negative code instead (-1 non-finite position, -2 unsorted batch, -3 invalid cell,
 //   -4 system index out of range), and the pairs are all padding.
-// - Larger systems (raycut::prefer_small_systems false) take the same path: correct, slower than
-//   the library's grids, which synchronise with the host and so have no place here yet.
+// - Larger systems (raycut::prefer_small_systems false) take the same path, with cells from 2,048
+//   particles a system (PairOptions::search automatic): slower than the library's grids, which
+//   synchronise with the host and so have no place here yet.
 #include <cuda_runtime.h>
 
 #include <algorithm>
