@@ -204,6 +204,19 @@ Box cubic(double l) {
   return b;
 }
 
+// A periodic triclinic cell, rows (ax, 0, 0), (bx, by, 0), (cx, cy, cz).
+Box triclinic(double ax, double bx, double by, double cx, double cy, double cz) {
+  Box b;
+  b.cell[0][0] = ax;
+  b.cell[1][0] = bx;
+  b.cell[1][1] = by;
+  b.cell[2][0] = cx;
+  b.cell[2][1] = cy;
+  b.cell[2][2] = cz;
+  b.pbc[0] = b.pbc[1] = b.pbc[2] = true;
+  return b;
+}
+
 class DevicePairsOn : public ::testing::TestWithParam<Where> {};
 
 TEST_P(DevicePairsOn, EveryFamilyAgainstTheDoubleOracle) {
@@ -215,15 +228,8 @@ TEST_P(DevicePairsOn, EveryFamilyAgainstTheDoubleOracle) {
     // L < 2C: a pair has several images.
     expect_exact(uniform(128, 0, 5.3, 2), {cubic(5.3)}, {}, 2.5, half, "cubic, several images",
                  where);
-    Box tri;
-    tri.cell[0][0] = 6;
-    tri.cell[1][0] = 2.5;
-    tri.cell[1][1] = 5;
-    tri.cell[2][0] = -1.5;
-    tri.cell[2][1] = 1;
-    tri.cell[2][2] = 4.5;
-    tri.pbc[0] = tri.pbc[1] = tri.pbc[2] = true;
-    expect_exact(uniform(150, 0, 5, 3), {tri}, {}, 2.2, half, "triclinic", where);
+    expect_exact(uniform(150, 0, 5, 3), {triclinic(6, 2.5, 5, -1.5, 1, 4.5)}, {}, 2.2, half,
+                 "triclinic", where);
     Box slab = cubic(5);
     slab.pbc[2] = false;
     slab.cell[2][2] = 0;  // an open row may be anything, even zero
@@ -279,15 +285,8 @@ TEST_P(DevicePairsOn, LargerSystemsAgainstTheDoubleOracle) {
     SCOPED_TRACE(half ? "half" : "full");
     expect_exact(uniform(1200, 0, 15, 40), {cubic(15)}, {}, 2.5, half, "cube, 6 cells a side",
                  where);
-    Box tri;
-    tri.cell[0][0] = 14;
-    tri.cell[1][0] = 3;
-    tri.cell[1][1] = 13;
-    tri.cell[2][0] = -2;
-    tri.cell[2][1] = 2;
-    tri.cell[2][2] = 12;
-    tri.pbc[0] = tri.pbc[1] = tri.pbc[2] = true;
-    expect_exact(uniform(1000, 0, 13, 41), {tri}, {}, 2.2, half, "triclinic", where);
+    expect_exact(uniform(1000, 0, 13, 41), {triclinic(14, 3, 13, -2, 2, 12)}, {}, 2.2, half,
+                 "triclinic", where);
     Box slab = cubic(14);
     slab.pbc[2] = false;
     std::vector<float> slab_xyz = uniform(800, 0, 14, 42);
