@@ -72,8 +72,9 @@ def plot(rows: list[dict], png: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(8, 5.5))
-    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    fig, ax = plt.subplots(figsize=(11, 5.5))
+    colours = plt.get_cmap("tab20").colors  # 20 distinct colours: a line each, none repeated
+
     for n, (key, points) in enumerate(sorted(series(rows).items())):
         colour = colours[n % len(colours)]
         label = "/".join(key)
@@ -89,7 +90,7 @@ def plot(rows: list[dict], png: str) -> None:
     ax.set_ylabel("microseconds per call")
     ax.set_title(title(rows), fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))  # beside the lines
     fig.tight_layout()
     fig.savefig(png, dpi=120)
     plt.close(fig)
