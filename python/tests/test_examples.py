@@ -207,8 +207,9 @@ def test_python_latency_counts_kernels_and_syncs():
 
 
 def test_python_latency_runs_tiny_on_the_cpu(tmp_path, capsys):
-    """bench/python_latency.py with PyTorch CPU tensors: both capacities of each workload, the
-    CSV's columns, and a second run appending to the same file."""
+    """bench/python_latency.py with PyTorch CPU tensors: the three eager capacities of each
+    workload (no CUDA graph row on the CPU), the CSV's columns, and a second run appending to the
+    same file."""
     pytest.importorskip("torch", reason="PyTorch is not installed")
     import pyraycut
 
@@ -220,19 +221,20 @@ def test_python_latency_runs_tiny_on_the_cpu(tmp_path, capsys):
             "--min-loop-ms", "0.05", "--output", str(out)]
     rows = bench.main(args)
     assert [(r["systems"], r["n_per_system"], r["capacity"]) for r in rows] == [
-        (1, 64, "static"), (1, 64, "exact"), (3, 40, "static"), (3, 40, "exact")]
+        (1, 64, "static"), (1, 64, "static-checked"), (1, 64, "exact"),
+        (3, 40, "static"), (3, 40, "static-checked"), (3, 40, "exact")]
     assert all(r["interface"] == "python-torch" and r["mode"] == "eager" for r in rows)
     assert all(float(r["us_per_call"]) > 0 for r in rows)
     text = out.read_text()
-    assert text.startswith(LATENCY_HEADER) and text.count("\n") == 5
-    bench.main(args[:5] + ["none"] + args[6:])  # appended: 2 rows, no second header
+    assert text.startswith(LATENCY_HEADER) and text.count("\n") == 7
+    bench.main(args[:5] + ["none"] + args[6:])  # appended: 3 rows, no second header
     text = out.read_text()
-    assert text.count("\n") == 7 and text.count("workload,") == 1
+    assert text.count("\n") == 10 and text.count("workload,") == 1
     other = tmp_path / "other.csv"
     other.write_text("a,b\n1,2\n")
     with pytest.raises(SystemExit, match="holds other columns"):
         bench.main(args[:-1] + [str(other)])
-    assert "wrote 4 rows" in capsys.readouterr().out
+    assert "wrote 6 rows" in capsys.readouterr().out
 
 
 def test_python_compiled_runs_tiny_on_the_cpu(tmp_path):
