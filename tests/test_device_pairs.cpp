@@ -320,6 +320,35 @@ TEST_P(DevicePairsOn, LargerSystemsAgainstTheDoubleOracle) {
       << "all pairs list j ascending in a row; cells, cell by cell";
 }
 
+// Odd inputs through both searches: a NaN position and an unsorted batch give their codes, never
+// a wrong list; coincident particles (an extent of zero), a far outlier (every other particle
+// in one cell of a grid a million cutoffs wide) and coordinates near 10^30 give the oracle's
+// pairs.
+TEST_P(DevicePairsOn, OddInputsGiveTheirCodesOrTheOraclesPairs) {
+  const Where where = GetParam();
+  if (!available(where)) GTEST_SKIP() << "no CUDA device";
+  std::vector<float> with_nan = uniform(3000, 0, 15, 50);
+  with_nan[3 * 1234 + 1] = std::numeric_limits<float>::quiet_NaN();
+  EXPECT_EQ(run_pass(with_nan, {cubic(15)}, {}, 2.5, false, 1 << 20, where).count,
+            raycut::count_non_finite_position);
+  std::vector<std::int64_t> unsorted(3000, 0);
+  std::fill(unsorted.begin() + 1500, unsorted.end(), 1);
+  unsorted[700] = 1;
+  EXPECT_EQ(run_pass(uniform(3000, 0, 15, 51), {cubic(15), cubic(15)}, unsorted, 2.5, false,
+                     1 << 20, where)
+                .count,
+            raycut::count_unsorted_batch);
+  const std::vector<float> coincident(3 * 600, 2.5f);
+  expect_exact(coincident, {}, {}, 1.0, false, "coincident", where);
+  expect_exact(coincident, {cubic(7)}, {}, 1.0, true, "coincident, periodic", where);
+  std::vector<float> outlier = uniform(700, 0, 10, 52);
+  outlier.insert(outlier.end(), {1e6f, 1e6f, 1e6f});
+  expect_exact(outlier, {}, {}, 1.5, false, "a far outlier", where);
+  std::vector<float> huge = uniform(300, 0, 1, 53);
+  for (float& v : huge) v = 1e30f * (1 + v);
+  expect_exact(huge, {}, {}, 1.0, false, "coordinates near 10^30", where);
+}
+
 TEST_P(DevicePairsOn, CapacityShortByOneIsReportedAndTheRestIsExact) {
   const Where where = GetParam();
   if (!available(where)) GTEST_SKIP() << "no CUDA device";
