@@ -591,6 +591,30 @@ __host__ __device__ inline void with_sources(const Input& in, const Frame& f, st
 }
 
 // The extents of every system (slot lo), for its grid.
+// Row f's contribution to its system's extents: the ordered images of c_a, -c_a and c_a's
+// rounding size (their maxima are the extents).
+__host__ __device__ inline void extent_words_of(const Frame& f,
+                                                unsigned long long (&word)[extent_words]) {
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    double size;
+    const double c = axis_coordinate(f, a, size);
+    word[a] = ordered(c);
+    word[3 + a] = ordered(-c);
+    word[6 + a] = ordered(size);
+  }
+}
+
+// Row f's cell number: its system's first particle plus its cell in the system's grid.
+__host__ __device__ inline std::uint32_t cell_number(const Frame& f,
+                                                     const unsigned long long* extents) {
+  const CellGrid grid = make_cell_grid(f, extents);
+  int c[3];
+  own_cell(f, grid, c);
+  return static_cast<std::uint32_t>(
+      f.lo + (static_cast<std::int64_t>(c[2]) * grid.m[1] + c[1]) * grid.m[0] + c[0]);
+}
+
 // A warp whose particles are all of one system (most, but for a batch's boundaries) reduces its
 // maxima first: one atomic per word and warp instead of 32 on the same address.
 template <class Real>
@@ -599,15 +623,8 @@ __global__ void extents_kernel(Input in, const Lattice* lattices, unsigned long 
   if (in.run_if && *in.run_if == 0) return;  // the whole grid alike
   Frame f;
   const bool valid = i < in.n && make_frame<Real>(in, i, lattices, f) == 0;
-  unsigned long long word[extent_words];
-#pragma unroll
-  for (int a = 0; a < 3; ++a) {
-    double size = 0;
-    const double c = valid ? axis_coordinate(f, a, size) : 0;
-    word[a] = valid ? ordered(c) : 0;
-    word[3 + a] = valid ? ordered(-c) : 0;
-    word[6 + a] = valid ? ordered(size) : 0;
-  }
+  unsigned long long word[extent_words] = {};  // 0: below every ordered value
+  if (valid) extent_words_of(f, word);
   const std::int64_t lo = valid ? f.lo : -1;
   const std::int64_t first_lo = __shfl_sync(all_lanes, lo, 0);
   if (__all_sync(all_lanes, lo == first_lo && valid)) {
@@ -636,11 +653,7 @@ __global__ void cell_keys_kernel(Input in, const Lattice* lattices,
   if (in.run_if && *in.run_if == 0) return;
   Frame f;
   if (make_frame<Real>(in, i, lattices, f)) return;
-  const CellGrid grid = make_cell_grid(f, extents);
-  int c[3];
-  own_cell(f, grid, c);
-  keys[i] = static_cast<std::uint32_t>(
-      f.lo + (static_cast<std::int64_t>(c[2]) * grid.m[1] + c[1]) * grid.m[0] + c[0]);
+  keys[i] = cell_number(f, extents);
 }
 
 // starts[b]: the first sorted slot whose cell number is >= b, for b in [0, n]; and the
@@ -936,25 +949,17 @@ struct HostCells {
     for (std::int64_t i = 0; i < in.n; ++i) {
       Frame f;
       if (make_frame<Real>(in, i, lattices.data(), f)) continue;
+      unsigned long long word[extent_words];
+      extent_words_of(f, word);
       unsigned long long* e = extents.data() + extent_words * f.lo;
-      for (int a = 0; a < 3; ++a) {
-        double size;
-        const double c = axis_coordinate(f, a, size);
-        e[a] = std::max(e[a], ordered(c));
-        e[3 + a] = std::max(e[3 + a], ordered(-c));
-        e[6 + a] = std::max(e[6 + a], ordered(size));
-      }
+      for (int w = 0; w < extent_words; ++w) e[w] = std::max(e[w], word[w]);
     }
     std::vector<std::uint32_t> keys(n);
     for (std::int64_t i = 0; i < in.n; ++i) {
       keys[i] = static_cast<std::uint32_t>(i);
       Frame f;
       if (make_frame<Real>(in, i, lattices.data(), f)) continue;
-      const CellGrid grid = make_cell_grid(f, extents.data());
-      int c[3];
-      own_cell(f, grid, c);
-      keys[i] = static_cast<std::uint32_t>(
-          f.lo + (static_cast<std::int64_t>(c[2]) * grid.m[1] + c[1]) * grid.m[0] + c[0]);
+      keys[i] = cell_number(f, extents.data());
     }
     sorted.resize(n);
     for (std::size_t i = 0; i < n; ++i) sorted[i] = static_cast<std::uint32_t>(i);
