@@ -291,25 +291,35 @@ def test_export_dynamic_n_and_aoti_package(tmp_path):
     assert any("raycut.neighbor_list" in str(node.target) for node in program.graph.nodes)
     x2, c2 = periodic_system(47, np.eye(3), (True,) * 3, seed=47)
     torch.testing.assert_close(program.module()(x2, c2), PairCount()(x2, c2))
-    path = torch._inductor.aoti_compile_and_package(program,
-                                                    package_path=str(tmp_path / "pairs.pt2"))
-    # Loaded and run in a process of its own, as a deployment loads it: in this one, after the
-    # file's torch.compile and TorchScript tests, AOTInductor's loader crashed on a GPU machine
-    # (std::regex in the package's parse_device_str; docs/python.md, "AOTInductor"), and the
-    # same load passed in a fresh process.
+    # Packaged, loaded and run in a process of its own, as a deployment does. Packaged in this
+    # one, after the file's torch.compile and TorchScript tests, the package crashed when loaded,
+    # in this process or a fresh one, on a GPU machine (std::regex in the package's
+    # parse_device_str; docs/python.md, "AOTInductor"); packaged in a fresh process it loads.
     inputs = [periodic_system(25, np.eye(3), (True,) * 3, seed=25), (x2, c2)]
     torch.save(inputs, tmp_path / "inputs.pt")
     script = (
         "import sys, torch, pyraycut\n"
         "pyraycut._torch_ops()  # registers torch.ops.raycut\n"
-        "runner = torch._inductor.aoti_load_package(sys.argv[1])\n"
+        "sys.path.insert(0, sys.argv[4])\n"
+        "from test_torch_ops import PairCount, periodic_system\n"
+        "import numpy as np\n"
+        "n = torch.export.Dim('n', min=2, max=100_000)\n"
+        "x, c = periodic_system(30, np.eye(3), (True,) * 3, seed=30)\n"
+        "program = torch.export.export(PairCount(), (x, c),\n"
+        "                              dynamic_shapes={'x': {0: n}, 'cell': None})\n"
+        "path = torch._inductor.aoti_compile_and_package(program, package_path=sys.argv[1])\n"
+        "runner = torch._inductor.aoti_load_package(path)\n"
         "inputs = torch.load(sys.argv[2])\n"
         "torch.save([runner(x, c) for x, c in inputs], sys.argv[3])\n")
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-    done = subprocess.run([sys.executable, "-c", script, path, str(tmp_path / "inputs.pt"),
-                           str(tmp_path / "outputs.pt")], env=env, capture_output=True,
-                          text=True, timeout=600)
+    # Inductor's own cache apart from this process's: its compiled code may not be shared.
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p),
+               TORCHINDUCTOR_CACHE_DIR=str(tmp_path / "inductor"))
+    done = subprocess.run([sys.executable, "-c", script, str(tmp_path / "pairs.pt2"),
+                           str(tmp_path / "inputs.pt"), str(tmp_path / "outputs.pt"),
+                           os.path.dirname(__file__)], env=env, capture_output=True, text=True,
+                          timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
+    assert (tmp_path / "pairs.pt2").stat().st_size > 0
     outputs = torch.load(tmp_path / "outputs.pt")
     for (x3, c3), got in zip(inputs, outputs):
         torch.testing.assert_close(got, PairCount()(x3, c3))
