@@ -224,6 +224,14 @@ def test_catalogue_is_the_library_s():
     assert pyraycut.KERNELS["sph_force"] == ("force",)
     assert [i["name"] for i in pyraycut.KERNEL_CATALOGUE["sph_force"]["inputs"]] == [
         "velocity", "density", "pressure"]
+    # The stubs name every built-in kernel, in the catalogue's order.
+    import ast
+    import pathlib
+    import re
+    stubs = ast.parse((pathlib.Path(pyraycut.__file__).parent / "_raycut.pyi").read_text())
+    listing = next(ast.get_docstring(f) for f in ast.walk(stubs)
+                   if isinstance(f, ast.FunctionDef) and f.name == "kernel_catalogue")
+    assert re.findall(r'"(\w+)"', listing) == list(pyraycut.KERNEL_CATALOGUE)
 
 
 def test_calculator_bad_parameters():
