@@ -35,6 +35,10 @@ constexpr int block_warps = block_threads / warp_size;
 // waves, never longer (half as long at 1,000 rows).
 constexpr std::size_t rows_for_block_teams = 2048;
 constexpr unsigned all_lanes = 0xffffffffu;
+// How far below 1/2 an axis's reach must stay for the single image (Lattice::single_image), and
+// the largest |f_a| it takes: f_a's rounding, ~1e-16 |f_a| per term, stays far below the slack.
+constexpr double single_image_slack = 1e-6;
+constexpr double single_image_largest_f = 1e8;
 
 struct Input {
   const void* xyz = nullptr;
@@ -67,6 +71,9 @@ struct Lattice {
   // cutoff |g[a]|: no pair within the cutoff is farther apart than this along axis a (open axes
   // too: the cells use it)
   double reach[3] = {};
+  // Every periodic axis thicker than twice the cutoff (reach < 1/2, with room for rounding): a
+  // pair then has at most one image within the cutoff, S_a = round(-f_a) (single_image()).
+  bool single_image = false;
 };
 
 // What a row needs to enumerate its pairs: its system's particles, its own position, and its
@@ -217,9 +224,13 @@ __host__ __device__ void make_lattice(const Input& in, std::int64_t s, Lattice& 
   // The images a pair can have, ~prod(2 reach + 1) over the periodic axes (+ 2 for rounding):
   // past the limit a cell far thinner than the cutoff would keep the GPU busy for hours.
   double images = 1;
+  f.single_image = true;
 #pragma unroll
-  for (int a = 0; a < 3; ++a)
-    if (f.periodic[a]) images *= 2 * f.reach[a] + 3;
+  for (int a = 0; a < 3; ++a) {
+    if (!f.periodic[a]) continue;
+    images *= 2 * f.reach[a] + 3;
+    f.single_image = f.single_image && f.reach[a] < 0.5 - single_image_slack;
+  }
   if (!(images <= max_images_per_pair)) f.code = int(count_too_many_images);
 }
 
@@ -288,6 +299,19 @@ struct Source {
   double x[3] = {};
 };
 
+// r = d + S . cell, the same operations in the same order for every path, so that (j, i, -S)
+// gives -r exactly and the full list is symmetric.
+__host__ __device__ inline void image_vector(const Frame& f, const double* d, int sx, int sy,
+                                             int sz, double* r) {
+#pragma unroll
+  for (int k = 0; k < 3; ++k) {
+    r[k] = d[k];
+    if (f.periodic[0]) r[k] += sx * f.row[0][k];
+    if (f.periodic[1]) r[k] += sy * f.row[1][k];
+    if (f.periodic[2]) r[k] += sz * f.row[2][k];
+  }
+}
+
 template <class Visit>
 __host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f, std::int64_t i,
                                                  const Source& source, Visit&& visit) {
@@ -301,6 +325,24 @@ __host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f
     visit(zero);
     return 1;
   }
+  double fa[3];
+#pragma unroll
+  for (int a = 0; a < 3; ++a) fa[a] = f.periodic[a] ? dot(d, f.g[a]) : 0.0;
+  if (f.single_image && fabs(fa[0]) < single_image_largest_f &&
+      fabs(fa[1]) < single_image_largest_f && fabs(fa[2]) < single_image_largest_f) {
+    // An image within the cutoff has |f_a + S_a| <= reach < 1/2 on every periodic axis, so it
+    // is the nearest one: one test, where the general path below enumerates a range (the same
+    // pairs: the range holds at most this S, and any other S is farther than the cutoff).
+    // i == j has only S = 0 here (its other images are more than twice the cutoff away).
+    const int s[3] = {static_cast<int>(rint(-fa[0])), static_cast<int>(rint(-fa[1])),
+                      static_cast<int>(rint(-fa[2]))};
+    if (i == j) return 0;
+    double r[3];
+    image_vector(f, d, s[0], s[1], s[2], r);
+    if (!(dot(r, r) < in.cutoff2)) return 0;
+    visit(s);
+    return 1;
+  }
   int first[3], last[3];
 #pragma unroll
   for (int a = 0; a < 3; ++a) {
@@ -308,11 +350,10 @@ __host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f
       first[a] = last[a] = 0;
       continue;
     }
-    const double fa = dot(d, f.g[a]);
     // A margin far above the rounding of fa and reach; extra images are decided exactly below.
-    const double margin = 1e-9 * (1 + fabs(fa) + f.reach[a]);
-    if (!shift_range(ceil(-fa - f.reach[a] - margin), floor(-fa + f.reach[a] + margin), first[a],
-                     last[a]))
+    const double margin = 1e-9 * (1 + fabs(fa[a]) + f.reach[a]);
+    if (!shift_range(ceil(-fa[a] - f.reach[a] - margin), floor(-fa[a] + f.reach[a] + margin),
+                     first[a], last[a]))
       return 0;
   }
   std::uint32_t hits = 0;
@@ -325,13 +366,7 @@ __host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f
           if (in.half && !(sx > 0 || (sx == 0 && (sy > 0 || (sy == 0 && sz > 0))))) continue;
         }
         double r[3];
-#pragma unroll
-        for (int k = 0; k < 3; ++k) {
-          r[k] = d[k];
-          if (f.periodic[0]) r[k] += sx * f.row[0][k];
-          if (f.periodic[1]) r[k] += sy * f.row[1][k];
-          if (f.periodic[2]) r[k] += sz * f.row[2][k];
-        }
+        image_vector(f, d, sx, sy, sz, r);
         if (dot(r, r) < in.cutoff2) {
           const int s[3] = {sx, sy, sz};
           visit(s);
@@ -801,21 +836,33 @@ __global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Latti
          base += T::threads, sources.advance(cursor, T::threads)) {
       const Source source = base + rank < sources.total ? sources.at(cursor) : Source{};
       const std::int64_t j = source.j;
-      const std::uint32_t hits = j >= 0 ? for_each_image(in, f, row, source, NoVisit{}) : 0;
+      // The first image is kept from the counting test: most sources have at most one, and only
+      // those with more are tested again.
+      int first[3] = {0, 0, 0};
+      const std::uint32_t hits = j >= 0 ? for_each_image(in, f, row, source,
+                                                         [&](const int* s) {
+                                                           first[0] = s[0];
+                                                           first[1] = s[1];
+                                                           first[2] = s[2];
+                                                         })
+                                        : 0;
       std::uint32_t chunk = 0;
       const std::uint32_t before = T::scan(hits, chunk) - hits;
       unsigned long long at = written + before;
-      if (hits)
-        for_each_image(in, f, row, source, [&](const int* s) {
-          if (at < static_cast<unsigned long long>(out.capacity)) {
-            const std::uint64_t e = slots.first + at;
-            out.i[e] = row;
-            out.j[e] = j;
-            if (out.shifts)
-              for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = s[k];
-          }
-          ++at;
-        });
+      const auto write = [&](const int* s) {
+        if (at < static_cast<unsigned long long>(out.capacity)) {
+          const std::uint64_t e = slots.first + at;
+          out.i[e] = row;
+          out.j[e] = j;
+          if (out.shifts)
+            for (int k = 0; k < 3; ++k) out.shifts[3 * e + k] = s[k];
+        }
+        ++at;
+      };
+      if (hits == 1)
+        write(first);
+      else if (hits > 1)
+        for_each_image(in, f, row, source, write);
       written += chunk;
       if (written >= static_cast<unsigned long long>(out.capacity)) return;
     }
