@@ -541,12 +541,14 @@ TEST(DevicePairs, ReadPairCountNamesBadDataAndHostArgumentsFailEarly) {
 // The policy's crossover, as measured (device_pairs.hpp): the sizes each side of it.
 TEST(DevicePairs, SmallSystemPolicyFollowsThePairTests) {
   EXPECT_TRUE(raycut::prefer_small_systems(1000, 1));
-  EXPECT_TRUE(raycut::prefer_small_systems(1024, 1));
-  EXPECT_FALSE(raycut::prefer_small_systems(1025, 1));
-  EXPECT_FALSE(raycut::prefer_small_systems(2000, 1));
+  EXPECT_TRUE(raycut::prefer_small_systems(4096, 1));
+  EXPECT_FALSE(raycut::prefer_small_systems(4097, 1));
+  EXPECT_FALSE(raycut::prefer_small_systems(10000, 1));
   EXPECT_TRUE(raycut::prefer_small_systems(32 * 100, 32));
-  EXPECT_FALSE(raycut::prefer_small_systems(256 * 100, 256));
-  EXPECT_FALSE(raycut::prefer_small_systems(512 * 128, 512));
+  EXPECT_TRUE(raycut::prefer_small_systems(256 * 100, 256));
+  EXPECT_TRUE(raycut::prefer_small_systems(512 * 128, 512));
+  EXPECT_FALSE(raycut::prefer_small_systems(512 * 128 + 1, 512));
+  EXPECT_FALSE(raycut::prefer_small_systems(64 * 4096, 64));
   EXPECT_FALSE(raycut::prefer_small_systems(10, 0));
   EXPECT_TRUE(raycut::prefer_small_systems(0, 1));
   // No overflow at sizes past 2^32 particles.

@@ -70,16 +70,21 @@ struct PairOptions {
   const int* run_if = nullptr;
 };
 
-// The small-system policy: the brute force within systems beats a grid build (and its host
-// synchronisations) while its pair tests, at least particles^2 / systems (B systems of N
-// particles in all; equal sizes give the least), stay within small_system_pair_tests. Measured
-// on an H100 (docs/streams.md): single systems of 1,000 particles (10^6 tests) and batches of
-// 32 x 100 (3.2 x 10^5) list faster on it; 2,000 particles (4 x 10^6) and 256 x 100
-// (2.6 x 10^6) on the grid. Callers with larger systems use the Engine.
-inline constexpr double small_system_pair_tests = 1 << 20;
+// The small-system policy: the stream-ordered pass beats a grid build and its host
+// synchronisations while its pair tests, at least particles^2 / systems (B systems of N
+// particles in all; equal sizes give the least), stay within small_system_pair_tests, or while
+// the particles are at most small_system_particles (cells then bound the tests by the density,
+// not by N^2). Measured on an H100 through PyTorch, where the Engine's host waits cost most
+// (docs/streams.md): 1,000 and 4,000 particles, 32 x 100, 256 x 100 and 512 x 128 (2^23 tests)
+// list faster on the pass, 10,000 particles on the grid. A C++ caller of the Engine waits less:
+// there the grid is already ahead at 4,000 particles (144 against 151 us), 256 x 100 and
+// 512 x 128.
+inline constexpr double small_system_pair_tests = 1 << 23;
+inline constexpr std::size_t small_system_particles = 4096;
 constexpr bool prefer_small_systems(std::size_t particles, std::size_t systems) {
-  return systems > 0 && static_cast<double>(particles) * static_cast<double>(particles) <=
-                            small_system_pair_tests * static_cast<double>(systems);
+  return systems > 0 && (particles <= small_system_particles ||
+                         static_cast<double>(particles) * static_cast<double>(particles) <=
+                             small_system_pair_tests * static_cast<double>(systems));
 }
 
 // Every pair (i, j, S) of the same system with r = x_j - x_i + S . cell, |r| < cutoff, except

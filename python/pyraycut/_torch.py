@@ -106,9 +106,9 @@ def routes(x: Any, method: str, max_pairs: Optional[int] = None, queries: bool =
 
 def _small_systems(x: torch.Tensor, cell: Any, pbc: Any) -> bool:
     """Whether the operator lists these positions with its small-system pass: the operator's own
-    rule (raycut::prefer_small_systems, N^2 <= 2^20 B), with B the number of cells of a (B, 3, 3)
-    cell and 1 otherwise (the batch index is data on the device, never read to decide); pbc
-    without a cell stays on the engine there."""
+    rule (raycut::prefer_small_systems: N <= 4096 or N^2 <= 2^23 B), with B the number of cells
+    of a (B, 3, 3) cell and 1 otherwise (the batch index is data on the device, never read to
+    decide); pbc without a cell stays on the engine there."""
     if (pbc is not None and cell is None) or x.dim() != 2:  # bad shapes: the extension says why
         return False
     shape = getattr(cell, "shape", None)

@@ -292,9 +292,9 @@ def test_without_max_pairs_small_systems_are_sized_exactly(name, dtype):
 @cuda
 @pytest.mark.parametrize("name", ["cube", "batch"])
 def test_eager_small_lists_take_the_operator(name):
-    """pyraycut.neighbor_list on CUDA tensors of at most 1,024 particles, without max_pairs: the
+    """pyraycut.neighbor_list on CUDA tensors of at most 4,096 particles, without max_pairs: the
     operator's pass, whose outputs torch allocates, with the pairs (and S) of the CPU operator;
-    1,025 particles alone keep the extension's zero-copy path (torch's allocator holds nothing)."""
+    4,097 particles alone keep the extension's zero-copy path (torch's allocator holds nothing)."""
     case = CASES[name]()
     want = reference(case, torch.float32, False)
     x, cutoff, cell, pbc, batch = case.on("cuda", torch.float32)
@@ -304,7 +304,7 @@ def test_eager_small_lists_take_the_operator(name):
     assert torch.cuda.memory_allocated() > before, "outputs not from torch: no operator"
     assert i.is_cuda and triples(i, j, s, len(i)) == want
     del i, j, s
-    big = torch.rand((1025, 3), device="cuda") * 10.0
+    big = torch.rand((4097, 3), device="cuda") * 16.0
     torch.cuda.synchronize()
     before = torch.cuda.memory_allocated()
     i, j = pyraycut.neighbor_list("ij", big, 1.0)
@@ -371,9 +371,9 @@ def test_compiled_step_replays_as_a_cuda_graph():
 def test_a_large_system_is_captured_in_a_cuda_graph():
     """Above the small-system policy an eager call takes the engine, which plans on the host and
     cannot be captured; while a graph is being captured the same call takes the stream-ordered
-    pass (with cells at 3,000 particles): the capture succeeds, and its replays list the eager
+    pass (with cells at 6,000 particles): the capture succeeds, and its replays list the eager
     call's pairs on moved positions."""
-    n, side, cutoff = 3000, 15.2, 2.5
+    n, side, cutoff = 6000, 19.15, 2.5
     assert not pyraycut._raycut.prefer_small_systems(n, 1)
     generator = torch.Generator(device="cuda").manual_seed(11)
     x = torch.rand((n, 3), device="cuda", generator=generator) * side
@@ -448,16 +448,17 @@ def test_the_count_letter_comes_with_the_operator():
 @pytest.mark.skipif(not OPS, reason="the operators are not built")
 def test_small_systems_rule_is_the_operators():
     """pyraycut sends eager CUDA lists to the operator where its small-system pass takes them:
-    N^2 <= 2^20 B (raycut::prefer_small_systems), B from a (B, 3, 3) cell, else 1."""
+    N <= 4096 or N^2 <= 2^23 B (raycut::prefer_small_systems), B from a (B, 3, 3) cell, else
+    1."""
     from pyraycut import _torch
 
     def small(n, cell=None, pbc=None):
         return _torch._small_systems(torch.zeros((n, 3)), cell, pbc)
 
-    assert small(1024) and not small(1025)
-    assert small(1025, cell=torch.eye(3)) is False
-    assert small(1448, cell=np.zeros((2, 3, 3))) and not small(1449, cell=np.zeros((2, 3, 3)))
-    assert small(1448, cell=[[[1, 0, 0]] * 3] * 2)
+    assert small(4096) and not small(4097)
+    assert small(4097, cell=torch.eye(3)) is False
+    assert small(8192, cell=np.zeros((8, 3, 3))) and not small(8193, cell=np.zeros((8, 3, 3)))
+    assert small(8192, cell=[[[1, 0, 0]] * 3] * 8)
     assert not small(10, pbc=True), "pbc without a cell stays on the engine"
 
 
@@ -465,7 +466,7 @@ def test_small_systems_rule_is_the_operators():
 def test_the_count_comes_with_any_size_on_cuda():
     """"c" sends a CUDA call through the operator at any size: the small pass below the rule,
     the engine's grid above it, each with the count of its pairs."""
-    for n in (200, 3000):
+    for n in (200, 6000):
         x = torch.rand((n, 3), device="cuda", generator=None) * (n / 0.8442) ** (1 / 3)
         i, j, count = pyraycut.neighbor_list("ijc", x, 2.5)
         assert count.is_cuda and count.dim() == 0 and int(count) == len(i) == len(j) > 0
