@@ -291,10 +291,8 @@ def test_export_dynamic_n_and_aoti_package(tmp_path):
     assert any("raycut.neighbor_list" in str(node.target) for node in program.graph.nodes)
     x2, c2 = periodic_system(47, np.eye(3), (True,) * 3, seed=47)
     torch.testing.assert_close(program.module()(x2, c2), PairCount()(x2, c2))
-    # Packaged, loaded and run in a process of its own, as a deployment does. Packaged in this
-    # one, after the file's torch.compile and TorchScript tests, the package crashed when loaded,
-    # in this process or a fresh one, on a GPU machine (std::regex in the package's
-    # parse_device_str; docs/python.md, "AOTInductor"); packaged in a fresh process it loads.
+    # Packaged, loaded and run in a process of its own, as a deployment does, with an Inductor
+    # cache of its own (docs/python.md, "AOTInductor", says what crashes on one GPU machine).
     inputs = [periodic_system(25, np.eye(3), (True,) * 3, seed=25), (x2, c2)]
     torch.save(inputs, tmp_path / "inputs.pt")
     script = (
