@@ -12,9 +12,9 @@ Prints markdown tables; writes docs/images/validation-dam-break.png and
 validation-hydrostatic.png (matplotlib).
 
   python3 bench/sph_validation.py \
-      --dam-break bench/results/cpu-2core/sph-dam-break-r10.csv:"10 across a" \
-      --dam-break bench/results/cpu-2core/sph-dam-break-r20.csv:"20 across a" \
-      --hydrostatic bench/results/cpu-2core/sph-hydrostatic.csv --out docs/images
+      --dam-break bench/results/cpu-2core/sph-dam-break-r10-2026-11-22.csv:"10 across a" \
+      --dam-break bench/results/cpu-2core/sph-dam-break-r20-2026-11-22.csv:"20 across a" \
+      --hydrostatic bench/results/cpu-2core/sph-hydrostatic-2026-11-22.csv --out docs/images
 """
 
 import argparse
