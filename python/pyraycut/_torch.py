@@ -144,6 +144,9 @@ def _any_true(values: Any) -> bool:
     return bool(values)
 
 
+_PBC_FLAGS: dict = {}  # (device, bool) -> its (3,) flags on that device (_pbc)
+
+
 def _pbc(pbc: Any, cell: Optional[torch.Tensor], like: torch.Tensor,
          on_device: bool) -> Optional[torch.Tensor]:
     """pbc as a bool tensor: on the positions' device where the operator's CUDA pass reads it
@@ -160,6 +163,17 @@ def _pbc(pbc: Any, cell: Optional[torch.Tensor], like: torch.Tensor,
         return None
     device = like.device if on_device else None  # None: a tensor stays where it is
     if isinstance(pbc, bool):
+        if device is not None and not torch.compiler.is_compiling():
+            # One constant per device and value, never written: a new one each call was a
+            # kernel launch each call. Not kept from a CUDA graph's capture, where its fill is
+            # only recorded, not run.
+            key = (device, pbc)
+            flags = _PBC_FLAGS.get(key)
+            if flags is None:
+                flags = torch.full((3,), pbc, dtype=torch.bool, device=device)
+                if not torch.cuda.is_current_stream_capturing():
+                    _PBC_FLAGS[key] = flags
+            return flags
         flags = torch.full((3,), pbc, dtype=torch.bool, device=device)
     else:
         flags = torch.as_tensor(pbc).to(device=device, dtype=torch.bool)
