@@ -327,8 +327,8 @@ struct Source {
 
 // r = d + S . cell, the same operations in the same order for every path, so that (j, i, -S)
 // gives -r exactly and the full list is symmetric.
-__host__ __device__ inline void image_vector(const Frame& f, const double* d, double sx,
-                                             double sy, double sz, double* r) {
+__host__ __device__ inline void image_vector(const Frame& f, const double* d, int sx, int sy,
+                                             int sz, double* r) {
 #pragma unroll
   for (int k = 0; k < 3; ++k) {
     r[k] = d[k];
@@ -361,17 +361,12 @@ __host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f
     // pairs: the range holds at most this S, and any other S is farther than the cutoff).
     // i == j has only S = 0 here (its other images are more than twice the cutoff away).
     if (i == j) return 0;
-    // S_a = round(-f_a) in double: adding and taking away 1.5 x 2^52 rounds to the nearest (ties
-    // to even, as rint), exact for |f_a| < 2^51; conversions to int and back run on a slow pipe
-    // of the GPU, and only a pair within the cutoff needs its S as ints.
-    constexpr double rounding = 6755399441055744.0;
-    const double s[3] = {(rounding - fa[0]) - rounding, (rounding - fa[1]) - rounding,
-                         (rounding - fa[2]) - rounding};
+    const int s[3] = {static_cast<int>(rint(-fa[0])), static_cast<int>(rint(-fa[1])),
+                      static_cast<int>(rint(-fa[2]))};
     double r[3];
     image_vector(f, d, s[0], s[1], s[2], r);
     if (!(dot(r, r) < in.cutoff2)) return 0;
-    const int shift[3] = {static_cast<int>(s[0]), static_cast<int>(s[1]), static_cast<int>(s[2])};
-    visit(shift);
+    visit(s);
     return 1;
   }
   int first[3], last[3];
