@@ -702,8 +702,8 @@ def neighbor_list(quantities: str, positions: Any, cutoff: Any, cell: Any = None
     may wait), and a CUDA call on small systems never waits for the GPU (CUDA graphs capture it;
     docs/python.md, "Static capacity on CUDA"). CUDA tensors (method "auto" or "grid") take the
     operator's CUDA kernel, where it is built, with ``max_pairs``, under torch.compile, and for
-    small systems, where it is faster (N^2 <= 2^20 B, B the systems of a (B, 3, 3) cell, else
-    1: about 1,000 particles alone); other eager calls keep the zero-copy path above.
+    small systems, where it is faster (N <= 4096 or N^2 <= 2^23 B, B the systems of a (B, 3, 3)
+    cell, else 1: batches up to 512 x 128); other eager calls keep the zero-copy path above.
 
     >>> i, j, S = pyraycut.neighbor_list("ijS", x, 3.0, cell=[10.0, 10.0, 10.0], pbc=True)
     >>> i, j = pyraycut.neighbor_list("ij", x, 3.0, cell=cells, batch=batch)   # cells (B, 3, 3)
