@@ -50,9 +50,9 @@ enum class SourceSearch {
 
 // The automatic choice: cells when the systems hold 2,048 particles or more on average (the host
 // knows the number of systems from the cells, the pbc rows or a list per system, else takes 1).
-// Measured on an H100 (docs/streams.md): all pairs is faster at 1,000 particles (65 against
-// 115 us from a graph), the two are even at 2,000 (192 and 187), cells far ahead above (4,000:
-// 209 against 517; 10,000: 432 against 2,409).
+// Measured on an H100 (docs/benchmarks.md): all pairs is faster at 1,000 particles (36 against
+// 98 us from a graph) and at 2,000 (92 us), cells ahead above, where all pairs grows as N^2
+// (4,000: 138 us with cells; 10,000: 270).
 inline constexpr double cells_from_particles_per_system = 2048;
 constexpr bool small_pass_uses_cells(std::size_t particles, std::size_t systems) {
   return static_cast<double>(particles) >=
