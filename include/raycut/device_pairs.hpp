@@ -51,8 +51,8 @@ enum class SourceSearch {
 // The automatic choice: cells when the systems hold 2,048 particles or more on average (the host
 // knows the number of systems from the cells, the pbc rows or a list per system, else takes 1).
 // Measured on an H100 (docs/benchmarks.md): all pairs is faster at 1,000 particles (36 against
-// 98 us from a graph) and at 2,000 (92 us), cells ahead above, where all pairs grows as N^2
-// (4,000: 138 us with cells; 10,000: 270).
+// 98 us from a graph; 92 us at 2,000), cells ahead above, where all pairs grows as N^2 (4,000:
+// 138 us with cells; 10,000: 270).
 inline constexpr double cells_from_particles_per_system = 2048;
 constexpr bool small_pass_uses_cells(std::size_t particles, std::size_t systems) {
   return static_cast<double>(particles) >=
