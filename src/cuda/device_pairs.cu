@@ -72,7 +72,7 @@ struct Lattice {
   // too: the cells use it)
   double reach[3] = {};
   // Every periodic axis thicker than twice the cutoff (reach < 1/2, with room for rounding): a
-  // pair then has at most one image within the cutoff, S_a = round(-f_a) (single_image()).
+  // pair then has at most one image within the cutoff, S_a = round(-f_a) (for_each_image).
   bool single_image = false;
 };
 
