@@ -320,6 +320,37 @@ TEST_P(DevicePairsOn, LargerSystemsAgainstTheDoubleOracle) {
       << "all pairs list j ascending in a row; cells, cell by cell";
 }
 
+// Boxes about twice the cutoff thick, where the pass switches between one image per source
+// (every periodic axis thicker than 2C, less a slack) and the range of images: just above 2C
+// (one image), within the slack above it and just below it (the range: a pair half a box apart
+// then has two images within the cutoff). Pairs are placed half a box apart along each axis, and
+// a float64 set lies 2 x 10^8 boxes out, past the single image's largest |f|.
+TEST_P(DevicePairsOn, BoxesAboutTwiceTheCutoffOnEachSideOfTheSingleImage) {
+  const Where where = GetParam();
+  if (!available(where)) GTEST_SKIP() << "no CUDA device";
+  const double cutoff = 1.0;
+  for (double side : {2.0 * (1 + 1e-3), 2.0 * (1 + 1e-7), 2.0 * (1 - 1e-3)}) {
+    std::vector<float> xyz = uniform(200, 0, side, 60);
+    for (int a = 0; a < 3; ++a) {  // pairs half a box apart along axis a
+      float p[3] = {0.1f, 0.2f, 0.3f};
+      xyz.insert(xyz.end(), p, p + 3);
+      p[a] += static_cast<float>(side / 2);
+      xyz.insert(xyz.end(), p, p + 3);
+    }
+    for (bool half : {false, true}) {
+      SCOPED_TRACE(half ? "half" : "full");
+      expect_exact(xyz, {cubic(side)}, {}, cutoff, half, "cube about 2C", where);
+      expect_exact(xyz, {triclinic(side, 0.3, side, -0.2, 0.1, side)}, {}, cutoff, half,
+                   "triclinic about 2C", where);
+    }
+  }
+  std::mt19937 rng(61);
+  std::uniform_real_distribution<double> u(0, 6);
+  std::vector<double> far(3 * 300);
+  for (double& v : far) v = u(rng) + 6.0 * 2e8;
+  expect_exact(far, {cubic(6)}, {}, 2.0, false, "float64 2e8 boxes out", where);
+}
+
 // Odd inputs through both searches: a NaN position and an unsorted batch give their codes, never
 // a wrong list; coincident particles (an extent of zero), a far outlier (every other particle
 // in one cell of a grid a million cutoffs wide) and coordinates near 10^30 give the oracle's
