@@ -69,6 +69,8 @@ std::string describe_box(const Box& box);
 // A progress line on stderr for long runs: "what: 40% (4/10), 12 s, ETA 18 s". Nothing before
 // 3 s have passed (short runs stay silent), then at most twice a second, on one line rewritten
 // with '\r' on a terminal and a line every 10 s otherwise (logs); nothing at all when quiet.
+// RAYCUT_PROGRESS_SECONDS=T sets both the wait and the interval to T seconds (0: a line at every
+// step).
 class Progress {
  public:
   Progress(std::string what, std::uint64_t total, bool quiet);
@@ -83,6 +85,7 @@ class Progress {
   std::string what_;
   std::uint64_t total_;
   bool quiet_, terminal_, printed_ = false;
+  double first_ = 3.0, interval_;  // seconds before the first line, and between lines
   double last_ = -1e30;
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
 };

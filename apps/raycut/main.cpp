@@ -7,6 +7,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <iostream>
 #include <limits>
 #include <map>
@@ -46,7 +47,20 @@ std::vector<std::string> resolve_methods(const std::vector<std::string>& names) 
 }
 
 Progress::Progress(std::string what, std::uint64_t total, bool quiet)
-    : what_(std::move(what)), total_(total), quiet_(quiet), terminal_(isatty(2) != 0) {}
+    : what_(std::move(what)),
+      total_(total),
+      quiet_(quiet),
+      terminal_(isatty(2) != 0),
+      interval_(terminal_ ? 0.5 : 10.0) {
+  if (const char* text = std::getenv("RAYCUT_PROGRESS_SECONDS")) {
+    char* end = nullptr;
+    const double seconds = std::strtod(text, &end);
+    if (end == text || *end != '\0' || !(seconds >= 0) || !std::isfinite(seconds))
+      throw Error(ErrorCode::invalid_argument, std::string("RAYCUT_PROGRESS_SECONDS=") + text +
+                                                   ": expected a number of seconds >= 0");
+    first_ = interval_ = seconds;
+  }
+}
 
 double Progress::elapsed() const {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
@@ -62,7 +76,7 @@ std::string Progress::eta(std::uint64_t done) const {
 
 void Progress::update(std::uint64_t done) {
   const double t = elapsed();
-  if (quiet_ || t < 3.0 || t - last_ < (terminal_ ? 0.5 : 10.0)) return;
+  if (quiet_ || t < first_ || t - last_ < interval_) return;
   last_ = t;
   const double percent = total_ ? 100.0 * static_cast<double>(done) / total_ : 100.0;
   std::fprintf(stderr, "%s%s: %.0f%% (%llu/%llu), %.0f s, %s%s", terminal_ ? "\r" : "",

@@ -95,3 +95,30 @@ def test_csv_and_letters(tmp_path):
 def test_version():
     code, out, _ = run("--version")
     assert code == 0 and out.strip() == f"raycut {pyraycut.__version__}"
+
+
+def test_progress_lines_carry_an_eta_and_quiet_silences_them(tmp_path):
+    """check, neighbours and bench print progress with an ETA on stderr (every step here:
+    RAYCUT_PROGRESS_SECONDS=0; by default only past 3 s), never on stdout, and nothing with -q; a
+    malformed RAYCUT_PROGRESS_SECONDS is refused by name."""
+    cli = find_cli()
+    xyz = tmp_path / "in.xyz"
+    write_xyz(xyz, np.random.default_rng(5).random((300, 3)) * 4.0, cell=np.eye(3) * 4.0)
+    commands = {
+        "check": ["check", "-m", "cell-list", "-f", "uniform", "lattice-k1", "-n", "200", "-c",
+                  "0.1"],
+        "neighbours": ["neighbours", "-i", xyz, "-c", "1.0", "-o", tmp_path / "pairs.npz"],
+        "bench": ["bench", "-s", "uniform", "--param", "4", "-m", "cell-list", "--reps", "1", "-o",
+                  tmp_path / "bench.csv"],
+    }
+    env = dict(os.environ, RAYCUT_PROGRESS_SECONDS="0")
+    for name, args in commands.items():
+        done = subprocess.run([cli, *map(str, args)], capture_output=True, text=True, env=env)
+        assert done.returncode == 0, (name, done.stderr)
+        assert "ETA" in done.stderr and "ETA" not in done.stdout, (name, done.stderr)
+        quiet = subprocess.run([cli, *map(str, args), "-q"], capture_output=True, text=True,
+                               env=env)
+        assert quiet.returncode == 0 and "ETA" not in quiet.stderr, (name, quiet.stderr)
+    bad = subprocess.run([cli, *map(str, commands["check"])], capture_output=True, text=True,
+                         env=dict(os.environ, RAYCUT_PROGRESS_SECONDS="soon"))
+    assert bad.returncode == 2 and "RAYCUT_PROGRESS_SECONDS=soon" in bad.stderr
