@@ -19,9 +19,11 @@
 // with their own operations (--ops overrides them), the lists with image shifts:
 //   list_full_s     build + neighbours(buffer, {shifts})
 //   list_half_s     build + neighbours(buffer, {half, shifts})
+//   list_half_any_s build + neighbours(buffer, {half, any_row, shifts}): the half stencil
 //   lj_forces_only  run(Kernel::lj_forces) alone, on an engine built before the timing (cold:
 //                   a fresh one, so the result arrays are allocated inside the timing)
-// (lj-liquid-pbc: build, count, list_full_s, list_half_s, lj_forces, lj_forces_only; the
+// (lj-liquid-pbc: build, count, list_full_s, list_half_s, lj_forces, lj_forces_only,
+// list_half_any_s; the
 // batches: build, count, list_full_s). Their rows have param = systems, p = particles per
 // system.
 //
@@ -36,7 +38,8 @@
 //   functor_lj      build + raycut::cuda::for_each_pair with a user functor carrying the
 //                   built-in LJ energy math and its own output buffer
 //   list_only_full  neighbours(buffer) alone, on an engine built before the timing
-//   list_full_s, list_half_s, lj_forces_only: above (any input; shifts are 0 without a box)
+//   list_full_s, list_half_s, list_half_any_s, lj_forces_only: above (any input; shifts are 0
+//                   without a box)
 // One CSV row per (input, method, operation, mode); `pairs` is the ordered in-range pair count
 // (sum of Kernel::count), `entries` what the result holds, `check` whether it agrees (list
 // entries vs pairs; functor energies bitwise against Kernel::lj).
@@ -139,6 +142,7 @@ enum class Op {
   list_only_full,
   list_full_s,
   list_half_s,
+  list_half_any_s,
   lj_forces_only
 };
 const std::vector<std::pair<std::string, Op>> kOps = {{"build", Op::build},
@@ -153,14 +157,16 @@ const std::vector<std::pair<std::string, Op>> kOps = {{"build", Op::build},
                                                       {"list_only_full", Op::list_only_full},
                                                       {"list_full_s", Op::list_full_s},
                                                       {"list_half_s", Op::list_half_s},
+                                                      {"list_half_any_s", Op::list_half_any_s},
                                                       {"lj_forces_only", Op::lj_forces_only}};
 // What runs by default: every operation of the first ten on the open inputs (the rows measured
 // before the periodic ones), these on the periodic ones.
 const std::vector<Op> kOpenOps = {Op::build,        Op::count,         Op::list_full, Op::list_half,
                                   Op::list_full_dv, Op::padded,        Op::lj,        Op::lj_forces,
                                   Op::functor_lj,   Op::list_only_full};
-const std::vector<Op> kLiquidOps = {Op::build,       Op::count,     Op::list_full_s,
-                                    Op::list_half_s, Op::lj_forces, Op::lj_forces_only};
+const std::vector<Op> kLiquidOps = {Op::build,          Op::count,     Op::list_full_s,
+                                    Op::list_half_s,    Op::lj_forces, Op::lj_forces_only,
+                                    Op::list_half_any_s};
 const std::vector<Op> kBatchOps = {Op::build, Op::count, Op::list_full_s};
 
 Op parse_op(const std::string& name) {
@@ -338,9 +344,11 @@ void execute(Op op, State& s, const Context& c) {
       e.neighbours(s.list, lo);
       break;
     }
-    case Op::list_half_s: {
+    case Op::list_half_s:
+    case Op::list_half_any_s: {
       raycut::ListOptions lo;
       lo.half = true;
+      lo.any_row = op == Op::list_half_any_s;
       lo.shifts = true;
       e.neighbours(s.list, lo);
       break;
@@ -419,7 +427,8 @@ Measurement measure(Op op, bool cold, int reps, const Context& c,
         case Op::list_full_dv:
         case Op::list_half:
         case Op::list_full_s:
-        case Op::list_half_s: {
+        case Op::list_half_s:
+        case Op::list_half_any_s: {
           m.entries = s.list.pairs();
           m.bytes = s.list.bytes();
           m.has_entries = true;
@@ -430,7 +439,8 @@ Measurement measure(Op op, bool cold, int reps, const Context& c,
           // such pairs exist (1 in 231,729,614 in a run on the H200, 2026-12-02): a half list may
           // differ from half the pairs by at most the pairs within a few ulps of the cutoff, 1e-6
           // of them here.
-          const bool half = op == Op::list_half || op == Op::list_half_s;
+          const bool half =
+              op == Op::list_half || op == Op::list_half_s || op == Op::list_half_any_s;
           const std::uint64_t want = half ? pairs / 2 : pairs;
           const std::uint64_t off =
               2 * m.entries > pairs ? 2 * m.entries - pairs : pairs - 2 * m.entries;
@@ -438,7 +448,8 @@ Measurement measure(Op op, bool cold, int reps, const Context& c,
           m.check = m.entries == want ? "ok"
                     : band            ? "ok(band " + std::to_string(off) + ")"
                                       : "MISMATCH";
-          const bool shifts = op == Op::list_full_s || op == Op::list_half_s;
+          const bool shifts =
+              op == Op::list_full_s || op == Op::list_half_s || op == Op::list_half_any_s;
           if (shifts && m.entries > 0 && s.list.shifts() == nullptr)
             m.check = "MISMATCH(no shifts)";
           break;

@@ -146,6 +146,25 @@ TEST_P(Conformance, MatchesBruteForce) {
             << "distance of pair " << i << "," << j;
       }
     }
+    // any_row: each pair once still, in the row of either particle (the grid's half stencil).
+    // Oriented i < j, its entries are the reference's upper pairs; each has its own vector.
+    engine.neighbours(buffer, {.half = true, .vectors = true, .any_row = true});
+    const NeighbourList either = buffer.to_host();
+    Rows upper(n);
+    for (std::size_t i = 0; i < n; ++i)
+      for (std::uint64_t e = either.offsets[i]; e < either.offsets[i + 1]; ++e) {
+        const std::uint32_t j = either.indices[e];
+        ASSERT_LT(j, n) << "any_row half list, target " << i;
+        for (int a = 0; a < 3; ++a)
+          ASSERT_EQ(either.vectors[3 * e + a], cloud.xyz[3 * j + a] - cloud.xyz[3 * i + a])
+              << "any_row half list: vector of pair " << i << "," << j;
+        upper[std::min<std::size_t>(i, j)].push_back(
+            static_cast<std::uint32_t>(std::max<std::size_t>(i, j)));
+      }
+    for (std::size_t i = 0; i < n; ++i) {
+      std::sort(upper[i].begin(), upper[i].end());
+      ASSERT_EQ(upper[i], half_rows[i]) << "any_row half list, pairs of target " << i;
+    }
     raycut::PaddedNeighbourBuffer padded;
     const auto k = static_cast<std::uint32_t>(std::max<std::size_t>(largest, 1));
     EXPECT_FALSE(engine.padded_neighbours(padded, {.k = k}).overflowed());

@@ -8,6 +8,8 @@
 #include <cuda_runtime.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <iterator>
@@ -65,6 +67,46 @@ const Variant variants[] = {
     {"thread_k1_compact_regs2", make(1, 1, 2, 0, 2)},
 };
 
+using Triple = std::array<std::int64_t, 5>;  // (i, j, S)
+
+// The half list's orientation: i < j, or i == j and S lexicographically positive.
+bool half_orientation(const Triple& t) {
+  if (t[0] != t[1]) return t[0] < t[1];
+  for (int k = 2; k < 5; ++k)
+    if (t[k] != 0) return t[k] > 0;
+  return false;
+}
+
+// Each entry as (i, j, S), S zero where the list has none; sorted.
+std::vector<Triple> triples(const raycut::NeighbourList& l) {
+  std::vector<Triple> out;
+  for (std::size_t i = 0; i + 1 < l.offsets.size(); ++i)
+    for (std::uint64_t e = l.offsets[i]; e < l.offsets[i + 1]; ++e) {
+      Triple t{static_cast<std::int64_t>(i), l.indices[e], 0, 0, 0};
+      if (!l.shifts.empty())
+        for (int a = 0; a < 3; ++a) t[2 + a] = l.shifts[3 * e + a];
+      out.push_back(t);
+    }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// The half list by the half stencil (ListOptions::any_row) of a built grid: the pairs of the
+// full list `want`, each once, in the row of either of its particles.
+void expect_half_any_row(raycut::detail::Method& grid, const raycut::NeighbourList& want,
+                         const std::string& what) {
+  auto storage = grid.make_list_storage();
+  grid.neighbours(*storage, {.half = true, .shifts = true, .any_row = true});
+  std::vector<Triple> got, halved;
+  for (const Triple& t : triples(storage->to_host()))
+    got.push_back(half_orientation(t) ? t : Triple{t[1], t[0], -t[2], -t[3], -t[4]});
+  std::sort(got.begin(), got.end());
+  for (const Triple& t : triples(want))
+    if (half_orientation(t)) halved.push_back(t);
+  ASSERT_EQ(got.size(), halved.size()) << what << ": any_row half list entries";
+  EXPECT_TRUE(got == halved) << what << ": any_row half list is not the full list halved";
+}
+
 const char* families[] = {"uniform",          "lattice-k2",     "coincident",
                           "gaussian-outlier", "sphere-surface", "diagonal"};
 
@@ -99,6 +141,7 @@ TEST_P(GridVariants, MatchBruteForce) {
   auto storage = grid->make_list_storage();
   grid->neighbours(*storage, {});
   const raycut::NeighbourList got_list = storage->to_host();
+  expect_half_any_row(*grid, want_list, std::string(v.name) + " " + family);
   cudaFree(xyz);
 
   const auto diff = raycut::compare_neighbours(got_list, want_list);
@@ -217,6 +260,7 @@ TEST_P(GridVariantsPeriodic, MatchTheExactCellList) {
     auto storage = grid->make_list_storage();
     grid->neighbours(*storage, {.shifts = true});
     const raycut::NeighbourList got_list = storage->to_host();
+    expect_half_any_row(*grid, want_list, std::string(v.name) + ", L / C " + std::to_string(ratio));
     cudaFree(xyz);
 
     const auto diff = raycut::compare_neighbours(got_list, want_list);

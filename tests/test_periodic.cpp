@@ -530,6 +530,17 @@ void expect_matches(Engine& engine, const Batch& b, const std::string& what) {
       if (raycut_test::half_orientation(t)) oriented.push_back(t);
     EXPECT_EQ(triples(half), oriented) << what << ": half list != full list halved";
     EXPECT_EQ(2 * half.indices.size(), full.indices.size()) << what;
+    // any_row: the same pairs, each in the row of either particle (the grid's half stencil),
+    // with the vector and S of its own row.
+    const NeighbourList either = engine.neighbours(
+        {.half = true, .distances = true, .vectors = true, .shifts = true, .any_row = true});
+    ASSERT_NO_FATAL_FAILURE(expect_geometry(either, b, what + ", any_row"));
+    std::vector<PeriodicTriple> either_oriented;
+    for (const PeriodicTriple& t : triples(either))
+      either_oriented.push_back(
+          raycut_test::half_orientation(t) ? t : PeriodicTriple{t[1], t[0], -t[2], -t[3], -t[4]});
+    std::sort(either_oriented.begin(), either_oriented.end());
+    EXPECT_EQ(either_oriented, oriented) << what << ": any_row half list != full list halved";
   }
   ASSERT_NO_FATAL_FAILURE(expect_kernels(engine, b, full, what));
 

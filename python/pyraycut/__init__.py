@@ -312,7 +312,7 @@ class Engine:
         return {name: _arrays.output(array, like) for name, array in out.items()}
 
     def neighbours(self, half: bool = False, distances: bool = False, vectors: bool = False,
-                   shifts: bool = False) -> tuple:
+                   shifts: bool = False, any_row: bool = False) -> tuple:
         """The CSR neighbour list of the built positions: ``(offsets, indices)`` then
         ``distances``, ``vectors`` and ``shifts`` when asked.
 
@@ -321,13 +321,16 @@ class Engine:
         float32, vectors ``r_ij = x_j - x_i + S @ cell`` (P, 3) float32, shifts S (P, 3) int32
         (zeros without a box). ``half``: each pair once: of (i, j, S) and (j, i, -S) the one
         with i < j, or i == j and S lexicographically positive, in row i (not with queries:
-        ValueError). On the device for device positions and GPU methods, wrapping the list's
-        own buffer (zero-copy; each call fills a new buffer).
+        ValueError). ``any_row`` (with ``half``): each pair once still, in the row of whichever
+        particle the method met it from; the CUDA grid then walks half its stencil, about half
+        the work (for loops that add each pair to both particles). On the device for device
+        positions and GPU methods, wrapping the list's own buffer (zero-copy; each call fills
+        a new buffer).
         """
         self._no_half_with_queries(half)
         like = self._like
         out = self._call(like, self._engine.neighbours, bool(half), bool(distances),
-                         bool(vectors), like.host, bool(shifts))
+                         bool(vectors), like.host, bool(shifts), bool(any_row))
         asked = (True, True, distances, vectors, shifts)
         return tuple(_arrays.output(a, like) for a, keep in zip(out, asked) if keep)
 

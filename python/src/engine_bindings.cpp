@@ -63,12 +63,13 @@ struct PyPairCutoffs {
 // stay valid).
 std::shared_ptr<raycut::NeighbourListBuffer> fill_list(PyEngine& e, bool half, bool distances,
                                                        bool vectors, bool shifts, bool coo = false,
-                                                       const PyPairCutoffs& given = {}) {
+                                                       const PyPairCutoffs& given = {},
+                                                       bool any_row = false) {
   std::shared_ptr<raycut::NeighbourListBuffer> list = idle_lists().take();
   Exclusive hold(e.mutex);
   const std::optional<raycut::PairCutoffs> cutoffs = given.view(e.engine.size());
   e.engine.neighbours(*list, raycut::ListOptions{half, distances, vectors, shifts, coo,
-                                                 cutoffs ? &*cutoffs : nullptr});
+                                                 cutoffs ? &*cutoffs : nullptr, any_row});
   return list;
 }
 
@@ -116,8 +117,9 @@ ListArrays arrays_of(std::shared_ptr<raycut::NeighbourListBuffer> list, bool to_
 // CSR: (offsets int64 [N+1], indices int32 [P], distances [P] or None, vectors [P, 3] or None,
 // shifts int32 [P, 3] or None).
 nb::tuple neighbours(PyEngine& engine, bool half, bool distances, bool vectors, bool to_host,
-                     bool shifts) {
-  const ListArrays a = arrays_of(fill_list(engine, half, distances, vectors, shifts), to_host);
+                     bool shifts, bool any_row) {
+  const ListArrays a =
+      arrays_of(fill_list(engine, half, distances, vectors, shifts, false, {}, any_row), to_host);
   const std::size_t n = a.targets, pairs = a.pairs;
   return nb::make_tuple(wrap(a.offsets, {n + 1}, dtype_of<std::int64_t>(), a.owner, a.space),
                         wrap(a.indices, {pairs}, index_dtype(n), a.owner, a.space),
@@ -249,7 +251,7 @@ void bind_engine(nb::module_& m) {
            nb::arg("inputs") = nb::dict(), nb::arg("to_host") = true)
       .def("results", &results, nb::arg("kernel"), nb::arg("to_host"))
       .def("neighbours", &neighbours, nb::arg("half"), nb::arg("distances"), nb::arg("vectors"),
-           nb::arg("to_host"), nb::arg("shifts") = false)
+           nb::arg("to_host"), nb::arg("shifts") = false, nb::arg("any_row") = false)
       .def("pairs", &pairs, nb::arg("half"), nb::arg("distances"), nb::arg("vectors"),
            nb::arg("to_host"), nb::arg("shifts") = false, nb::arg("radii") = nb::none(),
            nb::arg("species") = nb::none(), nb::arg("table") = nb::none())

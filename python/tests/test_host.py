@@ -37,6 +37,19 @@ def test_half_is_full_halved(method, family):
     assert_same_pairs(i, j, x, CUTOFF, half=True)
 
 
+@pytest.mark.parametrize("family", ["uniform", "coincident"])
+def test_half_any_row_holds_each_pair_once(method, family):
+    x = INPUTS[family]()
+    engine = pyraycut.Engine(method)
+    engine.build(x, CUTOFF)
+    offsets, indices, vectors = engine.neighbours(half=True, vectors=True, any_row=True)
+    rows = np.repeat(np.arange(len(offsets) - 1), np.diff(offsets))
+    pairs = {(min(a, b), max(a, b)) for a, b in zip(rows.tolist(), indices.tolist())}
+    full = pair_set(*pyraycut.neighbor_list("ij", x, CUTOFF, method=method))
+    assert len(pairs) == len(indices) and pairs == {(a, b) for a, b in full if a < b}
+    np.testing.assert_array_equal(vectors, x[indices] - x[rows])
+
+
 def test_quantities_order_and_single_letter(method):
     x = uniform(300)
     i, j, d, D = pyraycut.neighbor_list("ijdD", x, CUTOFF, method=method)

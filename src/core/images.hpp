@@ -60,11 +60,12 @@ class ImagePoints {
  protected:
   // What points() hands the method after an expansion into these arrays.
   void publish(const ImagePlan& plan, const float* xyz, std::size_t size, const PointImage* image,
-               const std::uint32_t* system, const ExactImages* exact) {
+               const std::uint32_t* system, const ExactImages* exact,
+               const std::uint32_t* image_counts = nullptr) {
     points_.xyz = xyz;
     points_.size = size;
     points_.targets = plan.target_count();
-    points_.images = {image, nullptr, !plan.has_queries(), exact};
+    points_.images = {image, nullptr, !plan.has_queries(), exact, image_counts};
     points_.systems = plan.systems();
     points_.system = plan.systems() > 1 ? system : nullptr;
   }

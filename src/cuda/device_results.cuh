@@ -208,7 +208,8 @@ class GpuMethod : public Method {
   // What a list keeps: its half orientation and per-pair cutoffs, staged in `list`.
   ListFilter list_filter(DeviceListStorage& list, const ListOptions& options, std::size_t n,
                          const ExactImages* exact) const {
-    ListFilter filter{options.half, list.stage_cutoffs(options.cutoffs, n, stream_)};
+    ListFilter filter{options.half, list.stage_cutoffs(options.cutoffs, n, stream_),
+                      options.half && options.any_row};
     if (exact && filter.cutoffs.active()) filter.cutoffs.exact = *exact;
     return filter;
   }

@@ -403,7 +403,7 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
   exact_.system = batch ? system_.data() : nullptr;
   exact_.cells = cells_.data();
   set_float_band(exact_, plan.cutoff, rounding_bound(extent));
-  publish(plan, xyz_.data(), points, image_.data(), system_.data(), &exact_);
+  publish(plan, xyz_.data(), points, image_.data(), system_.data(), &exact_, counts_.data());
 }
 
 }  // namespace

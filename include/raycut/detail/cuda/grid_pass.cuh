@@ -126,10 +126,13 @@ __host__ __device__ __forceinline__ std::uint64_t cell_key(const GridGeometry& v
 
 // The slots [s0, s1) of row (dz, dy) around the target, trimmed in x to the cells its sphere
 // can reach; false when the row is outside the grid or out of reach (an empty row may come back
-// as s0 == s1).
+// as s0 == s1). half (StencilRows): only the slots after the target's own, t.
 template <class Table>
 __device__ __forceinline__ bool row_range(const GridGeometry& view, const Table& table,
-                                          const TargetCell& c, int dz, int dy, Slot& s0, Slot& s1) {
+                                          const TargetCell& c, int dz, int dy, bool half, Slot t,
+                                          Slot& s0, Slot& s1) {
+  const bool own_row = dz == 0 && dy == 0;
+  if (half && (dz < 0 || (dz == 0 && dy < 0))) return false;
   const CellGrid& g = view.grid;
   const int jz = c.cell[2] + dz, jy = c.cell[1] + dy;
   if (jz < 0 || jz >= static_cast<int>(g.dims[2]) || jy < 0 || jy >= static_cast<int>(g.dims[1]))
@@ -145,15 +148,68 @@ __device__ __forceinline__ bool row_range(const GridGeometry& view, const Table&
     xa = max(xa, c.cell[0] + static_cast<int>(floorf(c.frac[0] - rx)));
     xb = min(xb, c.cell[0] + static_cast<int>(floorf(c.frac[0] + rx)));
   }
-  xa = max(xa, 0);
+  xa = max(xa, half && own_row ? c.cell[0] : 0);
   xb = min(xb, static_cast<int>(view.xgrid.dims[0]) - 1);
   if (xa > xb) return false;
   const std::uint64_t row = static_cast<std::uint64_t>(jz) * g.dims[1] + jy;
-  return table.range(row, view.xgrid.dims[0], xa, xb, s0, s1);
+  if (!table.range(row, view.xgrid.dims[0], xa, xb, s0, s1)) return false;
+  if (half && own_row) s0 = min(max(s0, t + 1), s1);
+  return true;
 }
 
 __device__ __forceinline__ std::uint32_t original_index(const float4& q) {
   return __float_as_uint(q.w);
+}
+
+// A half list by the half stencil (ListOptions::any_row): a pair of two home points (points
+// [0, targets): the particles themselves) is taken from its lower slot. The slots are in cell
+// order, so the later slots are the rows (dz, dy) after (0, 0) and the own row after the
+// target's own slot: 13 of the 26 neighbour cells and half of its own, half the candidates. An
+// image point is never a target, so a pair across the box is met from both of its particles and
+// the list's own rule (i < j, or i == j and S positive) keeps one: a particle with images walks
+// every row (about one in eight of a 2^20 liquid). One without has no image point within its
+// reach (an image within C of it would put it within C of a face, and give it an image), so the
+// rows before its own hold nothing it takes.
+struct StencilRows {
+  bool on = false;
+  Slot targets = 0;
+  const std::uint32_t* image_counts = nullptr;  // by source; null: no images
+  // Whether target point i walks only the later slots.
+  __device__ __forceinline__ bool half_rows(std::uint32_t i) const {
+    return on && !(image_counts && image_counts[i] > 0);
+  }
+  // Whether candidate point k, at slot s of target slot t, may be taken: a home pair from its
+  // lower slot only.
+  __device__ __forceinline__ bool allows(std::uint32_t k, Slot s, Slot t) const {
+    return !on || k >= targets || s > t;
+  }
+  __device__ __forceinline__ bool home(std::uint32_t k) const { return on && k < targets; }
+};
+
+template <class F, class = void>
+struct has_any_row : std::false_type {};
+template <class F>
+struct has_any_row<F, std::void_t<decltype(std::declval<F&>().any_row)>> : std::true_type {};
+
+// Whether functor f asks for the half stencil (a half list with ListOptions::any_row).
+template <class F>
+bool wants_stencil(const F& f) {
+  if constexpr (has_any_row<F>::value)
+    return f.half && f.any_row;
+  else
+    return false;
+}
+
+// f for a candidate: a home pair, already decided by its slots, is not halved again by index.
+template <class F>
+__device__ __forceinline__ F for_candidate(const F& f, bool home) {
+  if constexpr (has_any_row<F>::value) {
+    F g = f;
+    g.half = f.half && !home;
+    return g;
+  } else {
+    return f;
+  }
 }
 
 // Calls visit(q, slot, r, r2) for every candidate source q (a float4, w = point index) of the
@@ -163,7 +219,7 @@ __device__ __forceinline__ std::uint32_t original_index(const float4& q) {
 template <class Table, class Visit>
 __device__ __forceinline__ void for_each_candidate(const float4* __restrict__ pos, Slot t,
                                                    const float4& p, const GridGeometry& view,
-                                                   const Table& table, Visit&& visit) {
+                                                   const Table& table, bool half, Visit&& visit) {
   const TargetCell c = locate(view, p);
   const int reach = view.grid.reach;
   const float4* const self = pos + t;
@@ -196,7 +252,7 @@ __device__ __forceinline__ void for_each_candidate(const float4* __restrict__ po
   for (int dz = -reach; dz <= reach; ++dz) {
     for (int dy = -reach; dy <= reach; ++dy) {
       Slot s0, s1;
-      if (row_range(view, table, c, dz, dy, s0, s1)) scan_row(s0, s1);
+      if (row_range(view, table, c, dz, dy, half, t, s0, s1)) scan_row(s0, s1);
     }
   }
 }
@@ -246,17 +302,20 @@ template <bool Defer, class F, class Table, class Images>
 __device__ __forceinline__ bool grid_thread_target(const float4* __restrict__ pos, Slot t,
                                                    const GridGeometry& view, const Table& table,
                                                    float cutoff_squared, const F& f,
-                                                   const Images& images) {
+                                                   const Images& images,
+                                                   const StencilRows& stencil) {
   const float4 p = pos[t];
   const std::uint32_t i = original_index(p);
   const typename Images::Target ti = images.target(t);
   typename F::Accumulator acc = initial_state(f, i);
   bool band = false;
-  for_each_candidate(pos, t, p, view, table, [&](const float4& q, Slot s, Vec3 r, float r2) {
-    const std::uint32_t k = original_index(q);
-    const bool in = in_range_or_band<Defer>(images, cutoff_squared, i, k, r, r2, band);
-    visit(f, acc, in, i, k, s, r, r2, images, ti);
-  });
+  for_each_candidate(
+      pos, t, p, view, table, stencil.half_rows(i), [&](const float4& q, Slot s, Vec3 r, float r2) {
+        const std::uint32_t k = original_index(q);
+        const bool in = in_range_or_band<Defer>(images, cutoff_squared, i, k, r, r2, band) &&
+                        stencil.allows(k, s, t);
+        visit(for_candidate(f, stencil.home(k)), acc, in, i, k, s, r, r2, images, ti);
+      });
   if (Defer && band) return false;
   f.finish(i, acc);
   return true;
@@ -273,11 +332,12 @@ template <bool ManyRegisters, bool Defer, class F, class Table, class Images>
 __global__ void __launch_bounds__(grid_block_size, ManyRegisters ? 1 : 0)
     grid_thread_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n,
                        GridGeometry view, Table table, float cutoff_squared, F f, Images images,
-                       BandTargets band) {
+                       BandTargets band, StencilRows stencil) {
   const Slot tid = blockIdx.x * grid_block_size + threadIdx.x;
   if (tid >= n) return;
   const Slot t = target_slot(targets, tid);
-  if (!grid_thread_target<Defer>(pos, t, view, table, cutoff_squared, f, images)) band.add(t);
+  if (!grid_thread_target<Defer>(pos, t, view, table, cutoff_squared, f, images, stencil))
+    band.add(t);
 }
 
 constexpr int grid_max_rows = 49;  // (2 reach + 1)^2 rows for reach <= 3
@@ -287,8 +347,8 @@ constexpr int grid_max_rows = 49;  // (2 reach + 1)^2 rows for reach <= 3
 // in rows[] as (first slot - first flat index, end flat index); returns the list's length.
 template <int G, class Table>
 __device__ __forceinline__ Slot flatten_rows(const GridGeometry& view, const Table& table,
-                                             const TargetCell& c, bool active, int lane,
-                                             uint2* rows) {
+                                             const TargetCell& c, bool active, bool half, Slot t,
+                                             int lane, uint2* rows) {
   constexpr int rows_per_lane_max = (grid_max_rows + G - 1) / G;
   const int reach = view.grid.reach, side = 2 * reach + 1, row_count = side * side;
   const int rows_per_lane = (row_count + G - 1) / G;
@@ -300,7 +360,7 @@ __device__ __forceinline__ Slot flatten_rows(const GridGeometry& view, const Tab
     const int r = first_row + k;
     Slot s0 = 0, s1 = 0;
     if (!(active && k < rows_per_lane && r < row_count &&
-          row_range(view, table, c, r / side - reach, r % side - reach, s0, s1)))
+          row_range(view, table, c, r / side - reach, r % side - reach, half, t, s0, s1)))
       s0 = s1 = 0;
     base[k] = s0;
     length[k] = s1 - s0;
@@ -338,15 +398,17 @@ template <int G, bool Defer, class F, class Table, class Images>
 __device__ __forceinline__ bool grid_group_target(const float4* __restrict__ pos, Slot t,
                                                   bool active, const GridGeometry& view,
                                                   const Table& table, float cutoff_squared,
-                                                  const F& f, const Images& images, uint2* rows,
+                                                  const F& f, const Images& images,
+                                                  const StencilRows& stencil, uint2* rows,
                                                   int lane) {
   const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
-  const Slot group_total = flatten_rows<G>(view, table, locate(view, p), active, lane, rows);
+  const std::uint32_t i = original_index(p);
+  const Slot group_total = flatten_rows<G>(view, table, locate(view, p), active,
+                                           active && stencil.half_rows(i), t, lane, rows);
 
   // Unrolled by U: the slots of U candidates first (the row walk only moves forward), then U
   // independent loads in flight, then the U tests.
   constexpr int U = 4;
-  const std::uint32_t i = original_index(p);
   const typename Images::Target ti = images.target(t);
   typename F::Accumulator acc{};
   bool band = false;
@@ -372,9 +434,9 @@ __device__ __forceinline__ bool grid_group_target(const float4* __restrict__ pos
       Vec3 d{q[u].x - p.x, q[u].y - p.y, q[u].z - p.z};
       float r2 = squared_distance(d.x, d.y, d.z);
       const std::uint32_t k = original_index(q[u]);
-      const bool in =
-          in_range_or_band<Defer>(images, cutoff_squared, i, k, d, r2, band) && s[u] != t;
-      visit(f, acc, in, i, k, s[u], d, r2, images, ti);
+      const bool in = in_range_or_band<Defer>(images, cutoff_squared, i, k, d, r2, band) &&
+                      s[u] != t && stencil.allows(k, s[u], t);
+      visit(for_candidate(f, stencil.home(k)), acc, in, i, k, s[u], d, r2, images, ti);
     }
   }
   combine_lanes<G, F>(acc);
@@ -396,7 +458,7 @@ template <int G, bool Defer, class F, class Table, class Images>
 __global__ void __launch_bounds__(grid_block_size)
     grid_group_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n,
                       GridGeometry view, Table table, float cutoff_squared, F f, Images images,
-                      BandTargets band) {
+                      BandTargets band, StencilRows stencil) {
   constexpr int groups = grid_block_size / G;
   __shared__ uint2 rows[groups][grid_max_rows];
   const int group = threadIdx.x / G, lane = threadIdx.x % G;
@@ -404,7 +466,7 @@ __global__ void __launch_bounds__(grid_block_size)
       static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / G);
   const bool active = tid < n;  // no early return: every lane takes part in the shuffles
   const Slot t = active ? target_slot(targets, tid) : 0;
-  if (!grid_group_target<G, Defer>(pos, t, active, view, table, cutoff_squared, f, images,
+  if (!grid_group_target<G, Defer>(pos, t, active, view, table, cutoff_squared, f, images, stencil,
                                    rows[group], lane) &&
       active && lane == 0)
     band.add(t);
@@ -421,12 +483,14 @@ template <bool Defer, class F, class Table, class Images>
 __device__ __forceinline__ bool grid_emit_target(const float4* __restrict__ pos, Slot t,
                                                  bool active, const GridGeometry& view,
                                                  const Table& table, float cutoff_squared,
-                                                 const F& f, const Images& images, uint2* rows,
+                                                 const F& f, const Images& images,
+                                                 const StencilRows& stencil, uint2* rows,
                                                  int lane) {
   constexpr int G = 32;
   const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
-  const Slot total = flatten_rows<G>(view, table, locate(view, p), active, lane, rows);
   const std::uint32_t i = original_index(p);
+  const Slot total = flatten_rows<G>(view, table, locate(view, p), active,
+                                     active && stencil.half_rows(i), t, lane, rows);
   const typename Images::Target ti = images.target(t);
   typename F::Accumulator next{};
   if (active) next = initial_state(f, i);
@@ -448,9 +512,11 @@ __device__ __forceinline__ bool grid_emit_target(const float4* __restrict__ pos,
       d = Vec3{q.x - p.x, q.y - p.y, q.z - p.z};
       r2 = squared_distance(d.x, d.y, d.z);
       const std::uint32_t k = original_index(q);
-      const bool in = in_range_or_band<Defer>(images, cutoff_squared, i, k, d, r2, band) && s != t;
+      const bool in = in_range_or_band<Defer>(images, cutoff_squared, i, k, d, r2, band) &&
+                      s != t && stencil.allows(k, s, t);
       // A pair the functor drops (per-pair cutoffs) takes no place: it would leave a hole.
-      take = resolve(f, images, ti, in, i, k, s, j, shift) && f.within(i, j, shift, r2);
+      take = resolve(for_candidate(f, stencil.home(k)), images, ti, in, i, k, s, j, shift) &&
+             f.within(i, j, shift, r2);
     }
     const unsigned taken = __ballot_sync(0xffffffffu, take);
     if (take) {
@@ -468,7 +534,8 @@ __device__ __forceinline__ bool grid_emit_target(const float4* __restrict__ pos,
 template <bool Defer, class F, class Table, class Images>
 __global__ void __launch_bounds__(grid_block_size)
     grid_emit_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n, GridGeometry view,
-                     Table table, float cutoff_squared, F f, Images images, BandTargets band) {
+                     Table table, float cutoff_squared, F f, Images images, BandTargets band,
+                     StencilRows stencil) {
   constexpr int groups = grid_block_size / 32;
   __shared__ uint2 rows[groups][grid_max_rows];
   const int group = threadIdx.x / 32, lane = threadIdx.x % 32;
@@ -476,8 +543,8 @@ __global__ void __launch_bounds__(grid_block_size)
       static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / 32);
   const bool active = tid < n;  // the whole warp shares t: uniform
   const Slot t = active ? target_slot(targets, tid) : 0;
-  if (!grid_emit_target<Defer>(pos, t, active, view, table, cutoff_squared, f, images, rows[group],
-                               lane) &&
+  if (!grid_emit_target<Defer>(pos, t, active, view, table, cutoff_squared, f, images, stencil,
+                               rows[group], lane) &&
       active && lane == 0)
     band.add(t);
 }
@@ -489,7 +556,8 @@ __global__ void __launch_bounds__(grid_block_size)
 template <class F, class Table, class Images>
 __global__ void __launch_bounds__(grid_block_size)
     grid_band_kernel(const float4* __restrict__ pos, GridGeometry view, Table table,
-                     float cutoff_squared, F f, Images images, BandTargets band) {
+                     float cutoff_squared, F f, Images images, BandTargets band,
+                     StencilRows stencil) {
   constexpr int groups = grid_block_size / 32;
   __shared__ uint2 rows[groups][grid_max_rows];
   const int group = threadIdx.x / 32, lane = threadIdx.x % 32;
@@ -500,19 +568,20 @@ __global__ void __launch_bounds__(grid_block_size)
     const Slot t = band.list[1 + k];
     if constexpr (emits_entries<F>::value) {
       if (flat) {
-        grid_emit_target<false>(pos, t, true, view, table, cutoff_squared, f, images, rows[group],
-                                lane);
+        grid_emit_target<false>(pos, t, true, view, table, cutoff_squared, f, images, stencil,
+                                rows[group], lane);
         continue;
       }
     }
     if constexpr (has_combine<F>::value) {
       if (flat) {
-        grid_group_target<32, false>(pos, t, true, view, table, cutoff_squared, f, images,
+        grid_group_target<32, false>(pos, t, true, view, table, cutoff_squared, f, images, stencil,
                                      rows[group], lane);
         continue;
       }
     }
-    if (lane == 0) grid_thread_target<false>(pos, t, view, table, cutoff_squared, f, images);
+    if (lane == 0)
+      grid_thread_target<false>(pos, t, view, table, cutoff_squared, f, images, stencil);
     __syncwarp();
   }
 }
@@ -526,13 +595,20 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
   const Slot n = static_cast<Slot>(pass.n);
   const float c2 = pass.cutoff_squared;
   const BandTargets band{g.band_targets};
+  // The half stencil where it is asked and the image counts are known where there are images
+  // (else the index's rows, one choice of the rows any_row allows). Half lists take no queries.
+  StencilRows stencil;
+  stencil.on = wants_stencil(f) && pass.images.candidates_are_sources &&
+               (!pass.images.active() || pass.images.image_counts != nullptr);
+  stencil.targets = n;
+  stencil.image_counts = pass.images.active() ? pass.images.image_counts : nullptr;
   const auto launch = [&](const auto& table, const auto& images, auto defer) {
     constexpr bool Defer = decltype(defer)::value;
     if constexpr (emits_entries<F>::value) {
       if (g.geometry.grid.reach <= 3) {  // the flattened row table holds (2 * 3 + 1)^2 rows
         grid_emit_kernel<Defer>
             <<<blocks_for(std::uint64_t{n} * 32, grid_block_size), grid_block_size, 0, stream>>>(
-                pos, targets, n, g.geometry, table, c2, f, images, band);
+                pos, targets, n, g.geometry, table, c2, f, images, band, stencil);
         return;
       }
     }
@@ -544,19 +620,19 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
         constexpr int G = decltype(lanes)::value;
         grid_group_kernel<G, Defer>
             <<<blocks_for(std::uint64_t{n} * G, grid_block_size), grid_block_size, 0, stream>>>(
-                pos, targets, n, g.geometry, table, c2, f, images, band);
+                pos, targets, n, g.geometry, table, c2, f, images, band, stencil);
       }
     };
     switch (kernel) {
       case GridKernel::thread:
         grid_thread_kernel<false, Defer>
             <<<blocks_for(n, grid_block_size), grid_block_size, 0, stream>>>(
-                pos, targets, n, g.geometry, table, c2, f, images, band);
+                pos, targets, n, g.geometry, table, c2, f, images, band, stencil);
         break;
       case GridKernel::thread_many_registers:
         grid_thread_kernel<true, Defer>
             <<<blocks_for(n, grid_block_size), grid_block_size, 0, stream>>>(
-                pos, targets, n, g.geometry, table, c2, f, images, band);
+                pos, targets, n, g.geometry, table, c2, f, images, band, stencil);
         break;
       case GridKernel::lanes4:
         group(std::integral_constant<int, 4>{});
@@ -580,7 +656,7 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
     const unsigned blocks = std::min(blocks_for(std::uint64_t{n} * 32, grid_block_size), 2048u);
     if (blocks > 0)
       grid_band_kernel<<<blocks, grid_block_size, 0, stream>>>(pos, g.geometry, table, c2, f,
-                                                               images, band);
+                                                               images, band, stencil);
   };
   const auto run = [&](const auto& table, const auto& images) {
     using Images = std::decay_t<decltype(images)>;
