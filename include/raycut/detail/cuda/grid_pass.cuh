@@ -202,13 +202,40 @@ bool wants_stencil(const F& f) {
 
 // f for a candidate: a home pair, already decided by its slots, is not halved again by index.
 template <class F>
-__device__ __forceinline__ F for_candidate(const F& f, bool home) {
+__device__ __forceinline__ decltype(auto) for_candidate(const F& f, bool home) {
   if constexpr (has_any_row<F>::value) {
     F g = f;
     g.half = f.half && !home;
     return g;
   } else {
-    return f;
+    (void)home;
+    return f;  // by reference: other functors are not copied
+  }
+}
+
+// Candidate point k at slot s of target i through f (visit), as the half stencil has it: a home
+// pair, decided by its slots, is not halved again by index; and where the call reads neither j
+// nor S (a list's count without per-pair cutoffs) it is taken without the image table's 16-byte
+// read (a home point is its own source: j = k).
+template <class F, class Images>
+__device__ __forceinline__ void visit_stencil(const F& f, typename F::Accumulator& acc, bool in,
+                                              std::uint32_t i, std::uint32_t k, Slot s, Vec3 r,
+                                              float r2, const Images& images,
+                                              const typename Images::Target& ti,
+                                              const StencilRows& stencil) {
+  if constexpr (has_any_row<F>::value) {
+    const bool home = stencil.home(k);
+    const F g = for_candidate(f, home);
+    if constexpr (!emits_entries<F>::value) {
+      if (home && !f.cutoffs.active()) {
+        if (in) apply(g, acc, i, k, r, r2);
+        return;
+      }
+    }
+    visit(g, acc, in, i, k, s, r, r2, images, ti);
+  } else {
+    (void)stencil;
+    visit(f, acc, in, i, k, s, r, r2, images, ti);
   }
 }
 
@@ -314,7 +341,7 @@ __device__ __forceinline__ bool grid_thread_target(const float4* __restrict__ po
         const std::uint32_t k = original_index(q);
         const bool in = in_range_or_band<Defer>(images, cutoff_squared, i, k, r, r2, band) &&
                         stencil.allows(k, s, t);
-        visit(for_candidate(f, stencil.home(k)), acc, in, i, k, s, r, r2, images, ti);
+        visit_stencil(f, acc, in, i, k, s, r, r2, images, ti, stencil);
       });
   if (Defer && band) return false;
   f.finish(i, acc);
@@ -436,7 +463,7 @@ __device__ __forceinline__ bool grid_group_target(const float4* __restrict__ pos
       const std::uint32_t k = original_index(q[u]);
       const bool in = in_range_or_band<Defer>(images, cutoff_squared, i, k, d, r2, band) &&
                       s[u] != t && stencil.allows(k, s[u], t);
-      visit(for_candidate(f, stencil.home(k)), acc, in, i, k, s[u], d, r2, images, ti);
+      visit_stencil(f, acc, in, i, k, s[u], d, r2, images, ti, stencil);
     }
   }
   combine_lanes<G, F>(acc);
