@@ -6,7 +6,9 @@
 // above float round-off); the shared predicate decides every pair (in_range_of: with images,
 // the float band in double, the cells then as wide as its reach); self is excluded by slot.
 // Every functor runs through run_grid(): counting, list filling, the built-in kernels and the
-// caller's own. docs/grid.md has the measurements behind each choice. nvcc only.
+// caller's own. A half list whose rows may follow the traversal (ListOptions::any_row) walks
+// half the stencil (StencilRows). docs/grid.md has the measurements behind each choice. nvcc
+// only.
 #pragma once
 
 #include <cuda_runtime.h>
