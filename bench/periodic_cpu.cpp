@@ -14,10 +14,11 @@
 // with the cell list's cell width). Threads: OMP_NUM_THREADS.
 //
 // kernel "list" times the engine's CSR list with S (count and fill; not for open-n), "half-list"
-// the same half (nor for queries); those rows report 0 ms.
+// the same half (nor for queries), "half-any-list" the half list whose rows may follow the
+// traversal (ListOptions::any_row: the half stencil); those rows report 0 ms.
 //
 //   periodic_cpu [particles=200000] [rounds=5] [method=cell-list]
-//                [kernel=lj_forces|count|list|half-list]
+//                [kernel=lj_forces|count|list|half-list|half-any-list]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -138,14 +139,16 @@ int main(int argc, char** argv) {
     direct->build_points(open_n, cutoff);
     return ms(start, Clock::now());
   };
-  const bool list = kernel_name == "list" || kernel_name == "half-list";
+  const bool list =
+      kernel_name == "list" || kernel_name == "half-list" || kernel_name == "half-any-list";
   raycut::NeighbourListBuffer list_buffer;
   // Runs `kernel` on variant v; its ms.
   const auto run = [&](int v, raycut::Kernel kernel) {
     if (list && kernel != raycut::Kernel::count) {
       raycut::ListOptions options;
       options.shifts = true;
-      options.half = kernel_name == "half-list";
+      options.half = kernel_name != "list";
+      options.any_row = kernel_name == "half-any-list";
       if (v == 2 || (v == 3 && options.half)) return 0.0;  // no list, no half list of queries
       const auto start = Clock::now();
       engine_of(v).neighbours(list_buffer, options);

@@ -142,9 +142,10 @@ struct ListOptions {
   const PairCutoffs* cutoffs = nullptr;
   // With half: each pair once still, but in the row of whichever of its two particles the method
   // meets it from, not necessarily the lower index (LAMMPS's newton-on lists own their pairs
-  // the same way). The CUDA grid then walks half of its cells' stencil: about half the work of
-  // a half list in the lower index's row. Other methods keep the lower index's row, which is
-  // one such choice. For loops that add each pair's share to both particles.
+  // the same way). The CUDA grid and the CPU cell list then walk half of their cells' stencil:
+  // less work than a half list in the lower index's row. The brute forces keep the lower
+  // index's row, which is one such choice. For loops that add each pair's share to both
+  // particles.
   bool any_row = false;
 };
 

@@ -51,11 +51,13 @@ inline int lowest_set_bit(std::uint64_t x) {
 // are out (5 in 6 in a cell list of cells C wide), and a branch on each mispredicted often
 // (lists and lj_forces 1.6-2.4x faster on one CPU thread: docs/pair-pass.md, "The CPU loop").
 // Candidates whose source (CandidateRun::source, where a run gives it) is below lowest_source are
-// dropped in the first step too: a half list's row i keeps no source below i.
+// dropped in the first step too: a half list's row i keeps no source below i. Candidates at a
+// slot below first_slot (CandidateRun::slot) are not read at all: the half stencil. on_pair also
+// gets the candidate's slot.
 template <class Images, class RunsOf, class OnPair>
 void for_each_in_range(const Images& images, std::size_t i, const float* target_xyz,
                        float cutoff_squared, const RunsOf& runs_of, OnPair&& on_pair,
-                       std::uint32_t lowest_source = 0) {
+                       std::uint32_t lowest_source = 0, std::uint32_t first_slot = 0) {
   const float xi = target_xyz[0], yi = target_xyz[1], zi = target_xyz[2];
   const float out_from = out_of_range_from(images, cutoff_squared);
   CandidateRun runs[max_candidate_runs];
@@ -64,7 +66,17 @@ void for_each_in_range(const Images& images, std::size_t i, const float* target_
   float r2[block];
   alignas(8) unsigned char near[block];
   for (std::size_t u = 0; u < run_count; ++u) {
-    const CandidateRun& run = runs[u];
+    CandidateRun& run = runs[u];
+    if (first_slot > run.slot) {  // the run's points from first_slot on (every group readable)
+      const std::size_t skip = std::min<std::size_t>(first_slot - run.slot, run.count);
+      run.x += skip, run.y += skip, run.z += skip;
+      if (run.index) run.index += skip;
+      if (run.source) run.source += skip;
+      if (run.image) run.image += skip;
+      run.first += static_cast<std::uint32_t>(skip);
+      run.slot += static_cast<std::uint32_t>(skip);
+      run.count -= skip;
+    }
     for (std::size_t b = 0; b < run.count; b += block) {
       const std::size_t m = std::min(block, run.count - b);
       const float *x = run.x + b, *y = run.y + b, *z = run.z + b;
@@ -99,7 +111,8 @@ void for_each_in_range(const Images& images, std::size_t i, const float* target_
         Vec3 r{x[t] - xi, y[t] - yi, z[t] - zi};
         float d2 = r2[t];
         if (in_range_of(images, cutoff_squared, static_cast<std::uint32_t>(i), j, r, d2))
-          on_pair(j, r, d2, run.image ? run.image + b + t : nullptr);
+          on_pair(j, r, d2, run.image ? run.image + b + t : nullptr,
+                  run.slot + static_cast<std::uint32_t>(b + t));
       }
     }
   }
@@ -122,24 +135,36 @@ std::uint32_t lowest_source_of(const F& f, std::uint32_t i) {
 // Runs functor f for every target (points [0, n)), in parallel over targets (OpenMP), visited
 // in `order` (null: 0 .. n - 1; each target's own sum is the same in any order), at positions
 // order_xyz (3 per target in that order; null: xyz by index); candidate points become the
-// caller's sources and shifts through `images` (detail/images.hpp).
+// caller's sources and shifts through `images` (detail/images.hpp). `slots` (HostPass::slots)
+// and `image_counts` (ImageTables::image_counts, with images) let a half list whose rows may
+// follow the traversal (wants_stencil) take each home pair from its lower slot, as the CUDA
+// grid does (grid_pass.cuh, StencilRows): a target without images reads only the later slots.
 template <class RunsOf, class F, class Images = NoImages>
 void run_host(std::size_t n, const float* xyz, float cutoff_squared, const RunsOf& runs_of,
               const F& f, const Images& images = {}, const std::uint32_t* order = nullptr,
-              const float* order_xyz = nullptr) {
+              const float* order_xyz = nullptr, const std::uint32_t* slots = nullptr,
+              const std::uint32_t* image_counts = nullptr) {
   static_assert(check_functor<F>());
+  // Points with images (banded): the stencil needs their counts and the table (active).
+  const bool stencil =
+      slots && wants_stencil(f) && (!Images::banded || (Images::active && image_counts));
   const auto visit = [&](const std::uint32_t i, const float* target_xyz) {
     typename F::Accumulator acc = initial_state(f, i);
     const typename Images::Target ti = images.target(i);
+    const std::uint32_t t = stencil ? slots[i] : 0;
+    const bool half_rows = stencil && !(Images::banded && image_counts[i] > 0);
     for_each_in_range(
         images, i, target_xyz, cutoff_squared, runs_of,
-        [&](std::size_t point, Vec3 r, float r2, const PointImage* entry) {
+        [&](std::size_t point, Vec3 r, float r2, const PointImage* entry, std::uint32_t slot) {
           const auto k = static_cast<std::uint32_t>(point);
+          const bool home = stencil && k < n;
+          if (home && slot <= t) return;  // met from its lower slot
+          const auto& g = for_candidate(f, home);
           std::uint32_t j;
           Shift s{};
-          if (resolve(f, images, ti, true, i, k, k, j, s, entry)) apply(f, acc, i, j, r, r2, s);
+          if (resolve(g, images, ti, true, i, k, k, j, s, entry)) apply(g, acc, i, j, r, r2, s);
         },
-        lowest_source_of(f, i));
+        stencil ? 0 : lowest_source_of(f, i), half_rows ? t + 1 : 0);
     f.finish(i, acc);
   };
   if (order) {
@@ -157,7 +182,8 @@ template <class RunsOf, class F>
 void run_host_pass(const PairPass& pass, const RunsOf& runs_of, const F& f) {
   with_images<F>(pass, [&](const auto& images) {
     run_host(pass.n, pass.host.xyz, pass.cutoff_squared, runs_of, f, images, pass.host.order,
-             pass.host.order_xyz);
+             pass.host.order_xyz, pass.images.candidates_are_sources ? pass.host.slots : nullptr,
+             pass.images.image_counts);
   });
 }
 

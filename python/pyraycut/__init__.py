@@ -322,8 +322,8 @@ class Engine:
         (zeros without a box). ``half``: each pair once: of (i, j, S) and (j, i, -S) the one
         with i < j, or i == j and S lexicographically positive, in row i (not with queries:
         ValueError). ``any_row`` (with ``half``): each pair once still, in the row of whichever
-        particle the method met it from; the CUDA grid then walks half its stencil, about half
-        the work (for loops that add each pair to both particles). On the device for device
+        particle the method met it from; the grid and the cell list then walk half their
+        stencil, less work (for loops that add each pair to both particles). On the device for device
         positions and GPU methods, wrapping the list's own buffer (zero-copy; each call fills
         a new buffer).
         """

@@ -75,6 +75,7 @@ class HostImagePoints final : public ImagePoints {
   std::vector<std::uint32_t> system_;
   std::vector<WrappedPoint> wrapped_;
   std::vector<std::uint64_t> image_offset_;
+  std::vector<std::uint32_t> image_counts_;  // by source (ImageTables::image_counts)
   // What decides the pairs in double: the caller's positions, kept while the build lives.
   std::vector<float> sources_, queries_;
   std::vector<double> sources64_;
@@ -194,7 +195,10 @@ void HostImagePoints::expand(const ImagePlan& plan, const float* sources, const 
   exact_.system = systems > 1 ? system_.data() : nullptr;
   exact_.cells = cells_.data();
   set_float_band(exact_, plan.cutoff, rounding_bound(extent));
-  publish(plan, xyz_.data(), total, image_.data(), system_.data(), &exact_);
+  image_counts_.resize(n);
+  for (std::size_t p = 0; p < n; ++p)
+    image_counts_[p] = static_cast<std::uint32_t>(image_offset_[p + 1] - image_offset_[p]);
+  publish(plan, xyz_.data(), total, image_.data(), system_.data(), &exact_, image_counts_.data());
 }
 
 }  // namespace

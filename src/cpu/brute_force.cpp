@@ -20,6 +20,7 @@ class BruteForceCpu final : public HostMethod<BruteForceCpu> {
               nullptr,
               nullptr,
               first,
+              0,
               system_start_[s + 1] - first};
     return 1;
   }

@@ -131,6 +131,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
                 sorted_source_.data() + range.begin,
                 sorted_image_.empty() ? nullptr : sorted_image_.data() + range.begin,
                 0,
+                range.begin,
                 range.end - range.begin};
     }
     return static_cast<std::size_t>(runs);
@@ -144,6 +145,8 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   // (2026-12-05, the LJ liquid, one thread: count 10.0-10.3 -> 8.8-9.6 ns per pair, lj_forces
   // 1-3 % less).
   const float* target_order_xyz() const { return target_xyz_.data(); }
+  // Each target's slot: the runs' slots are in cell order (the half stencil, HostPass::slots).
+  const std::uint32_t* target_slots() const { return target_slot_.data(); }
 
   void build(const float* xyz, std::size_t n, float cutoff) override {
     build_points(Points::plain(xyz, n), cutoff);
@@ -203,8 +206,10 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     }
     target_order_.clear();
     target_xyz_.clear();
+    target_slot_.resize(points.targets);
     for (std::size_t s = 0; s < n; ++s)
       if (order_[s] < points.targets) {
+        target_slot_[order_[s]] = static_cast<std::uint32_t>(s);
         target_order_.push_back(order_[s]);
         target_xyz_.insert(target_xyz_.end(), {sorted_x_[s], sorted_y_[s], sorted_z_[s]});
       }
@@ -335,6 +340,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   std::vector<std::uint32_t> order_;            // sorted slot -> particle index
   std::vector<std::uint32_t> target_order_;     // the targets (points < targets) in slot order
   std::vector<float> target_xyz_;               // their positions, 3 each
+  std::vector<std::uint32_t> target_slot_;      // by target: its slot
   std::vector<float> sorted_x_, sorted_y_, sorted_z_;  // positions in slot order
   std::vector<std::uint32_t> sorted_source_;           // the caller's particle of each slot
   std::vector<PointImage> sorted_image_;               // with images: each slot's table entry

@@ -129,6 +129,7 @@ class HostMethod : public Method {
     pass.host.xyz = xyz_;
     pass.host.order = static_cast<const Self*>(this)->target_order();
     pass.host.order_xyz = static_cast<const Self*>(this)->target_order_xyz();
+    pass.host.slots = static_cast<const Self*>(this)->target_slots();
     pass.host.runs = [](const void* method, std::size_t i, CandidateRun* out) {
       return static_cast<const Self*>(method)->candidate_runs(i, out);
     };
@@ -139,6 +140,8 @@ class HostMethod : public Method {
   const std::uint32_t* target_order() const { return nullptr; }
   // With target_order(): the targets' positions in that order, 3 each (null: none).
   const float* target_order_xyz() const { return nullptr; }
+  // Each target's slot in the order of its runs' points (HostPass::slots; null: none).
+  const std::uint32_t* target_slots() const { return nullptr; }
 
  protected:
   // Lists index particles with 32 bits: called first by build(), before any copy.
@@ -166,7 +169,8 @@ class HostMethod : public Method {
   // What a list keeps: its half orientation and per-pair cutoffs (decided in double with the
   // points' images, ExactImages).
   ListFilter list_filter(const ListOptions& options) const {
-    ListFilter filter{options.half, host_cutoff_filter(options.cutoffs)};
+    ListFilter filter{options.half, host_cutoff_filter(options.cutoffs),
+                      options.half && options.any_row};
     if (images_.exact) filter.cutoffs.exact = *images_.exact;
     return filter;
   }

@@ -13,6 +13,8 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <type_traits>
+#include <utility>
 
 #include "raycut/detail/pair_pass.hpp"
 #include "raycut/error.hpp"
@@ -75,6 +77,37 @@ RAYCUT_HD bool resolve(const F& f, const Images& images, const typename Images::
     j = k;
   }
   return in && accepts(f, i, j, s);
+}
+
+// A half list whose rows may follow the traversal (ListOptions::any_row; the list functors'
+// `any_row`): a traversal that orders its points (the grid's and the cell list's slots, in cell
+// order) takes a pair of two home points from its lower slot, which is half its stencil, and
+// leaves the pairs with an image point to the list's own rule (grid_pass.cuh, StencilRows).
+template <class F, class = void>
+struct has_any_row : std::false_type {};
+template <class F>
+struct has_any_row<F, std::void_t<decltype(std::declval<F&>().any_row)>> : std::true_type {};
+
+// Whether functor f asks for the half stencil.
+template <class F>
+RAYCUT_HD bool wants_stencil(const F& f) {
+  if constexpr (has_any_row<F>::value)
+    return f.half && f.any_row;
+  else
+    return false;
+}
+
+// f for a candidate: a home pair, already decided by its slots, is not halved again by index.
+template <class F>
+RAYCUT_HD decltype(auto) for_candidate(const F& f, bool home) {
+  if constexpr (has_any_row<F>::value) {
+    F g = f;
+    g.half = f.half && !home;
+    return g;
+  } else {
+    (void)home;
+    return f;  // by reference: other functors are not copied
+  }
 }
 
 // Double products and sums rounded one by one, on the device as on the host (built with

@@ -69,6 +69,9 @@ struct CandidateRun {
   // list's j and S then come from memory read in sequence, not from the caller's order at random.
   const PointImage* image;
   std::uint32_t first;
+  // The slot of its first point in the method's order of points (HostPass::slots; 0 where the
+  // method gives none): a half stencil takes the slots after the target's.
+  std::uint32_t slot;
   std::size_t count;
   std::uint32_t point(std::size_t t) const {
     return index ? index[t] : first + static_cast<std::uint32_t>(t);
@@ -88,6 +91,9 @@ struct HostPass {
   // With `order`: the targets' positions in that order, 3 each, read in sequence where xyz
   // would be read at random (null: read xyz).
   const float* order_xyz = nullptr;
+  // By target: its slot in the order of the runs' points (CandidateRun::slot), for the half
+  // stencil (ListOptions::any_row); null: the method has none (lists keep the index's rows).
+  const std::uint32_t* slots = nullptr;
 };
 
 struct BruteForcePass {

@@ -188,33 +188,6 @@ struct StencilRows {
   __device__ __forceinline__ bool home(std::uint32_t k) const { return on && k < targets; }
 };
 
-template <class F, class = void>
-struct has_any_row : std::false_type {};
-template <class F>
-struct has_any_row<F, std::void_t<decltype(std::declval<F&>().any_row)>> : std::true_type {};
-
-// Whether functor f asks for the half stencil (a half list with ListOptions::any_row).
-template <class F>
-bool wants_stencil(const F& f) {
-  if constexpr (has_any_row<F>::value)
-    return f.half && f.any_row;
-  else
-    return false;
-}
-
-// f for a candidate: a home pair, already decided by its slots, is not halved again by index.
-template <class F>
-__device__ __forceinline__ decltype(auto) for_candidate(const F& f, bool home) {
-  if constexpr (has_any_row<F>::value) {
-    F g = f;
-    g.half = f.half && !home;
-    return g;
-  } else {
-    (void)home;
-    return f;  // by reference: other functors are not copied
-  }
-}
-
 // Candidate point k at slot s of target i through f (visit), as the half stencil has it: a home
 // pair, decided by its slots, is not halved again by index; and where the call reads neither j
 // nor S (a list's count without per-pair cutoffs) it is taken without the image table's 16-byte
