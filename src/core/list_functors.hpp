@@ -48,9 +48,10 @@ struct PairCutoffFilter {
 // What a list keeps of the pairs the pass offers. Half lists keep, of (i, j, S) and
 // (j, i, -S), the one with i < j, or i == j and S lexicographically positive (a self-image;
 // (i, i, 0) never reaches a functor); per-pair cutoffs keep the pairs within their own.
-// any_row (ListOptions::any_row): a traversal with a half stencil (the CUDA grid's) may keep the
-// pair in the row of whichever particle it meets it from; it then decides the pairs of two home
-// particles itself and hands the functor a copy with half off (grid_pass.cuh, StencilRows).
+// any_row (ListOptions::any_row): a traversal with a half stencil (the CUDA grid's, the CPU cell
+// list's) may keep the pair in the row of whichever particle it meets it from; it then decides
+// the pairs of two home particles itself and hands the functor a copy with half off
+// (for_candidate, detail/images.hpp).
 struct ListFilter {
   using options = functor_options<option::accepts, option::repeatable>;
   bool half = false;

@@ -197,9 +197,9 @@ struct ImageTables {
   // What decides the pairs of the float band in double (see ExactImages): a host struct, its
   // arrays where the traversal runs. Set whenever `image` is.
   const ExactImages* exact = nullptr;
-  // By source: how many image points it has (the device expansion keeps them; null elsewhere).
-  // A particle without images has no image within the cutoff, which lets the grid's half stencil
-  // leave it the rows before its own (grid_pass.cuh, StencilRows).
+  // By source: how many image points it has (both expansions keep them; null: not known). A
+  // particle without images has no image within the cutoff, which lets a half stencil leave it
+  // the slots before its own (grid_pass.cuh, StencilRows; pairs.hpp, run_host).
   const std::uint32_t* image_counts = nullptr;
   bool active() const { return image != nullptr; }
   // What a traversal launched on `stream` indexes: by point, or the deferred table.
