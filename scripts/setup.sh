@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs everything raycut needs on a fresh Debian 12 machine, from Debian's packages, then the
-# Python package's build and test requirements (python/requirements.txt, from PyPI: PyTorch and
-# JAX included, a few GB, for the operators and the custom call) into a virtual environment in
+# Python package's build and test requirements (python/requirements.txt, from PyPI) and PyTorch and
+# JAX (python/requirements-frameworks.txt, about 6 GB, for the operators and the custom call:
+# scripts/python_env.sh) into a virtual environment in
 # the repository, .venv (ignored by git; Debian's own Python refuses `pip install` outside one,
 # PEP 668). scripts/test.sh uses it.
 # doxygen and sphinx build the API reference (scripts/docs.sh).

@@ -5,7 +5,8 @@
 #
 # The Python used: $RAYCUT_PYTHON, else .venv/bin/python (scripts/setup.sh), else python3; it
 # needs nanobind, numpy and pytest (python/requirements.txt); without them and without .venv,
-# .venv is created by scripts/python_env.sh, as scripts/setup.sh does. RAYCUT_PYTHON_TESTS=OFF
+# .venv is created by scripts/python_env.sh, as scripts/setup.sh does, but with PyTorch and JAX
+# only where the disk has room for them (--frameworks-optional). RAYCUT_PYTHON_TESTS=OFF
 # skips the Python package. RAYCUT_TEST_WHEEL=1 also runs `pip install --no-build-isolation .`
 # into that Python (a second, full build of the library) and the tests on the installed package.
 # With torch and jax importable by that Python, the PyTorch operators and pyraycut.jax's custom
@@ -21,8 +22,8 @@ python_args=(-DRAYCUT_BUILD_PYTHON=OFF)
 if [ "$python_tests" != OFF ]; then
   if [ -z "${RAYCUT_PYTHON:-}" ] && [ ! -e .venv ] &&
      ! "$python" -c "import nanobind, numpy, pytest" 2>/dev/null; then
-    echo "raycut: no .venv: creating it (python/requirements.txt, from PyPI)" >&2
-    if scripts/python_env.sh; then
+    echo "raycut: no .venv: creating it (python/requirements*.txt, from PyPI)" >&2
+    if scripts/python_env.sh --frameworks-optional; then
       python="$PWD/.venv/bin/python"
     fi
   fi
