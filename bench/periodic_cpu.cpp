@@ -13,12 +13,17 @@
 // and candidates per target (the points of the 27 cells around the target's own, counted here
 // with the cell list's cell width). Threads: OMP_NUM_THREADS.
 //
+// kernel "lj_forces-each-side" ("count-each-side") times lj_forces (count) computed from both
+// particles of every pair (raycut::for_each_pair with the kernel's functor less option::mirror),
+// the pass the kernel took before it computed each pair once on the half stencil.
+//
 // kernel "list" times the engine's CSR list with S (count and fill; not for open-n), "half-list"
 // the same half (nor for queries), "half-any-list" the half list whose rows may follow the
 // traversal (ListOptions::any_row: the half stencil); those rows report 0 ms.
 //
 //   periodic_cpu [particles=200000] [rounds=5] [method=cell-list]
-//                [kernel=lj_forces|count|list|half-list|half-any-list]
+//                [kernel=lj_forces|lj_forces-each-side|count|count-each-side|list|half-list|
+//                 half-any-list]
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -33,8 +38,20 @@
 #include "core/method.hpp"
 #include "raycut/box.hpp"
 #include "raycut/engine.hpp"
+#include "raycut/pairs.hpp"
 
 namespace {
+
+// A built-in kernel's functor from each side of a pair: without option::mirror.
+template <class F>
+struct EachSide {
+  F f;
+  using Accumulator = typename F::Accumulator;
+  void operator()(Accumulator& acc, std::uint32_t i, raycut::Vec3 r, float r2) const {
+    f(acc, i, r, r2);
+  }
+  void finish(std::uint32_t i, Accumulator& acc) const { f.finish(i, acc); }
+};
 
 struct Sample {
   double build_ms, compute_ms;
@@ -97,7 +114,7 @@ int main(int argc, char** argv) {
   const std::string method = argc > 3 ? argv[3] : "cell-list";
   const std::string kernel_name = argc > 4 ? argv[4] : "lj_forces";
   const raycut::Kernel kernel =
-      kernel_name == "count" ? raycut::Kernel::count : raycut::Kernel::lj_forces;
+      kernel_name.rfind("count", 0) == 0 ? raycut::Kernel::count : raycut::Kernel::lj_forces;
   const float cutoff = 2.5f;
   const double side = std::cbrt(static_cast<double>(n) / 0.8442);
   std::mt19937_64 rng(1);
@@ -142,6 +159,9 @@ int main(int argc, char** argv) {
   const bool list =
       kernel_name == "list" || kernel_name == "half-list" || kernel_name == "half-any-list";
   raycut::NeighbourListBuffer list_buffer;
+  std::vector<std::uint32_t> counts;  // the -each-side kernels' outputs
+  std::vector<float> energy, force, virial;
+  const bool each_side = kernel_name.find("-each-side") != std::string::npos;
   // Runs `kernel` on variant v; its ms.
   const auto run = [&](int v, raycut::Kernel kernel) {
     if (list && kernel != raycut::Kernel::count) {
@@ -152,6 +172,21 @@ int main(int argc, char** argv) {
       if (v == 2 || (v == 3 && options.half)) return 0.0;  // no list, no half list of queries
       const auto start = Clock::now();
       engine_of(v).neighbours(list_buffer, options);
+      return ms(start, Clock::now());
+    }
+    if (each_side) {
+      if (v == 2) return 0.0;
+      raycut::Engine& e = engine_of(v);
+      counts.resize(e.size()), energy.resize(e.size()), force.resize(3 * e.size());
+      virial.resize(6 * e.size());
+      const raycut::KernelOutputs out{counts.data(), energy.data(), force.data(), virial.data()};
+      const auto start = Clock::now();
+      if (kernel == raycut::Kernel::count)
+        raycut::for_each_pair(e, EachSide<raycut::CountKernel>{{counts.data()}});
+      else
+        raycut::for_each_pair(e,
+                              EachSide<raycut::LennardJonesForceKernel>{
+                                  raycut::LennardJonesForceSpec::make({}, cutoff * cutoff, out)});
       return ms(start, Clock::now());
     }
     if (v != 2) {
@@ -166,7 +201,10 @@ int main(int argc, char** argv) {
   std::uint64_t pairs[variants] = {0, 0, 0, 0};
   for (int v = 0; v < variants; ++v) {
     build(v);
-    run(v, raycut::Kernel::count);
+    if (v == 2)
+      direct->compute(raycut::Kernel::count, {});
+    else
+      engine_of(v).run(raycut::Kernel::count);
     const raycut::ResultsView r = v == 2 ? direct->results_view() : engine_of(v).results_view();
     for (std::size_t i = 0; i < targets[v]; ++i) pairs[v] += r.count[i];
   }

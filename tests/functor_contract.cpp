@@ -124,6 +124,33 @@ struct Functor {
   }
   void finish(std::uint32_t, Accumulator&) const {}
 };
+#elif RAYCUT_CONTRACT_CASE == 13
+// option::mirror declared, the member missing.
+struct Functor {
+  using Accumulator = float;
+  using options = raycut::functor_options<raycut::option::combine, raycut::option::mirror>;
+  static void combine(Accumulator& a, const Accumulator& b) { a += b; }
+  void operator()(Accumulator& a, std::uint32_t, Vec3, float r2) const { a += r2; }
+  void finish(std::uint32_t, Accumulator&) const {}
+};
+#elif RAYCUT_CONTRACT_CASE == 14
+// option::mirror on a term that reads j: computed once, it could not be j's term.
+struct Functor {
+  using Accumulator = float;
+  using options = raycut::functor_options<raycut::option::combine, raycut::option::mirror>;
+  static void combine(Accumulator& a, const Accumulator& b) { a += b; }
+  static void mirror(Accumulator&) {}
+  void operator()(Accumulator& a, std::uint32_t, std::uint32_t j, Vec3, float) const { a += j; }
+  void finish(std::uint32_t, Accumulator&) const {}
+};
+#elif RAYCUT_CONTRACT_CASE == 15
+// A mirror member without its option: it would be ignored.
+struct Functor {
+  using Accumulator = float;
+  static void mirror(Accumulator&) {}
+  void operator()(Accumulator& a, std::uint32_t, Vec3, float r2) const { a += r2; }
+  void finish(std::uint32_t, Accumulator&) const {}
+};
 #else
 #error "unknown RAYCUT_CONTRACT_CASE"
 #endif

@@ -27,19 +27,23 @@ struct LjNoCombine {
     energy[i] = acc * four_epsilon_sigma6;
   }
 };
+// The same, each pair computed once on the CPU cell list and added to both (option::mirror), as
+// the built-in kernel is.
 struct Lj : LjNoCombine {
-  using options =
-      raycut::functor_options<raycut::option::vanishes_at_infinity, raycut::option::combine>;
+  using options = raycut::functor_options<raycut::option::vanishes_at_infinity,
+                                          raycut::option::combine, raycut::option::mirror>;
   RAYCUT_HD static void combine(float& a, const float& b) { a += b; }
+  RAYCUT_HD static void mirror(float&) {}
 };
 
-// Energy, force and virial, as Kernel::lj_forces.
+// Energy, force and virial, as Kernel::lj_forces: each pair computed once on the CPU cell list
+// and added to both particles (option::mirror), as the built-in kernel is.
 struct LjForces {
   struct Accumulator {
     float energy = 0, f[3] = {0, 0, 0}, v[6] = {0, 0, 0, 0, 0, 0};
   };
-  using options =
-      raycut::functor_options<raycut::option::vanishes_at_infinity, raycut::option::combine>;
+  using options = raycut::functor_options<raycut::option::vanishes_at_infinity,
+                                          raycut::option::combine, raycut::option::mirror>;
   float sigma2, four_epsilon;  // reduced units: u = (sigma^2 / r^2)^3
   float *energy, *force, *virial;
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, raycut::Vec3 r, float r2) const {
@@ -63,6 +67,9 @@ struct LjForces {
     a.energy += b.energy;
     for (int k = 0; k < 3; ++k) a.f[k] += b.f[k];
     for (int k = 0; k < 6; ++k) a.v[k] += b.v[k];
+  }
+  RAYCUT_HD static void mirror(Accumulator& a) {
+    for (int k = 0; k < 3; ++k) a.f[k] = -a.f[k];
   }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
     energy[i] = acc.energy * (0.5f * four_epsilon);

@@ -47,6 +47,14 @@
 //                         few targets with a candidate in it again in a second launch, in
 //                         double: no double arithmetic in its loop, whose registers it would
 //                         double (without the option it decides them inline)
+//   mirror                RAYCUT_HD static void mirror(Accumulator& a);  turns a pair's term
+//                         for its target i (one call from Accumulator{}, with r = x_j - x_i)
+//                         into its term for the other particle j (for a force: negated). Then
+//                         a CPU traversal with a half stencil (the cell list) computes each
+//                         pair once and adds its term to both particles (Newton's third law)
+//                         instead of computing it from each side. It requires combine, the
+//                         pair call without j (the term is of r alone), and neither init nor
+//                         accepts
 //
 // Why a list of types rather than optional members found by name: C++ cannot tell a misspelt
 // member (`vanishes_at_infinty`, `combin`) from one that is not there, so an optional member
@@ -81,6 +89,7 @@ struct accepts {};
 struct combine {};
 struct emits_entries {};
 struct repeatable {};
+struct mirror {};
 }  // namespace option
 
 namespace detail {
@@ -89,14 +98,15 @@ inline constexpr bool one_of = (std::is_same_v<Option, Known> || ...);
 template <class Option>
 inline constexpr bool known_option =
     one_of<Option, option::vanishes_at_infinity, option::init, option::accepts, option::combine,
-           option::emits_entries, option::repeatable>;
+           option::emits_entries, option::repeatable, option::mirror>;
 }  // namespace detail
 
 template <class... Options>
 struct functor_options {
   static_assert((detail::known_option<Options> && ...),
                 "raycut::functor_options: every option must be one of raycut::option::"
-                "vanishes_at_infinity, init, accepts, combine, emits_entries, repeatable");
+                "vanishes_at_infinity, init, accepts, combine, emits_entries, repeatable, "
+                "mirror");
   template <class Option>
   static constexpr bool has = detail::one_of<Option, Options...>;
 };
@@ -189,6 +199,11 @@ struct combine_member<
     F, std::void_t<decltype(F::combine(std::declval<typename F::Accumulator&>(),
                                        std::declval<const typename F::Accumulator&>()))>>
     : std::true_type {};
+template <class F, class = void>
+struct mirror_member : std::false_type {};
+template <class F>
+struct mirror_member<F, std::void_t<decltype(F::mirror(std::declval<typename F::Accumulator&>()))>>
+    : std::true_type {};
 // accepts(i, j), or accepts(i, j, s) for a functor with the shifted pair call. Two plain
 // detections and a choice: nvcc's front end took any shifted functor for one with accepts when
 // the shift's detection sat inside enable_if_t.
@@ -215,6 +230,7 @@ struct accepts_of_shifted_pair<F, std::void_t<decltype(std::declval<const F&>().
 RAYCUT_DETAIL_NAMED_MEMBER(init)
 RAYCUT_DETAIL_NAMED_MEMBER(accepts)
 RAYCUT_DETAIL_NAMED_MEMBER(combine)
+RAYCUT_DETAIL_NAMED_MEMBER(mirror)
 RAYCUT_DETAIL_NAMED_MEMBER(vanishes_at_infinity)
 RAYCUT_DETAIL_NAMED_MEMBER(emits_entries)
 RAYCUT_DETAIL_NAMED_MEMBER(uses_source)
@@ -244,6 +260,8 @@ template <class F>
 struct emits_entries : std::bool_constant<detail::opts_into<F, option::emits_entries>> {};
 template <class F>
 struct repeatable : std::bool_constant<detail::opts_into<F, option::repeatable>> {};
+template <class F>
+struct has_mirror : std::bool_constant<detail::opts_into<F, option::mirror>> {};
 
 namespace detail {
 
@@ -275,7 +293,8 @@ constexpr bool check_functor() {
     static_assert(!is_functor_options<typename options_of<F>::type>::value ||
                       options_known<typename options_of<F>::type>::value,
                   "raycut functor: every option must be one of raycut::option::"
-                  "vanishes_at_infinity, init, accepts, combine, emits_entries, repeatable");
+                  "vanishes_at_infinity, init, accepts, combine, emits_entries, repeatable, "
+                  "mirror");
     static_assert(!names_vanishes_at_infinity<F>::value && !names_emits_entries<F>::value,
                   "raycut functor: vanishes_at_infinity and emits_entries are not members; name "
                   "them in `using options = raycut::functor_options<raycut::option::...>`");
@@ -311,6 +330,18 @@ constexpr bool check_functor() {
                   "raycut functor: option::emits_entries is declared but no `bool within(uint32_t "
                   "i, uint32_t j, const raycut::Shift& s, float r2) const` is found (whether the "
                   "call writes the pair: the grid places entries before the calls)");
+    static_assert(!opts_into<F, option::mirror> || mirror_member<F>::value,
+                  "raycut functor: option::mirror is declared but no `static void "
+                  "mirror(Accumulator& a)` is found");
+    static_assert(opts_into<F, option::mirror> || !names_mirror<F>::value,
+                  "raycut functor: a member mirror is declared without option::mirror in "
+                  "`options` (it would be ignored)");
+    static_assert(!opts_into<F, option::mirror> ||
+                      (opts_into<F, option::combine> && calls_without_source<F>::value &&
+                       !opts_into<F, option::init> && !opts_into<F, option::accepts>),
+                  "raycut functor: option::mirror needs option::combine and the pair call "
+                  "without j (a term of r alone), and neither init nor accepts: the pair's term "
+                  "is computed once, from Accumulator{}, and added to both particles");
   }
   return true;
 }

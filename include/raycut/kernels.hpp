@@ -128,10 +128,11 @@ RAYCUT_HD float fast_reciprocal(float b) {
 
 struct CountKernel {
   using Accumulator = std::uint32_t;
-  using options = functor_options<option::combine, option::repeatable>;
+  using options = functor_options<option::combine, option::repeatable, option::mirror>;
   std::uint32_t* count;
   RAYCUT_HD void operator()(Accumulator& acc, std::uint32_t, Vec3, float) const { ++acc; }
   RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
+  RAYCUT_HD static void mirror(Accumulator&) {}
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { count[i] = acc; }
 };
 
@@ -142,8 +143,8 @@ struct CountKernel {
 // vanish at r2 = +inf (w = 0), so a pair out of range can be fed r2 = +inf instead of a branch.
 struct LennardJonesKernel {
   using Accumulator = float;
-  using options =
-      functor_options<option::vanishes_at_infinity, option::combine, option::repeatable>;
+  using options = functor_options<option::vanishes_at_infinity, option::combine, option::repeatable,
+                                  option::mirror>;
   float sigma6;               // sigma^6
   float four_epsilon_sigma6;  // 4 eps sigma^6
   float* energy;
@@ -153,6 +154,7 @@ struct LennardJonesKernel {
     acc += w * (sigma6 * w - 1.0f);
   }
   RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
+  RAYCUT_HD static void mirror(Accumulator&) {}  // an energy: the same on both
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
     energy[i] = acc * four_epsilon_sigma6;
   }
@@ -198,8 +200,8 @@ struct EnergyForceVirial {
 // scales as 1 / sigma^2 (docs/limits.md).
 struct LennardJonesForceKernel {
   using Accumulator = EnergyForceVirial;
-  using options =
-      functor_options<option::vanishes_at_infinity, option::combine, option::repeatable>;
+  using options = functor_options<option::vanishes_at_infinity, option::combine, option::repeatable,
+                                  option::mirror>;
   float sigma2;        // sigma^2
   float four_epsilon;  // 4 eps
   float* energy;       // 1 per target
@@ -216,6 +218,10 @@ struct LennardJonesForceKernel {
     acc.add_force(g, r);
   }
   RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a.add(b); }
+  // j's term: the same energy and virial (r r is even in r), the opposite force.
+  RAYCUT_HD static void mirror(Accumulator& a) {
+    for (int k = 0; k < 3; ++k) a.f[k] = -a.f[k];
+  }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
     energy[i] = acc.energy * (0.5f * four_epsilon);  // half of each pair's energy
     const float fs = -6.0f * four_epsilon, vs = 3.0f * four_epsilon;
@@ -229,7 +235,7 @@ struct SmoothKernel {
   struct Accumulator {
     float energy = 0, f[3] = {0, 0, 0};
   };
-  using options = functor_options<option::combine, option::repeatable>;
+  using options = functor_options<option::combine, option::repeatable, option::mirror>;
   float cutoff_squared;
   float* energy;
   float* force;
@@ -244,6 +250,9 @@ struct SmoothKernel {
     a.energy += b.energy;
     for (int k = 0; k < 3; ++k) a.f[k] += b.f[k];
   }
+  RAYCUT_HD static void mirror(Accumulator& a) {
+    for (int k = 0; k < 3; ++k) a.f[k] = -a.f[k];
+  }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const {
     energy[i] = acc.energy;
     for (int k = 0; k < 3; ++k) force[3 * std::size_t{i} + k] = acc.f[k];
@@ -253,7 +262,7 @@ struct SmoothKernel {
 // rho_i contribution m W_poly6(r, h) = m 315 / (64 pi h^9) (h^2 - r^2)^3 (Mueller et al. 2003).
 struct SphDensityKernel {
   using Accumulator = float;
-  using options = functor_options<option::combine, option::repeatable>;
+  using options = functor_options<option::combine, option::repeatable, option::mirror>;
   float mass_poly6;  // m 315 / (64 pi h^9)
   float h_squared;
   float* density;
@@ -262,6 +271,7 @@ struct SphDensityKernel {
     acc += w * w * w;
   }
   RAYCUT_HD static void combine(Accumulator& a, const Accumulator& b) { a += b; }
+  RAYCUT_HD static void mirror(Accumulator&) {}
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& acc) const { density[i] = acc * mass_poly6; }
 };
 

@@ -19,11 +19,17 @@
 #include <string>
 #include <type_traits>
 #include <utility>
+#include <vector>
+
+#if defined(_OPENMP)
+#include <omp.h>
+#endif
 
 #include "raycut/detail/host_threads.hpp"
 #include "raycut/detail/images.hpp"
 #include "raycut/detail/pair_pass.hpp"
 #include "raycut/error.hpp"
+#include "raycut/host_memory.hpp"
 #include "raycut/kernels.hpp"
 #include "raycut/predicate.hpp"
 
@@ -177,9 +183,92 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const RunsO
   }
 }
 
+// run_host for a functor with option::mirror over a traversal in slot order: each pair once, by
+// the half stencil (a home pair from its lower slot; a pair with an image point by the half
+// list's rule, i < j or i == j and S positive, from a target with images, which reads every
+// slot), its term computed once from Accumulator{} and combined into both particles: into the
+// target's accumulator, and, mirrored, into a per-thread sum by the other's slot. Then each
+// particle's per-thread sums, in thread order, and finish. The targets go to the threads in
+// fixed chunks: the same bits on every run with the same number of threads (another number
+// changes the order of the sums, and may change the last bits).
+template <class RunsOf, class F, class Images>
+void run_host_pair_once(std::size_t n, const RunsOf& runs_of, const F& f, const Images& images,
+                        const std::uint32_t* order, const float* order_xyz,
+                        const std::uint32_t* slots, const std::uint32_t* image_counts,
+                        float cutoff_squared) {
+  using Accumulator = typename F::Accumulator;
+  std::uint32_t slot_count = 0;  // home slots: the sums are kept by slot, in cell order
+  for (std::size_t i = 0; i < n; ++i) slot_count = std::max(slot_count, slots[i] + 1);
+  int threads = 1;
+#if defined(_OPENMP)
+  if (n >= parallel_targets) threads = std::max(1, omp_get_max_threads());
+#endif
+  require_host_memory(static_cast<double>(threads) * slot_count * sizeof(Accumulator), [&] {
+    return "the per-thread force sums of " + std::to_string(threads) + " threads over " +
+           std::to_string(n) + " particles";
+  });
+  std::vector<Accumulator> sums(static_cast<std::size_t>(threads) * slot_count);
+#pragma omp parallel num_threads(threads) if (threads > 1)
+  {
+    int thread = 0;
+#if defined(_OPENMP)
+    thread = omp_get_thread_num();
+#endif
+    Accumulator* const mine = sums.data() + static_cast<std::size_t>(thread) * slot_count;
+#pragma omp for schedule(static, 256)
+    for (std::size_t v = 0; v < n; ++v) {
+      const std::uint32_t i = order[v];
+      const std::uint32_t t = slots[i];
+      const typename Images::Target ti = images.target(i);
+      const bool half_rows = !(Images::banded && image_counts[i] > 0);
+      Accumulator acc{};
+      for_each_in_range(
+          images, i, order_xyz + 3 * v, cutoff_squared, runs_of,
+          [&](std::size_t point, Vec3 r, float r2, const PointImage* entry, std::uint32_t slot) {
+            const auto k = static_cast<std::uint32_t>(point);
+            std::uint32_t j = k;  // a home point is its own particle
+            if (k < n) {
+              if (slot <= t) return;  // met from its lower slot
+            } else {
+              Shift s{};
+              if (!resolve(f, images, ti, true, i, k, k, j, s, entry)) return;
+              if (!(i < j || (i == j && s.positive()))) return;  // met from j as well
+            }
+            Accumulator term{};
+            apply(f, term, i, j, r, r2);
+            F::combine(acc, term);
+            F::mirror(term);
+            F::combine(mine[slots[j]], term);
+          },
+          0, half_rows ? t + 1 : 0);
+      F::combine(mine[t], acc);
+    }
+#pragma omp for schedule(static)
+    for (std::size_t i = 0; i < n; ++i) {
+      Accumulator total = sums[slots[i]];
+      for (int other = 1; other < threads; ++other)
+        F::combine(total, sums[static_cast<std::size_t>(other) * slot_count + slots[i]]);
+      f.finish(static_cast<std::uint32_t>(i), total);
+    }
+  }
+}
+
 // run_host over a HostPass, with its images.
 template <class RunsOf, class F>
 void run_host_pass(const PairPass& pass, const RunsOf& runs_of, const F& f) {
+  if constexpr (has_mirror<F>::value) {
+    const HostPass& host = pass.host;
+    const ImageTables& images = pass.images;
+    if (host.slots && host.order && host.order_xyz && images.candidates_are_sources) {
+      if (!images.active() && pass.points == pass.n)
+        return run_host_pair_once(pass.n, runs_of, f, NoImages{}, host.order, host.order_xyz,
+                                  host.slots, nullptr, pass.cutoff_squared);
+      if (images.exact && images.image_counts)  // the half rule reads an image's j and S
+        return run_host_pair_once(
+            pass.n, runs_of, f, WithImages{images.table(nullptr), *images.exact}, host.order,
+            host.order_xyz, host.slots, images.image_counts, pass.cutoff_squared);
+    }
+  }
   with_images<F>(pass, [&](const auto& images) {
     run_host(pass.n, pass.host.xyz, pass.cutoff_squared, runs_of, f, images, pass.host.order,
              pass.host.order_xyz, pass.images.candidates_are_sources ? pass.host.slots : nullptr,

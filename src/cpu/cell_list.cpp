@@ -146,7 +146,10 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   // 1-3 % less).
   const float* target_order_xyz() const { return target_xyz_.data(); }
   // Each target's slot: the runs' slots are in cell order (the half stencil, HostPass::slots).
-  const std::uint32_t* target_slots() const { return target_slot_.data(); }
+  // Only where every candidate point is a target or a target's image: not with query points.
+  const std::uint32_t* target_slots() const {
+    return targets_are_particles_ ? target_slot_.data() : nullptr;
+  }
 
   void build(const float* xyz, std::size_t n, float cutoff) override {
     build_points(Points::plain(xyz, n), cutoff);
@@ -162,6 +165,8 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     xyz_.assign(xyz, xyz + 3 * n);
     // Query points are sorted after every source and never offered as candidates (below).
     ImageTables images = points.images;
+    targets_are_particles_ =
+        images.active() ? images.candidates_are_sources : points.targets == points.size;
     images.candidates_are_sources = true;
     set_positions(xyz_.data(), n, cutoff, points.targets, images);
     // Points rounded at their box's scale: cells as wide as the float distance below which the
@@ -339,8 +344,9 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   double inverse_width_ = 1;                    // cells per unit length
   std::vector<std::uint32_t> order_;            // sorted slot -> particle index
   std::vector<std::uint32_t> target_order_;     // the targets (points < targets) in slot order
-  std::vector<float> target_xyz_;               // their positions, 3 each
-  std::vector<std::uint32_t> target_slot_;      // by target: its slot
+  bool targets_are_particles_ = true;       // every point a target or an image of one (no queries)
+  std::vector<float> target_xyz_;           // their positions, 3 each
+  std::vector<std::uint32_t> target_slot_;  // by target: its slot
   std::vector<float> sorted_x_, sorted_y_, sorted_z_;  // positions in slot order
   std::vector<std::uint32_t> sorted_source_;           // the caller's particle of each slot
   std::vector<PointImage> sorted_image_;               // with images: each slot's table entry
