@@ -1,7 +1,8 @@
 // Refusals that are clear and early: the host memory budget (RAYCUT_MAX_MEMORY, else the memory
 // available and the cgroup's headroom), checked before lists and padded matrices are allocated;
 // cutoffs checked as given in double; distances that agree with their vectors at every scale
-// of the supported cutoff range; the padded report's largest row.
+// of the supported cutoff range; the padded report's largest row; a pass's per-thread sums that
+// do not fit, left out for the pass that needs none.
 #include <gtest/gtest.h>
 #include <omp.h>
 
@@ -15,6 +16,7 @@
 #include "error_helpers.hpp"
 #include "raycut/engine.hpp"
 #include "raycut/host_memory.hpp"
+#include "raycut/pairs.hpp"
 
 namespace {
 
@@ -160,6 +162,47 @@ TEST(MemoryBudget, ListWhoseOnePassRowsPassTheBudgetIsMadeInTwoPasses) {
   EXPECT_EQ(budgeted.offsets, unbudgeted.offsets);
   EXPECT_EQ(budgeted.indices, unbudgeted.indices);
   EXPECT_EQ(budgeted.distances, unbudgeted.distances);
+}
+
+// lj_forces from both sides of each pair: the built-in functor less option::mirror.
+struct LjForcesEachSide {
+  raycut::LennardJonesForceKernel lj;
+  using Accumulator = raycut::LennardJonesForceKernel::Accumulator;
+  void operator()(Accumulator& acc, std::uint32_t i, raycut::Vec3 r, float r2) const {
+    lj(acc, i, r, r2);
+  }
+  void finish(std::uint32_t i, Accumulator& acc) const { lj.finish(i, acc); }
+};
+
+// The cell list computes lj_forces once per pair into per-thread sums (40 bytes a particle and
+// thread); where those would leave less than as much again of the budget, it computes each pair
+// from both sides instead, which needs no sums: the same bits as that pass, not a refusal.
+TEST(MemoryBudget, PerThreadSumsBeyondTheBudgetFallBackToEachSide) {
+  const std::size_t n = 20000;  // 800 kB of sums on one thread
+  const std::vector<float> xyz = unit_cube_cloud(n);
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  Engine engine("cell-list");
+  engine.build({xyz.data(), n, MemorySpace::host}, 0.05f);
+  raycut::KernelOptions lj;
+  lj.lj_sigma = 0.005f;  // below the spacing (~0.04): finite forces
+  const raycut::Results once = engine.compute(raycut::Kernel::lj_forces, lj);
+  std::vector<float> energy(n), force(3 * n), virial(6 * n);
+  const raycut::KernelOutputs out{nullptr, energy.data(), force.data(), virial.data()};
+  raycut::for_each_pair(
+      engine, LjForcesEachSide{raycut::LennardJonesForceSpec::make(lj, 0.05f * 0.05f, out)});
+  raycut::Results budgeted;
+  {
+    Budget b("1M");
+    budgeted = engine.compute(raycut::Kernel::lj_forces, lj);
+  }
+  omp_set_num_threads(threads);
+  EXPECT_EQ(budgeted.force, force);
+  EXPECT_EQ(budgeted.energy, energy);
+  EXPECT_EQ(budgeted.virial, virial);
+  EXPECT_NE(once.force, force);  // the pass without the budget took each pair once
+  for (std::size_t k = 0; k < force.size(); ++k)
+    ASSERT_NEAR(once.force[k], force[k], 1e-4 * std::abs(force[k]) + 1e-3) << "component " << k;
 }
 
 // A GPU list fits the device but not the host budget: its copy to the host (what NumPy outputs

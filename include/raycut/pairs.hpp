@@ -190,9 +190,11 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const RunsO
 // target's accumulator, and, mirrored, into a per-thread sum by the other's slot. Then each
 // particle's per-thread sums, in thread order, and finish. The targets go to the threads in
 // fixed chunks: the same bits on every run with the same number of threads (another number
-// changes the order of the sums, and may change the last bits).
+// changes the order of the sums, and may change the last bits). False, having run nothing, where
+// the sums would leave less than as much again of the host memory budget: the caller then
+// computes each pair from both sides, which needs no sums.
 template <class RunsOf, class F, class Images>
-void run_host_pair_once(std::size_t n, const RunsOf& runs_of, const F& f, const Images& images,
+bool run_host_pair_once(std::size_t n, const RunsOf& runs_of, const F& f, const Images& images,
                         const std::uint32_t* order, const float* order_xyz,
                         const std::uint32_t* slots, const std::uint32_t* image_counts,
                         float cutoff_squared) {
@@ -203,10 +205,8 @@ void run_host_pair_once(std::size_t n, const RunsOf& runs_of, const F& f, const 
 #if defined(_OPENMP)
   if (n >= parallel_targets) threads = std::max(1, omp_get_max_threads());
 #endif
-  require_host_memory(static_cast<double>(threads) * slot_count * sizeof(Accumulator), [&] {
-    return "the per-thread force sums of " + std::to_string(threads) + " threads over " +
-           std::to_string(n) + " particles";
-  });
+  const double bytes = static_cast<double>(threads) * slot_count * sizeof(Accumulator);
+  if (host_memory_checked(bytes) && 2 * bytes > host_memory_budget().bytes) return false;
   std::vector<Accumulator> sums(static_cast<std::size_t>(threads) * slot_count);
 #pragma omp parallel num_threads(threads) if (threads > 1)
   {
@@ -251,6 +251,7 @@ void run_host_pair_once(std::size_t n, const RunsOf& runs_of, const F& f, const 
       f.finish(static_cast<std::uint32_t>(i), total);
     }
   }
+  return true;
 }
 
 // run_host over a HostPass, with its images.
@@ -260,13 +261,16 @@ void run_host_pass(const PairPass& pass, const RunsOf& runs_of, const F& f) {
     const HostPass& host = pass.host;
     const ImageTables& images = pass.images;
     if (host.slots && host.order && host.order_xyz && images.candidates_are_sources) {
-      if (!images.active() && pass.points == pass.n)
-        return run_host_pair_once(pass.n, runs_of, f, NoImages{}, host.order, host.order_xyz,
-                                  host.slots, nullptr, pass.cutoff_squared);
-      if (images.exact && images.image_counts)  // the half rule reads an image's j and S
-        return run_host_pair_once(
-            pass.n, runs_of, f, WithImages{images.table(nullptr), *images.exact}, host.order,
-            host.order_xyz, host.slots, images.image_counts, pass.cutoff_squared);
+      if (!images.active() && pass.points == pass.n &&
+          run_host_pair_once(pass.n, runs_of, f, NoImages{}, host.order, host.order_xyz, host.slots,
+                             nullptr, pass.cutoff_squared))
+        return;
+      // The half rule reads an image's j and S: the table, whatever the functor reads.
+      if (images.active() && images.exact && images.image_counts &&
+          run_host_pair_once(pass.n, runs_of, f, WithImages{images.table(nullptr), *images.exact},
+                             host.order, host.order_xyz, host.slots, images.image_counts,
+                             pass.cutoff_squared))
+        return;
     }
   }
   with_images<F>(pass, [&](const auto& images) {
