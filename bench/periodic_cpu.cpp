@@ -15,14 +15,17 @@
 //
 // kernel "lj_forces-each-side" ("count-each-side") times lj_forces (count) computed from both
 // particles of every pair (raycut::for_each_pair with the kernel's functor less option::mirror),
-// the pass the kernel took before it computed each pair once on the half stencil.
+// the pass the kernel took before it computed each pair once on the half stencil;
+// "lj_forces-once" ("count-once") the kernel's own functor through the same call and buffers
+// (the engine's run also allocates its results: at small N, compare these two).
 //
 // kernel "list" times the engine's CSR list with S (count and fill; not for open-n), "half-list"
 // the same half (nor for queries), "half-any-list" the half list whose rows may follow the
 // traversal (ListOptions::any_row: the half stencil); those rows report 0 ms.
 //
 //   periodic_cpu [particles=200000] [rounds=5] [method=cell-list]
-//                [kernel=lj_forces|lj_forces-each-side|count|count-each-side|list|half-list|
+//                [kernel=lj_forces|lj_forces-each-side|lj_forces-once|count|count-each-side|
+//                 count-once|list|half-list|
 //                 half-any-list]
 #include <algorithm>
 #include <chrono>
@@ -159,9 +162,10 @@ int main(int argc, char** argv) {
   const bool list =
       kernel_name == "list" || kernel_name == "half-list" || kernel_name == "half-any-list";
   raycut::NeighbourListBuffer list_buffer;
-  std::vector<std::uint32_t> counts;  // the -each-side kernels' outputs
+  std::vector<std::uint32_t> counts;  // the -each-side and -once kernels' outputs
   std::vector<float> energy, force, virial;
   const bool each_side = kernel_name.find("-each-side") != std::string::npos;
+  const bool once = kernel_name.find("-once") != std::string::npos;
   // Runs `kernel` on variant v; its ms.
   const auto run = [&](int v, raycut::Kernel kernel) {
     if (list && kernel != raycut::Kernel::count) {
@@ -174,19 +178,24 @@ int main(int argc, char** argv) {
       engine_of(v).neighbours(list_buffer, options);
       return ms(start, Clock::now());
     }
-    if (each_side) {
+    if (each_side || once) {
       if (v == 2) return 0.0;
       raycut::Engine& e = engine_of(v);
       counts.resize(e.size()), energy.resize(e.size()), force.resize(3 * e.size());
       virial.resize(6 * e.size());
       const raycut::KernelOutputs out{counts.data(), energy.data(), force.data(), virial.data()};
+      const raycut::CountKernel count{counts.data()};
+      const raycut::LennardJonesForceKernel lj =
+          raycut::LennardJonesForceSpec::make({}, cutoff * cutoff, out);
       const auto start = Clock::now();
-      if (kernel == raycut::Kernel::count)
-        raycut::for_each_pair(e, EachSide<raycut::CountKernel>{{counts.data()}});
+      if (kernel == raycut::Kernel::count && once)
+        raycut::for_each_pair(e, count);
+      else if (kernel == raycut::Kernel::count)
+        raycut::for_each_pair(e, EachSide<raycut::CountKernel>{count});
+      else if (once)
+        raycut::for_each_pair(e, lj);
       else
-        raycut::for_each_pair(e,
-                              EachSide<raycut::LennardJonesForceKernel>{
-                                  raycut::LennardJonesForceSpec::make({}, cutoff * cutoff, out)});
+        raycut::for_each_pair(e, EachSide<raycut::LennardJonesForceKernel>{lj});
       return ms(start, Clock::now());
     }
     if (v != 2) {
