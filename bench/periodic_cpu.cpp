@@ -15,7 +15,7 @@
 //
 // kernel "lj_forces-each-side" ("count-each-side") times lj_forces (count) computed from both
 // particles of every pair (raycut::for_each_pair with the kernel's functor less option::mirror),
-// the pass the kernel took before it computed each pair once on the half stencil;
+// the pass of a functor without the option;
 // "lj_forces-once" ("count-once") the kernel's own functor through the same call and buffers
 // (the engine's run also allocates its results: at small N, compare these two).
 //
