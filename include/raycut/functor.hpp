@@ -81,6 +81,12 @@ struct Shift {
   RAYCUT_HD bool positive() const { return a != 0 ? a > 0 : (b != 0 ? b > 0 : c > 0); }
 };
 
+// The half-list orientation: of (i, j, S) and (j, i, -S), the one with i < j, or i == j and S
+// positive, is kept ((i, i, 0) never reaches a functor).
+RAYCUT_HD bool half_keeps(std::uint32_t i, std::uint32_t j, const Shift& s) {
+  return i < j || (i == j && s.positive());
+}
+
 // The optional behaviours a functor opts into (see above).
 namespace option {
 struct vanishes_at_infinity {};

@@ -232,7 +232,7 @@ bool run_host_pair_once(std::size_t n, const RunsOf& runs_of, const F& f, const 
             } else {
               Shift s{};
               if (!resolve(f, images, ti, true, i, k, k, j, s, entry)) return;
-              if (!(i < j || (i == j && s.positive()))) return;  // met from j as well
+              if (!half_keeps(i, j, s)) return;  // met from j as well
             }
             Accumulator term{};
             apply(f, term, i, j, r, r2);

@@ -58,7 +58,7 @@ struct ListFilter {
   PairCutoffFilter cutoffs;
   bool any_row = false;
   RAYCUT_HD bool accepts(std::uint32_t i, std::uint32_t j, const Shift& s) const {
-    return !half || i < j || (i == j && s.positive());
+    return !half || half_keeps(i, j, s);
   }
   // The CPU loop drops sources below it before the predicate (pairs.hpp): a half list's row i
   // has none (2026-12-05, the 200,000-particle LJ liquid, one thread: see docs/pair-pass.md).
