@@ -93,8 +93,10 @@ std::vector<Triple> triples(const raycut::NeighbourList& l) {
 
 // The half list by the half stencil (ListOptions::any_row) of a built grid: the pairs of the
 // full list `want`, each once, in the row of either of its particles. `scattered`: particles in
-// random order, whose pairs the stencil must then leave in the higher index's row about half the
-// time (none there would mean that the stencil never ran).
+// random order, whose pairs between two home points the stencil leaves in the higher index's row
+// about half the time (none there would mean that the stencil never ran). Pairs across a face
+// keep the index's row, so a set with many particles on faces has fewer: 9 % at L / C = 1e5
+// below, hence a bound of 1 in 20.
 void expect_half_any_row(raycut::detail::Method& grid, const raycut::NeighbourList& want,
                          const std::string& what, bool scattered) {
   auto storage = grid.make_list_storage();
@@ -106,7 +108,7 @@ void expect_half_any_row(raycut::detail::Method& grid, const raycut::NeighbourLi
     got.push_back(half_orientation(t) ? t : Triple{t[1], t[0], -t[2], -t[3], -t[4]});
   }
   if (scattered && got.size() >= 100) {
-    EXPECT_GT(upper_rows, got.size() / 10) << what << ": the half stencil kept the index's rows";
+    EXPECT_GT(upper_rows, got.size() / 20) << what << ": the half stencil kept the index's rows";
   }
   std::sort(got.begin(), got.end());
   for (const Triple& t : triples(want))

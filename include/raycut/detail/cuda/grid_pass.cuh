@@ -173,32 +173,40 @@ __device__ __forceinline__ std::uint32_t original_index(const float4& q) {
 // reach (an image within C of it would put it within C of a face, and give it an image), so the
 // rows before its own hold nothing it takes.
 struct StencilRows {
-  bool on = false;
   Slot targets = 0;
   const std::uint32_t* image_counts = nullptr;  // by source; null: no images
   // Whether target point i walks only the later slots.
   __device__ __forceinline__ bool half_rows(std::uint32_t i) const {
-    return on && !(image_counts && image_counts[i] > 0);
+    return !(image_counts && image_counts[i] > 0);
   }
   // Whether candidate point k, at slot s of target slot t, may be taken: a home pair from its
   // lower slot only.
   __device__ __forceinline__ bool allows(std::uint32_t k, Slot s, Slot t) const {
-    return !on || k >= targets || s > t;
+    return k >= targets || s > t;
   }
-  __device__ __forceinline__ bool home(std::uint32_t k) const { return on && k < targets; }
+  __device__ __forceinline__ bool home(std::uint32_t k) const { return k < targets; }
+};
+
+// The stencil of every functor that never asks for the half one (has_any_row false), and of
+// lists that do not: its checks fold away at compile time. (A runtime flag tested in every
+// kernel made the full-stencil passes 1.1-1.4x slower on an H100: docs/grid.md.)
+struct FullStencil {
+  __device__ __forceinline__ bool half_rows(std::uint32_t) const { return false; }
+  __device__ __forceinline__ bool allows(std::uint32_t, Slot, Slot) const { return true; }
+  __device__ __forceinline__ bool home(std::uint32_t) const { return false; }
 };
 
 // Candidate point k at slot s of target i through f (visit), as the half stencil has it: a home
 // pair, decided by its slots, is not halved again by index; and where the call reads neither j
 // nor S (a list's count without per-pair cutoffs) it is taken without the image table's 16-byte
 // read (a home point is its own source: j = k).
-template <class F, class Images>
+template <class F, class Images, class Stencil>
 __device__ __forceinline__ void visit_stencil(const F& f, typename F::Accumulator& acc, bool in,
                                               std::uint32_t i, std::uint32_t k, Slot s, Vec3 r,
                                               float r2, const Images& images,
                                               const typename Images::Target& ti,
-                                              const StencilRows& stencil) {
-  if constexpr (has_any_row<F>::value) {
+                                              const Stencil& stencil) {
+  if constexpr (has_any_row<F>::value && std::is_same_v<Stencil, StencilRows>) {
     const bool home = stencil.home(k);
     const F g = for_candidate(f, home);
     if constexpr (!emits_entries<F>::value) {
@@ -300,12 +308,11 @@ __device__ __forceinline__ bool in_range_or_band(const Images& images, float cut
 
 // Target t of a thread's own: every candidate through f; false (and nothing finished) when
 // Defer found a candidate in the band.
-template <bool Defer, class F, class Table, class Images>
+template <bool Defer, class F, class Table, class Images, class Stencil>
 __device__ __forceinline__ bool grid_thread_target(const float4* __restrict__ pos, Slot t,
                                                    const GridGeometry& view, const Table& table,
                                                    float cutoff_squared, const F& f,
-                                                   const Images& images,
-                                                   const StencilRows& stencil) {
+                                                   const Images& images, const Stencil& stencil) {
   const float4 p = pos[t];
   const std::uint32_t i = original_index(p);
   const typename Images::Target ti = images.target(t);
@@ -330,11 +337,11 @@ __device__ __forceinline__ Slot target_slot(const Slot* targets, Slot t) {
   return targets ? targets[t] : t;
 }
 
-template <bool ManyRegisters, bool Defer, class F, class Table, class Images>
+template <bool ManyRegisters, bool Defer, class F, class Table, class Images, class Stencil>
 __global__ void __launch_bounds__(grid_block_size, ManyRegisters ? 1 : 0)
     grid_thread_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n,
                        GridGeometry view, Table table, float cutoff_squared, F f, Images images,
-                       BandTargets band, StencilRows stencil) {
+                       BandTargets band, Stencil stencil) {
   const Slot tid = blockIdx.x * grid_block_size + threadIdx.x;
   if (tid >= n) return;
   const Slot t = target_slot(targets, tid);
@@ -396,13 +403,12 @@ __device__ __forceinline__ Slot flatten_rows(const GridGeometry& view, const Tab
 // Target t of a group of G lanes (rows: the group's shared row table; an inactive group's
 // lanes take part in the shuffles and finish nothing). False (nothing finished) when Defer found
 // a candidate in the band.
-template <int G, bool Defer, class F, class Table, class Images>
+template <int G, bool Defer, class F, class Table, class Images, class Stencil>
 __device__ __forceinline__ bool grid_group_target(const float4* __restrict__ pos, Slot t,
                                                   bool active, const GridGeometry& view,
                                                   const Table& table, float cutoff_squared,
                                                   const F& f, const Images& images,
-                                                  const StencilRows& stencil, uint2* rows,
-                                                  int lane) {
+                                                  const Stencil& stencil, uint2* rows, int lane) {
   const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
   const std::uint32_t i = original_index(p);
   const Slot group_total = flatten_rows<G>(view, table, locate(view, p), active,
@@ -456,11 +462,11 @@ __device__ __forceinline__ bool grid_group_target(const float4* __restrict__ pos
   return true;
 }
 
-template <int G, bool Defer, class F, class Table, class Images>
+template <int G, bool Defer, class F, class Table, class Images, class Stencil>
 __global__ void __launch_bounds__(grid_block_size)
     grid_group_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n,
                       GridGeometry view, Table table, float cutoff_squared, F f, Images images,
-                      BandTargets band, StencilRows stencil) {
+                      BandTargets band, Stencil stencil) {
   constexpr int groups = grid_block_size / G;
   __shared__ uint2 rows[groups][grid_max_rows];
   const int group = threadIdx.x / G, lane = threadIdx.x % G;
@@ -481,13 +487,12 @@ __global__ void __launch_bounds__(grid_block_size)
 // order of the candidates, the same on every run.
 // Target t of a warp (rows: the warp's shared row table; active is uniform over the warp).
 // False (nothing finished) when Defer found a candidate in the band.
-template <bool Defer, class F, class Table, class Images>
+template <bool Defer, class F, class Table, class Images, class Stencil>
 __device__ __forceinline__ bool grid_emit_target(const float4* __restrict__ pos, Slot t,
                                                  bool active, const GridGeometry& view,
                                                  const Table& table, float cutoff_squared,
                                                  const F& f, const Images& images,
-                                                 const StencilRows& stencil, uint2* rows,
-                                                 int lane) {
+                                                 const Stencil& stencil, uint2* rows, int lane) {
   constexpr int G = 32;
   const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
   const std::uint32_t i = original_index(p);
@@ -533,11 +538,11 @@ __device__ __forceinline__ bool grid_emit_target(const float4* __restrict__ pos,
   return true;
 }
 
-template <bool Defer, class F, class Table, class Images>
+template <bool Defer, class F, class Table, class Images, class Stencil>
 __global__ void __launch_bounds__(grid_block_size)
     grid_emit_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n, GridGeometry view,
                      Table table, float cutoff_squared, F f, Images images, BandTargets band,
-                     StencilRows stencil) {
+                     Stencil stencil) {
   constexpr int groups = grid_block_size / 32;
   __shared__ uint2 rows[groups][grid_max_rows];
   const int group = threadIdx.x / 32, lane = threadIdx.x % 32;
@@ -555,11 +560,10 @@ __global__ void __launch_bounds__(grid_block_size)
 // predicate. A warp per target, through the functor's warp-wide body where it has one: a
 // target walked by one thread took as long as the whole first launch (110-290 us on an H100,
 // docs/grid.md); a grid-stride loop, since only the device knows how many.
-template <class F, class Table, class Images>
+template <class F, class Table, class Images, class Stencil>
 __global__ void __launch_bounds__(grid_block_size)
     grid_band_kernel(const float4* __restrict__ pos, GridGeometry view, Table table,
-                     float cutoff_squared, F f, Images images, BandTargets band,
-                     StencilRows stencil) {
+                     float cutoff_squared, F f, Images images, BandTargets band, Stencil stencil) {
   constexpr int groups = grid_block_size / 32;
   __shared__ uint2 rows[groups][grid_max_rows];
   const int group = threadIdx.x / 32, lane = threadIdx.x % 32;
@@ -597,14 +601,7 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
   const Slot n = static_cast<Slot>(pass.n);
   const float c2 = pass.cutoff_squared;
   const BandTargets band{g.band_targets};
-  // The half stencil where it is asked and the image counts are known where there are images
-  // (else the index's rows, one choice of the rows any_row allows). Half lists take no queries.
-  StencilRows stencil;
-  stencil.on = wants_stencil(f) && pass.images.candidates_are_sources &&
-               (!pass.images.active() || pass.images.image_counts != nullptr);
-  stencil.targets = n;
-  stencil.image_counts = pass.images.active() ? pass.images.image_counts : nullptr;
-  const auto launch = [&](const auto& table, const auto& images, auto defer) {
+  const auto launch = [&](const auto& table, const auto& images, const auto& stencil, auto defer) {
     constexpr bool Defer = decltype(defer)::value;
     if constexpr (emits_entries<F>::value) {
       if (g.geometry.grid.reach <= 3) {  // the flattened row table holds (2 * 3 + 1)^2 rows
@@ -651,34 +648,47 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
     }
   };
   // The band's targets: a second launch, as many blocks as a few waves need (it loops).
-  const auto launch_deferred = [&](const auto& table, const auto& images) {
+  const auto launch_deferred = [&](const auto& table, const auto& images, const auto& stencil) {
     RAYCUT_CUDA_CHECK(cudaMemsetAsync(band.list, 0, sizeof(Slot), stream));
-    launch(table, images, std::true_type{});
+    launch(table, images, stencil, std::true_type{});
     RAYCUT_CUDA_CHECK_LAUNCH();
     const unsigned blocks = std::min(blocks_for(std::uint64_t{n} * 32, grid_block_size), 2048u);
     if (blocks > 0)
       grid_band_kernel<<<blocks, grid_block_size, 0, stream>>>(pos, g.geometry, table, c2, f,
                                                                images, band, stencil);
   };
-  const auto run = [&](const auto& table, const auto& images) {
+  const auto run = [&](const auto& table, const auto& images, const auto& stencil) {
     using Images = std::decay_t<decltype(images)>;
     if constexpr (Images::banded && defers_band<F>) {
       // Not where every pair is decided in double (exact vectors: float_in = 0), which would
       // leave every target to the second launch.
       if (band.list && images.exact.float_in > 0 && !band_inline_requested()) {
-        launch_deferred(table, images);
+        launch_deferred(table, images, stencil);
         return;
       }
     }
-    launch(table, images, std::false_type{});
+    launch(table, images, stencil, std::false_type{});
+  };
+  // The half stencil where it is asked and the image counts are known where there are images
+  // (else the index's rows, one choice of the rows any_row allows). Half lists take no queries.
+  const auto with_stencil = [&](const auto& table, const auto& images) {
+    if constexpr (has_any_row<F>::value) {
+      if (wants_stencil(f) && pass.images.candidates_are_sources &&
+          (!pass.images.active() || pass.images.image_counts != nullptr)) {
+        run(table, images,
+            StencilRows{n, pass.images.active() ? pass.images.image_counts : nullptr});
+        return;
+      }
+    }
+    run(table, images, FullStencil{});
   };
   with_images<F>(
       pass,
       [&](const auto& images) {
         if (g.dense)
-          run(DenseTable{g.dense_table.start}, images);
+          with_stencil(DenseTable{g.dense_table.start}, images);
         else
-          run(CompactTable{g.compact_table}, images);
+          with_stencil(CompactTable{g.compact_table}, images);
       },
       stream);
   RAYCUT_CUDA_CHECK_LAUNCH();
