@@ -181,10 +181,33 @@ struct PlainListFill : ListFill {
   }
 };
 
-// Runs run(f), or run(f) as its Plain functor above where f has no per-pair cutoffs.
+// The fill of the common list, j (and S with Shifts) into a list of unbounded capacity: its write
+// tests nothing at run time, where ListFill's tests each output and the capacity for every pair
+// written (the fill is issue-bound: docs/benchmarks.md, "The half stencil, and the roofline").
+template <bool Shifts>
+struct IndexFill : PlainListFill {
+  RAYCUT_HD void operator()(Accumulator& slot, std::uint32_t, std::uint32_t j, Vec3, float,
+                            const Shift& s) const {
+    indices[slot] = j;
+    if constexpr (Shifts) {
+      shifts[3 * slot] = s.a;
+      shifts[3 * slot + 1] = s.b;
+      shifts[3 * slot + 2] = s.c;
+    }
+    ++slot;
+  }
+};
+
+// Runs run(f), or run(f) as its Plain functor above where f has no per-pair cutoffs (and as an
+// IndexFill where a list asks for no more than j and S).
 template <class F, class Run>
 void run_without_idle_cutoffs(const F& f, Run&& run) {
   if constexpr (std::is_same_v<F, ListFill>) {
+    if (!f.cutoffs.active() && !f.columns && !f.distances && !f.vectors &&
+        f.capacity == ~std::uint64_t{0}) {
+      if (f.shifts) return run(IndexFill<true>{PlainListFill{f}});
+      return run(IndexFill<false>{PlainListFill{f}});
+    }
     if (!f.cutoffs.active()) return run(PlainListFill{f});
   } else if constexpr (std::is_same_v<F, FilteredListCount>) {
     if (!f.cutoffs.active()) return run(PlainFilteredListCount{f});

@@ -17,6 +17,8 @@
   X(::raycut::detail::PlainFilteredListCount) \
   X(::raycut::detail::ListFill)               \
   X(::raycut::detail::PlainListFill)          \
+  X(::raycut::detail::IndexFill<true>)        \
+  X(::raycut::detail::IndexFill<false>)       \
   X(::raycut::detail::PaddedFill)
 // clang-format on
 
