@@ -54,8 +54,10 @@ def periodic_workload(rows):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("--periodic", nargs="*", default=[], help="OP=file: the periodic workloads")
-    ap.add_argument("--uniform", nargs="*", default=[], help="OP=file: uniform beta 32 p 32")
+    ap.add_argument("--periodic", nargs="+", action="extend", default=[],
+                    help="OP=file: the periodic workloads")
+    ap.add_argument("--uniform", nargs="+", action="extend", default=[],
+                    help="OP=file: uniform beta 32 p 32")
     ap.add_argument("--out", required=True)
     ap.add_argument("--png")
     ap.add_argument("--peak-gbs", type=float, default=3350.0, help="DRAM peak (H100 SXM: 3350)")
@@ -71,7 +73,7 @@ def main():
             for launch, kernel, r in rows:
                 if not kernel.startswith(TRAVERSALS) or (workload(launch), op, kernel) in seen:
                     continue
-                if "<CountKernel" in kernel and op not in ("count", "lj", "lj_forces"):
+                if "CountKernel" in kernel and op != "count":
                     continue  # neighbour_bench's check
                 seen.add((workload(launch), op, kernel))
                 pairs = ORDERED_PAIRS[workload(launch)]
@@ -107,7 +109,7 @@ def main():
             y = float(t["warp_instructions_m"]) * 1e6 / (float(t["us"]) * 1e-6)
             main = t["workload"].startswith(("lj-liquid", "uniform"))
             ax.scatter(x, y, s=22 if main else 10, c="C0" if main else "C7")
-            if main and "<CountKernel" not in t["kernel"] or t["operation"] == "count":
+            if main:
                 label = f"{t['workload'].split('-')[0]} {t['operation']}: {t['kernel'].split('<')[0][5:-7]}"
                 ax.annotate(label, (x, y), fontsize=6.5, xytext=(4, -3), textcoords="offset points")
         ax.set_xlim(0.05, 50)

@@ -39,8 +39,9 @@
 #                compiled-python.csv, compiled-cpp.csv
 #   knn          bench/python_knn.py: pyraycut.torch.knn (k = 16 and 64) beside radius_graph of
 #                the same mean degree, 10^6 uniform points on CUDA (knn.csv; docs/compatibility.md)
-#   roofline     ncu (Nsight Compute) metrics of the periodic workloads' and the small pass's
-#                kernels: ncu-periodic.csv, ncu-small.csv (docs/benchmarks.md's roofline)
+#   roofline     ncu (Nsight Compute) metrics of the periodic workloads', the uniform suite's and
+#                the small pass's kernels, a run per operation: ncu-*.csv, and roofline.csv/.png
+#                by bench/roofline_table.py (docs/benchmarks.md's roofline)
 #   memcheck     compute-sanitizer on the functor, list, grid-variant and periodic GPU tests;
 #                racecheck on the small-system pass
 #   python       the Python package built with the device's Python (the PyTorch operators with
@@ -248,22 +249,40 @@ while [ $# -gt 0 ]; do
       fi
       ;;
     roofline)
-      # Nsight Compute over the periodic workloads (2^20 LJ liquid: full and half lists with S,
-      # lj_forces; the batches) and the small-system pass at 1,000 particles: each kernel's time,
-      # DRAM and L2 bytes, instructions and achieved throughput, for docs/benchmarks.md's
-      # roofline (#34). --clock-control none: the clocks stay as the machine runs them.
+      # Nsight Compute over the periodic workloads (2^20 LJ liquid, the 512 x 128 and 64 x 4096
+      # batches) and the uniform suite's beta 32 p 32, one run per operation, and the small-system
+      # pass at 1,000 particles: each launch's time, DRAM and L2 bytes, instructions, achieved
+      # throughput and registers. bench/roofline_table.py then gives each traversal kernel its
+      # workload and its instructions and bytes per pair: roofline.csv/.png (docs/benchmarks.md's
+      # roofline). --clock-control none: the clocks stay as the machine runs them.
       metrics=gpu__time_duration.sum,dram__bytes_read.sum,dram__bytes_write.sum,lts__t_bytes.sum
       metrics=$metrics,sm__inst_executed.sum,sm__throughput.avg.pct_of_peak_sustained_elapsed
       metrics=$metrics,gpu__compute_memory_throughput.avg.pct_of_peak_sustained_elapsed
-      metrics=$metrics,sm__warps_active.avg.pct_of_peak_sustained_active
-      ncu=(ncu --clock-control none --csv --metrics "$metrics" --launch-count 400)
-      timeout 300 "${ncu[@]}" build/bench/neighbour_bench --methods grid --no-suite --periodic \
-        --modes prepared --reps 1 > "$res/ncu-periodic.csv" 2> "$res/ncu-periodic.log"
-      echo "ncu periodic exit $? ($(wc -l < "$res/ncu-periodic.csv") lines)"
+      metrics=$metrics,sm__warps_active.avg.pct_of_peak_sustained_active,launch__registers_per_thread
+      ncu=(ncu --clock-control none --csv --metrics "$metrics")
+      specs=()
+      for op in count list_full_s list_half_s list_half_any_s lj_forces; do
+        timeout 150 "${ncu[@]}" build/bench/neighbour_bench --methods grid --no-suite --periodic \
+          --ops "$op" --modes prepared --reps 1 > "$res/ncu-periodic-$op.csv" \
+          2> "$res/ncu-periodic-$op.log"
+        echo "ncu periodic $op exit $? ($(wc -l < "$res/ncu-periodic-$op.csv") lines)"
+        python3 bench/summarise_ncu.py "$res/ncu-periodic-$op.csv" --launches \
+          --out "$res/launches-periodic-$op.csv" && specs+=(--periodic "$op=$res/launches-periodic-$op.csv")
+      done
+      for op in lj list_full; do
+        timeout 100 "${ncu[@]}" build/bench/neighbour_bench --methods grid --betas 32 --ps 32 \
+          --ops "$op" --modes prepared --reps 1 > "$res/ncu-uniform-$op.csv" \
+          2> "$res/ncu-uniform-$op.log"
+        echo "ncu uniform $op exit $? ($(wc -l < "$res/ncu-uniform-$op.csv") lines)"
+        python3 bench/summarise_ncu.py "$res/ncu-uniform-$op.csv" --launches \
+          --out "$res/launches-uniform-$op.csv" && specs+=(--uniform "$op=$res/launches-uniform-$op.csv")
+      done
+      python3 bench/roofline_table.py "${specs[@]}" --out "$res/roofline.csv" \
+        --png "$res/roofline.png" > "$res/roofline.log" 2>&1
+      echo "roofline table exit $?"
       timeout 120 "${ncu[@]}" build/bench/raycut_latency_bench --sizes 1000 --batches none \
         --reps 1 --min-loop-ms 0.001 > "$res/ncu-small.csv" 2> "$res/ncu-small.log"
       echo "ncu small pass exit $? ($(wc -l < "$res/ncu-small.csv") lines)"
-      tail -3 "$res/ncu-periodic.log" "$res/ncu-small.log"
       ;;
     python)
       # One process per test file, so that a crash (a segfault in one framework's runtime) hides
