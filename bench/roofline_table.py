@@ -94,7 +94,11 @@ def main():
         w.writeheader()
         w.writerows(table)
     if args.png:
-        import matplotlib
+        try:
+            import matplotlib
+        except ImportError:
+            raise SystemExit(f"{args.png} not written: matplotlib is missing "
+                             "(Debian: apt-get install python3-matplotlib); the table is written")
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
         issue = args.sms * 4 * args.clock_ghz * 1e9  # warp instructions per second: 4 per SM-clock

@@ -261,22 +261,20 @@ while [ $# -gt 0 ]; do
       metrics=$metrics,sm__warps_active.avg.pct_of_peak_sustained_active,launch__registers_per_thread
       ncu=(ncu --clock-control none --csv --metrics "$metrics")
       specs=()
+      # One operation of one suite (periodic or uniform) under ncu, then its launches.
+      ncu_operation() {
+        local suite=$1 op=$2
+        shift 2
+        timeout 150 "${ncu[@]}" build/bench/neighbour_bench --methods grid "$@" --ops "$op" \
+          --modes prepared --reps 1 > "$res/ncu-$suite-$op.csv" 2> "$res/ncu-$suite-$op.log"
+        echo "ncu $suite $op exit $? ($(wc -l < "$res/ncu-$suite-$op.csv") lines)"
+        python3 bench/summarise_ncu.py "$res/ncu-$suite-$op.csv" --launches \
+          --out "$res/launches-$suite-$op.csv" && specs+=(--"$suite" "$op=$res/launches-$suite-$op.csv")
+      }
       for op in count list_full_s list_half_s list_half_any_s lj_forces; do
-        timeout 150 "${ncu[@]}" build/bench/neighbour_bench --methods grid --no-suite --periodic \
-          --ops "$op" --modes prepared --reps 1 > "$res/ncu-periodic-$op.csv" \
-          2> "$res/ncu-periodic-$op.log"
-        echo "ncu periodic $op exit $? ($(wc -l < "$res/ncu-periodic-$op.csv") lines)"
-        python3 bench/summarise_ncu.py "$res/ncu-periodic-$op.csv" --launches \
-          --out "$res/launches-periodic-$op.csv" && specs+=(--periodic "$op=$res/launches-periodic-$op.csv")
+        ncu_operation periodic "$op" --no-suite --periodic
       done
-      for op in lj list_full; do
-        timeout 100 "${ncu[@]}" build/bench/neighbour_bench --methods grid --betas 32 --ps 32 \
-          --ops "$op" --modes prepared --reps 1 > "$res/ncu-uniform-$op.csv" \
-          2> "$res/ncu-uniform-$op.log"
-        echo "ncu uniform $op exit $? ($(wc -l < "$res/ncu-uniform-$op.csv") lines)"
-        python3 bench/summarise_ncu.py "$res/ncu-uniform-$op.csv" --launches \
-          --out "$res/launches-uniform-$op.csv" && specs+=(--uniform "$op=$res/launches-uniform-$op.csv")
-      done
+      for op in lj list_full; do ncu_operation uniform "$op" --betas 32 --ps 32; done
       python3 bench/roofline_table.py "${specs[@]}" --out "$res/roofline.csv" \
         --png "$res/roofline.png" > "$res/roofline.log" 2>&1
       echo "roofline table exit $?"
