@@ -1,8 +1,9 @@
 // The stream-ordered small-system pair list (raycut/device_pairs.hpp): brute force within each
 // system, a block per particle up to 2,048 particles and a warp per particle above, every
-// distance in double. Five launches and a memset per call, all on the context's stream: the
-// lattices (one per cell), count per row, scan, fill, pad. No host synchronisation and no
-// allocation outside the context's memory resource, so a CUDA graph captures it. Compiled with
+// distance in double. Three launches and a memset per call without cells, all on the context's
+// stream: the lattices (one per cell), the rows (count, offset and fill in one, list_rows), pad. No
+// host synchronisation and no allocation outside the context's memory resource, so a CUDA graph
+// captures it. Compiled with
 // --fmad=false (CMakeLists.txt): the device rounds every double as the host mirror below does.
 #include <cuda_runtime.h>
 #include <cub/device/device_radix_sort.cuh>
@@ -803,6 +804,30 @@ __device__ std::int64_t team_row(std::int64_t k, const Input& in, const CellTabl
   return k;
 }
 
+// Row `row`'s pairs (0 for a bad row, whose code goes to status), in every thread of its team.
+template <class Real, int Warps, bool Cells>
+__device__ unsigned long long count_row(const Input& in, const Lattice* lattices,
+                                        const CellTable& cells, std::int64_t row, Frame& f,
+                                        int* status, bool& bad) {
+  using T = Team<Warps>;
+  const int code = make_frame<Real>(in, row, lattices, f);
+  bad = code != 0;
+  unsigned long long c = 0;
+  if (bad) {
+    if (T::rank() == 0) atomicMin(status, code);
+  } else {
+    with_sources<Real, Cells>(in, f, row, cells, [&](const auto& sources) {
+      auto at = sources.cursor(T::rank());
+      for (std::uint32_t k = T::rank(); k < sources.total;
+           k += T::threads, sources.advance(at, T::threads)) {
+        const Source source = sources.at(at);
+        if (source.j >= 0) c += for_each_image(in, f, row, source, NoVisit{});
+      }
+    });
+  }
+  return T::sum(c);  // the whole team takes part, bad rows too
+}
+
 template <class Real, int Warps, bool Cells>
 __global__ __launch_bounds__(block_threads) void count_rows(Input in, const Lattice* lattices,
                                                             CellTable cells,
@@ -813,21 +838,9 @@ __global__ __launch_bounds__(block_threads) void count_rows(Input in, const Latt
   // Whole teams leave together: their bounds are the row's.
   if (row >= in.n || (in.run_if && *in.run_if == 0)) return;
   Frame f;
-  const int bad = make_frame<Real>(in, row, lattices, f);
-  if (bad) {
-    if (T::rank() == 0) atomicMin(status, bad);
-    return;
-  }
-  unsigned long long c = 0;
-  with_sources<Real, Cells>(in, f, row, cells, [&](const auto& sources) {
-    auto at = sources.cursor(T::rank());
-    for (std::uint32_t k = T::rank(); k < sources.total;
-         k += T::threads, sources.advance(at, T::threads)) {
-      const Source source = sources.at(at);
-      if (source.j >= 0) c += for_each_image(in, f, row, source, NoVisit{});
-    }
-  });
-  c = T::sum(c);
+  bool bad;
+  const unsigned long long c =
+      count_row<Real, Warps, Cells>(in, lattices, cells, row, f, status, bad);
   if (T::rank() == 0) counts[row] = c;
 }
 
@@ -845,22 +858,13 @@ __host__ __device__ ListSlots list_slots(const Input& in, const Frame& f, std::i
   return {static_cast<std::uint64_t>(system) * out.capacity, offsets[f.lo]};
 }
 
+// Writes row `row`'s pairs from entry first + start on (start counted within its list), up to the
+// capacity.
 template <class Real, int Warps, bool Cells>
-__global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Lattice* lattices,
-                                                           CellTable cells,
-                                                           const unsigned long long* offsets,
-                                                           StaticPairs out) {
+__device__ void fill_row(const Input& in, const Frame& f, std::int64_t row, const CellTable& cells,
+                         std::uint64_t first, unsigned long long start, const StaticPairs& out) {
   using T = Team<Warps>;
-  const std::int64_t row = team_row<Cells>(T::row(), in, cells);
   const int rank = T::rank();
-  if (row >= in.n || (in.run_if && *in.run_if == 0)) return;
-  Frame f;
-  if (make_frame<Real>(in, row, lattices, f)) return;
-  // A list per system: this system's entries from s * capacity, counted from its first row.
-  const ListSlots slots = list_slots(in, f, row, offsets, out);
-  const unsigned long long start = offsets[row] - slots.origin;
-  if (start >= static_cast<unsigned long long>(out.capacity) || offsets[row + 1] == offsets[row])
-    return;
   unsigned long long written = start;
   // Chunks of one source per thread in lockstep: each thread's hits go after the lower ranks'
   // (a team scan), so the order is the sources' whatever the scheduling. Every thread of the
@@ -873,12 +877,12 @@ __global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Latti
       const std::int64_t j = source.j;
       // The first image is kept from the counting test: most sources have at most one, and only
       // those with more are tested again.
-      int first[3] = {0, 0, 0};
+      int image[3] = {0, 0, 0};
       const std::uint32_t hits = j >= 0 ? for_each_image(in, f, row, source,
                                                          [&](const int* s) {
-                                                           first[0] = s[0];
-                                                           first[1] = s[1];
-                                                           first[2] = s[2];
+                                                           image[0] = s[0];
+                                                           image[1] = s[1];
+                                                           image[2] = s[2];
                                                          })
                                         : 0;
       std::uint32_t chunk = 0;
@@ -886,7 +890,7 @@ __global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Latti
       unsigned long long at = written + before;
       const auto write = [&](const int* s) {
         if (at < static_cast<unsigned long long>(out.capacity)) {
-          const std::uint64_t e = slots.first + at;
+          const std::uint64_t e = first + at;
           out.i[e] = row;
           out.j[e] = j;
           if (out.shifts)
@@ -895,13 +899,131 @@ __global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Latti
         ++at;
       };
       if (hits == 1)
-        write(first);
+        write(image);
       else if (hits > 1)
         for_each_image(in, f, row, source, write);
       written += chunk;
       if (written >= static_cast<unsigned long long>(out.capacity)) return;
     }
   });
+}
+
+template <class Real, int Warps, bool Cells>
+__global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Lattice* lattices,
+                                                           CellTable cells,
+                                                           const unsigned long long* offsets,
+                                                           StaticPairs out) {
+  using T = Team<Warps>;
+  const std::int64_t row = team_row<Cells>(T::row(), in, cells);
+  if (row >= in.n || (in.run_if && *in.run_if == 0)) return;
+  Frame f;
+  if (make_frame<Real>(in, row, lattices, f)) return;
+  // A list per system: this system's entries from s * capacity, counted from its first row.
+  const ListSlots slots = list_slots(in, f, row, offsets, out);
+  const unsigned long long start = offsets[row] - slots.origin;
+  if (start >= static_cast<unsigned long long>(out.capacity) || offsets[row + 1] == offsets[row])
+    return;
+  fill_row<Real, Warps, Cells>(in, f, row, cells, slots.first, start, out);
+}
+
+// ---- All pairs in one launch: count, offset, fill ----------------------------------------------
+// Without cells the rows run in index order, so one launch can count a row, find where its pairs
+// start, and write them: each team takes the next row from a ticket counter (so every earlier
+// row's team is running or done) and finds its offset by a decoupled look-back (Merrill and
+// Garland, "Single-pass Parallel Prefix Scan with Decoupled Look-back", 2016): a word per row,
+// first its count, then its inclusive prefix. That replaces a count launch and a two-launch scan,
+// which at a thousand particles were more of the call than the pair tests; the fill tests the
+// sources again, from L1.
+constexpr unsigned long long row_counted = 1ull << 62, row_prefixed = 1ull << 63;
+constexpr unsigned long long row_value = row_counted - 1;
+
+__device__ inline unsigned long long load_volatile(const unsigned long long* p) {
+  return *static_cast<const volatile unsigned long long*>(p);
+}
+__device__ inline void store_volatile(unsigned long long* p, unsigned long long v) {
+  *static_cast<volatile unsigned long long*>(p) = v;
+}
+
+// The pairs before `row` (whose own are `count`), in every lane of the calling warp, which
+// publishes the row's count first: the warp reads 32 earlier words at a time, nearest first,
+// until one holds a prefix (before row 0, a prefix of 0).
+__device__ unsigned long long look_back(unsigned long long* words, std::int64_t row,
+                                        unsigned long long count) {
+  const int lane = threadIdx.x % warp_size;
+  if (lane == 0) store_volatile(words + row, row_counted | count);
+  unsigned long long before = 0;
+  for (std::int64_t end = row;; end -= warp_size) {
+    const std::int64_t k = end - 1 - lane;
+    unsigned long long word = row_prefixed;
+    if (k >= 0) do {
+        word = load_volatile(words + k);
+      } while ((word & ~row_value) == 0);
+    const unsigned prefixed = __ballot_sync(all_lanes, (word & row_prefixed) != 0);
+    const int nearest = prefixed ? __ffs(static_cast<int>(prefixed)) - 1 : warp_size;
+    unsigned long long v = lane <= nearest ? word & row_value : 0;
+    for (int offset = warp_size / 2; offset > 0; offset /= 2)
+      v += __shfl_xor_sync(all_lanes, v, offset);
+    before += v;
+    if (prefixed) return before;
+  }
+}
+
+template <int Warps>
+__device__ inline void team_sync() {
+  if constexpr (Warps > 1)
+    __syncthreads();
+  else
+    __syncwarp();
+}
+
+template <class Real, int Warps>
+__global__ __launch_bounds__(block_threads) void list_rows(Input in, const Lattice* lattices,
+                                                           unsigned long long* words,
+                                                           unsigned long long* offsets, int* status,
+                                                           StaticPairs out) {
+  using T = Team<Warps>;
+  if (in.run_if && *in.run_if == 0) return;  // the whole grid alike
+  constexpr int teams = block_threads / T::threads;
+  __shared__ std::int64_t team_rows[teams];
+  __shared__ unsigned long long team_before[teams];
+  const int team = threadIdx.x / T::threads;
+  if (T::rank() == 0) team_rows[team] = static_cast<std::int64_t>(atomicAdd(words + in.n, 1ull));
+  team_sync<Warps>();
+  const std::int64_t row = team_rows[team];
+  if (row >= in.n) return;  // whole teams
+  Frame f;
+  bool bad;
+  const unsigned long long count =
+      count_row<Real, Warps, false>(in, lattices, CellTable{}, row, f, status, bad);
+  if (T::rank() < warp_size) {  // the team's first warp
+    const unsigned long long before = look_back(words, row, count);
+    if (T::rank() == 0) {
+      offsets[row] = before;
+      if (row + 1 == in.n) offsets[in.n] = before + count;
+      __threadfence();  // the offset before the prefix that announces it
+      store_volatile(words + row, row_prefixed | (before + count));
+      team_before[team] = before;
+    }
+  }
+  team_sync<Warps>();
+  const unsigned long long before = team_before[team];
+  if (bad || count == 0 || out.capacity == 0) return;
+  // A list per system: its entries from s * capacity, counted from its first row's offset, which
+  // that row (earlier, so running or done) publishes before its prefix.
+  ListSlots slots;
+  if (in.systems) {
+    slots.first = static_cast<std::uint64_t>(in.batch ? in.batch[row] : 0) * out.capacity;
+    slots.origin = before;
+    if (f.lo != row) {
+      while ((load_volatile(words + f.lo) & row_prefixed) == 0) {
+      }
+      __threadfence();
+      slots.origin = load_volatile(offsets + f.lo);
+    }
+  }
+  const unsigned long long start = before - slots.origin;
+  if (start >= static_cast<unsigned long long>(out.capacity)) return;
+  fill_row<Real, Warps, false>(in, f, row, CellTable{}, slots.first, start, out);
 }
 
 // The count (or the first error code), and padding from the count to the capacity.
@@ -1128,7 +1250,9 @@ void host_pass(const Input& in, const StaticPairs& out) {
 
 namespace {
 
-// The row passes of one instantiation: count per row, the scan into offsets, fill.
+// The row passes of one instantiation: without cells one launch (list_rows); with cells, count
+// per row, the scan into offsets, fill (the rows run in cell order, for the cache, so no row
+// can wait for the one before it).
 template <class Real, bool Cells>
 void row_passes(const Input& in, const Lattice* lattices, const CellTable& cells,
                 unsigned long long* counts, int* status, unsigned long long* offsets,
@@ -1140,6 +1264,14 @@ void row_passes(const Input& in, const Lattice* lattices, const CellTable& cells
   const bool block_per_row = n <= rows_for_block_teams;
   const unsigned rows_blocks = static_cast<unsigned>(
       block_per_row ? n : (n * warp_size + block_threads - 1) / block_threads);
+  if constexpr (!Cells) {
+    if (n > 0) {
+      const auto list = block_per_row ? list_rows<Real, block_warps> : list_rows<Real, 1>;
+      list<<<rows_blocks, block_threads, 0, stream>>>(in, lattices, counts, offsets, status, out);
+      RAYCUT_CUDA_CHECK_LAUNCH();
+    }
+    return;
+  }
   if (n > 0) {
     const auto count =
         block_per_row ? count_rows<Real, block_warps, Cells> : count_rows<Real, 1, Cells>;
@@ -1187,20 +1319,21 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
   const bool by_cells = in.by_cells && n > 0;
 
   const auto stream = static_cast<cudaStream_t>(ctx.stream);
-  // Temporaries in one block: per-row counts (and a zero past them), the status word and the
-  // systems' extents (zeroed together), offsets, the lattices, the cells' arrays, and the scan's
-  // and the sort's storage.
+  // Temporaries in one block: per-row counts (or list_rows's words, and its ticket counter past
+  // them), the status word, the systems' extents and the offsets (zeroed together), the
+  // lattices, the cells' arrays, and the scan's and the sort's storage.
   std::size_t scan_bytes = 0, sort_bytes = 0;
-  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(
-      nullptr, scan_bytes, static_cast<unsigned long long*>(nullptr),
-      static_cast<unsigned long long*>(nullptr), static_cast<std::int64_t>(n + 1), stream));
   int key_bits = 1;
   while (key_bits < 32 && (std::uint64_t(1) << key_bits) < n) ++key_bits;
-  if (by_cells)
+  if (by_cells) {
+    RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(
+        nullptr, scan_bytes, static_cast<unsigned long long*>(nullptr),
+        static_cast<unsigned long long*>(nullptr), static_cast<std::int64_t>(n + 1), stream));
     RAYCUT_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(
         nullptr, sort_bytes, static_cast<std::uint32_t*>(nullptr),
         static_cast<std::uint32_t*>(nullptr), static_cast<std::uint32_t*>(nullptr),
         static_cast<std::uint32_t*>(nullptr), static_cast<std::int64_t>(n), 0, key_bits, stream));
+  }
   const std::size_t counts_bytes = align_up((n + 1) * sizeof(unsigned long long) + sizeof(int));
   const std::size_t extents_bytes =
       by_cells ? align_up(extent_words * n * sizeof(unsigned long long)) : 0;
@@ -1235,7 +1368,8 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
   void* scan_storage = take(align_up(scan_bytes));
   void* sort_storage = take(align_up(sort_bytes));
   try {
-    RAYCUT_CUDA_CHECK(cudaMemsetAsync(counts, 0, counts_bytes + extents_bytes, stream));
+    RAYCUT_CUDA_CHECK(
+        cudaMemsetAsync(counts, 0, counts_bytes + extents_bytes + offsets_bytes, stream));
     if (n > 0 && lattices_wanted > 0) {
       const auto lattice = wide ? lattices_kernel<double> : lattices_kernel<float>;
       lattice<<<static_cast<unsigned>((lattices_wanted + 63) / 64), 64, 0, stream>>>(
