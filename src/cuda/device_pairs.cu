@@ -13,7 +13,6 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
-#include <new>
 #include <string>
 #include <utility>
 #include <vector>
@@ -796,38 +795,6 @@ struct Team {
   }
 };
 
-template <int Warps>
-__device__ inline void team_sync() {
-  if constexpr (Warps > 1)
-    __syncthreads();
-  else
-    __syncwarp();
-}
-
-// Row `row`'s frame, made once by its team's first thread into shared memory (code: make_frame's,
-// with bad rows reported to status), for every thread of the team to read: held in registers,
-// the frame took about 60 of the ~126 registers a thread had, which left a quarter of the warps
-// a multiprocessor can run. Every thread of the team calls it.
-template <class Real, int Warps>
-__device__ const Frame& team_frame(const Input& in, std::int64_t row, const Lattice* lattices,
-                                   int* status, int& code) {
-  constexpr int teams = block_threads / Team<Warps>::threads;
-  // Raw storage: a __shared__ array cannot have Frame's default member initializers.
-  __shared__ alignas(Frame) unsigned char frames[teams * sizeof(Frame)];
-  __shared__ int codes[teams];
-  const int team = threadIdx.x / Team<Warps>::threads;
-  Frame* const frame = reinterpret_cast<Frame*>(frames) + team;
-  if (Team<Warps>::rank() == 0) {
-    Frame made;
-    codes[team] = make_frame<Real>(in, row, lattices, made);
-    new (frame) Frame(made);
-    if (codes[team] && status) atomicMin(status, codes[team]);
-  }
-  team_sync<Warps>();
-  code = codes[team];
-  return *frame;
-}
-
 // The row of team k: with cells, the particles in cell order, so that the teams of a block (and
 // of the blocks beside it) walk the same cells and find their sources in cache. Each row writes
 // only its own count and entries, so the order the rows run in changes no result.
@@ -837,21 +804,28 @@ __device__ std::int64_t team_row(std::int64_t k, const Input& in, const CellTabl
   return k;
 }
 
-// Row `row`'s pairs, from its frame f, in every thread of its team.
+// Row `row`'s pairs (0 for a bad row, whose code goes to status), in every thread of its team.
 template <class Real, int Warps, bool Cells>
-__device__ unsigned long long count_row(const Input& in, const Frame& f, std::int64_t row,
-                                        const CellTable& cells) {
+__device__ unsigned long long count_row(const Input& in, const Lattice* lattices,
+                                        const CellTable& cells, std::int64_t row, Frame& f,
+                                        int* status, bool& bad) {
   using T = Team<Warps>;
+  const int code = make_frame<Real>(in, row, lattices, f);
+  bad = code != 0;
   unsigned long long c = 0;
-  with_sources<Real, Cells>(in, f, row, cells, [&](const auto& sources) {
-    auto at = sources.cursor(T::rank());
-    for (std::uint32_t k = T::rank(); k < sources.total;
-         k += T::threads, sources.advance(at, T::threads)) {
-      const Source source = sources.at(at);
-      if (source.j >= 0) c += for_each_image(in, f, row, source, NoVisit{});
-    }
-  });
-  return T::sum(c);
+  if (bad) {
+    if (T::rank() == 0) atomicMin(status, code);
+  } else {
+    with_sources<Real, Cells>(in, f, row, cells, [&](const auto& sources) {
+      auto at = sources.cursor(T::rank());
+      for (std::uint32_t k = T::rank(); k < sources.total;
+           k += T::threads, sources.advance(at, T::threads)) {
+        const Source source = sources.at(at);
+        if (source.j >= 0) c += for_each_image(in, f, row, source, NoVisit{});
+      }
+    });
+  }
+  return T::sum(c);  // the whole team takes part, bad rows too
 }
 
 template <class Real, int Warps, bool Cells>
@@ -863,10 +837,10 @@ __global__ __launch_bounds__(block_threads) void count_rows(Input in, const Latt
   const std::int64_t row = team_row<Cells>(T::row(), in, cells);
   // Whole teams leave together: their bounds are the row's.
   if (row >= in.n || (in.run_if && *in.run_if == 0)) return;
-  int bad;
-  const Frame& f = team_frame<Real, Warps>(in, row, lattices, status, bad);
-  if (bad) return;
-  const unsigned long long c = count_row<Real, Warps, Cells>(in, f, row, cells);
+  Frame f;
+  bool bad;
+  const unsigned long long c =
+      count_row<Real, Warps, Cells>(in, lattices, cells, row, f, status, bad);
   if (T::rank() == 0) counts[row] = c;
 }
 
@@ -942,9 +916,8 @@ __global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Latti
   using T = Team<Warps>;
   const std::int64_t row = team_row<Cells>(T::row(), in, cells);
   if (row >= in.n || (in.run_if && *in.run_if == 0)) return;
-  int bad;
-  const Frame& f = team_frame<Real, Warps>(in, row, lattices, nullptr, bad);
-  if (bad) return;  // the count reported it
+  Frame f;
+  if (make_frame<Real>(in, row, lattices, f)) return;
   // A list per system: this system's entries from s * capacity, counted from its first row.
   const ListSlots slots = list_slots(in, f, row, offsets, out);
   const unsigned long long start = offsets[row] - slots.origin;
@@ -995,6 +968,14 @@ __device__ unsigned long long look_back(unsigned long long* words, std::int64_t 
   }
 }
 
+template <int Warps>
+__device__ inline void team_sync() {
+  if constexpr (Warps > 1)
+    __syncthreads();
+  else
+    __syncwarp();
+}
+
 template <class Real, int Warps>
 __global__ __launch_bounds__(block_threads) void list_rows(Input in, const Lattice* lattices,
                                                            unsigned long long* words,
@@ -1010,10 +991,10 @@ __global__ __launch_bounds__(block_threads) void list_rows(Input in, const Latti
   team_sync<Warps>();
   const std::int64_t row = team_rows[team];
   if (row >= in.n) return;  // whole teams
-  int bad;
-  const Frame& f = team_frame<Real, Warps>(in, row, lattices, status, bad);
+  Frame f;
+  bool bad;
   const unsigned long long count =
-      bad ? T::sum(0ull) : count_row<Real, Warps, false>(in, f, row, CellTable{});
+      count_row<Real, Warps, false>(in, lattices, CellTable{}, row, f, status, bad);
   if (T::rank() < warp_size) {  // the team's first warp
     const unsigned long long before = look_back(words, row, count);
     if (T::rank() == 0) {
