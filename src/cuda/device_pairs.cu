@@ -1,10 +1,10 @@
 // The stream-ordered small-system pair list (raycut/device_pairs.hpp): brute force within each
 // system, a block per particle up to 2,048 particles and a warp per particle above, every
 // distance in double. Three launches and a memset per call without cells, all on the context's
-// stream: the lattices (one per cell), the rows (count, offset and fill in one, list_rows), pad. No
-// host synchronisation and no allocation outside the context's memory resource, so a CUDA graph
-// captures it. Compiled with
-// --fmad=false (CMakeLists.txt): the device rounds every double as the host mirror below does.
+// stream: the lattices (one per cell), the rows (count, offset and fill in one, list_rows), pad.
+// No host synchronisation and no allocation outside the context's memory resource, so a CUDA
+// graph captures it. Compiled with --fmad=false (CMakeLists.txt): the device rounds every double
+// as the host mirror below does.
 #include <cuda_runtime.h>
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
