@@ -19,7 +19,14 @@ cell per system, ``batch`` the sorted int64 system index). Each workload is meas
   proves the call does not synchronise; the calls that plan on the host cannot be captured);
 - interface ``python-torch-op``, capacity ``exact``: the operator ``torch.ops.raycut``'s Python
   wrapper called directly in eager mode (where its CUDA kernel is built), against the package's
-  zero-copy path above: which of the two eager CUDA calls should take.
+  zero-copy path above: which of the two eager CUDA calls should take;
+- interface ``python-torch-op``, capacity ``static``: ``torch.ops.raycut.neighbor_list.default``
+  itself with the ``static`` call's arguments made once: the operator's own cost (PyTorch's
+  dispatch, the output tensors, the launches), and so, subtracted from ``static``, the Python
+  wrapper's;
+- interface ``python-torch-verlet-update``: ``VerletList(2.5, skin=0.3, shifts=True, ...)``'s
+  ``update(x)`` with the positions it was built from, so that nothing rebuilds: the cost of a
+  step loop's check (its answer, True or False, is read on the host).
 
 Timing as the C++ bench: after warm-up, ``--reps`` repetitions of a loop of K calls (K doubled
 until a loop takes ``--min-loop-ms``), synchronised (``torch.cuda.synchronize``) only around each
@@ -47,6 +54,7 @@ from typing import Callable, Iterable, Optional
 
 DENSITY = 0.8442
 CUTOFF = 2.5
+VERLET_SKIN = 0.3
 COLUMNS = ["workload", "systems", "n_per_system", "interface", "mode", "capacity", "us_per_call",
            "kernels", "syncs", "gpu", "driver", "cuda"]
 CROSSOVER_SIZES = (2000, 4000, 8000)
@@ -316,6 +324,23 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
         def operator():
             return ops.neighbor_list("ijS", x, CUTOFF, cell, True, batch, False, None)
 
+        # The operator itself, its arguments made once: what the Python wrapper adds is the
+        # difference from "static".
+        flags = torch.ones(3, dtype=torch.bool, device=x.device)
+
+        def bare_operator():
+            return torch.ops.raycut.neighbor_list.default(x, CUTOFF, cell, flags, batch, False,
+                                                          max_pairs)
+
+        # A step that rebuilds nothing: the positions have not moved since the list was built.
+        verlet = pyraycut.VerletList(CUTOFF, VERLET_SKIN, shifts=True, cell=cell, pbc=True,
+                                     batch=batch)
+        verlet.update(x)
+
+        def verlet_update():
+            if verlet.update(x):
+                raise SystemExit("python_latency: VerletList.update rebuilt unmoved positions")
+
         calls = [("python-torch", "eager", "static", static),
                  ("python-torch", "eager", "static-checked", static_checked),
                  ("python-torch", "eager", "exact", exact)]
@@ -323,8 +348,10 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
             replay = captured(torch, static)
             if replay is not None:
                 calls.append(("python-torch", "graph", "static", replay))
+        calls.append(("python-torch-verlet-update", "eager", "exact", verlet_update))
         if cuda and ops is not None and ops._CUDA_KERNEL:
             calls.append(("python-torch-op", "eager", "exact", operator))
+            calls.append(("python-torch-op", "eager", "static", bare_operator))
         for interface, mode, capacity, call in calls:
             us = median_us_per_call(call, sync, args.reps, args.min_loop_ms)
             table = (os.path.join(args.profile_tables, f"profile-{systems}x{per_system}-"
@@ -336,7 +363,7 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
                    "interface": interface, "mode": mode, "capacity": capacity,
                    "us_per_call": f"{us:.3f}", "kernels": kernels, "syncs": syncs, **machine}
             rows.append(row)
-            print(f"lj-pbc {systems:>4} x {per_system:<6} {interface:<15} {mode:<5} "
+            print(f"lj-pbc {systems:>4} x {per_system:<6} {interface:<26} {mode:<5} "
                   f"{capacity:<14} "
                   f"{us:10.2f} us  "
                   f"kernels {kernels or '-':>5}  syncs {syncs or '-':>5}  ({count} pairs)",

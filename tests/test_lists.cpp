@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <optional>
 #include <string>
 #include <tuple>
 #include <vector>
@@ -134,6 +136,40 @@ TEST_P(Lists, VerletSkinReuseKeepsEveryPairWithinTheCutoff) {
   EXPECT_EQ(rebuilt_at, 4u);
   EXPECT_GE(verlet.rebuilds(), 3u);  // at steps 4, 8, 12
   EXPECT_LE(verlet.rebuilds(), 4u);
+}
+
+// An update that moved nothing but holds a non-finite coordinate is refused, naming its particle
+// (the distance test flags it, the rebuild names it), and leaves the list as it was: host
+// positions, and device positions where the method runs on the device.
+TEST_P(Lists, VerletUpdateRefusesANonFiniteCoordinate) {
+  const float cutoff = 1.0f, skin = 0.3f;
+  const raycut::PointCloud cloud = raycut::make_family("uniform", 300, cutoff, 3);
+  std::vector<float> bad = cloud.xyz;
+  bad[3 * 7 + 1] = std::numeric_limits<float>::quiet_NaN();
+  std::vector<MemorySpace> spaces{MemorySpace::host};
+  if (Engine(GetParam()).space() == MemorySpace::device) spaces.push_back(MemorySpace::device);
+  for (const MemorySpace space : spaces) {
+    std::optional<raycut::DeviceArray> good_on_device, bad_on_device;
+    raycut::PositionsView good_view{cloud.xyz.data(), cloud.size(), space},
+        bad_view{bad.data(), cloud.size(), space};
+    if (space == MemorySpace::device) {
+      good_view = good_on_device.emplace(cloud.xyz).view();
+      bad_view = bad_on_device.emplace(bad).view();
+    }
+    raycut::VerletList verlet(GetParam(), cutoff, skin);
+    ASSERT_TRUE(verlet.update(good_view));
+    const raycut::NeighbourList before = verlet.list().to_host();
+    try {
+      verlet.update(bad_view);
+      ADD_FAILURE() << "a NaN coordinate was taken";
+    } catch (const raycut::Error& e) {
+      EXPECT_EQ(e.code(), raycut::ErrorCode::invalid_input) << e.what();
+      EXPECT_NE(std::string(e.what()).find("index 7"), std::string::npos) << e.what();
+    }
+    EXPECT_EQ(verlet.rebuilds(), 1u);
+    EXPECT_TRUE(raycut::compare_neighbours(verlet.list().to_host(), before).equal());
+    EXPECT_FALSE(verlet.update(good_view));  // nothing moved since the one build
+  }
 }
 
 TEST_P(Lists, FailedRunLeavesNoResults) {

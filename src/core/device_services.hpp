@@ -36,8 +36,8 @@ class DeviceServices {
   virtual void free(void* device) const = 0;
   // A device copy of device memory, on `stream`.
   virtual DeviceBytes copy_on_device(const void* device, std::size_t bytes, void* stream) const = 0;
-  // Whether some particle of `now` is more than `distance` from where `then` has it (both (n, 3)
-  // on the device).
+  // Whether some particle of `now` is more than `distance` from where `then` has it, or has a
+  // non-finite coordinate (both (n, 3) on the device).
   virtual bool moved_beyond(const float* now, const float* then, std::size_t n, float distance,
                             void* stream) const = 0;
   // Points with images expanded on the device (core/images.hpp).

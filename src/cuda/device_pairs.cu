@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <new>
 #include <string>
 #include <utility>
 #include <vector>
@@ -795,6 +796,38 @@ struct Team {
   }
 };
 
+template <int Warps>
+__device__ inline void team_sync() {
+  if constexpr (Warps > 1)
+    __syncthreads();
+  else
+    __syncwarp();
+}
+
+// Row `row`'s frame, made once by its team's first thread into shared memory (code: make_frame's,
+// with bad rows reported to status), for every thread of the team to read: held in registers,
+// the frame took about 60 of the ~126 registers a thread had, which left a quarter of the warps
+// a multiprocessor can run. Every thread of the team calls it.
+template <class Real, int Warps>
+__device__ const Frame& team_frame(const Input& in, std::int64_t row, const Lattice* lattices,
+                                   int* status, int& code) {
+  constexpr int teams = block_threads / Team<Warps>::threads;
+  // Raw storage: a __shared__ array cannot have Frame's default member initializers.
+  __shared__ alignas(Frame) unsigned char frames[teams * sizeof(Frame)];
+  __shared__ int codes[teams];
+  const int team = threadIdx.x / Team<Warps>::threads;
+  Frame* const frame = reinterpret_cast<Frame*>(frames) + team;
+  if (Team<Warps>::rank() == 0) {
+    Frame made;
+    codes[team] = make_frame<Real>(in, row, lattices, made);
+    new (frame) Frame(made);
+    if (codes[team] && status) atomicMin(status, codes[team]);
+  }
+  team_sync<Warps>();
+  code = codes[team];
+  return *frame;
+}
+
 // The row of team k: with cells, the particles in cell order, so that the teams of a block (and
 // of the blocks beside it) walk the same cells and find their sources in cache. Each row writes
 // only its own count and entries, so the order the rows run in changes no result.
@@ -804,28 +837,21 @@ __device__ std::int64_t team_row(std::int64_t k, const Input& in, const CellTabl
   return k;
 }
 
-// Row `row`'s pairs (0 for a bad row, whose code goes to status), in every thread of its team.
+// Row `row`'s pairs, from its frame f, in every thread of its team.
 template <class Real, int Warps, bool Cells>
-__device__ unsigned long long count_row(const Input& in, const Lattice* lattices,
-                                        const CellTable& cells, std::int64_t row, Frame& f,
-                                        int* status, bool& bad) {
+__device__ unsigned long long count_row(const Input& in, const Frame& f, std::int64_t row,
+                                        const CellTable& cells) {
   using T = Team<Warps>;
-  const int code = make_frame<Real>(in, row, lattices, f);
-  bad = code != 0;
   unsigned long long c = 0;
-  if (bad) {
-    if (T::rank() == 0) atomicMin(status, code);
-  } else {
-    with_sources<Real, Cells>(in, f, row, cells, [&](const auto& sources) {
-      auto at = sources.cursor(T::rank());
-      for (std::uint32_t k = T::rank(); k < sources.total;
-           k += T::threads, sources.advance(at, T::threads)) {
-        const Source source = sources.at(at);
-        if (source.j >= 0) c += for_each_image(in, f, row, source, NoVisit{});
-      }
-    });
-  }
-  return T::sum(c);  // the whole team takes part, bad rows too
+  with_sources<Real, Cells>(in, f, row, cells, [&](const auto& sources) {
+    auto at = sources.cursor(T::rank());
+    for (std::uint32_t k = T::rank(); k < sources.total;
+         k += T::threads, sources.advance(at, T::threads)) {
+      const Source source = sources.at(at);
+      if (source.j >= 0) c += for_each_image(in, f, row, source, NoVisit{});
+    }
+  });
+  return T::sum(c);
 }
 
 template <class Real, int Warps, bool Cells>
@@ -837,25 +863,25 @@ __global__ __launch_bounds__(block_threads) void count_rows(Input in, const Latt
   const std::int64_t row = team_row<Cells>(T::row(), in, cells);
   // Whole teams leave together: their bounds are the row's.
   if (row >= in.n || (in.run_if && *in.run_if == 0)) return;
-  Frame f;
-  bool bad;
-  const unsigned long long c =
-      count_row<Real, Warps, Cells>(in, lattices, cells, row, f, status, bad);
+  int bad;
+  const Frame& f = team_frame<Real, Warps>(in, row, lattices, status, bad);
+  if (bad) return;
+  const unsigned long long c = count_row<Real, Warps, Cells>(in, f, row, cells);
   if (T::rank() == 0) counts[row] = c;
 }
 
 // Where row `row`'s list lies: its first entry (s * capacity for system s with a list per
-// system, else 0) and the global offset its list counts from (its system's first row's).
+// system, else 0) and the global offset its list counts from (`origin`: its system's first
+// row's offset).
 struct ListSlots {
   std::uint64_t first = 0;
   unsigned long long origin = 0;
 };
-__host__ __device__ ListSlots list_slots(const Input& in, const Frame& f, std::int64_t row,
-                                         const unsigned long long* offsets,
-                                         const StaticPairs& out) {
+__host__ __device__ ListSlots list_slots(const Input& in, std::int64_t row,
+                                         unsigned long long origin, const StaticPairs& out) {
   if (in.systems == 0) return {};
   const std::int64_t system = in.batch ? in.batch[row] : 0;
-  return {static_cast<std::uint64_t>(system) * out.capacity, offsets[f.lo]};
+  return {static_cast<std::uint64_t>(system) * out.capacity, origin};
 }
 
 // Writes row `row`'s pairs from entry first + start on (start counted within its list), up to the
@@ -916,10 +942,11 @@ __global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Latti
   using T = Team<Warps>;
   const std::int64_t row = team_row<Cells>(T::row(), in, cells);
   if (row >= in.n || (in.run_if && *in.run_if == 0)) return;
-  Frame f;
-  if (make_frame<Real>(in, row, lattices, f)) return;
+  int bad;
+  const Frame& f = team_frame<Real, Warps>(in, row, lattices, nullptr, bad);
+  if (bad) return;  // the count reported it
   // A list per system: this system's entries from s * capacity, counted from its first row.
-  const ListSlots slots = list_slots(in, f, row, offsets, out);
+  const ListSlots slots = list_slots(in, row, in.systems ? offsets[f.lo] : 0, out);
   const unsigned long long start = offsets[row] - slots.origin;
   if (start >= static_cast<unsigned long long>(out.capacity) || offsets[row + 1] == offsets[row])
     return;
@@ -968,14 +995,6 @@ __device__ unsigned long long look_back(unsigned long long* words, std::int64_t 
   }
 }
 
-template <int Warps>
-__device__ inline void team_sync() {
-  if constexpr (Warps > 1)
-    __syncthreads();
-  else
-    __syncwarp();
-}
-
 template <class Real, int Warps>
 __global__ __launch_bounds__(block_threads) void list_rows(Input in, const Lattice* lattices,
                                                            unsigned long long* words,
@@ -991,10 +1010,10 @@ __global__ __launch_bounds__(block_threads) void list_rows(Input in, const Latti
   team_sync<Warps>();
   const std::int64_t row = team_rows[team];
   if (row >= in.n) return;  // whole teams
-  Frame f;
-  bool bad;
+  int bad;
+  const Frame& f = team_frame<Real, Warps>(in, row, lattices, status, bad);
   const unsigned long long count =
-      count_row<Real, Warps, false>(in, lattices, CellTable{}, row, f, status, bad);
+      bad ? T::sum(0ull) : count_row<Real, Warps, false>(in, f, row, CellTable{});
   if (T::rank() < warp_size) {  // the team's first warp
     const unsigned long long before = look_back(words, row, count);
     if (T::rank() == 0) {
@@ -1010,17 +1029,14 @@ __global__ __launch_bounds__(block_threads) void list_rows(Input in, const Latti
   if (bad || count == 0 || out.capacity == 0) return;
   // A list per system: its entries from s * capacity, counted from its first row's offset, which
   // that row (earlier, so running or done) publishes before its prefix.
-  ListSlots slots;
-  if (in.systems) {
-    slots.first = static_cast<std::uint64_t>(in.batch ? in.batch[row] : 0) * out.capacity;
-    slots.origin = before;
-    if (f.lo != row) {
-      while ((load_volatile(words + f.lo) & row_prefixed) == 0) {
-      }
-      __threadfence();
-      slots.origin = load_volatile(offsets + f.lo);
+  unsigned long long origin = before;
+  if (in.systems && f.lo != row) {
+    while ((load_volatile(words + f.lo) & row_prefixed) == 0) {
     }
+    __threadfence();
+    origin = load_volatile(offsets + f.lo);
   }
+  const ListSlots slots = list_slots(in, row, origin, out);
   const unsigned long long start = before - slots.origin;
   if (start >= static_cast<unsigned long long>(out.capacity)) return;
   fill_row<Real, Warps, false>(in, f, row, CellTable{}, slots.first, start, out);

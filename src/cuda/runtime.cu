@@ -218,7 +218,7 @@ __global__ void moved_beyond_kernel(const float* now, const float* then, std::si
       const float d = now[3 * i + a] - then[3 * i + a];
       d2 += d * d;
     }
-    if (!(d2 <= limit_squared)) *moved = 1u;  // racing writes of the same value
+    if (!(d2 <= limit_squared)) *moved = 1u;  // NaN too; racing writes of the same value
   }
 }
 }  // namespace

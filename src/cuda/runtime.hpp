@@ -35,8 +35,9 @@ void copy(void* to, const void* from, std::size_t bytes);
 // A device-to-device copy into new memory, queued on `stream` (a cudaStream_t).
 DeviceMemory copy_on_device(const void* device, std::size_t bytes, void* stream);
 
-// True when some particle of `now` is more than `distance` away from its place in `then`
-// ((n, 3) device positions): one reduction on `stream`, one flag read back.
+// True when some particle of `now` is more than `distance` away from its place in `then`, or has
+// a non-finite coordinate ((n, 3) device positions): one reduction on `stream`, one flag read
+// back.
 bool moved_beyond(const float* now, const float* then, std::size_t n, float distance, void* stream);
 
 // Name of the current device and the CUDA runtime version ("13.0").
