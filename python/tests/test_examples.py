@@ -208,8 +208,8 @@ def test_python_latency_counts_kernels_and_syncs():
 
 def test_python_latency_runs_tiny_on_the_cpu(tmp_path, capsys):
     """bench/python_latency.py with PyTorch CPU tensors: the three eager capacities of each
-    workload (no CUDA graph row on the CPU), the CSV's columns, and a second run appending to the
-    same file."""
+    workload and its Verlet update (no CUDA graph row on the CPU), the CSV's columns, and a second
+    run appending to the same file."""
     pytest.importorskip("torch", reason="PyTorch is not installed")
     import pyraycut
 
@@ -220,21 +220,23 @@ def test_python_latency_runs_tiny_on_the_cpu(tmp_path, capsys):
     args = ["--device", "cpu", "--sizes", "64", "--batches", "3x40", "--reps", "2",
             "--min-loop-ms", "0.05", "--output", str(out)]
     rows = bench.main(args)
-    assert [(r["systems"], r["n_per_system"], r["capacity"]) for r in rows] == [
-        (1, 64, "static"), (1, 64, "static-checked"), (1, 64, "exact"),
-        (3, 40, "static"), (3, 40, "static-checked"), (3, 40, "exact")]
-    assert all(r["interface"] == "python-torch" and r["mode"] == "eager" for r in rows)
+    per_workload = [("python-torch", "static"), ("python-torch", "static-checked"),
+                    ("python-torch", "exact"), ("python-torch-verlet-update", "exact")]
+    assert [(r["systems"], r["n_per_system"], r["interface"], r["capacity"]) for r in rows] == [
+        (s, n, interface, capacity) for s, n in ((1, 64), (3, 40))
+        for interface, capacity in per_workload]
+    assert all(r["mode"] == "eager" for r in rows)
     assert all(float(r["us_per_call"]) > 0 for r in rows)
     text = out.read_text()
-    assert text.startswith(LATENCY_HEADER) and text.count("\n") == 7
-    bench.main(args[:5] + ["none"] + args[6:])  # appended: 3 rows, no second header
+    assert text.startswith(LATENCY_HEADER) and text.count("\n") == 9
+    bench.main(args[:5] + ["none"] + args[6:])  # appended: 4 rows, no second header
     text = out.read_text()
-    assert text.count("\n") == 10 and text.count("workload,") == 1
+    assert text.count("\n") == 13 and text.count("workload,") == 1
     other = tmp_path / "other.csv"
     other.write_text("a,b\n1,2\n")
     with pytest.raises(SystemExit, match="holds other columns"):
         bench.main(args[:-1] + [str(other)])
-    assert "wrote 6 rows" in capsys.readouterr().out
+    assert "wrote 8 rows" in capsys.readouterr().out
 
 
 def test_python_compiled_runs_tiny_on_the_cpu(tmp_path):
