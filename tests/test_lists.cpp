@@ -172,6 +172,46 @@ TEST_P(Lists, VerletUpdateRefusesANonFiniteCoordinate) {
   }
 }
 
+// An untimed engine (set_timed(false): its builds do not wait for the GPU to time themselves)
+// lists what a timed one lists, open and periodic, after build() and update(), and reports no
+// build times.
+TEST_P(Lists, UntimedBuildsListTheSamePairs) {
+  raycut::PointCloud cloud = raycut::make_family("uniform", 800, 1.0f, 4);
+  const raycut::PositionsView x{cloud.xyz.data(), cloud.size(), MemorySpace::host};
+  raycut::Box box;  // periodic along a and b of a 4 x 4 cell, the cloud inside it
+  box.cell[0][0] = 4;
+  box.cell[1][1] = 4;
+  box.pbc[0] = box.pbc[1] = true;
+  for (const bool periodic : {false, true}) {
+    Engine timed(GetParam()), untimed(GetParam());
+    untimed.set_timed(false);
+    try {
+      for (Engine* e : {&timed, &untimed}) {
+        if (periodic)
+          e->build(x, 1.0f, box);
+        else
+          e->build(x, 1.0f);
+      }
+    } catch (const raycut::Error& e) {
+      if (periodic && e.code() == raycut::ErrorCode::unsupported) continue;  // OptiX, grid-paper
+      throw;
+    }
+    const raycut::ListOptions options{false, false, false, periodic};
+    EXPECT_GE(timed.last_timings().build_ms, 0);
+    EXPECT_LT(untimed.last_timings().build_ms, 0);
+    EXPECT_LT(untimed.last_timings().device_build_ms, 0);
+    auto diff = raycut::compare_neighbours(untimed.neighbours(options), timed.neighbours(options));
+    EXPECT_TRUE(diff.equal()) << "periodic " << periodic << ": " << diff.first_difference;
+    for (float& v : cloud.xyz) v = std::fmod(v + 0.05f, 4.0f);
+    timed.update(x);
+    untimed.update(x);
+    EXPECT_LT(untimed.last_timings().build_ms, 0);
+    diff = raycut::compare_neighbours(untimed.neighbours(options), timed.neighbours(options));
+    EXPECT_TRUE(diff.equal()) << "periodic " << periodic
+                              << " after update: " << diff.first_difference;
+  }
+}
+
 TEST_P(Lists, FailedRunLeavesNoResults) {
   const raycut::PointCloud cloud = raycut::make_family("uniform", 500, 1.0f, 5);
   Engine engine(GetParam());

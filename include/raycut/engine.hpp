@@ -239,7 +239,8 @@ class PaddedNeighbourBuffer {
 
 // Wall-clock milliseconds of the last build()/update() and run(), each phase synchronised.
 // device_* are the CUDA-event times of the same phases for GPU methods, negative for CPU
-// methods. refit: the last update() refitted the structure instead of rebuilding it.
+// methods. Both build times negative for builds not timed (Engine::set_timed). refit: the last
+// update() refitted the structure instead of rebuilding it.
 struct Timings {
   double build_ms = 0, compute_ms = 0;
   double device_build_ms = -1, device_compute_ms = -1;
@@ -311,6 +312,13 @@ class Engine {
   // (the legacy default stream). Every call waits for its own work on this stream only.
   void set_stream(void* cuda_stream);
   void* stream() const { return stream_; }
+
+  // Whether build() and update() time themselves (last_timings(); the default). Timing a GPU
+  // build waits for it to finish. Untimed, they return once their work is queued on the
+  // stream, and the host waits only where a size must come back (the grid's plan): what a step
+  // loop that never reads the build's time wants. run() is always timed.
+  void set_timed(bool timed) { timed_ = timed; }
+  bool timed() const { return timed_; }
 
   // Validates (finite coordinates, cutoff finite and within the supported range) and builds
   // the method's structure. Throws Error with the first bad index or the bad value, before any
@@ -420,6 +428,7 @@ class Engine {
   bool float64_ = false;  // built from Float64Positions
   bool built_ = false;
   bool has_run_ = false;
+  bool timed_ = true;
   Timings timings_;
 };
 

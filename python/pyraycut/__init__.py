@@ -554,11 +554,19 @@ def _take_engine(method: str, like: _arrays.Like) -> tuple:
     """An engine for one call, and its cache key (None when the cache is off). The key's device
     is where a GPU method will allocate: the CUDA device current during the call."""
     if not _ENGINE_CACHE[0]:
-        return Engine(method), None
+        return _untimed_engine(method), None
     with _arrays.device_context(like):
         key = (method, _raycut.current_device())
     engine = _ENGINES.pop(key, None)
-    return (engine if engine is not None else Engine(method)), key
+    return (engine if engine is not None else _untimed_engine(method)), key
+
+
+def _untimed_engine(method: str) -> Engine:
+    """An engine whose builds do not time themselves: nobody reads the times of the engine a
+    call borrows, and timing a GPU build is a wait for the GPU."""
+    engine = Engine(method)
+    engine._engine.set_timed(False)
+    return engine
 
 
 def _put_back(key: Any, engine: Engine) -> None:

@@ -204,6 +204,13 @@ void bind_engine(nb::module_& m) {
           },
           nb::arg("stream"))
       .def(
+          "set_timed",
+          [](PyEngine& e, bool timed) {
+            Exclusive hold(e.mutex);
+            e.engine.set_timed(timed);
+          },
+          nb::arg("timed"))
+      .def(
           "build",
           [](PyEngine& e, nb::handle positions, double cutoff,
              const std::optional<HostCells>& cells, const std::optional<HostFlags>& pbc,

@@ -244,7 +244,8 @@ raycut::Systems systems_of(std::vector<raycut::Box> boxes, const at::Tensor& ind
 // raycut's stream-ordered pool, so that a copy of the last call's pairs still queued on another
 // stream never reads a refilled buffer.
 struct Work {
-  explicit Work(const char* method) : engine(method) {}
+  // Untimed: timing a GPU build waits for it, and an operator call never reads the times.
+  explicit Work(const char* method) : engine(method) { engine.set_timed(false); }
   raycut::Engine engine;
 
   // On CUDA, the last call's list again while the stream is the same (the copies out of it were
@@ -450,6 +451,14 @@ bool takes_small_systems_pass(const at::Tensor& positions, const std::optional<a
                                       static_cast<std::size_t>(systems));
 }
 
+// `t` on `device` as `dtype`, C-contiguous: `t` itself where it is so already, without the
+// dispatcher calls that a no-op to() and contiguous() still cost (at a hundred particles the
+// call is mostly such per-operation costs).
+at::Tensor on_device_as(const at::Tensor& t, const at::Device& device, at::ScalarType dtype) {
+  if (t.device() == device && t.scalar_type() == dtype && t.is_contiguous()) return t;
+  return t.to(device, dtype).contiguous();
+}
+
 // The small-system pass on the positions' device and current stream, into tensors that torch
 // allocates: nothing here reads device data or waits, so bad values (NaN, an unsorted batch,
 // a singular cell, a system without its cell) show as a negative count
@@ -464,7 +473,7 @@ Pairs small_systems_pairs(const at::Tensor& positions, double cutoff,
   check_max_pairs(max_pairs);
   const at::Device device = positions.device();
   const c10::cuda::CUDAGuard guard(device);
-  const at::Tensor x = positions.contiguous();
+  const at::Tensor x = on_device_as(positions, device, positions.scalar_type());
   const std::int64_t n = x.size(0);
   const auto on_device = at::TensorOptions().device(device);
 
@@ -477,15 +486,16 @@ Pairs small_systems_pairs(const at::Tensor& positions, double cutoff,
   std::int64_t cell_count = 1, flag_count = 1;
   if (cell) {
     check_cell(*cell);
-    cells = cell->to(device, x.scalar_type()).reshape({-1, 3, 3}).contiguous();
-    cell_count = cells.size(0);
+    // (3, 3) or (B, 3, 3) as given: the pass reads them flat.
+    cells = on_device_as(*cell, device, x.scalar_type());
+    cell_count = cells.dim() == 3 ? cells.size(0) : 1;
     systems.cells = cells.data_ptr();
     systems.cell_count = static_cast<std::size_t>(cell_count);
   }
   if (pbc) {
     check_pbc(*pbc);
-    flags = pbc->to(device, at::kBool).reshape({-1, 3}).contiguous();
-    flag_count = flags.size(0);
+    flags = on_device_as(*pbc, device, at::kBool);  // (3,) or (B, 3), likewise
+    flag_count = flags.dim() == 2 ? flags.size(0) : 1;
     systems.pbc = flags.data_ptr<bool>();
     systems.pbc_count = static_cast<std::size_t>(flag_count);
   }
@@ -493,7 +503,7 @@ Pairs small_systems_pairs(const at::Tensor& positions, double cutoff,
   check_systems_are_told(std::max(cell_count, flag_count), batch.has_value(), "batch");
   if (batch) {
     check_batch(*batch, n, "batch");
-    index = batch->to(device, at::kLong).contiguous();
+    index = on_device_as(*batch, device, at::kLong);
     systems.batch = index.data_ptr<std::int64_t>();
   }
 

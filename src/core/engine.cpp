@@ -41,6 +41,17 @@ double elapsed_ms(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
+// The times of a build begun at `start`: timed, it waits for the method's work, then reads the
+// host clock and the method's device time (`device_ms`); untimed, neither (-1).
+struct BuildTimes {
+  double host_ms = -1, device_ms = -1;
+};
+BuildTimes end_build(detail::Method& m, bool timed, Clock::time_point start) {
+  if (!timed) return {};
+  m.synchronize();
+  return {elapsed_ms(start), m.device_build_ms()};
+}
+
 const detail::MethodEntry& find_entry(std::string_view name) {
   std::string known;
   for (const auto& entry : detail::method_registry()) {
@@ -166,9 +177,9 @@ void Engine::build(PositionsView positions, float cutoff) {
   with_positions_in_method_space(positions, [&](const float* xyz) {
     const auto start = Clock::now();
     m.build(xyz, size_, cutoff);
-    m.synchronize();
-    timings_.build_ms = elapsed_ms(start);
-    timings_.device_build_ms = m.device_build_ms();
+    const BuildTimes t = end_build(m, timed_, start);
+    timings_.build_ms = t.host_ms;
+    timings_.device_build_ms = t.device_ms;
   });
   built_ = true;
 }
@@ -287,11 +298,12 @@ void Engine::build_points(PositionsView positions, float cutoff, const Systems& 
       images_->set_float64_sources(float64);
       images_->expand(plan, sources, queries, stream_);
       m.build_points(images_->points(), cutoff);
-      m.synchronize();
+      // Within the positions' scope: a device copy of host positions is alive until it ends.
+      const BuildTimes t = end_build(m, timed_, start);
+      timings_.build_ms = t.host_ms;
+      timings_.device_build_ms = t.device_ms;
     });
   });
-  timings_.build_ms = elapsed_ms(start);
-  timings_.device_build_ms = m.device_build_ms();
   built_ = true;
 }
 
@@ -329,9 +341,9 @@ void Engine::update(PositionsView positions, bool checked) {
   with_positions_in_method_space(positions, [&](const float* xyz) {
     const auto start = Clock::now();
     timings_.refit = m.update(xyz, size_, cutoff_);
-    m.synchronize();
-    timings_.build_ms = elapsed_ms(start);
-    timings_.device_build_ms = m.device_build_ms();
+    const BuildTimes t = end_build(m, timed_, start);
+    timings_.build_ms = t.host_ms;
+    timings_.device_build_ms = t.device_ms;
   });
   built_ = true;
 }
@@ -375,7 +387,7 @@ void Engine::run(Kernel kernel, const KernelOptions& options) {
   if (size_ > 0) {
     const auto start = Clock::now();
     m.compute(kernel, options);
-    m.synchronize();
+    m.synchronize();  // run() is always timed: results() reads what it wrote
     timings_.compute_ms = elapsed_ms(start);
     timings_.device_compute_ms = m.device_compute_ms();
   }

@@ -31,11 +31,17 @@ namespace {
 constexpr int warp_size = 32;
 constexpr int block_threads = 128;  // four rows per block, or one (Team)
 constexpr int block_warps = block_threads / warp_size;
-// Up to this many rows, a block per row. At ~120 registers a thread an H100 multiprocessor holds
-// 16 warps, 2,112 in all: below that many rows a warp per row leaves warps idle and walks all
-// n sources in each, where a block per row walks n / 128 per thread in ceil(4 n / 2,112)
-// waves, never longer (half as long at 1,000 rows).
+// Up to this many rows, a block per row. Chosen at ~120 registers a thread, when an H100
+// multiprocessor held 16 warps, 2,112 in all: below that many rows a warp per row leaves warps
+// idle and walks all n sources in each, where a block per row walks n / 128 per thread in
+// ceil(4 n / 2,112) waves, never longer (half as long at 1,000 rows). Not measured again since
+// the row kernels went to 64-72 registers (28-32 warps a multiprocessor).
 constexpr std::size_t rows_for_block_teams = 2048;
+// The blocks of the one-launch pass (list_rows) that a multiprocessor must hold at once: 8 caps
+// it at 64 registers a thread (from 72, with ~90 bytes of spills), so that a thousand rows of a
+// block each run in one wave on an H100 (132 x 8 blocks): 0.86x the time at 1,000 particles.
+// The cells path's count (95 registers) bounded to 80 was 3 % slower on single systems: unbounded.
+constexpr int list_rows_blocks_per_multiprocessor = 8;
 constexpr unsigned all_lanes = 0xffffffffu;
 // How far below 1/2 an axis's reach must stay for the single image (Lattice::single_image), and
 // the largest |f_a| it takes: f_a's rounding, ~1e-16 |f_a| per term, stays far below the slack.
@@ -996,10 +1002,9 @@ __device__ unsigned long long look_back(unsigned long long* words, std::int64_t 
 }
 
 template <class Real, int Warps>
-__global__ __launch_bounds__(block_threads) void list_rows(Input in, const Lattice* lattices,
-                                                           unsigned long long* words,
-                                                           unsigned long long* offsets, int* status,
-                                                           StaticPairs out) {
+__global__ __launch_bounds__(block_threads, list_rows_blocks_per_multiprocessor) void list_rows(
+    Input in, const Lattice* lattices, unsigned long long* words, unsigned long long* offsets,
+    int* status, StaticPairs out) {
   using T = Team<Warps>;
   if (in.run_if && *in.run_if == 0) return;  // the whole grid alike
   constexpr int teams = block_threads / T::threads;
