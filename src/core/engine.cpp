@@ -41,15 +41,16 @@ double elapsed_ms(Clock::time_point start) {
   return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
 }
 
-// The times of a build begun at `start`: timed, it waits for the method's work, then reads the
-// host clock and the method's device time (`device_ms`); untimed, neither (-1).
-struct BuildTimes {
-  double host_ms = -1, device_ms = -1;
-};
-BuildTimes end_build(detail::Method& m, bool timed, Clock::time_point start) {
-  if (!timed) return {};
+// The end of a build begun at `start`: timed, it waits for the method's work and records the
+// host clock's and the method's device time; untimed, neither (both -1).
+void end_build(detail::Method& m, bool timed, Clock::time_point start, Timings& timings) {
+  if (!timed) {
+    timings.build_ms = timings.device_build_ms = -1;
+    return;
+  }
   m.synchronize();
-  return {elapsed_ms(start), m.device_build_ms()};
+  timings.build_ms = elapsed_ms(start);
+  timings.device_build_ms = m.device_build_ms();
 }
 
 const detail::MethodEntry& find_entry(std::string_view name) {
@@ -177,9 +178,7 @@ void Engine::build(PositionsView positions, float cutoff) {
   with_positions_in_method_space(positions, [&](const float* xyz) {
     const auto start = Clock::now();
     m.build(xyz, size_, cutoff);
-    const BuildTimes t = end_build(m, timed_, start);
-    timings_.build_ms = t.host_ms;
-    timings_.device_build_ms = t.device_ms;
+    end_build(m, timed_, start, timings_);
   });
   built_ = true;
 }
@@ -299,9 +298,7 @@ void Engine::build_points(PositionsView positions, float cutoff, const Systems& 
       images_->expand(plan, sources, queries, stream_);
       m.build_points(images_->points(), cutoff);
       // Within the positions' scope: a device copy of host positions is alive until it ends.
-      const BuildTimes t = end_build(m, timed_, start);
-      timings_.build_ms = t.host_ms;
-      timings_.device_build_ms = t.device_ms;
+      end_build(m, timed_, start, timings_);
     });
   });
   built_ = true;
@@ -341,9 +338,7 @@ void Engine::update(PositionsView positions, bool checked) {
   with_positions_in_method_space(positions, [&](const float* xyz) {
     const auto start = Clock::now();
     timings_.refit = m.update(xyz, size_, cutoff_);
-    const BuildTimes t = end_build(m, timed_, start);
-    timings_.build_ms = t.host_ms;
-    timings_.device_build_ms = t.device_ms;
+    end_build(m, timed_, start, timings_);
   });
   built_ = true;
 }
