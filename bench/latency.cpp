@@ -14,7 +14,9 @@
 // in global mode, replayed with cudaGraphLaunch), mode eager / capacity exact (Engine("grid")
 // build + neighbours with shifts, engine and buffer reused), mode eager / capacity engine-static
 // (the same build, then Engine::neighbours into a StaticPairs of 1.25 x the count: no read-back
-// of the total). The small path is measured where
+// of the total), mode eager (and graph, when its capture succeeds) / capacity engine-reused (the
+// same with an untimed engine that reuses its plan, Engine::set_reuse_plan: nothing read back
+// after its first build). The small path is measured where
 // prefer_small_systems says so, everywhere with --all; --crossover adds single systems of 2000,
 // 4000 and 8000 particles on every path.
 //
@@ -417,6 +419,54 @@ std::uint64_t measure_engine(const Workload& w, DeviceWorkload& d, cudaStream_t 
   if (count != static_cast<std::int64_t>(pairs))
     throw std::runtime_error("the engine's static list counts " + std::to_string(count) +
                              " pairs, its exact list " + std::to_string(pairs));
+
+  // An untimed engine that reuses its plan (Engine::set_reuse_plan): after its first build,
+  // nothing read back. Also tried in a global-mode capture (reported, not required).
+  raycut::Engine reusing("grid");
+  reusing.set_stream(stream);
+  reusing.set_timed(false);
+  reusing.set_reuse_plan(true);
+  auto reused_call = [&] {
+    reusing.build(d.positions(), cutoff, d.engine_systems);
+    reusing.neighbours(out, raycut::ListOptions{});
+  };
+  reused_call();  // plans and records
+  Row reused_row{"lj-pbc", w.systems, w.per_system, "cpp", "eager", "engine-reused", 0, "", ""};
+  reused_row.us = us_per_call(reused_call, sync, o.reps, o.min_loop_ms);
+  rows.push_back(reused_row);
+  const std::int64_t reused_count = raycut::read_pair_count(ctx, buffer.count());
+  if (reused_count != static_cast<std::int64_t>(pairs))
+    throw std::runtime_error("the reusing engine's static list counts " +
+                             std::to_string(reused_count) + " pairs, the exact list " +
+                             std::to_string(pairs));
+  cudaGraph_t graph = nullptr;
+  cudaGraphExec_t exec = nullptr;
+  check_cuda(cudaStreamBeginCapture(stream, cudaStreamCaptureModeGlobal), "cudaStreamBeginCapture");
+  std::string capture_error;
+  try {
+    reused_call();
+  } catch (const std::exception& e) {
+    capture_error = e.what();
+  }
+  const cudaError_t ended = cudaStreamEndCapture(stream, &graph);
+  if (capture_error.empty() && ended != cudaSuccess) capture_error = cudaGetErrorString(ended);
+  if (capture_error.empty() && cudaGraphInstantiate(&exec, graph, 0) != cudaSuccess)
+    capture_error = "cudaGraphInstantiate failed";
+  (void)cudaGetLastError();
+  if (exec) {
+    auto replay = [&] { check_cuda(cudaGraphLaunch(exec, stream), "cudaGraphLaunch"); };
+    reused_row.mode = "graph";
+    reused_row.kernels = std::to_string(kernel_nodes(graph));
+    reused_row.syncs = "0";
+    reused_row.us = us_per_call(replay, sync, o.reps, o.min_loop_ms);
+    rows.push_back(reused_row);
+    if (raycut::read_pair_count(ctx, buffer.count()) != static_cast<std::int64_t>(pairs))
+      throw std::runtime_error("the reusing engine's replayed count differs");
+    check_cuda(cudaGraphExecDestroy(exec), "cudaGraphExecDestroy");
+  }
+  if (graph) check_cuda(cudaGraphDestroy(graph), "cudaGraphDestroy");
+  std::printf("  engine reusing its plan: %lld pairs%s%s\n", static_cast<long long>(reused_count),
+              capture_error.empty() ? "" : "; no graph: ", capture_error.c_str());
   return pairs;
 }
 

@@ -6,13 +6,18 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
+#include <limits>
+#include <random>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "method_availability.hpp"
 #include "raycut/device_pairs.hpp"
 #include "raycut/engine.hpp"
+#include "raycut/tools/device_array.hpp"
 #include "raycut/tools/generators.hpp"
 
 #if defined(RAYCUT_TESTS_CUDA)
@@ -189,6 +194,129 @@ TEST_P(StaticLists, EmptyBuildWritesTheCountAndPadding) {
   const float none[3] = {0, 0, 0};
   engine.build({none, 0, MemorySpace::host}, 1.0f);
   expect_static_equals(run_static(engine, 5, {}, false), Expected{}, 5, 0, "N = 0");
+}
+
+// Engine::set_reuse_plan. The pairs of a static list as a sorted set of (i, j, S): a reused
+// plan's grid may be another than a fresh one's, and visit rows' pairs in another order.
+std::vector<std::tuple<std::int64_t, std::int64_t, std::int32_t, std::int32_t, std::int32_t>>
+pair_set(const Read& r) {
+  std::vector<std::tuple<std::int64_t, std::int64_t, std::int32_t, std::int32_t, std::int32_t>>
+      pairs;
+  for (std::int64_t k = 0; k < r.count; ++k)
+    pairs.emplace_back(r.i[k], r.j[k], r.shifts[3 * k], r.shifts[3 * k + 1], r.shifts[3 * k + 2]);
+  std::sort(pairs.begin(), pairs.end());
+  return pairs;
+}
+std::vector<std::tuple<std::int64_t, std::int64_t, std::int32_t, std::int32_t, std::int32_t>>
+pair_set(const Expected& e) {
+  Read r;
+  r.i = e.i;
+  r.j = e.j;
+  r.shifts = e.shifts;
+  r.count = static_cast<std::int64_t>(e.i.size());
+  return pair_set(r);
+}
+
+// A cube of side L, periodic along `periodic` of its axes, and n particles in it; moved by
+// step() by up to `jump` on each axis (periodic axes unwrapped: positions leave the cube).
+struct Liquid {
+  raycut::Box box;
+  std::vector<float> xyz;
+  std::mt19937 random{7};
+  Liquid(std::size_t n, double side, int periodic) {
+    for (int a = 0; a < 3; ++a) {
+      box.cell[a][a] = side;
+      box.pbc[a] = a < periodic;
+    }
+    std::uniform_real_distribution<float> u(0.0f, static_cast<float>(side));
+    xyz.resize(3 * n);
+    for (float& v : xyz) v = u(random);
+  }
+  void step(float jump) {
+    std::uniform_real_distribution<float> u(-jump, jump);
+    for (float& v : xyz) v += u(random);
+  }
+};
+
+Read static_list(Engine& engine, const raycut::DeviceArray& x, const raycut::Box& box, float cutoff,
+                 std::size_t capacity) {
+  engine.build(x.view(), cutoff, box);
+  return run_static(engine, capacity, {}, true);
+}
+
+// A reused plan lists what a fresh build lists, step after step, periodic and partially
+// periodic, while the particles move (and leave the cube: unwrapped); its exact list too.
+TEST(ReusedPlans, ListTheFreshPairsStepAfterStep) {
+  if (const std::string why = unavailable("grid"); !why.empty()) GTEST_SKIP() << why;
+  const float cutoff = 1.0f;
+  for (const int periodic : {3, 2}) {
+    Liquid liquid(3000, 9.0, periodic);
+    Engine fresh("grid"), reused("grid");
+    reused.set_reuse_plan(true);
+    for (int step = 0; step < 6; ++step) {
+      const raycut::DeviceArray x(liquid.xyz);
+      const Read want = static_list(fresh, x, liquid.box, cutoff, 200000);
+      const Read got = static_list(reused, x, liquid.box, cutoff, 200000);
+      const std::string what =
+          std::to_string(periodic) + " periodic axes, step " + std::to_string(step);
+      ASSERT_GT(want.count, 10000) << what;
+      ASSERT_EQ(got.count, want.count) << what;
+      EXPECT_EQ(pair_set(got), pair_set(want)) << what;
+      EXPECT_EQ(pair_set(exact(reused, {}, true)), pair_set(want)) << what << ", exact list";
+      liquid.step(0.05f);
+    }
+  }
+}
+
+// A plan that no longer fits is reported, never used: more images than it has room for (every
+// particle moved to a face), or a particle outside its grid (an open axis), give the count
+// count_plan_outgrown; once that count has been read, the next build plans afresh. A list that
+// waits (the exact one) builds afresh at once. A NaN gives count_non_finite_position, and the
+// next build names it.
+TEST(ReusedPlans, OutgrownIsReportedThenPlannedAfresh) {
+  if (const std::string why = unavailable("grid"); !why.empty()) GTEST_SKIP() << why;
+  const float cutoff = 1.0f;
+  Liquid liquid(2000, 10.0, 2);
+  for (std::size_t p = 0; p < liquid.xyz.size(); p += 3)  // away from the faces: few images
+    for (int a = 0; a < 2; ++a) liquid.xyz[p + a] = 2.0f + 0.6f * liquid.xyz[p + a];
+  Engine fresh("grid"), reused("grid");
+  reused.set_reuse_plan(true);
+  const raycut::DeviceArray start(liquid.xyz);
+  ASSERT_GT(static_list(reused, start, liquid.box, cutoff, 100000).count, 0);
+
+  std::vector<float> at_faces = liquid.xyz;  // x near 0: every particle has an image
+  for (std::size_t p = 0; p < at_faces.size(); p += 3) at_faces[p] = 0.1f * at_faces[p];
+  std::vector<float> outside = liquid.xyz;  // the open axis stretched twice as far
+  for (std::size_t p = 0; p < outside.size(); p += 3) outside[p + 2] *= 2.0f;
+  for (const auto* moved : {&at_faces, &outside}) {
+    const raycut::DeviceArray x(*moved);
+    const Read want = static_list(fresh, x, liquid.box, cutoff, 1000000);
+    ASSERT_GT(want.count, 0);
+    EXPECT_EQ(static_list(reused, x, liquid.box, cutoff, 1000000).count,
+              raycut::count_plan_outgrown);
+    const Read again = static_list(reused, x, liquid.box, cutoff, 1000000);  // planned afresh
+    ASSERT_EQ(again.count, want.count);
+    EXPECT_EQ(pair_set(again), pair_set(want));
+    // A plan made for the start, then the moved positions: the exact list builds afresh.
+    Engine waits("grid");
+    waits.set_reuse_plan(true);
+    ASSERT_GT(static_list(waits, start, liquid.box, cutoff, 1000000).count, 0);
+    waits.build(x.view(), cutoff, liquid.box);
+    EXPECT_EQ(pair_set(exact(waits, {}, true)), pair_set(want));
+  }
+
+  std::vector<float> bad = liquid.xyz;
+  bad[3 * 5 + 1] = std::numeric_limits<float>::quiet_NaN();
+  ASSERT_GT(static_list(reused, start, liquid.box, cutoff, 1000000).count, 0);
+  const raycut::DeviceArray x(bad);
+  EXPECT_EQ(static_list(reused, x, liquid.box, cutoff, 1000000).count,
+            raycut::count_non_finite_position);
+  try {
+    reused.build(x.view(), cutoff, liquid.box);
+    ADD_FAILURE() << "a NaN coordinate was taken";
+  } catch (const raycut::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("particle index 5"), std::string::npos) << e.what();
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(Methods, StaticLists, ::testing::ValuesIn(every_method()),

@@ -320,6 +320,20 @@ class Engine {
   void set_timed(bool timed) { timed_ = timed; }
   bool timed() const { return timed_; }
 
+  // Whether a build with Systems (periodic boxes, batches) reuses the sizes of the previous one
+  // (off by default). On a GPU method that can (the grid) with device positions, a build of the
+  // same systems, particle count and cutoff then reads nothing back: it takes the previous
+  // build's room for periodic images, its float band and its grid, and the device checks that
+  // they still fit. A static-capacity list of a build that no longer fits gets the count
+  // count_plan_outgrown (raycut/static_pairs.hpp); every other result (lists, padded lists,
+  // kernels, functors) waits for the check first and, if the plan no longer fits, builds again
+  // from the same positions with a fresh plan, so the positions must stay valid until then. A
+  // build plans afresh when the previous plan was found not to fit (as soon as the host has
+  // seen it), and the sizes it records have room to spare (about 1/8 more images, a grid box
+  // wider by half the cutoff).
+  void set_reuse_plan(bool reuse) { reuse_plan_ = reuse; }
+  bool reuse_plan() const { return reuse_plan_; }
+
   // Validates (finite coordinates, cutoff finite and within the supported range) and builds
   // the method's structure. Throws Error with the first bad index or the bad value, before any
   // device work.
@@ -409,6 +423,10 @@ class Engine {
   template <class F>
   void with_positions_in_method_space(const PositionsView& positions, F&& f);
   detail::Method& impl(const char* call) const;
+  // After a build that reused its plan: waits for the device's check and, if the plan no
+  // longer fits, builds again from the same positions with a fresh plan. What every result but
+  // a static-capacity list calls first.
+  void settle_reused_plan();
 
   std::string method_;
   std::unique_ptr<detail::Method> impl_;
@@ -429,6 +447,11 @@ class Engine {
   bool built_ = false;
   bool has_run_ = false;
   bool timed_ = true;
+  bool reuse_plan_ = false;
+  // The last build reused its plan: its positions (and queries), for settle_reused_plan().
+  bool reused_ = false;
+  PositionsView reused_positions_;
+  PositionsView reused_queries_;
   Timings timings_;
 };
 

@@ -37,5 +37,10 @@ inline constexpr std::int64_t count_batch_out_of_range = -4;  // a system withou
 // (the brute force over them would run for hours; the Engine's cell lists take such boxes).
 inline constexpr std::int64_t count_too_many_images = -5;
 inline constexpr double max_images_per_pair = 16777216.0;  // 2^24
+// An engine that reuses its previous build's plan (Engine::set_reuse_plan) found on the device
+// that it no longer fits these positions (more periodic images than planned, a point outside the
+// planned grid, a wider float band, or a bad coordinate): the pairs are not valid. Once this
+// count has been read, the next build of the same engine plans afresh (and names any bad input).
+inline constexpr std::int64_t count_plan_outgrown = -6;
 
 }  // namespace raycut

@@ -863,13 +863,24 @@ _BAD_COUNT = {
 }
 
 
+# The count of a static list whose engine reused its last plan, which no longer fits
+# (raycut/static_pairs.hpp, count_plan_outgrown): the next call plans afresh.
+_PLAN_OUTGROWN = -6
+
+
 def check_pair_count(count: Any, max_pairs: int) -> int:
     """The pair count of a static-capacity list (``torch.ops.raycut.neighbor_list(...,
     max_pairs=K)``'s ``count``), checked: returns it when the list is complete (0 <= count <=
     max_pairs), raises ``CapacityError`` when it was cut (count > max_pairs: that many pairs
-    exist) and ``ValueError`` naming the bad input for a negative count. Reading a CUDA count
+    exist) or when the grid planned at an earlier call no longer fits (count -6: call again,
+    the next call plans afresh), and ``ValueError`` naming the bad input for another negative
+    count. Reading a CUDA count
     waits for the GPU: call this where the host may wait, not in a captured or compiled step."""
     found = int(count)
+    if found == _PLAN_OUTGROWN:
+        raise CapacityError("the grid planned at the previous call no longer fits these "
+                            "positions (more periodic images or a wider box): call again, the "
+                            "next call plans afresh")
     if found < 0:
         raise ValueError(f"bad input to the pair list (count {found}): "
                          f"{_BAD_COUNT.get(found, 'unknown code')}")

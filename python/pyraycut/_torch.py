@@ -24,7 +24,7 @@ import torch
 from . import _arrays
 from . import _raycut
 from . import _systems
-from . import check_pair_count
+from . import _PLAN_OUTGROWN, check_pair_count
 
 LIBRARY = _arrays.built_library("_torch_ops", "raycut's PyTorch operators are", "torch",
                                 "RAYCUT_BUILD_TORCH")
@@ -199,13 +199,21 @@ def _on(index: Optional[torch.Tensor], like: torch.Tensor, needed: bool) -> Opti
     return index.to(like.device) if index is not None and needed else index
 
 
-def _check_capacity(count: torch.Tensor, max_pairs: Optional[int], letters: str) -> None:
-    """In eager mode, a list cut short by max_pairs raises, unless the caller asked for the count
-    ("c") and so checks it where it may wait: on CUDA reading it waits for the GPU, which static
-    capacity is there to avoid. Compiled code reads ``count`` itself."""
+def _checked_call(call: Any, max_pairs: Optional[int], letters: str) -> Any:
+    """The operator's (i, j, S, count). In eager mode, a list cut short by max_pairs raises,
+    unless the caller asked for the count ("c") and so checks it where it may wait: on CUDA
+    reading it waits for the GPU, which static capacity is there to avoid. Compiled code reads
+    ``count`` itself. A count that says the operator's reused plan no longer fits is followed by
+    one more call, which plans afresh (the count read back is what tells the engine)."""
+    out = call()
     if max_pairs is None or "c" in letters or torch.compiler.is_compiling():
-        return
-    check_pair_count(count, max_pairs)
+        return out
+    found = int(out[3])
+    if found == _PLAN_OUTGROWN:
+        out = call()
+        found = int(out[3])
+    check_pair_count(found, max_pairs)
+    return out
 
 
 def _padded(x: torch.Tensor) -> torch.Tensor:
@@ -260,10 +268,11 @@ def neighbor_list(letters: str, positions: torch.Tensor, cutoff: float, cell: An
                                        _small_systems(positions, c, pbc))
     b = _index(batch, "batch", positions.device if on_device else None)
     vectors_batch = _on(b, positions, c is not None and ("d" in letters or "D" in letters))
-    i, j, shifts, count = torch.ops.raycut.neighbor_list(
-        positions.detach(), float(cutoff), None if c is None else c.detach(),
-        _pbc(pbc, c, positions, on_device), b, bool(half), max_pairs)
-    _check_capacity(count, max_pairs, letters)
+    flags = _pbc(pbc, c, positions, on_device)
+    i, j, shifts, count = _checked_call(
+        lambda: torch.ops.raycut.neighbor_list(positions.detach(), float(cutoff),
+                                               None if c is None else c.detach(), flags, b,
+                                               bool(half), max_pairs), max_pairs, letters)
     return _quantities(
         letters, i, j, shifts, count,
         lambda: _vectors(positions, positions, i, j, shifts, c, vectors_batch,
@@ -284,11 +293,12 @@ def radius(letters: str, points: torch.Tensor, queries: Any, cutoff: float, cell
     device = points.device if on_device else None
     bq = _index(batch_queries, "batch_queries", device)
     vectors_batch = _on(bq, points, c is not None and ("d" in letters or "D" in letters))
-    i, j, shifts, count = torch.ops.raycut.radius(
-        points.detach(), queries.detach().to(points.dtype), float(cutoff),
-        None if c is None else c.detach(), _pbc(pbc, c, points, on_device),
-        _index(batch_points, "batch_points", device), bq, max_pairs)
-    _check_capacity(count, max_pairs, letters)
+    flags = _pbc(pbc, c, points, on_device)
+    bp = _index(batch_points, "batch_points", device)
+    i, j, shifts, count = _checked_call(
+        lambda: torch.ops.raycut.radius(points.detach(), queries.detach().to(points.dtype),
+                                        float(cutoff), None if c is None else c.detach(), flags,
+                                        bp, bq, max_pairs), max_pairs, letters)
     return _quantities(
         letters, i, j, shifts, count,
         lambda: _vectors(points, queries.to(points.dtype), i, j, shifts, c, vectors_batch,

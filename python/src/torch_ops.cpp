@@ -244,8 +244,14 @@ raycut::Systems systems_of(std::vector<raycut::Box> boxes, const at::Tensor& ind
 // raycut's stream-ordered pool, so that a copy of the last call's pairs still queued on another
 // stream never reads a refilled buffer.
 struct Work {
-  // Untimed: timing a GPU build waits for it, and an operator call never reads the times.
-  explicit Work(const char* method) : engine(method) { engine.set_timed(false); }
+  // Untimed: timing a GPU build waits for it, and an operator call never reads the times. Its
+  // builds reuse the last plan (on CUDA, a build reads nothing back while the plan fits; a
+  // static list reports one that no longer does as count_plan_outgrown), and every call's
+  // positions outlive the call's own results.
+  explicit Work(const char* method) : engine(method) {
+    engine.set_timed(false);
+    engine.set_reuse_plan(true);
+  }
   raycut::Engine engine;
 
   // On CUDA, the last call's list again while the stream is the same (the copies out of it were

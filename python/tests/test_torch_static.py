@@ -178,6 +178,45 @@ def test_bad_data_is_a_negative_count_not_a_raise():
     assert int(count) == -4
 
 
+def pair_set(i, j, s, count):
+    found = int(count)
+    rows = torch.cat([i[:found, None], j[:found, None], s[:found].long()], 1).cpu().numpy()
+    return set(map(tuple, rows.tolist()))
+
+
+@cuda
+def test_the_engine_reuses_its_plan_and_says_when_it_no_longer_fits():
+    """Above the small systems the operator's grid reuses the last call's plan (nothing read
+    back): the same pairs as the CPU operator call after call; a plan that no longer fits (every
+    particle moved next to a face: far more periodic images) gives the count -6, which
+    check_pair_count raises as CapacityError, and the next call plans afresh; without "c" the
+    call itself calls once more."""
+    n, cutoff = 6000, 2.5
+    side = (n / 0.8442) ** (1 / 3)
+    x = torch.as_tensor(rng(9).random((n, 3)) * side, dtype=torch.float32)
+    cell = side * torch.eye(3)
+    crowded = x.clone()
+    crowded[:, 0] *= 0.1  # every particle within the cutoff of the face x = 0
+    for step, host in enumerate((x, x + 0.05, crowded, crowded + 0.05, x)):
+        want = pair_set(*torch.ops.raycut.neighbor_list(host, cutoff, cell, None, None, False,
+                                                        4_000_000))
+        on = host.cuda()
+        out = torch.ops.raycut.neighbor_list(on, cutoff, cell, None, None, False, 4_000_000)
+        if step in (2, 4):  # the plan of the step before does not fit
+            assert int(out[3]) == -6, step
+            with pytest.raises(pyraycut.CapacityError, match="call again"):
+                pyraycut.check_pair_count(out[3], 4_000_000)
+            out = torch.ops.raycut.neighbor_list(on, cutoff, cell, None, None, False, 4_000_000)
+        assert pair_set(*out) == want, step
+    # Without "c": the wrapper reads the count, and calls once more for a plan that no longer
+    # fits.
+    i, j, s = pyraycut.neighbor_list("ijS", crowded.cuda(), cutoff, cell=cell, pbc=True,
+                                     max_pairs=4_000_000)
+    want = pair_set(*torch.ops.raycut.neighbor_list(crowded, cutoff, cell, None, None, False,
+                                                    4_000_000))
+    assert pair_set(i, j, s, int((i < n).sum())) == want
+
+
 @cuda
 def test_no_host_synchronisation():
     case = batched()

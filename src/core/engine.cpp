@@ -164,6 +164,7 @@ void Engine::build(PositionsView positions, float cutoff) {
   float64_ = false;
   built_ = false;
   has_run_ = false;
+  reused_ = false;
   size_ = sources_ = positions.size;
   cutoff_ = cutoff;
   systems_ = {};
@@ -257,8 +258,10 @@ void Engine::build_points(PositionsView positions, float cutoff, const Systems& 
   require_build_memory(m, method_,
                        positions.size + (systems.has_queries() ? systems.queries.size : 0));
   // A step loop builds the same systems again: their plan (validation, frames) is kept.
+  bool same_plan = true;
   if (!plan_ || plan_queries_ != systems.has_queries() || !same_layout(systems, plan_key_) ||
       positions.size != plan_sources_ || cutoff != plan_cutoff_) {
+    same_plan = false;
     plan_.reset();
     plan_ = std::make_shared<const detail::ImagePlan>(
         detail::plan_images(systems, positions.size, cutoff));
@@ -295,13 +298,40 @@ void Engine::build_points(PositionsView positions, float cutoff, const Systems& 
         }
       }
       images_->set_float64_sources(float64);
-      images_->expand(plan, sources, queries, stream_);
-      m.build_points(images_->points(), cutoff);
+      // Engine::set_reuse_plan: device positions of a method that can, float32.
+      const bool may_reuse = reuse_plan_ && m.reuses_plans() && float64 == nullptr &&
+                             positions.space == MemorySpace::device;
+      reused_ = may_reuse && same_plan && images_->recorded() &&
+                !images_->reused_plan_outgrown(/*wait=*/false);
+      if (reused_) {
+        images_->expand_reusing(plan, sources, queries, stream_);
+        m.build_points(images_->points(), cutoff);
+        images_->finish_reusing(stream_);
+        reused_positions_ = positions;
+        reused_queries_ = systems.queries;
+      } else {
+        images_->drop_recording();
+        images_->set_recording(may_reuse);
+        images_->expand(plan, sources, queries, stream_);
+        m.build_points(images_->points(), cutoff);
+        float parking[3];
+        if (may_reuse && m.parking(parking)) images_->set_parking(parking);
+      }
       // Within the positions' scope: a device copy of host positions is alive until it ends.
       end_build(m, timed_, start, timings_);
     });
   });
   built_ = true;
+}
+
+void Engine::settle_reused_plan() {
+  if (!reused_) return;
+  reused_ = false;
+  if (!images_->reused_plan_outgrown(/*wait=*/true)) return;
+  Systems systems = systems_;
+  systems.queries = reused_queries_;
+  images_->drop_recording();  // planned afresh, and recorded again
+  build_points(reused_positions_, cutoff_, systems, nullptr);
 }
 
 void Engine::update(PositionsView positions) {
@@ -380,6 +410,7 @@ void Engine::run(Kernel kernel, const KernelOptions& options) {
   validate_kernel_range(kernel, options, cutoff_);
   validate_kernel_inputs(kernel, options, queries_);
   if (size_ > 0) {
+    settle_reused_plan();
     const auto start = Clock::now();
     m.compute(kernel, options);
     m.synchronize();  // run() is always timed: results() reads what it wrote
@@ -432,6 +463,7 @@ void Engine::neighbours(NeighbourListBuffer& list, const ListOptions& options) {
     list.storage_->set_empty(options);
     return;
   }
+  settle_reused_plan();
   m.neighbours(*list.storage_, options);
   m.synchronize();
 }
@@ -505,6 +537,7 @@ PaddedReport Engine::padded_neighbours(PaddedNeighbourBuffer& list, const Padded
       "; no row can hold more than " + std::to_string(candidates) + " neighbours here (" +
       std::to_string(sources_) + " particles" + (images_ ? " and their images" : "") +
       "), so K = " + std::to_string(std::max<std::uint64_t>(candidates, 1)) + " is always enough";
+  settle_reused_plan();
   try {
     if (m.space() == MemorySpace::host) require_host_memory(bytes, what);
     if (options.nearest)
@@ -525,6 +558,9 @@ detail::PairPass Engine::pair_pass() const {
   if (!built_)
     throw Error(ErrorCode::invalid_argument, "for_each_pair() called before Engine::build()");
   if (size_ == 0) return {};
+  // A functor's pass waits for the check of a reused plan (it may build again: pair_pass() is
+  // const to its callers, the rebuild is not a change they see).
+  const_cast<Engine*>(this)->settle_reused_plan();
   detail::PairPass pass = m.pair_pass();
   if (pass.kind == detail::PassKind::none)
     throw Error(ErrorCode::unsupported,

@@ -254,6 +254,10 @@ double band_reach(const ExactImages& exact) {
   return std::sqrt(static_cast<double>(exact.float_out)) * (1 + 1e-6);
 }
 
+void ImagePoints::expand_reusing(const ImagePlan&, const float*, const float*, void*) {
+  throw Error(ErrorCode::internal, "this expansion records no plan to reuse");
+}
+
 std::string too_many_points(std::uint64_t points, std::size_t targets) {
   if (points < not_a_source) return {};
   return "periodic images: " + std::to_string(points) + " points for " + std::to_string(targets) +

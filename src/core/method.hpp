@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <memory>
 #include <string>
@@ -32,6 +33,16 @@ struct Points {
   ImageTables images;
   const std::uint32_t* system = nullptr;  // per point; null: one system
   std::uint32_t systems = 1;
+  // Engine::set_reuse_plan. `record`: the later builds will reuse this one's plan, sized for
+  // `planned_size` points, with a parking place (Method::parking) for the slots they leave
+  // empty. `misfit`: this build reuses the last recorded plan; its points past the real ones
+  // are parked, and what no longer fits is reported in this device word (0: it fits; else a
+  // StaticPairs count code), which the method's static lists report as their count.
+  struct PlanReuse {
+    bool record = false;
+    std::size_t planned_size = 0;
+    int* misfit = nullptr;
+  } reuse;
   // n plain particles: every point a target and its own source, one system.
   static Points plain(const float* xyz, std::size_t n) {
     Points p;
@@ -65,6 +76,10 @@ class Method {
   virtual std::string points_unsupported() const {
     return "its traversal has no images, batches or query points (docs/methods.md)";
   }
+  // Engine::set_reuse_plan: whether build_points() takes Points::reuse, and after a recording
+  // build, a point of its grid that no real point's search reaches (xyz; false: none).
+  virtual bool reuses_plans() const { return false; }
+  virtual bool parking(float[3]) const { return false; }
 
   // New positions of the same n particles. Returns true when the structure was refitted;
   // the default rebuilds.

@@ -165,11 +165,12 @@ std::uint64_t DeviceListStorage::scan_counts(cudaStream_t stream) {
 }
 
 namespace {
-__global__ void finish_static_pairs_kernel(const std::uint64_t* total, StaticPairs out) {
+__global__ void finish_static_pairs_kernel(const std::uint64_t* total, const int* misfit,
+                                           StaticPairs out) {
   const std::uint64_t count = total ? *total : 0;
   const std::uint64_t first = count < out.capacity ? count : out.capacity;
   const std::uint64_t start = blockIdx.x * std::uint64_t{blockDim.x} + threadIdx.x;
-  if (start == 0) *out.count = static_cast<std::int64_t>(count);
+  if (start == 0) *out.count = misfit && *misfit != 0 ? *misfit : static_cast<std::int64_t>(count);
   for (std::uint64_t e = first + start; e < out.capacity;
        e += std::uint64_t{gridDim.x} * blockDim.x) {
     out.i[e] = out.j[e] = out.pad_index;
@@ -179,12 +180,12 @@ __global__ void finish_static_pairs_kernel(const std::uint64_t* total, StaticPai
 }  // namespace
 
 void finish_static_pairs_on_device(const std::uint64_t* total, const StaticPairs& out,
-                                   cudaStream_t stream) {
+                                   const int* misfit, cudaStream_t stream) {
   constexpr unsigned threads = 256;
   const std::uint64_t wanted = (out.capacity + threads - 1) / threads;
   const auto blocks =
       static_cast<unsigned>(std::max<std::uint64_t>(1, std::min<std::uint64_t>(wanted, 4096)));
-  finish_static_pairs_kernel<<<blocks, threads, 0, stream>>>(total, out);
+  finish_static_pairs_kernel<<<blocks, threads, 0, stream>>>(total, misfit, out);
   RAYCUT_CUDA_CHECK_LAUNCH();
 }
 

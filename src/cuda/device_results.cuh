@@ -109,8 +109,10 @@ class DeviceListStorage final : public ListStorage {
 
 // A static-capacity list's end, queued on `stream`: the count from *total (device; null: 0),
 // then padding from it (or from the capacity) to the capacity.
+// `misfit` (or null): a nonzero value there is written as the count instead (a reused plan
+// that no longer fits, Engine::set_reuse_plan).
 void finish_static_pairs_on_device(const std::uint64_t* total, const StaticPairs& out,
-                                   cudaStream_t stream);
+                                   const int* misfit, cudaStream_t stream);
 
 class DevicePaddedStorage final : public PaddedStorage {
  public:
@@ -192,9 +194,9 @@ class GpuMethod : public Method {
                     nullptr, out.shifts,          out.i,   out.j};
       fill.capacity = out.capacity;
       run(fill);
-      finish_static_pairs_on_device(list.offsets_data() + n, out, stream_);
+      finish_static_pairs_on_device(list.offsets_data() + n, out, plan_misfit_, stream_);
     } else {
-      finish_static_pairs_on_device(nullptr, out, stream_);
+      finish_static_pairs_on_device(nullptr, out, nullptr, stream_);
     }
   }
   template <class Run>
@@ -215,6 +217,9 @@ class GpuMethod : public Method {
   }
 
   cudaStream_t stream_ = nullptr;
+  // A build that reused its plan (Points::reuse.misfit): what the device found no longer fits,
+  // reported as the count of static lists.
+  const int* plan_misfit_ = nullptr;
   DeviceResults results_;
   DeviceListStorage static_scratch_;
   EventTimer build_timer_, compute_timer_;

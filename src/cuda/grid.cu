@@ -50,12 +50,23 @@ class Grid final : public CudaPairMethod<Grid> {
     images_ = points.images;
     cutoff_squared_ = squared_cutoff(cutoff);
     build_timer_.start(stream_);
-    float lo[3], hi[3];
-    box_.compute(points.xyz, n, lo, hi, stream_);
-    // Points with images: cells as wide as the band's reach, so that every pair the exact
-    // decision may take is offered (the CPU cell list widens its cells the same way).
-    const float reach = points.images.exact ? search_reach(cutoff, *points.images.exact) : cutoff;
-    plan_ = plan_grid(policy_, GridInput{n, points.targets, points.systems}, lo, hi, reach);
+    plan_misfit_ = points.reuse.misfit;
+    if (points.reuse.misfit) {
+      // The recorded plan again (Engine::set_reuse_plan): its box checked on the device.
+      box_.check(points.xyz, n, planned_lo_, planned_hi_, points.reuse.misfit, stream_);
+    } else {
+      float lo[3], hi[3];
+      box_.compute(points.xyz, n, lo, hi, stream_);
+      // Points with images: cells as wide as the band's reach, so that every pair the exact
+      // decision may take is offered (the CPU cell list widens its cells the same way).
+      const float reach = points.images.exact ? search_reach(cutoff, *points.images.exact) : cutoff;
+      has_parking_ = points.reuse.record;
+      if (has_parking_) plan_room(lo, hi, reach);
+      plan_ = plan_grid(
+          policy_,
+          GridInput{has_parking_ ? points.reuse.planned_size : n, points.targets, points.systems},
+          lo, hi, reach);
+    }
     plan_.geometry.system = points.systems > 1 ? points.system : nullptr;
     tables_.build(points.xyz, static_cast<std::uint32_t>(n), plan_, stream_);
     if (points.targets < n)
@@ -63,6 +74,12 @@ class Grid final : public CudaPairMethod<Grid> {
     if (images_.active())  // the traversal indexes images by slot
       images_.deferred = tables_.slot_images(images_.image);
     build_timer_.stop(stream_);
+  }
+
+  bool reuses_plans() const override { return true; }
+  bool parking(float p[3]) const override {
+    for (int a = 0; a < 3; ++a) p[a] = parking_[a];
+    return has_parking_;
   }
 
   std::size_t size() const { return n_; }
@@ -90,6 +107,28 @@ class Grid final : public CudaPairMethod<Grid> {
   GridPlan plan_;
   BoundingBox box_;
   GridTables tables_;
+  // The plan that later builds reuse: its box, and the parking place of their spare slots.
+  float planned_lo_[3] = {0, 0, 0}, planned_hi_[3] = {0, 0, 0}, parking_[3] = {0, 0, 0};
+  bool has_parking_ = false;
+
+  // A box [lo, hi] that later builds reuse: half the reach wider on every side (and 2^-12 of
+  // its size, for the rounding of far coordinates), then longer in x by a gap of at least three
+  // reaches and one cell where the spare slots park: no real point's search reaches them, and
+  // few of its cells are visited.
+  void plan_room(float lo[3], float hi[3], float reach) {
+    for (int a = 0; a < 3; ++a) {
+      const float margin =
+          0.5f * reach + std::ldexp(std::max(std::fabs(lo[a]), std::fabs(hi[a])), -12);
+      lo[a] -= margin;
+      hi[a] += margin;
+    }
+    for (int a = 0; a < 3; ++a) planned_lo_[a] = lo[a], planned_hi_[a] = hi[a];
+    parking_[0] = hi[0] + 4 * reach;
+    parking_[1] = lo[1];
+    parking_[2] = lo[2];
+    hi[0] = parking_[0];
+    planned_hi_[0] = hi[0];
+  }
 };
 
 }  // namespace

@@ -4,6 +4,7 @@
 #include <thrust/iterator/transform_iterator.h>
 #include <cub/device/device_scan.cuh>
 
+#include <cmath>
 #include <cstring>
 #include <string>
 #include <vector>
@@ -12,6 +13,7 @@
 #include "cuda/device_buffer.cuh"
 #include "cuda/device_results.cuh"
 #include "raycut/detail/cuda/visit.cuh"
+#include "raycut/static_pairs.hpp"
 
 namespace raycut::detail::cuda {
 namespace {
@@ -167,22 +169,57 @@ __global__ void queries_kernel(Plan plan, const float* queries, Out out, Finding
   report_extent(extent, found);
 }
 
-// The images of each listed particle, at the places the scan of the counts gave them.
+// The images of each listed particle, at the places the scan of the counts gave them; image
+// slots from `slots` on are not written (a reused plan with too few: park_kernel reports it).
+// `listed_on_device`: the count of listed particles where the host has not read it (a reused
+// plan launches over every particle).
 template <class Real>
 __global__ void images_kernel(Plan plan, const Real* sources, const std::uint32_t* with_images,
-                              std::uint64_t listed, const std::uint64_t* image_offset, Out out) {
+                              std::uint64_t listed, const unsigned long long* listed_on_device,
+                              const std::uint64_t* image_offset, Out out, std::uint64_t slots) {
   const std::uint64_t k = blockIdx.x * std::uint64_t{block} + threadIdx.x;
-  if (k >= listed) return;
+  if (k >= (listed_on_device ? *listed_on_device : listed)) return;
   const std::uint64_t p = with_images[k];
   const std::uint32_t s = system_of(plan.sources, plan.systems, p);
   const ImageFrame& frame = plan.frames[s];
   const WrappedPoint w = wrap_point(frame, sources + 3 * p);
   const auto source = static_cast<std::uint32_t>(p);
-  std::uint64_t next = plan.first_image + image_offset[p];
+  std::uint64_t next = image_offset[p];
   for_each_image(frame, w, false, [&](const int n[3], const float position[3]) {
     const std::int32_t t[3] = {n[0] - w.shift[0], n[1] - w.shift[1], n[2] - w.shift[2]};
-    out.place(next++, position, source, s, t);
+    if (next < slots) out.place(plan.first_image + next, position, source, s, t);
+    ++next;
   });
+}
+
+// A reused plan (Engine::set_reuse_plan): its image slots, the float band's extent (float
+// bits) and its parking place; the device word that says what no longer fits.
+struct Reuse {
+  std::uint64_t slots = 0;
+  unsigned extent = 0;
+  float parking[3] = {0, 0, 0};
+  int* misfit = nullptr;
+};
+
+// After the images of a reused plan: the slots they left empty get the parking place (a point
+// no search reaches), and thread 0 writes the verdict, the first word of this build's misfit.
+__global__ void park_kernel(Plan plan, const std::uint64_t* images, const Findings* found,
+                            Reuse reuse, Out out) {
+  const std::uint64_t k = blockIdx.x * std::uint64_t{block} + threadIdx.x;
+  const std::uint64_t real = *images;
+  if (k == 0) {
+    int code = 0;
+    if (first_of(found->not_non_finite) != none)
+      code = static_cast<int>(count_non_finite_position);
+    else if (real > reuse.slots || found->extent > reuse.extent ||
+             first_of(found->not_shift) != none)
+      code = static_cast<int>(count_plan_outgrown);
+    *reuse.misfit = code;
+  }
+  if (k >= real && k < reuse.slots) {
+    const std::int32_t none_shifted[3] = {0, 0, 0};
+    out.place(plan.first_image + k, reuse.parking, 0, 0, none_shifted);
+  }
 }
 
 struct CountOrZero {
@@ -195,11 +232,35 @@ struct CountOrZero {
 
 class DeviceImagePoints final : public ImagePoints {
  public:
+  ~DeviceImagePoints() override {
+    if (misfit_seen_) cudaEventDestroy(misfit_seen_);
+  }
   MemorySpace space() const override { return MemorySpace::device; }
   void expand(const ImagePlan& plan, const float* sources, const float* queries,
-              void* stream) override;
+              void* stream) override {
+    expand_into(plan, sources, queries, static_cast<cudaStream_t>(stream), false);
+  }
+
+  void set_recording(bool on) override { recording_ = on; }
+  void set_parking(const float p[3]) override {
+    for (int c = 0; c < 3; ++c) reuse_.parking[c] = p[c];
+    parked_ = recorded_slots_;
+  }
+  bool recorded() const override { return parked_; }
+  void drop_recording() override {
+    parked_ = recorded_slots_ = false;
+    reuse_.slots = 0;
+  }
+  void expand_reusing(const ImagePlan& plan, const float* sources, const float* queries,
+                      void* stream) override {
+    expand_into(plan, sources, queries, static_cast<cudaStream_t>(stream), true);
+  }
+  void finish_reusing(void* stream) override;
+  bool reused_plan_outgrown(bool wait) override;
 
  private:
+  void expand_into(const ImagePlan& plan, const float* sources, const float* queries,
+                   cudaStream_t stream, bool reusing);
   Out reserve(std::uint64_t points, std::uint64_t keep, bool systems, cudaStream_t stream);
   DeviceBuffer<float> xyz_;
   DeviceBuffer<PointImage> image_;
@@ -219,6 +280,13 @@ class DeviceImagePoints final : public ImagePoints {
   std::vector<ImageFrame> uploaded_frames_;
   std::vector<std::uint64_t> uploaded_sources_, uploaded_queries_;
   bool origins_written_ = false;  // frames_ holds origins of an earlier expansion
+  // Engine::set_reuse_plan: the recorded sizes and parking place, the misfit word, and its copy
+  // on the host with the event after it.
+  bool recording_ = false, recorded_slots_ = false, parked_ = false, misfit_pending_ = false;
+  Reuse reuse_;
+  DeviceBuffer<int> misfit_;
+  MappedValue<int> misfit_host_;
+  cudaEvent_t misfit_seen_ = nullptr;
 };
 
 bool same_frames(const std::vector<ImageFrame>& a, const std::vector<ImageFrame>& b) {
@@ -249,9 +317,31 @@ Out DeviceImagePoints::reserve(std::uint64_t points, std::uint64_t keep, bool sy
   return {xyz_.data(), image_.data(), systems ? system_.data() : nullptr};
 }
 
-void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, const float* queries,
-                               void* stream_ptr) {
+void DeviceImagePoints::finish_reusing(void* stream_ptr) {
   const auto stream = static_cast<cudaStream_t>(stream_ptr);
+  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(misfit_host_.device(), misfit_.data(), sizeof(int),
+                                    cudaMemcpyDeviceToDevice, stream));
+  if (!misfit_seen_)
+    RAYCUT_CUDA_CHECK(cudaEventCreateWithFlags(&misfit_seen_, cudaEventDisableTiming));
+  RAYCUT_CUDA_CHECK(cudaEventRecord(misfit_seen_, stream));
+  misfit_pending_ = true;
+}
+
+bool DeviceImagePoints::reused_plan_outgrown(bool wait) {
+  if (!misfit_pending_) return false;
+  if (wait) {
+    RAYCUT_CUDA_CHECK(cudaEventSynchronize(misfit_seen_));
+  } else {
+    const cudaError_t status = cudaEventQuery(misfit_seen_);
+    if (status == cudaErrorNotReady) return false;  // not known yet: the device reports it
+    RAYCUT_CUDA_CHECK(status);
+  }
+  misfit_pending_ = false;
+  return misfit_host_.host() != 0;
+}
+
+void DeviceImagePoints::expand_into(const ImagePlan& plan, const float* sources,
+                                    const float* queries, cudaStream_t stream, bool reusing) {
   const std::uint32_t systems = plan.systems();
   const std::uint64_t n = plan.source_count(), targets = plan.target_count();
   const bool with_queries = plan.has_queries();
@@ -310,12 +400,13 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
   }
 
   // Every particle (and query) in its place and its images counted, the scan (the total lands
-  // at image_offset[n]), then the total and any bad point read back at once.
+  // at image_offset[n]), then the total and any bad point read back at once; a reused plan
+  // reads nothing back (its slots were reserved up front, and park_kernel judges).
   p.first_image = targets + (with_queries ? n : 0);
   if (std::string why = too_many_points(p.first_image, targets); !why.empty())
     throw Error(ErrorCode::invalid_argument, why);
   const bool batch = systems > 1;
-  Out out = reserve(p.first_image, 0, batch, stream);
+  Out out = reserve(p.first_image + (reusing ? reuse_.slots : 0), 0, batch, stream);
   found_.resize(1);
   RAYCUT_CUDA_CHECK(cudaMemsetAsync(found_.data(), 0, sizeof(Findings), stream));
   counts_.resize(std::max<std::uint64_t>(n, 1));
@@ -341,42 +432,81 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
   temp_.resize(std::max<std::size_t>(temp_bytes, 1));
   RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(temp_.data(), temp_bytes, input,
                                                   image_offset_.data(), n + 1, stream));
-  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(total_.device(), image_offset_.data() + n,
-                                    sizeof(std::uint64_t), cudaMemcpyDeviceToDevice, stream));
-  RAYCUT_CUDA_CHECK(cudaMemcpyAsync(found_host_.device(), found_.data(), sizeof(Findings),
-                                    cudaMemcpyDeviceToDevice, stream));
-  RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
-  const Findings found = found_host_.host();
-  const std::uint64_t non_finite = first_of(found.not_non_finite),
-                      shift = first_of(found.not_shift);
-  if (non_finite != none) {
-    float x[3];
-    RAYCUT_CUDA_CHECK(cudaMemcpy(x, sources + 3 * non_finite, sizeof x, cudaMemcpyDeviceToHost));
-    throw_non_finite(non_finite, x);
-  }
-  if (shift != none && shift >= n)
-    throw Error(ErrorCode::invalid_argument,
-                "query point " + std::to_string(shift - n) +
-                    " lies more than 2^31 boxes away: its image shift leaves the int32 range");
-  if (shift != none) {
-    float x[3];
-    RAYCUT_CUDA_CHECK(cudaMemcpy(x, sources + 3 * shift, sizeof x, cudaMemcpyDeviceToHost));
-    throw Error(ErrorCode::invalid_argument,
-                "particle " + std::to_string(shift) + " at (" + std::to_string(x[0]) + ", " +
-                    std::to_string(x[1]) + ", " + std::to_string(x[2]) +
-                    ") lies more than 2^31 boxes away: its image shift leaves the int32 range");
-  }
-  const std::uint64_t points = p.first_image + total_.host();
-  if (std::string why = too_many_points(points, targets); !why.empty())
-    throw Error(ErrorCode::invalid_argument, why);
-
-  out = reserve(points, p.first_image, batch, stream);
-  if (found.with_images > 0) {
-    on_sources([&](const auto* x) {
-      images_kernel<<<blocks_for(found.with_images, block), block, 0, stream>>>(
-          p, x, with_images_.data(), found.with_images, image_offset_.data(), out);
-    });
+  std::uint64_t points = 0;
+  float extent = 0;
+  Points::PlanReuse reused;
+  if (reusing) {
+    misfit_.resize(1);
+    if (n > 0) {
+      on_sources([&](const auto* x) {
+        images_kernel<<<blocks_for(n, block), block, 0, stream>>>(
+            p, x, with_images_.data(), 0, &found_.data()->with_images, image_offset_.data(), out,
+            reuse_.slots);
+      });
+      RAYCUT_CUDA_CHECK_LAUNCH();
+    }
+    Reuse r = reuse_;
+    r.misfit = misfit_.data();
+    park_kernel<<<blocks_for(std::max<std::uint64_t>(reuse_.slots, 1), block), block, 0, stream>>>(
+        p, image_offset_.data() + n, found_.data(), r, out);
     RAYCUT_CUDA_CHECK_LAUNCH();
+    points = p.first_image + reuse_.slots;
+    std::memcpy(&extent, &reuse_.extent, sizeof extent);
+    reused.misfit = misfit_.data();
+  } else {
+    RAYCUT_CUDA_CHECK(cudaMemcpyAsync(total_.device(), image_offset_.data() + n,
+                                      sizeof(std::uint64_t), cudaMemcpyDeviceToDevice, stream));
+    RAYCUT_CUDA_CHECK(cudaMemcpyAsync(found_host_.device(), found_.data(), sizeof(Findings),
+                                      cudaMemcpyDeviceToDevice, stream));
+    RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
+    const Findings found = found_host_.host();
+    const std::uint64_t non_finite = first_of(found.not_non_finite),
+                        shift = first_of(found.not_shift);
+    if (non_finite != none) {
+      float x[3];
+      RAYCUT_CUDA_CHECK(cudaMemcpy(x, sources + 3 * non_finite, sizeof x, cudaMemcpyDeviceToHost));
+      throw_non_finite(non_finite, x);
+    }
+    if (shift != none && shift >= n)
+      throw Error(ErrorCode::invalid_argument,
+                  "query point " + std::to_string(shift - n) +
+                      " lies more than 2^31 boxes away: its image shift leaves the int32 range");
+    if (shift != none) {
+      float x[3];
+      RAYCUT_CUDA_CHECK(cudaMemcpy(x, sources + 3 * shift, sizeof x, cudaMemcpyDeviceToHost));
+      throw Error(ErrorCode::invalid_argument,
+                  "particle " + std::to_string(shift) + " at (" + std::to_string(x[0]) + ", " +
+                      std::to_string(x[1]) + ", " + std::to_string(x[2]) +
+                      ") lies more than 2^31 boxes away: its image shift leaves the int32 range");
+    }
+    const std::uint64_t images = total_.host();
+    points = p.first_image + images;
+    if (std::string why = too_many_points(points, targets); !why.empty())
+      throw Error(ErrorCode::invalid_argument, why);
+
+    out = reserve(points, p.first_image, batch, stream);
+    if (found.with_images > 0) {
+      on_sources([&](const auto* x) {
+        images_kernel<<<blocks_for(found.with_images, block), block, 0, stream>>>(
+            p, x, with_images_.data(), found.with_images, nullptr, image_offset_.data(), out,
+            images);
+      });
+      RAYCUT_CUDA_CHECK_LAUNCH();
+    }
+    std::memcpy(&extent, &found.extent, sizeof extent);
+    parked_ = recorded_slots_ = false;
+    if (recording_ && !float64) {
+      // What the next builds reuse: 1/8 more image slots (a step loop's particles cross into
+      // and out of the faces' reach), the extent a 1/16 wider (the band with it).
+      reuse_.slots = images + images / 8 + 64;
+      extent = std::nextafter(extent * 1.0625f, INFINITY);
+      std::memcpy(&reuse_.extent, &extent, sizeof extent);
+      recorded_slots_ = true;
+      reused.record = true;
+      reused.planned_size = p.first_image + reuse_.slots;
+      if (std::string why = too_many_points(reused.planned_size, targets); !why.empty())
+        throw Error(ErrorCode::invalid_argument, why);
+    }
   }
 
   // The caller's positions, kept for the band's decisions (ExactImages): the float64 ones when
@@ -393,8 +523,6 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
       RAYCUT_CUDA_CHECK(cudaMemcpyAsync(queries_.data(), queries, 3 * targets * sizeof(float),
                                         cudaMemcpyDeviceToDevice, stream));
   }
-  float extent;
-  std::memcpy(&extent, &found.extent, sizeof extent);
   exact_ = {};
   exact_.sources = float64 ? nullptr : sources_.data();
   exact_.sources64 = float64;
@@ -403,7 +531,8 @@ void DeviceImagePoints::expand(const ImagePlan& plan, const float* sources, cons
   exact_.system = batch ? system_.data() : nullptr;
   exact_.cells = cells_.data();
   set_float_band(exact_, plan.cutoff, rounding_bound(extent));
-  publish(plan, xyz_.data(), points, image_.data(), system_.data(), &exact_, counts_.data());
+  publish(plan, xyz_.data(), points, image_.data(), system_.data(), &exact_, counts_.data(),
+          reused);
 }
 
 }  // namespace
