@@ -159,4 +159,56 @@ void index_offsets(const void* index, bool wide, std::size_t n, std::size_t syst
   check(cudaStreamSynchronize(s), "index_offsets");
 }
 
+namespace {
+__global__ void compare_words(const std::uint32_t* a, const std::uint32_t* b, std::size_t words,
+                              std::int64_t* count, std::int64_t code, int* raised) {
+  bool differs = false;
+  for (std::size_t w = threadIdx.x; w < words; w += blockDim.x) differs = differs || a[w] != b[w];
+  if (__syncthreads_or(differs) && threadIdx.x == 0) {
+    *count = code;
+    *raised = 1;
+  }
+}
+}  // namespace
+
+ChangeFlag::ChangeFlag() {
+  check(cudaHostAlloc(reinterpret_cast<void**>(&host_), sizeof(int), cudaHostAllocMapped),
+        "cudaHostAlloc");
+  *host_ = 0;
+  check(cudaHostGetDevicePointer(reinterpret_cast<void**>(&device_), host_, 0),
+        "cudaHostGetDevicePointer");
+}
+
+ChangeFlag::~ChangeFlag() {
+  if (done_) cudaEventDestroy(static_cast<cudaEvent_t>(done_));
+  cudaFreeHost(host_);
+}
+
+void ChangeFlag::compare(const void* a, const void* b, std::size_t bytes, std::int64_t* count,
+                         std::int64_t code, void* stream) {
+  const auto s = static_cast<cudaStream_t>(stream);
+  compare_words<<<1, 128, 0, s>>>(static_cast<const std::uint32_t*>(a),
+                                  static_cast<const std::uint32_t*>(b), bytes / 4, count, code,
+                                  device_);
+  check(cudaGetLastError(), "compare_words launch");
+  if (!done_) {
+    cudaEvent_t event = nullptr;
+    check(cudaEventCreateWithFlags(&event, cudaEventDisableTiming), "cudaEventCreate");
+    done_ = event;
+  }
+  check(cudaEventRecord(static_cast<cudaEvent_t>(done_), s), "cudaEventRecord");
+  pending_ = true;
+}
+
+bool ChangeFlag::raised() {
+  if (!pending_) return false;
+  const cudaError_t status = cudaEventQuery(static_cast<cudaEvent_t>(done_));
+  if (status == cudaErrorNotReady) return false;
+  check(status, "cudaEventQuery");
+  pending_ = false;
+  const bool was = *static_cast<volatile int*>(host_) != 0;
+  *host_ = 0;
+  return was;
+}
+
 }  // namespace raycut_py

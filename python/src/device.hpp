@@ -32,4 +32,25 @@ IndexSummary summarise_index(const void* index, bool wide, std::size_t n, void* 
 void index_offsets(const void* index, bool wide, std::size_t n, std::size_t systems,
                    std::uint64_t* host_offsets, void* stream);
 
+// A flag the device raises and the host reads without waiting: compare() queues a comparison of
+// two device arrays of `bytes` (a multiple of 4) and, where they differ, writes `code` to
+// *count (an int64 in device memory) and raises the flag; raised() says whether a finished
+// comparison found a difference (one not yet finished counts as none) and lowers it.
+class ChangeFlag {
+ public:
+  ChangeFlag();
+  ~ChangeFlag();
+  ChangeFlag(const ChangeFlag&) = delete;
+  ChangeFlag& operator=(const ChangeFlag&) = delete;
+  void compare(const void* a, const void* b, std::size_t bytes, std::int64_t* count,
+               std::int64_t code, void* stream);
+  bool raised();
+
+ private:
+  int* host_ = nullptr;    // mapped pinned memory
+  int* device_ = nullptr;  // the same, as the device writes it
+  void* done_ = nullptr;   // the event after the last comparison
+  bool pending_ = false;
+};
+
 }  // namespace raycut_py

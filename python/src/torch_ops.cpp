@@ -25,6 +25,7 @@
 #include <c10/cuda/CUDAGuard.h>
 #include <c10/cuda/CUDAStream.h>
 
+#include "device.hpp"
 #include "raycut/context.hpp"
 #include "raycut/device_pairs.hpp"
 #endif
@@ -258,6 +259,19 @@ struct Work {
   // queued there before the next fill): no allocation per call, and no free, which waits for the
   // whole device. It keeps the largest list's memory until the thread ends, as the engine keeps
   // its own.
+#ifdef RAYCUT_TORCH_CUDA
+  // A static list's device cell, so that a call need not copy it to the host while it is the
+  // one the last copy was made from: the boxes of that copy are taken again, and the device
+  // compares the cell with a copy of it kept on the device (one kernel, after the list); a
+  // different cell makes the count count_plan_outgrown and the next call copies the cell again.
+  struct CellWatch {
+    at::Tensor seen;      // the cell the boxes were made from, on the device
+    at::Tensor seen_pbc;  // and its pbc (host), or undefined
+    std::vector<raycut::Box> boxes;
+    raycut_py::ChangeFlag changed;
+  } cell_watch;
+#endif
+
   std::shared_ptr<raycut::NeighbourListBuffer> device_list() {
     if (!list_ || list_stream_ != engine.stream()) {
       list_ = std::make_shared<raycut::NeighbourListBuffer>();
@@ -575,6 +589,25 @@ Pairs exact_small_systems_pairs(const at::Tensor& positions, double cutoff,
 }
 #endif
 
+#ifdef RAYCUT_TORCH_CUDA
+// The boxes of a device cell (and host pbc) for a static list: those of the watch's last copy
+// while no comparison has found the cell changed, else a new copy (one wait).
+std::vector<raycut::Box> watched_boxes(Work::CellWatch& watch, const at::Tensor& cell,
+                                       const std::optional<at::Tensor>& pbc) {
+  const bool same_pbc = pbc ? watch.seen_pbc.defined() && watch.seen_pbc.sizes() == pbc->sizes() &&
+                                  at::equal(watch.seen_pbc, *pbc)
+                            : !watch.seen_pbc.defined();
+  if (!watch.changed.raised() && watch.seen.defined() && watch.seen.sizes() == cell.sizes() &&
+      watch.seen.scalar_type() == cell.scalar_type() && watch.seen.device() == cell.device() &&
+      same_pbc)
+    return watch.boxes;
+  watch.boxes = boxes_of(cell, pbc);
+  watch.seen = cell.contiguous().clone();
+  watch.seen_pbc = pbc ? pbc->clone() : at::Tensor();
+  return watch.boxes;
+}
+#endif
+
 Pairs neighbor_list(const at::Tensor& positions, double cutoff,
                     const std::optional<at::Tensor>& cell, const std::optional<at::Tensor>& pbc,
                     const std::optional<at::Tensor>& batch, bool half,
@@ -589,6 +622,21 @@ Pairs neighbor_list(const at::Tensor& positions, double cutoff,
 #endif
   const at::Tensor x = search_points(positions, "positions");
   const std::int64_t n = x.size(0);
+#ifdef RAYCUT_TORCH_CUDA
+  if (max_pairs && cell && cell->is_cuda() && (!pbc || !pbc->is_cuda())) {
+    Work::CellWatch& watch = work_for(positions.device()).cell_watch;
+    Pairs out = run(x, cutoff,
+                    systems_of(watched_boxes(watch, *cell, pbc), system_index(batch, n, "batch"), n,
+                               at::Tensor(), 0, /*with_queries=*/false, "batch"),
+                    half, max_pairs, n, n);
+    const c10::cuda::CUDAGuard guard(positions.device());
+    const at::Tensor now = cell->contiguous();
+    watch.changed.compare(now.data_ptr(), watch.seen.data_ptr(), watch.seen.nbytes(),
+                          std::get<3>(out).data_ptr<std::int64_t>(), raycut::count_plan_outgrown,
+                          c10::cuda::getCurrentCUDAStream(positions.device().index()).stream());
+    return out;
+  }
+#endif
   const raycut::Systems systems =
       systems_of(boxes_of(cell, pbc), system_index(batch, n, "batch"), n, at::Tensor(), 0,
                  /*with_queries=*/false, "batch");

@@ -218,6 +218,29 @@ def test_the_engine_reuses_its_plan_and_says_when_it_no_longer_fits():
 
 
 @cuda
+def test_a_device_cell_is_not_copied_while_unchanged_and_a_change_is_reported():
+    """A static call with a CUDA cell takes the boxes of the last copy of it while the device
+    finds it unchanged; a cell changed in place gives the count -6, and the next call copies the
+    new one."""
+    n, cutoff = 6000, 2.5
+    side = (n / 0.8442) ** (1 / 3)
+    x = torch.as_tensor(rng(10).random((n, 3)) * side, dtype=torch.float32)
+    cell = side * torch.eye(3)
+    on, cell_on = x.cuda(), cell.cuda()
+    want = pair_set(*torch.ops.raycut.neighbor_list(x, cutoff, cell, None, None, False, 500_000))
+    for _ in range(3):
+        out = torch.ops.raycut.neighbor_list(on, cutoff, cell_on, None, None, False, 500_000)
+        assert pair_set(*out) == want
+    cell_on.mul_(1.02)  # in place: the same tensor, another cell
+    out = torch.ops.raycut.neighbor_list(on, cutoff, cell_on, None, None, False, 500_000)
+    assert int(out[3]) == -6
+    out = torch.ops.raycut.neighbor_list(on, cutoff, cell_on, None, None, False, 500_000)
+    want = pair_set(*torch.ops.raycut.neighbor_list(x, cutoff, cell_on.cpu(), None, None, False,
+                                                    500_000))
+    assert pair_set(*out) == want
+
+
+@cuda
 def test_no_host_synchronisation():
     case = batched()
     x, cutoff, cell, pbc, batch = case.on("cuda", torch.float32)
