@@ -310,6 +310,35 @@ std::size_t kernel_nodes(cudaGraph_t graph) {
   return kernels;
 }
 
+// call() captured in a CUDA graph in global mode (any synchronisation fails it) and
+// instantiated; `error` says why not (then `exec` is null).
+struct Capture {
+  cudaGraph_t graph = nullptr;
+  cudaGraphExec_t exec = nullptr;
+  std::string error;
+  template <class Call>
+  Capture(cudaStream_t stream, Call&& call) {
+    check_cuda(cudaStreamBeginCapture(stream, cudaStreamCaptureModeGlobal),
+               "cudaStreamBeginCapture");
+    try {
+      call();
+    } catch (const std::exception& e) {
+      error = e.what();
+    }
+    const cudaError_t ended = cudaStreamEndCapture(stream, &graph);
+    if (error.empty() && ended != cudaSuccess) error = cudaGetErrorString(ended);
+    if (error.empty() && cudaGraphInstantiate(&exec, graph, 0) != cudaSuccess)
+      error = "cudaGraphInstantiate failed";
+    (void)cudaGetLastError();  // a failed capture leaves its error behind
+  }
+  ~Capture() {
+    if (exec) cudaGraphExecDestroy(exec);
+    if (graph) cudaGraphDestroy(graph);
+  }
+  Capture(const Capture&) = delete;
+  Capture& operator=(const Capture&) = delete;
+};
+
 // What measuring one workload found wrong (empty: every check held).
 struct Checks {
   std::vector<std::string> problems;
@@ -337,23 +366,11 @@ std::int64_t measure_small(const Workload& w, DeviceWorkload& d, cudaStream_t st
   auto sync = [&] { check_cuda(cudaStreamSynchronize(stream), "cudaStreamSynchronize"); };
 
   // The graph first: its kernel count and whether it captured describe the eager call too.
-  cudaGraph_t graph = nullptr;
-  cudaGraphExec_t exec = nullptr;
-  check_cuda(cudaStreamBeginCapture(stream, cudaStreamCaptureModeGlobal), "cudaStreamBeginCapture");
-  std::string capture_error;
-  try {
-    call();
-  } catch (const std::exception& e) {
-    capture_error = e.what();
-  }
-  const cudaError_t ended = cudaStreamEndCapture(stream, &graph);
-  if (capture_error.empty() && ended != cudaSuccess) capture_error = cudaGetErrorString(ended);
-  if (capture_error.empty() && cudaGraphInstantiate(&exec, graph, 0) != cudaSuccess)
-    capture_error = "cudaGraphInstantiate failed";
-  (void)cudaGetLastError();  // a failed capture leaves its error behind
+  Capture captured(stream, call);
+  const std::string& capture_error = captured.error;
   checks.expect(capture_error.empty(), "global-mode capture failed: " + capture_error);
   const std::string kernels =
-      capture_error.empty() ? std::to_string(kernel_nodes(graph)) : std::string();
+      capture_error.empty() ? std::to_string(kernel_nodes(captured.graph)) : std::string();
   const std::string syncs = capture_error.empty() ? "0" : "";
 
   const std::string interface = o.search_name.empty() ? "cpp" : "cpp-" + o.search_name;
@@ -363,17 +380,15 @@ std::int64_t measure_small(const Workload& w, DeviceWorkload& d, cudaStream_t st
   checks.expect(
       raycut::read_pair_count(ctx, pairs.count()) == count,
       "eager: the count read after the loops differs from the true count " + std::to_string(count));
-  if (exec) {
-    auto replay = [&] { check_cuda(cudaGraphLaunch(exec, stream), "cudaGraphLaunch"); };
+  if (captured.exec) {
+    auto replay = [&] { check_cuda(cudaGraphLaunch(captured.exec, stream), "cudaGraphLaunch"); };
     check_cuda(cudaMemsetAsync(pairs.count(), 0xff, sizeof(std::int64_t), stream), "cudaMemset");
     row.mode = "graph";
     row.us = us_per_call(replay, sync, o.reps, o.min_loop_ms);
     rows.push_back(row);
     checks.expect(raycut::read_pair_count(ctx, pairs.count()) == count,
                   "graph: the replayed count differs from the true count " + std::to_string(count));
-    check_cuda(cudaGraphExecDestroy(exec), "cudaGraphExecDestroy");
   }
-  if (graph) check_cuda(cudaGraphDestroy(graph), "cudaGraphDestroy");
   pairs = {};
   sync();
   std::printf("  small path: %lld pairs, capacity %zu%s\n", static_cast<long long>(count), capacity,
@@ -439,34 +454,19 @@ std::uint64_t measure_engine(const Workload& w, DeviceWorkload& d, cudaStream_t 
     throw std::runtime_error("the reusing engine's static list counts " +
                              std::to_string(reused_count) + " pairs, the exact list " +
                              std::to_string(pairs));
-  cudaGraph_t graph = nullptr;
-  cudaGraphExec_t exec = nullptr;
-  check_cuda(cudaStreamBeginCapture(stream, cudaStreamCaptureModeGlobal), "cudaStreamBeginCapture");
-  std::string capture_error;
-  try {
-    reused_call();
-  } catch (const std::exception& e) {
-    capture_error = e.what();
-  }
-  const cudaError_t ended = cudaStreamEndCapture(stream, &graph);
-  if (capture_error.empty() && ended != cudaSuccess) capture_error = cudaGetErrorString(ended);
-  if (capture_error.empty() && cudaGraphInstantiate(&exec, graph, 0) != cudaSuccess)
-    capture_error = "cudaGraphInstantiate failed";
-  (void)cudaGetLastError();
-  if (exec) {
-    auto replay = [&] { check_cuda(cudaGraphLaunch(exec, stream), "cudaGraphLaunch"); };
+  const Capture captured(stream, reused_call);
+  if (captured.exec) {
+    auto replay = [&] { check_cuda(cudaGraphLaunch(captured.exec, stream), "cudaGraphLaunch"); };
     reused_row.mode = "graph";
-    reused_row.kernels = std::to_string(kernel_nodes(graph));
+    reused_row.kernels = std::to_string(kernel_nodes(captured.graph));
     reused_row.syncs = "0";
     reused_row.us = us_per_call(replay, sync, o.reps, o.min_loop_ms);
     rows.push_back(reused_row);
     if (raycut::read_pair_count(ctx, buffer.count()) != static_cast<std::int64_t>(pairs))
       throw std::runtime_error("the reusing engine's replayed count differs");
-    check_cuda(cudaGraphExecDestroy(exec), "cudaGraphExecDestroy");
   }
-  if (graph) check_cuda(cudaGraphDestroy(graph), "cudaGraphDestroy");
   std::printf("  engine reusing its plan: %lld pairs%s%s\n", static_cast<long long>(reused_count),
-              capture_error.empty() ? "" : "; no graph: ", capture_error.c_str());
+              captured.error.empty() ? "" : "; no graph: ", captured.error.c_str());
   return pairs;
 }
 
