@@ -248,7 +248,7 @@ class DeviceImagePoints final : public ImagePoints {
   }
   bool recorded() const override { return parked_; }
   void drop_recording() override {
-    parked_ = recorded_slots_ = false;
+    parked_ = recorded_slots_ = misfit_pending_ = false;
     reuse_.slots = 0;
   }
   void expand_reusing(const ImagePlan& plan, const float* sources, const float* queries,
