@@ -589,24 +589,62 @@ Pairs exact_small_systems_pairs(const at::Tensor& positions, double cutoff,
 }
 #endif
 
+// The boxes of a call's cell and pbc. A static list with a device cell (and host pbc, or none)
+// takes those of the thread's last copy of that cell while no comparison has found it changed,
+// and after() queues the comparison behind the list (Work::CellWatch); every other call copies
+// the cell (boxes_of: one wait for a device cell).
+class CallBoxes {
+ public:
+  CallBoxes(const at::Tensor& points, const std::optional<at::Tensor>& cell,
+            const std::optional<at::Tensor>& pbc, bool static_list) {
 #ifdef RAYCUT_TORCH_CUDA
-// The boxes of a device cell (and host pbc) for a static list: those of the watch's last copy
-// while no comparison has found the cell changed, else a new copy (one wait).
-std::vector<raycut::Box> watched_boxes(Work::CellWatch& watch, const at::Tensor& cell,
-                                       const std::optional<at::Tensor>& pbc) {
-  const bool same_pbc = pbc ? watch.seen_pbc.defined() && watch.seen_pbc.sizes() == pbc->sizes() &&
-                                  at::equal(watch.seen_pbc, *pbc)
-                            : !watch.seen_pbc.defined();
-  if (!watch.changed.raised() && watch.seen.defined() && watch.seen.sizes() == cell.sizes() &&
-      watch.seen.scalar_type() == cell.scalar_type() && watch.seen.device() == cell.device() &&
-      same_pbc)
-    return watch.boxes;
-  watch.boxes = boxes_of(cell, pbc);
-  watch.seen = cell.contiguous().clone();
-  watch.seen_pbc = pbc ? pbc->clone() : at::Tensor();
-  return watch.boxes;
-}
+    if (static_list && cell && cell->is_cuda() && (!pbc || !pbc->is_cuda())) {
+      watch_ = &work_for(points.device()).cell_watch;
+      cell_ = *cell;
+      boxes = watched(*watch_, *cell, pbc);
+      return;
+    }
 #endif
+    boxes = boxes_of(cell, pbc);
+  }
+  std::vector<raycut::Box> boxes;
+
+  // After the list of `out` is queued: the comparison that makes its count
+  // count_plan_outgrown where the cell is not the one the boxes came from.
+  void after(const Pairs& out) const {
+#ifdef RAYCUT_TORCH_CUDA
+    if (!watch_) return;
+    const c10::cuda::CUDAGuard guard(cell_.device());
+    const at::Tensor now = cell_.contiguous();
+    watch_->changed.compare(now.data_ptr(), watch_->seen.data_ptr(), watch_->seen.nbytes(),
+                            std::get<3>(out).data_ptr<std::int64_t>(), raycut::count_plan_outgrown,
+                            c10::cuda::getCurrentCUDAStream(cell_.device().index()).stream());
+#else
+    (void)out;
+#endif
+  }
+
+ private:
+#ifdef RAYCUT_TORCH_CUDA
+  static std::vector<raycut::Box> watched(Work::CellWatch& watch, const at::Tensor& cell,
+                                          const std::optional<at::Tensor>& pbc) {
+    const bool same_pbc = pbc ? watch.seen_pbc.defined() &&
+                                    watch.seen_pbc.sizes() == pbc->sizes() &&
+                                    at::equal(watch.seen_pbc, *pbc)
+                              : !watch.seen_pbc.defined();
+    if (!watch.changed.raised() && watch.seen.defined() && watch.seen.sizes() == cell.sizes() &&
+        watch.seen.scalar_type() == cell.scalar_type() && watch.seen.device() == cell.device() &&
+        same_pbc)
+      return watch.boxes;
+    watch.boxes = boxes_of(cell, pbc);
+    watch.seen = cell.contiguous().clone();
+    watch.seen_pbc = pbc ? pbc->clone() : at::Tensor();
+    return watch.boxes;
+  }
+  Work::CellWatch* watch_ = nullptr;
+  at::Tensor cell_;
+#endif
+};
 
 Pairs neighbor_list(const at::Tensor& positions, double cutoff,
                     const std::optional<at::Tensor>& cell, const std::optional<at::Tensor>& pbc,
@@ -622,27 +660,15 @@ Pairs neighbor_list(const at::Tensor& positions, double cutoff,
 #endif
   const at::Tensor x = search_points(positions, "positions");
   const std::int64_t n = x.size(0);
-#ifdef RAYCUT_TORCH_CUDA
-  if (max_pairs && cell && cell->is_cuda() && (!pbc || !pbc->is_cuda())) {
-    Work::CellWatch& watch = work_for(positions.device()).cell_watch;
-    Pairs out = run(x, cutoff,
-                    systems_of(watched_boxes(watch, *cell, pbc), system_index(batch, n, "batch"), n,
-                               at::Tensor(), 0, /*with_queries=*/false, "batch"),
-                    half, max_pairs, n, n);
-    const c10::cuda::CUDAGuard guard(positions.device());
-    const at::Tensor now = cell->contiguous();
-    watch.changed.compare(now.data_ptr(), watch.seen.data_ptr(), watch.seen.nbytes(),
-                          std::get<3>(out).data_ptr<std::int64_t>(), raycut::count_plan_outgrown,
-                          c10::cuda::getCurrentCUDAStream(positions.device().index()).stream());
-    return out;
-  }
-#endif
+  const CallBoxes boxes(positions, cell, pbc, max_pairs.has_value());
   const raycut::Systems systems =
-      systems_of(boxes_of(cell, pbc), system_index(batch, n, "batch"), n, at::Tensor(), 0,
+      systems_of(boxes.boxes, system_index(batch, n, "batch"), n, at::Tensor(), 0,
                  /*with_queries=*/false, "batch");
   const bool wide = positions.is_cpu() && positions.scalar_type() == at::kDouble;
-  return run(x, cutoff, systems, half, max_pairs, n, n,
-             wide ? positions.contiguous() : at::Tensor());
+  Pairs out =
+      run(x, cutoff, systems, half, max_pairs, n, n, wide ? positions.contiguous() : at::Tensor());
+  boxes.after(out);
+  return out;
 }
 
 Pairs radius(const at::Tensor& points, const at::Tensor& queries, double cutoff,
