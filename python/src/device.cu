@@ -171,22 +171,24 @@ __global__ void compare_words(const std::uint32_t* a, const std::uint32_t* b, st
 }
 }  // namespace
 
-ChangeFlag::ChangeFlag() {
-  check(cudaHostAlloc(reinterpret_cast<void**>(&host_), sizeof(int), cudaHostAllocMapped),
-        "cudaHostAlloc");
-  *host_ = 0;
-  check(cudaHostGetDevicePointer(reinterpret_cast<void**>(&device_), host_, 0),
-        "cudaHostGetDevicePointer");
-}
+// No CUDA call until the first compare(): a CPU caller never makes one.
+ChangeFlag::ChangeFlag() = default;
 
 ChangeFlag::~ChangeFlag() {
   if (done_) cudaEventDestroy(static_cast<cudaEvent_t>(done_));
-  cudaFreeHost(host_);
+  if (host_) cudaFreeHost(host_);
 }
 
 void ChangeFlag::compare(const void* a, const void* b, std::size_t bytes, std::int64_t* count,
                          std::int64_t code, void* stream) {
   const auto s = static_cast<cudaStream_t>(stream);
+  if (!host_) {
+    check(cudaHostAlloc(reinterpret_cast<void**>(&host_), sizeof(int), cudaHostAllocMapped),
+          "cudaHostAlloc");
+    *host_ = 0;
+    check(cudaHostGetDevicePointer(reinterpret_cast<void**>(&device_), host_, 0),
+          "cudaHostGetDevicePointer");
+  }
   compare_words<<<1, 128, 0, s>>>(static_cast<const std::uint32_t*>(a),
                                   static_cast<const std::uint32_t*>(b), bytes / 4, count, code,
                                   device_);
