@@ -32,6 +32,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstdlib>
 #include <map>
 #include <memory>
 #include <optional>
@@ -245,13 +246,16 @@ raycut::Systems systems_of(std::vector<raycut::Box> boxes, const at::Tensor& ind
 // raycut's stream-ordered pool, so that a copy of the last call's pairs still queued on another
 // stream never reads a refilled buffer.
 struct Work {
-  // Untimed: timing a GPU build waits for it, and an operator call never reads the times. Its
-  // builds reuse the last plan (on CUDA, a build reads nothing back while the plan fits; a
-  // static list reports one that no longer does as count_plan_outgrown), and every call's
-  // positions outlive the call's own results.
-  explicit Work(const char* method) : engine(method) {
-    engine.set_timed(false);
-    engine.set_reuse_plan(true);
+  // Untimed: timing a GPU build waits for it, and an operator call never reads the times. With
+  // RAYCUT_REUSE_PLAN=1 its builds reuse the last plan (on CUDA, a build reads nothing back
+  // while the plan fits; a static list reports one that no longer does as
+  // count_plan_outgrown; every call's positions outlive the call's own results).
+  explicit Work(const char* method) : engine(method) { engine.set_timed(false); }
+  // RAYCUT_REUSE_PLAN=1 in the environment (read at each call): the engines reuse plans and
+  // static lists keep a device cell's boxes (CallBoxes). Off by default.
+  static bool reuse_plans() {
+    const char* v = std::getenv("RAYCUT_REUSE_PLAN");
+    return v != nullptr && v[0] == '1' && v[1] == '\0';
   }
   raycut::Engine engine;
 
@@ -400,6 +404,7 @@ Pairs run(const at::Tensor& x, double cutoff, const raycut::Systems& systems, bo
   const at::Device device = x.device();
   const OnDevice on(device);
   Work& work = on.work;
+  work.engine.set_reuse_plan(Work::reuse_plans());
   const std::shared_ptr<raycut::NeighbourListBuffer> list =
       device.is_cpu() ? raycut_py::idle_lists().take() : work.device_list();
   const auto space = device.is_cpu() ? raycut::MemorySpace::host : raycut::MemorySpace::device;
@@ -589,16 +594,17 @@ Pairs exact_small_systems_pairs(const at::Tensor& positions, double cutoff,
 }
 #endif
 
-// The boxes of a call's cell and pbc. A static list with a device cell (and host pbc, or none)
-// takes those of the thread's last copy of that cell while no comparison has found it changed,
-// and after() queues the comparison behind the list (Work::CellWatch); every other call copies
-// the cell (boxes_of: one wait for a device cell).
+// The boxes of a call's cell and pbc. With RAYCUT_REUSE_PLAN=1, a static list with a device cell
+// (and host pbc, or none) takes those of the thread's last copy of that cell while no comparison
+// has found it changed, and after() queues the comparison behind the list (Work::CellWatch); every
+// other call copies the cell (boxes_of: one wait for a device cell).
 class CallBoxes {
  public:
   CallBoxes(const at::Tensor& points, const std::optional<at::Tensor>& cell,
             const std::optional<at::Tensor>& pbc, bool static_list) {
 #ifdef RAYCUT_TORCH_CUDA
-    if (static_list && cell && cell->is_cuda() && (!pbc || !pbc->is_cuda())) {
+    if (Work::reuse_plans() && static_list && cell && cell->is_cuda() &&
+        (!pbc || !pbc->is_cuda())) {
       watch_ = &work_for(points.device()).cell_watch;
       cell_ = *cell;
       boxes = watched(*watch_, *cell, pbc);

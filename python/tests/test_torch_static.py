@@ -185,12 +185,13 @@ def pair_set(i, j, s, count):
 
 
 @cuda
-def test_the_engine_reuses_its_plan_and_says_when_it_no_longer_fits():
-    """Above the small systems the operator's grid reuses the last call's plan (nothing read
-    back): the same pairs as the CPU operator call after call; a plan that no longer fits (every
-    particle moved next to a face: far more periodic images) gives the count -6, which
-    check_pair_count raises as CapacityError, and the next call plans afresh; without "c" the
-    call itself calls once more."""
+def test_the_engine_reuses_its_plan_and_says_when_it_no_longer_fits(monkeypatch):
+    """With RAYCUT_REUSE_PLAN=1, above the small systems the operator's grid reuses the last
+    call's plan (nothing read back): the same pairs as the CPU operator call after call; a plan
+    that no longer fits (every particle moved next to a face: far more periodic images) gives the
+    count -6, which check_pair_count raises as CapacityError, and the next call plans afresh;
+    without "c" the call itself calls once more."""
+    monkeypatch.setenv("RAYCUT_REUSE_PLAN", "1")
     n, cutoff = 6000, 2.5
     side = (n / 0.8442) ** (1 / 3)
     x = torch.as_tensor(rng(9).random((n, 3)) * side, dtype=torch.float32)
@@ -218,10 +219,11 @@ def test_the_engine_reuses_its_plan_and_says_when_it_no_longer_fits():
 
 
 @cuda
-def test_a_device_cell_is_not_copied_while_unchanged_and_a_change_is_reported():
-    """A static call with a CUDA cell takes the boxes of the last copy of it while the device
-    finds it unchanged; a cell changed in place gives the count -6, and the next call copies the
-    new one."""
+def test_a_device_cell_is_not_copied_while_unchanged_and_a_change_is_reported(monkeypatch):
+    """With RAYCUT_REUSE_PLAN=1, a static call with a CUDA cell takes the boxes of the last copy
+    of it while the device finds it unchanged; a cell changed in place gives the count -6, and
+    the next call copies the new one."""
+    monkeypatch.setenv("RAYCUT_REUSE_PLAN", "1")
     n, cutoff = 6000, 2.5
     side = (n / 0.8442) ** (1 / 3)
     x = torch.as_tensor(rng(10).random((n, 3)) * side, dtype=torch.float32)
