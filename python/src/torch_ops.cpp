@@ -259,10 +259,6 @@ struct Work {
   }
   raycut::Engine engine;
 
-  // On CUDA, the last call's list again while the stream is the same (the copies out of it were
-  // queued there before the next fill): no allocation per call, and no free, which waits for the
-  // whole device. It keeps the largest list's memory until the thread ends, as the engine keeps
-  // its own.
 #ifdef RAYCUT_TORCH_CUDA
   // A static list's device cell, so that a call need not copy it to the host while it is the
   // one the last copy was made from: the boxes of that copy are taken again, and the device
@@ -276,6 +272,10 @@ struct Work {
   } cell_watch;
 #endif
 
+  // On CUDA, the last call's list again while the stream is the same (the copies out of it were
+  // queued there before the next fill): no allocation per call, and no free, which waits for the
+  // whole device. It keeps the largest list's memory until the thread ends, as the engine keeps
+  // its own.
   std::shared_ptr<raycut::NeighbourListBuffer> device_list() {
     if (!list_ || list_stream_ != engine.stream()) {
       list_ = std::make_shared<raycut::NeighbourListBuffer>();
@@ -605,6 +605,7 @@ class CallBoxes {
 #ifdef RAYCUT_TORCH_CUDA
     if (Work::reuse_plans() && static_list && cell && cell->is_cuda() &&
         (!pbc || !pbc->is_cuda())) {
+      const c10::cuda::CUDAGuard guard(points.device());  // a new Work is made on its device
       watch_ = &work_for(points.device()).cell_watch;
       cell_ = *cell;
       boxes = watched(*watch_, *cell, pbc);
