@@ -474,6 +474,30 @@ def test_check_pair_count_names_bad_input_and_overflow():
     for code, words in ((-1, "NaN"), (-2, "not sorted"), (-3, "cell"), (-4, "no cell")):
         with pytest.raises(ValueError, match=words):
             pyraycut.check_pair_count(torch.tensor(code), 12)
+    # A reused plan that no longer fits: an overflow of a kind, cured by calling again.
+    with pytest.raises(pyraycut.CapacityError, match="call again"):
+        pyraycut.check_pair_count(torch.tensor(-6), 12)
+
+
+@pytest.mark.skipif(not OPS, reason="the PyTorch operators are not built")
+def test_a_count_of_a_plan_outgrown_is_followed_by_one_more_call():
+    """Without "c", the wrapper reads the count and calls the operator once more for -6 (the
+    call that plans afresh); with "c" it leaves the count to the caller."""
+    from pyraycut import _torch
+    counts = [-6, 7]
+    calls = []
+
+    def call():
+        calls.append(1)
+        return None, None, None, torch.tensor(counts[len(calls) - 1])
+
+    assert int(_torch._checked_call(call, 12, "ijS")[3]) == 7 and len(calls) == 2
+    calls.clear()
+    assert int(_torch._checked_call(call, 12, "ijSc")[3]) == -6 and len(calls) == 1
+    calls.clear()
+    counts[:] = [-6, -6]
+    with pytest.raises(pyraycut.CapacityError, match="call again"):
+        _torch._checked_call(call, 12, "ijS")
 
 
 @pytest.mark.skipif(not OPS, reason="the PyTorch operators are not built")
