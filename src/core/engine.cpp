@@ -314,7 +314,7 @@ void Engine::build_points(PositionsView positions, float cutoff, const Systems& 
         images_->set_recording(may_reuse);
         images_->expand(plan, sources, queries, stream_);
         m.build_points(images_->points(), cutoff);
-        float parking[3];
+        detail::ParkingPlace parking;
         if (may_reuse && m.parking(parking)) images_->set_parking(parking);
       }
       // Within the positions' scope: a device copy of host positions is alive until it ends.

@@ -64,7 +64,7 @@ class ImagePoints {
   // place, and what no longer fits goes to a device word (Points::reuse.misfit) that the method
   // checks too; finish_reusing() queues that word's copy to the host after the method's build.
   virtual void set_recording(bool) {}
-  virtual void set_parking(const float[3]) {}
+  virtual void set_parking(const ParkingPlace&) {}
   virtual bool recorded() const { return false; }  // a recorded plan, with its parking place
   virtual void drop_recording() {}
   virtual void expand_reusing(const ImagePlan& plan, const float* sources, const float* queries,

@@ -21,6 +21,14 @@ namespace raycut::detail {
 // and its sort's scratch (~70 B), more than brute force's copy of the positions (12 B).
 constexpr double host_build_bytes_per_point = 80;
 
+// Where the spare slots of a reused plan park (Engine::set_reuse_plan): the sheet x = `x`, y and z
+// within [lo, hi], that no real point's search reaches. The slots are spread over it, a few a
+// cell: one cell holding them all would cost the grid's table build a rank per pair of them.
+struct ParkingPlace {
+  float x = 0;
+  float lo[2] = {0, 0}, hi[2] = {0, 0};  // y, z
+};
+
 // What a method builds over when there are images, batches or query points (the engine makes
 // it, src/core/images.hpp): points [0, targets) are the targets; every point is a candidate
 // source, mapped by `images` to the caller's source and shift (images.exact: what decides the
@@ -77,9 +85,9 @@ class Method {
     return "its traversal has no images, batches or query points (docs/methods.md)";
   }
   // Engine::set_reuse_plan: whether build_points() takes Points::reuse, and after a recording
-  // build, a point of its grid that no real point's search reaches (xyz; false: none).
+  // build, where in its grid the spare slots park (false: nowhere).
   virtual bool reuses_plans() const { return false; }
-  virtual bool parking(float[3]) const { return false; }
+  virtual bool parking(ParkingPlace&) const { return false; }
 
   // New positions of the same n particles. Returns true when the structure was refitted;
   // the default rebuilds.

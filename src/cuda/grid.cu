@@ -77,8 +77,8 @@ class Grid final : public CudaPairMethod<Grid> {
   }
 
   bool reuses_plans() const override { return true; }
-  bool parking(float p[3]) const override {
-    for (int a = 0; a < 3; ++a) p[a] = parking_[a];
+  bool parking(ParkingPlace& place) const override {
+    place = parking_;
     return has_parking_;
   }
 
@@ -107,14 +107,15 @@ class Grid final : public CudaPairMethod<Grid> {
   GridPlan plan_;
   BoundingBox box_;
   GridTables tables_;
-  // The plan that later builds reuse: its box, and the parking place of their spare slots.
-  float planned_lo_[3] = {0, 0, 0}, planned_hi_[3] = {0, 0, 0}, parking_[3] = {0, 0, 0};
+  // The plan that later builds reuse: its box, and where their spare slots park.
+  float planned_lo_[3] = {0, 0, 0}, planned_hi_[3] = {0, 0, 0};
+  ParkingPlace parking_;
   bool has_parking_ = false;
 
   // A box [lo, hi] that later builds reuse: half the reach wider on every side (and 2^-12 of
   // its size, for the rounding of far coordinates), then longer in x by a gap of at least three
-  // reaches and one cell where the spare slots park: no real point's search reaches them, and
-  // few of its cells are visited.
+  // reaches and the sheet of cells where the spare slots park: no real point's search reaches
+  // them, and few of its cells are visited.
   void plan_room(float lo[3], float hi[3], float reach) {
     for (int a = 0; a < 3; ++a) {
       const float margin =
@@ -123,10 +124,9 @@ class Grid final : public CudaPairMethod<Grid> {
       hi[a] += margin;
     }
     for (int a = 0; a < 3; ++a) planned_lo_[a] = lo[a], planned_hi_[a] = hi[a];
-    parking_[0] = hi[0] + 4 * reach;
-    parking_[1] = lo[1];
-    parking_[2] = lo[2];
-    hi[0] = parking_[0];
+    parking_.x = hi[0] + 4 * reach;
+    for (int a = 0; a < 2; ++a) parking_.lo[a] = lo[a + 1], parking_.hi[a] = hi[a + 1];
+    hi[0] = parking_.x;
     planned_hi_[0] = hi[0];
   }
 };

@@ -436,8 +436,11 @@ void GridTables::build_compact(const float* xyz, const GridPlan& plan, cudaStrea
   gather_kernel<<<blocks_for(n_, 256), 256, 0, stream>>>(xyz, order_, n_, pos_.data());
   RAYCUT_CUDA_CHECK_LAUNCH();
 
-  // First slot of every non-empty cell; the number of cells comes back to size the tables.
-  std::uint32_t* runs_device = runs_.device();
+  // First slot of every non-empty cell. Their number stays on the device: the tables are sized
+  // for n cells (a compact grid has far more cells than points, so nearly every point heads its
+  // own), which reads nothing back and keeps the build stream-ordered.
+  runs_.resize(1);
+  std::uint32_t* runs_device = runs_.data();
   const thrust::counting_iterator<std::uint32_t> slots(0);
   std::size_t temp_bytes = 0;
   RAYCUT_CUDA_CHECK(cub::DeviceSelect::If(nullptr, temp_bytes, slots, run_start_.data(),
@@ -445,23 +448,21 @@ void GridTables::build_compact(const float* xyz, const GridPlan& plan, cudaStrea
   temp_.resize(std::max<std::size_t>(temp_bytes, 1));
   RAYCUT_CUDA_CHECK(cub::DeviceSelect::If(temp_.data(), temp_bytes, slots, run_start_.data(),
                                           runs_device, n_, IsCellHead{sorted}, stream));
-  RAYCUT_CUDA_CHECK(cudaStreamSynchronize(stream));
-  const std::uint32_t runs = runs_.host();
 
-  cell_keys_.resize(runs);
-  start_.resize(runs + 1);
-  const std::uint64_t capacity = power_of_two_at_least(std::max<std::uint64_t>(2ull * runs, 1024));
+  cell_keys_.resize(n_);
+  start_.resize(n_ + 1);
+  const std::uint64_t capacity = power_of_two_at_least(std::max<std::uint64_t>(2ull * n_, 1024));
   row_keys_.resize(capacity);
   row_cells_.resize(capacity);
   row_mask_ = capacity - 1;
   row_shift_ = 64 - log2_of_power_of_two(capacity);
   RAYCUT_CUDA_CHECK(
       cudaMemsetAsync(row_keys_.data(), 0xFF, capacity * sizeof(std::uint64_t), stream));
-  insert_rows_kernel<<<blocks_for(runs, 256), 256, 0, stream>>>(
+  insert_rows_kernel<<<blocks_for(n_, 256), 256, 0, stream>>>(
       sorted, run_start_.data(), runs_device, n_, view.xgrid.dims[0], cell_keys_.data(),
       start_.data(), row_keys_.data(), row_cells_.data(), row_mask_, row_shift_);
   RAYCUT_CUDA_CHECK_LAUNCH();
-  close_rows_kernel<<<blocks_for(runs, 256), 256, 0, stream>>>(
+  close_rows_kernel<<<blocks_for(n_, 256), 256, 0, stream>>>(
       cell_keys_.data(), runs_device, view.xgrid.dims[0], row_keys_.data(), row_cells_.data(),
       row_mask_, row_shift_);
   RAYCUT_CUDA_CHECK_LAUNCH();

@@ -85,7 +85,7 @@ class GridTables {
   DeviceBuffer<uint2> row_cells_;
   std::uint64_t row_mask_ = 0;
   int row_shift_ = 0;
-  MappedValue<std::uint32_t> runs_;  // the compact table's number of non-empty cells
+  DeviceBuffer<std::uint32_t> runs_;  // the compact table's number of non-empty cells (device)
   DeviceBuffer<unsigned char> temp_;
   std::uint64_t sort_shape_ = 0, scan_shape_ = 0;
   std::size_t sort_temp_bytes_ = 0, scan_temp_bytes_ = 0;

@@ -193,16 +193,19 @@ __global__ void images_kernel(Plan plan, const Real* sources, const std::uint32_
 }
 
 // A reused plan (Engine::set_reuse_plan): its image slots, the float band's extent (float
-// bits) and its parking place; the device word that says what no longer fits.
+// bits) and where spare slots park (a lattice of side x side places on the sheet); the device
+// word that says what no longer fits.
 struct Reuse {
   std::uint64_t slots = 0;
   unsigned extent = 0;
-  float parking[3] = {0, 0, 0};
+  ParkingPlace parking;
+  std::uint32_t side = 1;
   int* misfit = nullptr;
 };
 
-// After the images of a reused plan: the slots they left empty get the parking place (a point
-// no search reaches), and thread 0 writes the verdict, the first word of this build's misfit.
+// After the images of a reused plan: slot k, when the images left it empty, gets place k of the
+// parking lattice (no search reaches it), and thread 0 writes the verdict, the first word of this
+// build's misfit.
 __global__ void park_kernel(Plan plan, const std::uint64_t* images, const Findings* found,
                             Reuse reuse, Out out) {
   const std::uint64_t k = blockIdx.x * std::uint64_t{block} + threadIdx.x;
@@ -217,8 +220,13 @@ __global__ void park_kernel(Plan plan, const std::uint64_t* images, const Findin
     *reuse.misfit = code;
   }
   if (k >= real && k < reuse.slots) {
+    const ParkingPlace& at = reuse.parking;
+    const float y = (static_cast<float>(k % reuse.side) + 0.5f) / static_cast<float>(reuse.side),
+                z = (static_cast<float>(k / reuse.side) + 0.5f) / static_cast<float>(reuse.side);
+    const float place[3] = {at.x, at.lo[0] + y * (at.hi[0] - at.lo[0]),
+                            at.lo[1] + z * (at.hi[1] - at.lo[1])};
     const std::int32_t none_shifted[3] = {0, 0, 0};
-    out.place(plan.first_image + k, reuse.parking, 0, 0, none_shifted);
+    out.place(plan.first_image + k, place, 0, 0, none_shifted);
   }
 }
 
@@ -242,8 +250,10 @@ class DeviceImagePoints final : public ImagePoints {
   }
 
   void set_recording(bool on) override { recording_ = on; }
-  void set_parking(const float p[3]) override {
-    for (int c = 0; c < 3; ++c) reuse_.parking[c] = p[c];
+  void set_parking(const ParkingPlace& place) override {
+    reuse_.parking = place;
+    reuse_.side = 1;
+    while (std::uint64_t{reuse_.side} * reuse_.side < reuse_.slots) ++reuse_.side;
     parked_ = recorded_slots_;
   }
   bool recorded() const override { return parked_; }
