@@ -280,6 +280,24 @@ double us_per_call(Call&& call, Sync&& sync, int reps, double min_loop_ms) {
   return median(per_call);
 }
 
+// The host's share of an eager call: `calls` calls queued back to back, timed before the stream
+// is waited for (the GPU works behind them), the median over `reps` such loops. Printed beside
+// the engine's rows: a row near this is host-bound.
+template <class Call, class Sync>
+double host_enqueue_us(Call&& call, Sync&& sync, int reps, int calls = 16) {
+  using clock = std::chrono::steady_clock;
+  std::vector<double> per_call;
+  for (int r = 0; r < reps; ++r) {
+    sync();
+    const auto t0 = clock::now();
+    for (int c = 0; c < calls; ++c) call();
+    per_call.push_back(std::chrono::duration<double, std::micro>(clock::now() - t0).count() /
+                       calls);
+  }
+  sync();
+  return median(per_call);
+}
+
 struct Row {
   std::string workload = "lj-pbc";
   std::size_t systems = 0, n_per_system = 0;
@@ -467,6 +485,9 @@ std::uint64_t measure_engine(const Workload& w, DeviceWorkload& d, cudaStream_t 
   }
   std::printf("  engine reusing its plan: %lld pairs%s%s\n", static_cast<long long>(reused_count),
               captured.error.empty() ? "" : "; no graph: ", captured.error.c_str());
+  std::printf("  host enqueue per call: engine-static %.1f us, engine-reused %.1f us\n",
+              host_enqueue_us(static_call, sync, o.reps),
+              host_enqueue_us(reused_call, sync, o.reps));
   return pairs;
 }
 

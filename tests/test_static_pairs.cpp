@@ -21,6 +21,8 @@
 #include "raycut/tools/generators.hpp"
 
 #if defined(RAYCUT_TESTS_CUDA)
+#include <cuda_runtime.h>
+
 #include "cuda/runtime.hpp"  // copy(), read_back(): device pairs written and read back
 #endif
 
@@ -43,6 +45,24 @@ struct Read {
 
 constexpr std::int64_t sentinel = -7;
 constexpr std::size_t guard = 16;
+
+#if defined(RAYCUT_TESTS_CUDA)
+// A device static list's `slots` entries, read back after the work queued on `stream`: the count
+// first (read_back waits for the stream, and reads at most 64 bytes), then the arrays, whole.
+Read read_static(raycut::StaticPairBuffer& buffer, std::size_t slots, bool shifts, void* stream) {
+  Read r;
+  raycut::detail::cuda::read_back(&r.count, buffer.count(), 8, stream);
+  r.i.resize(slots);
+  r.j.resize(slots);
+  raycut::detail::cuda::copy(r.i.data(), buffer.i(), slots * 8);
+  raycut::detail::cuda::copy(r.j.data(), buffer.j(), slots * 8);
+  if (shifts) {
+    r.shifts.resize(3 * slots);
+    raycut::detail::cuda::copy(r.shifts.data(), buffer.shifts(), 3 * slots * 4);
+  }
+  return r;
+}
+#endif
 
 // Runs the static list on `engine` with `capacity`, in the method's memory, and reads it back.
 Read run_static(Engine& engine, std::size_t capacity, ListOptions options, bool shifts) {
@@ -72,21 +92,11 @@ Read run_static(Engine& engine, std::size_t capacity, ListOptions options, bool 
   out.capacity = capacity;
   if (!shifts) out.shifts = nullptr;
   engine.neighbours(out, options);  // queued on the engine's stream: read back after it
-  // The count first: read_back waits for the stream (and reads at most 64 bytes); then the
-  // arrays, copied whole.
-  raycut::detail::cuda::read_back(&r.count, buffer.count(), 8, ctx.stream);
-  r.i.resize(slots);
-  r.j.resize(slots);
-  raycut::detail::cuda::copy(r.i.data(), buffer.i(), slots * 8);
-  raycut::detail::cuda::copy(r.j.data(), buffer.j(), slots * 8);
-  if (shifts) {
-    r.shifts.resize(3 * slots);
-    raycut::detail::cuda::copy(r.shifts.data(), buffer.shifts(), 3 * slots * 4);
-  }
+  return read_static(buffer, slots, shifts, ctx.stream);
 #else
   ADD_FAILURE() << "a device method without CUDA";
-#endif
   return r;
+#endif
 }
 
 // The exactly sized list's entries as COO rows: the reference order.
@@ -318,6 +328,61 @@ TEST(ReusedPlans, OutgrownIsReportedThenPlannedAfresh) {
     EXPECT_NE(std::string(e.what()).find("particle index 5"), std::string::npos) << e.what();
   }
 }
+
+#if defined(RAYCUT_TESTS_CUDA)
+// A build that reuses its plan, captured with its static list in a global-mode CUDA graph (which
+// fails on any synchronisation): each replay over positions changed in place lists what a fresh
+// build lists; positions the plan no longer fits give the count count_plan_outgrown at replay.
+TEST(ReusedPlans, CapturedStepReplaysTheFreshPairs) {
+  if (const std::string why = unavailable("grid"); !why.empty()) GTEST_SKIP() << why;
+  const float cutoff = 1.0f;
+  const std::size_t capacity = 200000;
+  Liquid liquid(3000, 9.0, 3);
+  raycut::DeviceArray x(liquid.xyz);
+  cudaStream_t stream = nullptr;
+  ASSERT_EQ(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking), cudaSuccess);
+  Engine fresh("grid"), reused("grid");
+  reused.set_stream(stream);
+  reused.set_timed(false);
+  reused.set_reuse_plan(true);
+  raycut::Context ctx;
+  ctx.stream = stream;
+  raycut::StaticPairBuffer buffer(capacity, ctx);
+  const raycut::StaticPairs out = buffer.view(static_cast<std::int64_t>(liquid.xyz.size() / 3));
+  const auto step = [&] {
+    reused.build(x.view(), cutoff, liquid.box);
+    reused.neighbours(out, {});
+  };
+  step();  // plans and records
+  step();  // reuses
+  cudaGraph_t graph = nullptr;
+  ASSERT_EQ(cudaStreamBeginCapture(stream, cudaStreamCaptureModeGlobal), cudaSuccess);
+  step();
+  ASSERT_EQ(cudaStreamEndCapture(stream, &graph), cudaSuccess);
+  cudaGraphExec_t exec = nullptr;
+  ASSERT_EQ(cudaGraphInstantiate(&exec, graph, 0), cudaSuccess);
+  const auto replay = [&] {
+    raycut::detail::cuda::copy(x.data(), liquid.xyz.data(), liquid.xyz.size() * sizeof(float));
+    EXPECT_EQ(cudaDeviceSynchronize(), cudaSuccess);  // the copy has landed
+    EXPECT_EQ(cudaGraphLaunch(exec, stream), cudaSuccess);
+    return read_static(buffer, capacity, true, stream);
+  };
+  for (int s = 0; s < 5; ++s) {
+    liquid.step(0.05f);
+    const raycut::DeviceArray now(liquid.xyz);
+    const Read want = static_list(fresh, now, liquid.box, cutoff, capacity);
+    const Read got = replay();
+    ASSERT_GT(want.count, 10000) << "step " << s;
+    ASSERT_EQ(got.count, want.count) << "step " << s;
+    EXPECT_EQ(pair_set(got), pair_set(want)) << "step " << s;
+  }
+  for (std::size_t p = 0; p < liquid.xyz.size(); p += 3) liquid.xyz[p] *= 0.1f;  // all at a face
+  EXPECT_EQ(replay().count, raycut::count_plan_outgrown);
+  cudaGraphExecDestroy(exec);
+  cudaGraphDestroy(graph);
+  cudaStreamDestroy(stream);
+}
+#endif
 
 INSTANTIATE_TEST_SUITE_P(Methods, StaticLists, ::testing::ValuesIn(every_method()),
                          [](const auto& info) {

@@ -302,7 +302,7 @@ void Engine::build_points(PositionsView positions, float cutoff, const Systems& 
       const bool may_reuse = reuse_plan_ && m.reuses_plans() && float64 == nullptr &&
                              positions.space == MemorySpace::device;
       reused_ = may_reuse && same_plan && images_->recorded() &&
-                !images_->reused_plan_outgrown(/*wait=*/false);
+                !images_->reused_plan_outgrown(stream_, /*wait=*/false);
       if (reused_) {
         images_->expand_reusing(plan, sources, queries, stream_);
         m.build_points(images_->points(), cutoff);
@@ -327,7 +327,7 @@ void Engine::build_points(PositionsView positions, float cutoff, const Systems& 
 void Engine::settle_reused_plan() {
   if (!reused_) return;
   reused_ = false;
-  if (!images_->reused_plan_outgrown(/*wait=*/true)) return;
+  if (!images_->reused_plan_outgrown(stream_, /*wait=*/true)) return;
   Systems systems = systems_;
   systems.queries = reused_queries_;
   images_->drop_recording();  // planned afresh, and recorded again

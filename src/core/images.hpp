@@ -71,8 +71,9 @@ class ImagePoints {
                               void* stream);
   virtual void finish_reusing(void*) {}
   // Whether the last expand_reusing() found that the plan no longer fits: false while the
-  // device has not yet said (wait: waits for it).
-  virtual bool reused_plan_outgrown(bool /*wait*/) { return false; }
+  // device has not yet said (wait: waits for it), and while `stream` is being captured into a
+  // CUDA graph (a captured build's verdict reaches only its list's count).
+  virtual bool reused_plan_outgrown(void* /*stream*/, bool /*wait*/) { return false; }
 
  protected:
   // What points() hands the method after an expansion into these arrays.

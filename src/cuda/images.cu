@@ -266,7 +266,7 @@ class DeviceImagePoints final : public ImagePoints {
     expand_into(plan, sources, queries, static_cast<cudaStream_t>(stream), true);
   }
   void finish_reusing(void* stream) override;
-  bool reused_plan_outgrown(bool wait) override;
+  bool reused_plan_outgrown(void* stream, bool wait) override;
 
  private:
   void expand_into(const ImagePlan& plan, const float* sources, const float* queries,
@@ -327,8 +327,17 @@ Out DeviceImagePoints::reserve(std::uint64_t points, std::uint64_t keep, bool sy
   return {xyz_.data(), image_.data(), systems ? system_.data() : nullptr};
 }
 
+// Whether `stream` is being captured into a CUDA graph: a captured build's verdict reaches the
+// caller as its list's count at each replay, not the host, which may not query events meanwhile.
+bool capturing(cudaStream_t stream) {
+  cudaStreamCaptureStatus status = cudaStreamCaptureStatusNone;
+  RAYCUT_CUDA_CHECK(cudaStreamIsCapturing(stream, &status));
+  return status != cudaStreamCaptureStatusNone;
+}
+
 void DeviceImagePoints::finish_reusing(void* stream_ptr) {
   const auto stream = static_cast<cudaStream_t>(stream_ptr);
+  if (capturing(stream)) return;
   RAYCUT_CUDA_CHECK(cudaMemcpyAsync(misfit_host_.device(), misfit_.data(), sizeof(int),
                                     cudaMemcpyDeviceToDevice, stream));
   if (!misfit_seen_)
@@ -337,8 +346,8 @@ void DeviceImagePoints::finish_reusing(void* stream_ptr) {
   misfit_pending_ = true;
 }
 
-bool DeviceImagePoints::reused_plan_outgrown(bool wait) {
-  if (!misfit_pending_) return false;
+bool DeviceImagePoints::reused_plan_outgrown(void* stream, bool wait) {
+  if (!misfit_pending_ || capturing(static_cast<cudaStream_t>(stream))) return false;
   if (wait) {
     RAYCUT_CUDA_CHECK(cudaEventSynchronize(misfit_seen_));
   } else {
