@@ -310,8 +310,7 @@ void Engine::build_points(PositionsView positions, float cutoff, const Systems& 
         reused_positions_ = positions;
         reused_queries_ = systems.queries;
       } else {
-        images_->drop_recording();
-        images_->set_recording(may_reuse);
+        images_->set_recording(may_reuse);  // forgets the last recorded plan
         images_->expand(plan, sources, queries, stream_);
         m.build_points(images_->points(), cutoff);
         detail::ParkingPlace parking;
@@ -327,10 +326,9 @@ void Engine::build_points(PositionsView positions, float cutoff, const Systems& 
 void Engine::settle_reused_plan() {
   if (!reused_) return;
   reused_ = false;
-  if (!images_->reused_plan_outgrown(stream_, /*wait=*/true)) return;
+  if (!images_->reused_plan_outgrown(stream_, /*wait=*/true)) return;  // else forgotten
   Systems systems = systems_;
   systems.queries = reused_queries_;
-  images_->drop_recording();  // planned afresh, and recorded again
   build_points(reused_positions_, cutoff_, systems, nullptr);
 }
 

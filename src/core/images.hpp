@@ -57,22 +57,22 @@ class ImagePoints {
   // wraps and decides pairs from them; the device one searches the floats.
   void set_float64_sources(const double* xyz) { float64_sources_ = xyz; }
 
-  // Engine::set_reuse_plan (the device expansion; the host one never records). With recording
-  // on, expand() keeps its sizes (room for 1/8 more images, the float band's extent) and says
-  // so in Points::reuse; the engine then gives the method's parking place. expand_reusing()
-  // expands into those sizes with no read-back: image slots past the real ones hold the parking
-  // place, and what no longer fits goes to a device word (Points::reuse.misfit) that the method
-  // checks too; finish_reusing() queues that word's copy to the host after the method's build.
+  // Engine::set_reuse_plan (the device expansion; the host one never records). set_recording()
+  // forgets the plan recorded last; with recording on, expand() keeps its sizes (room for 1/8 more
+  // images, the float band's extent) and says so in Points::reuse; the engine then gives the
+  // method's parking place. expand_reusing() expands into those sizes with no read-back: image
+  // slots past the real ones hold the parking place, and what no longer fits goes to a device word
+  // (Points::reuse.misfit) that the method checks too; finish_reusing() queues that word's copy to
+  // the host after the method's build.
   virtual void set_recording(bool) {}
   virtual void set_parking(const ParkingPlace&) {}
   virtual bool recorded() const { return false; }  // a recorded plan, with its parking place
-  virtual void drop_recording() {}
   virtual void expand_reusing(const ImagePlan& plan, const float* sources, const float* queries,
                               void* stream);
   virtual void finish_reusing(void*) {}
-  // Whether the last expand_reusing() found that the plan no longer fits: false while the
-  // device has not yet said (wait: waits for it), and while `stream` is being captured into a
-  // CUDA graph (a captured build's verdict reaches only its list's count).
+  // Whether the last expand_reusing() found that the plan no longer fits (the plan is then
+  // forgotten): false while the device has not yet said (wait: waits for it), and while `stream` is
+  // being captured into a CUDA graph (a captured build's verdict reaches only its list's count).
   virtual bool reused_plan_outgrown(void* /*stream*/, bool /*wait*/) { return false; }
 
  protected:

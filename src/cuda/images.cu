@@ -249,7 +249,11 @@ class DeviceImagePoints final : public ImagePoints {
     expand_into(plan, sources, queries, static_cast<cudaStream_t>(stream), false);
   }
 
-  void set_recording(bool on) override { recording_ = on; }
+  void set_recording(bool on) override {
+    recording_ = on;
+    parked_ = recorded_slots_ = misfit_pending_ = false;
+    reuse_.slots = 0;
+  }
   void set_parking(const ParkingPlace& place) override {
     reuse_.parking = place;
     reuse_.side = 1;
@@ -257,10 +261,6 @@ class DeviceImagePoints final : public ImagePoints {
     parked_ = recorded_slots_;
   }
   bool recorded() const override { return parked_; }
-  void drop_recording() override {
-    parked_ = recorded_slots_ = misfit_pending_ = false;
-    reuse_.slots = 0;
-  }
   void expand_reusing(const ImagePlan& plan, const float* sources, const float* queries,
                       void* stream) override {
     expand_into(plan, sources, queries, static_cast<cudaStream_t>(stream), true);
@@ -356,7 +356,9 @@ bool DeviceImagePoints::reused_plan_outgrown(void* stream, bool wait) {
     RAYCUT_CUDA_CHECK(status);
   }
   misfit_pending_ = false;
-  return misfit_host_.host() != 0;
+  if (misfit_host_.host() == 0) return false;
+  parked_ = false;  // forgotten: the next build plans afresh
+  return true;
 }
 
 void DeviceImagePoints::expand_into(const ImagePlan& plan, const float* sources,
