@@ -5,7 +5,8 @@
 #
 #   [PREBUILT=ARCHIVE] scripts/device_run.sh [gtest FILTER] [tests REGEX] [bench] [lists]
 #                         [periodic] [sph] [python] [python-bench] [mpi] [mpi-scaling]
-#                         [memcheck] [grid-suites] [latency] [compiled] [knn] [roofline]
+#                         [reused-plans] [memcheck] [grid-suites] [latency] [compiled] [knn]
+#                         [roofline]
 #                         results: ${OUT:-/tmp/raycut-out}/results.tgz
 #
 #   gtest FILTER the gtest binaries with --gtest_filter=FILTER (also with PREBUILT, below)
@@ -42,6 +43,10 @@
 #   roofline     ncu (Nsight Compute) metrics of the periodic workloads', the uniform suite's and
 #                the small pass's kernels, a run per operation: ncu-*.csv, and roofline.csv/.png
 #                by bench/roofline_table.py (docs/benchmarks.md's roofline)
+#   reused-plans the grid's builds that reuse their plan (Engine::set_reuse_plan): their tests
+#                and memcheck, then the C++ engine rows and bench/python_latency.py at 10^4 and
+#                10^5 particles with RAYCUT_REUSE_PLAN=0 and =1, $ROUNDS alternated rounds
+#                (default 2), profiler tables in profiles-reuse{0,1}-K/ (docs/streams.md)
 #   memcheck     compute-sanitizer on the functor, list, grid-variant and periodic GPU tests;
 #                racecheck on the small-system pass
 #   python       the Python package built with the device's Python (the PyTorch operators with
@@ -217,6 +222,35 @@ while [ $# -gt 0 ]; do
         --output "$res/compiled-python.csv" > "$res/compiled-python.log" 2>&1
       echo "python_compiled exit $?"
       grep -E "^lj-pbc|python_compiled" "$res/compiled-python.log" | head -20
+      ;;
+    reused-plans)
+      # Engine::set_reuse_plan on the GPU: its tests (memcheck too), the C++ engine rows at
+      # 10,000 and 100,000 particles, then bench/python_latency.py there with the operators
+      # planning (RAYCUT_REUSE_PLAN=0) and reusing (=1), alternated $ROUNDS times (default 2),
+      # each with the profiler's tables: reused-gtest.log, reused-memcheck.log,
+      # reused-cpp-K.csv, reused-python-{0,1}-K.csv, profiles-reuse{0,1}-K/
+      timeout 300 build/tests/raycut_tests --gtest_filter='*Reused*:*StaticLists*/grid' \
+        > "$res/reused-gtest.log" 2>&1
+      echo "reused-plans gtest exit $?: $(grep -E '^\[  PASSED  \]' "$res/reused-gtest.log")"
+      grep -E '^\[  FAILED  \] [A-Za-z]' "$res/reused-gtest.log" | head -10
+      compute-sanitizer --tool memcheck --error-exitcode 9 build/tests/raycut_tests \
+        --gtest_filter='*Reused*' > "$res/reused-memcheck.log" 2>&1
+      echo "reused-plans memcheck exit $? ($(grep -E "ERROR SUMMARY" "$res/reused-memcheck.log"))"
+      build_python
+      for round in $(seq 1 "${ROUNDS:-2}"); do
+        build/bench/raycut_latency_bench --sizes 10000,100000 --batches none \
+          --output "$res/reused-cpp-$round.csv" > "$res/reused-cpp-$round.log" 2>&1
+        grep -E "engine|host enqueue" "$res/reused-cpp-$round.log"
+        for reuse in 0 1; do
+          mkdir -p "$res/profiles-reuse$reuse-$round"
+          RAYCUT_REUSE_PLAN=$reuse PYTHONPATH="$PWD/build/python" "$py" bench/python_latency.py \
+            --sizes 10000,100000 --batches none --profile-tables "$res/profiles-reuse$reuse-$round" \
+            --output "$res/reused-python-$reuse-$round.csv" \
+            > "$res/reused-python-$reuse-$round.log" 2>&1
+          echo "RAYCUT_REUSE_PLAN=$reuse, round $round:"
+          grep -E "^lj-pbc" "$res/reused-python-$reuse-$round.log" | grep -v verlet
+        done
+      done
       ;;
     memcheck)
       # compute-sanitizer on the pair-pass paths: user functors, lists, the grid's variants.
