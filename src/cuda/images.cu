@@ -193,8 +193,8 @@ __global__ void images_kernel(Plan plan, const Real* sources, const std::uint32_
 }
 
 // A reused plan (Engine::set_reuse_plan): its image slots, the float band's extent (float
-// bits) and where spare slots park (a lattice of side x side places on the sheet); the device
-// word that says what no longer fits.
+// bits) and where spare slots park (a lattice of side x side places on the sheet, in each
+// system's layer of the grid); the device word that says what no longer fits.
 struct Reuse {
   std::uint64_t slots = 0;
   unsigned extent = 0;
@@ -203,9 +203,10 @@ struct Reuse {
   int* misfit = nullptr;
 };
 
-// After the images of a reused plan: slot k, when the images left it empty, gets place k of the
-// parking lattice (no search reaches it), and thread 0 writes the verdict, the first word of this
-// build's misfit.
+// After the images of a reused plan: slot k, when the images left it empty, gets a place of the
+// parking lattice in system k % systems (no search reaches it: the slots spread over every
+// system's cells of the sheet), and thread 0 writes the verdict, the first word of this build's
+// misfit.
 __global__ void park_kernel(Plan plan, const std::uint64_t* images, const Findings* found,
                             Reuse reuse, Out out) {
   const std::uint64_t k = blockIdx.x * std::uint64_t{block} + threadIdx.x;
@@ -221,12 +222,16 @@ __global__ void park_kernel(Plan plan, const std::uint64_t* images, const Findin
   }
   if (k >= real && k < reuse.slots) {
     const ParkingPlace& at = reuse.parking;
-    const float y = (static_cast<float>(k % reuse.side) + 0.5f) / static_cast<float>(reuse.side),
-                z = (static_cast<float>(k / reuse.side) + 0.5f) / static_cast<float>(reuse.side);
+    const std::uint64_t lattice = k / plan.systems;
+    const float y = (static_cast<float>(lattice % reuse.side) + 0.5f) /
+                    static_cast<float>(reuse.side),
+                z = (static_cast<float>(lattice / reuse.side) + 0.5f) /
+                    static_cast<float>(reuse.side);
     const float place[3] = {at.x, at.lo[0] + y * (at.hi[0] - at.lo[0]),
                             at.lo[1] + z * (at.hi[1] - at.lo[1])};
     const std::int32_t none_shifted[3] = {0, 0, 0};
-    out.place(plan.first_image + k, place, 0, 0, none_shifted);
+    out.place(plan.first_image + k, place, 0, static_cast<std::uint32_t>(k % plan.systems),
+              none_shifted);
   }
 }
 
@@ -256,8 +261,6 @@ class DeviceImagePoints final : public ImagePoints {
   }
   void set_parking(const ParkingPlace& place) override {
     reuse_.parking = place;
-    reuse_.side = 1;
-    while (std::uint64_t{reuse_.side} * reuse_.side < reuse_.slots) ++reuse_.side;
     parked_ = recorded_slots_;
   }
   bool recorded() const override { return parked_; }
@@ -468,6 +471,8 @@ void DeviceImagePoints::expand_into(const ImagePlan& plan, const float* sources,
     }
     Reuse r = reuse_;
     r.misfit = misfit_.data();
+    const std::uint64_t per_system = (reuse_.slots + systems - 1) / systems;
+    while (std::uint64_t{r.side} * r.side < per_system) ++r.side;
     park_kernel<<<blocks_for(std::max<std::uint64_t>(reuse_.slots, 1), block), block, 0, stream>>>(
         p, image_offset_.data() + n, found_.data(), r, out);
     RAYCUT_CUDA_CHECK_LAUNCH();
