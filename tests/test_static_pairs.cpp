@@ -278,6 +278,37 @@ TEST(ReusedPlans, ListTheFreshPairsStepAfterStep) {
   }
 }
 
+// A batch: three periodic systems of their own boxes, one grid (each system's layer of cells,
+// the spare slots parked in every layer); the reused plan lists what a fresh build lists.
+TEST(ReusedPlans, ListTheFreshPairsOfABatch) {
+  if (const std::string why = unavailable("grid"); !why.empty()) GTEST_SKIP() << why;
+  const float cutoff = 1.0f;
+  raycut::Systems systems;
+  std::vector<float> xyz;
+  systems.offsets = {0};
+  for (const double side : {7.0, 8.0, 9.0}) {
+    const Liquid one(static_cast<std::size_t>(2.5 * side * side * side), side, 3);
+    systems.boxes.push_back(one.box);
+    xyz.insert(xyz.end(), one.xyz.begin(), one.xyz.end());
+    systems.offsets.push_back(xyz.size() / 3);
+  }
+  Engine fresh("grid"), reused("grid");
+  reused.set_reuse_plan(true);
+  std::mt19937 random{11};
+  std::uniform_real_distribution<float> jump(-0.05f, 0.05f);
+  for (int step = 0; step < 4; ++step) {
+    const raycut::DeviceArray x(xyz);
+    fresh.build(x.view(), cutoff, systems);
+    const Read want = run_static(fresh, 400000, {}, true);
+    reused.build(x.view(), cutoff, systems);
+    const Read got = run_static(reused, 400000, {}, true);
+    ASSERT_GT(want.count, 10000) << "step " << step;
+    ASSERT_EQ(got.count, want.count) << "step " << step;
+    EXPECT_EQ(pair_set(got), pair_set(want)) << "step " << step;
+    for (float& v : xyz) v += jump(random);
+  }
+}
+
 // A plan that no longer fits is reported, never used: more images than it has room for (every
 // particle moved to a face), or a particle outside its grid (an open axis), give the count
 // count_plan_outgrown; once that count has been read, the next build plans afresh. A list that
