@@ -333,6 +333,11 @@ class Engine {
   // wider by half the cutoff).
   void set_reuse_plan(bool reuse) { reuse_plan_ = reuse; }
   bool reuse_plan() const { return reuse_plan_; }
+  // Whether build(positions, cutoff, systems) would reuse the plan recorded last, and so read
+  // nothing back: what a caller asks before building on a stream it is capturing into a CUDA
+  // graph (a build that plans waits for its sizes, which a capture refuses). A captured build
+  // reports a plan that no longer fits only through its static list's count, at each replay.
+  bool reuses_plan_for(PositionsView positions, float cutoff, const Systems& systems) const;
 
   // Validates (finite coordinates, cutoff finite and within the supported range) and builds
   // the method's structure. Throws Error with the first bad index or the bad value, before any

@@ -160,14 +160,19 @@ void index_offsets(const void* index, bool wide, std::size_t n, std::size_t syst
 }
 
 namespace {
-__global__ void compare_words(const std::uint32_t* a, const std::uint32_t* b, std::size_t words,
+__global__ void compare_bytes(const unsigned char* a, const unsigned char* b, std::size_t bytes,
                               std::int64_t* count, std::int64_t code, int* raised) {
   bool differs = false;
-  for (std::size_t w = threadIdx.x; w < words; w += blockDim.x) differs = differs || a[w] != b[w];
+  for (std::size_t k = threadIdx.x; k < bytes; k += blockDim.x) differs = differs || a[k] != b[k];
   if (__syncthreads_or(differs) && threadIdx.x == 0) {
     *count = code;
     *raised = 1;
   }
+}
+bool capturing(cudaStream_t stream) {
+  cudaStreamCaptureStatus status = cudaStreamCaptureStatusNone;
+  check(cudaStreamIsCapturing(stream, &status), "cudaStreamIsCapturing");
+  return status != cudaStreamCaptureStatusNone;
 }
 }  // namespace
 
@@ -189,10 +194,11 @@ void ChangeFlag::compare(const void* a, const void* b, std::size_t bytes, std::i
     check(cudaHostGetDevicePointer(reinterpret_cast<void**>(&device_), host_, 0),
           "cudaHostGetDevicePointer");
   }
-  compare_words<<<1, 128, 0, s>>>(static_cast<const std::uint32_t*>(a),
-                                  static_cast<const std::uint32_t*>(b), bytes / 4, count, code,
+  compare_bytes<<<1, 128, 0, s>>>(static_cast<const unsigned char*>(a),
+                                  static_cast<const unsigned char*>(b), bytes, count, code,
                                   device_);
-  check(cudaGetLastError(), "compare_words launch");
+  check(cudaGetLastError(), "compare_bytes launch");
+  if (capturing(s)) return;
   if (!done_) {
     cudaEvent_t event = nullptr;
     check(cudaEventCreateWithFlags(&event, cudaEventDisableTiming), "cudaEventCreate");
@@ -202,8 +208,8 @@ void ChangeFlag::compare(const void* a, const void* b, std::size_t bytes, std::i
   pending_ = true;
 }
 
-bool ChangeFlag::raised() {
-  if (!pending_) return false;
+bool ChangeFlag::raised(void* stream) {
+  if (!pending_ || capturing(static_cast<cudaStream_t>(stream))) return false;
   const cudaError_t status = cudaEventQuery(static_cast<cudaEvent_t>(done_));
   if (status == cudaErrorNotReady) return false;
   check(status, "cudaEventQuery");

@@ -33,9 +33,11 @@ void index_offsets(const void* index, bool wide, std::size_t n, std::size_t syst
                    std::uint64_t* host_offsets, void* stream);
 
 // A flag the device raises and the host reads without waiting: compare() queues a comparison of
-// two device arrays of `bytes` (a multiple of 4) and, where they differ, writes `code` to
-// *count (an int64 in device memory) and raises the flag; raised() says whether a finished
-// comparison found a difference (one not yet finished counts as none) and lowers it.
+// two device arrays of `bytes` and, where they differ, writes `code` to *count (an int64 in
+// device memory) and raises the flag; raised() says whether a finished comparison found a
+// difference (one not yet finished counts as none) and lowers it. On a stream being captured
+// into a CUDA graph, compare() only queues the comparison (a replay's verdict reaches *count
+// alone) and raised() says false without asking the device.
 class ChangeFlag {
  public:
   ChangeFlag();
@@ -44,7 +46,7 @@ class ChangeFlag {
   ChangeFlag& operator=(const ChangeFlag&) = delete;
   void compare(const void* a, const void* b, std::size_t bytes, std::int64_t* count,
                std::int64_t code, void* stream);
-  bool raised();
+  bool raised(void* stream);
 
  private:
   int* host_ = nullptr;    // mapped pinned memory

@@ -266,9 +266,22 @@ struct Work {
   // different cell makes the count count_plan_outgrown and the next call copies the cell again.
   struct CellWatch {
     at::Tensor seen;      // the cell the boxes were made from, on the device
-    at::Tensor seen_pbc;  // and its pbc (host), or undefined
+    at::Tensor seen_pbc;  // and its pbc (where it was given), or undefined
     std::vector<raycut::Box> boxes;
     raycut_py::ChangeFlag changed;
+    // Whether `boxes` are those of this cell and pbc as far as the host can tell without reading
+    // the device: the same shapes, dtypes and devices, a host pbc equal, and no comparison
+    // found a change (a change found is remembered: the cell is copied again).
+    bool holds(const at::Tensor& cell, const std::optional<at::Tensor>& pbc, void* stream) {
+      if (changed.raised(stream)) seen = at::Tensor();
+      const bool same_pbc = pbc ? seen_pbc.defined() && seen_pbc.sizes() == pbc->sizes() &&
+                                      seen_pbc.scalar_type() == pbc->scalar_type() &&
+                                      seen_pbc.device() == pbc->device() &&
+                                      (pbc->is_cuda() || at::equal(seen_pbc, *pbc))
+                                : !seen_pbc.defined();
+      return seen.defined() && seen.sizes() == cell.sizes() &&
+             seen.scalar_type() == cell.scalar_type() && seen.device() == cell.device() && same_pbc;
+    }
   } cell_watch;
 #endif
 
@@ -405,8 +418,7 @@ Pairs run(const at::Tensor& x, double cutoff, const raycut::Systems& systems, bo
   const OnDevice on(device);
   Work& work = on.work;
   work.engine.set_reuse_plan(Work::reuse_plans());
-  const std::shared_ptr<raycut::NeighbourListBuffer> list =
-      device.is_cpu() ? raycut_py::idle_lists().take() : work.device_list();
+  std::shared_ptr<raycut::NeighbourListBuffer> list;  // not for a static list (a graph may hold it)
   const auto space = device.is_cpu() ? raycut::MemorySpace::host : raycut::MemorySpace::device;
   try {
     if (wide.defined())
@@ -436,6 +448,7 @@ Pairs run(const at::Tensor& x, double cutoff, const raycut::Systems& systems, bo
     options.half = half;
     options.shifts = true;
     options.coo = true;
+    list = device.is_cpu() ? raycut_py::idle_lists().take() : work.device_list();
     work.engine.neighbours(*list, options);
   } catch (const raycut::Error& e) {
     rethrow(e);
@@ -459,18 +472,40 @@ class CachingAllocatorMemory final : public raycut::MemoryResource {
   }
 };
 
+// Whether the engine's grid can be captured into a CUDA graph for this call: a static list with
+// RAYCUT_REUSE_PLAN=1, one device cell whose watched boxes still hold (so the cell is not copied),
+// no batch index (reading one waits), and an engine that would reuse the plan it recorded at an
+// earlier call of as many particles (Engine::reuses_plan_for: a build that plans waits).
+bool engine_captures(const at::Tensor& positions, double cutoff,
+                     const std::optional<at::Tensor>& cell, const std::optional<at::Tensor>& pbc,
+                     const std::optional<at::Tensor>& batch, bool static_list) {
+  if (!static_list || !Work::reuse_plans() || !cell || !cell->is_cuda() || cell->dim() != 2 ||
+      batch)
+    return false;
+  const c10::cuda::CUDAGuard guard(positions.device());
+  Work& work = work_for(positions.device());
+  const auto stream = c10::cuda::getCurrentCUDAStream(positions.device().index()).stream();
+  if (!work.cell_watch.holds(*cell, pbc, stream) || work.cell_watch.boxes.size() != 1) return false;
+  const auto n = static_cast<std::size_t>(positions.size(0));
+  return work.engine.reuses_plan_for({nullptr, n, raycut::MemorySpace::device},
+                                     static_cast<float>(cutoff),
+                                     raycut::Systems::periodic(work.cell_watch.boxes[0]));
+}
+
 // Whether a neighbor_list call takes the stream-ordered small-system pass: CUDA tensors, systems
 // small enough by raycut's policy, or any size while the current stream is being captured into a
-// CUDA graph (torch.cuda.graph, torch.compile's "reduce-overhead"): the engine plans on the host
-// and cannot be captured, the pass can (with cells from 2,048 particles a system). The number of
-// systems is what the host knows: B of a (B, 3, 3) cell, else 1 (the batch's is data-dependent
-// and is never read back). pbc without a cell stays on the engine, which checks that no axis is
-// periodic.
-bool takes_small_systems_pass(const at::Tensor& positions, const std::optional<at::Tensor>& cell,
-                              const std::optional<at::Tensor>& pbc) {
+// CUDA graph (torch.cuda.graph, torch.compile's "reduce-overhead") unless the engine's grid can
+// be captured (engine_captures): an engine that plans waits on the host, the pass does not (with
+// cells from 2,048 particles a system). The number of systems is what the host knows: B of a
+// (B, 3, 3) cell, else 1 (the batch's is data-dependent and is never read back). pbc without a
+// cell stays on the engine, which checks that no axis is periodic.
+bool takes_small_systems_pass(const at::Tensor& positions, double cutoff,
+                              const std::optional<at::Tensor>& cell,
+                              const std::optional<at::Tensor>& pbc,
+                              const std::optional<at::Tensor>& batch, bool static_list) {
   if (!positions.is_cuda() || (pbc && !cell)) return false;
   if (c10::cuda::currentStreamCaptureStatusMayInitCtx() != c10::cuda::CaptureStatus::None)
-    return true;
+    return !engine_captures(positions, cutoff, cell, pbc, batch, static_list);
   const std::int64_t systems = cell && cell->dim() == 3 ? cell->size(0) : 1;
   return raycut::prefer_small_systems(static_cast<std::size_t>(positions.size(0)),
                                       static_cast<std::size_t>(systems));
@@ -595,19 +630,19 @@ Pairs exact_small_systems_pairs(const at::Tensor& positions, double cutoff,
 #endif
 
 // The boxes of a call's cell and pbc. With RAYCUT_REUSE_PLAN=1, a static list with a device cell
-// (and host pbc, or none) takes those of the thread's last copy of that cell while no comparison
-// has found it changed, and after() queues the comparison behind the list (Work::CellWatch); every
-// other call copies the cell (boxes_of: one wait for a device cell).
+// takes those of the thread's last copy of that cell and pbc while no comparison has found either
+// changed, and after() queues the comparisons behind the list (Work::CellWatch); every other call
+// copies the cell (boxes_of: one wait for a device cell, one more for a device pbc).
 class CallBoxes {
  public:
   CallBoxes(const at::Tensor& points, const std::optional<at::Tensor>& cell,
             const std::optional<at::Tensor>& pbc, bool static_list) {
 #ifdef RAYCUT_TORCH_CUDA
-    if (Work::reuse_plans() && static_list && cell && cell->is_cuda() &&
-        (!pbc || !pbc->is_cuda())) {
+    if (Work::reuse_plans() && static_list && cell && cell->is_cuda()) {
       const c10::cuda::CUDAGuard guard(points.device());  // a new Work is made on its device
       watch_ = &work_for(points.device()).cell_watch;
       cell_ = *cell;
+      if (pbc) pbc_ = *pbc;
       boxes = watched(*watch_, *cell, pbc);
       return;
     }
@@ -622,10 +657,17 @@ class CallBoxes {
 #ifdef RAYCUT_TORCH_CUDA
     if (!watch_) return;
     const c10::cuda::CUDAGuard guard(cell_.device());
+    const auto stream = c10::cuda::getCurrentCUDAStream(cell_.device().index()).stream();
+    std::int64_t* count = std::get<3>(out).data_ptr<std::int64_t>();
+    if (pbc_.defined() && pbc_.is_cuda()) {
+      const at::Tensor pbc_now = pbc_.contiguous();
+      watch_->changed.compare(pbc_now.data_ptr(), watch_->seen_pbc.data_ptr(),
+                              watch_->seen_pbc.nbytes(), count, raycut::count_plan_outgrown,
+                              stream);
+    }
     const at::Tensor now = cell_.contiguous();
-    watch_->changed.compare(now.data_ptr(), watch_->seen.data_ptr(), watch_->seen.nbytes(),
-                            std::get<3>(out).data_ptr<std::int64_t>(), raycut::count_plan_outgrown,
-                            c10::cuda::getCurrentCUDAStream(cell_.device().index()).stream());
+    watch_->changed.compare(now.data_ptr(), watch_->seen.data_ptr(), watch_->seen.nbytes(), count,
+                            raycut::count_plan_outgrown, stream);
 #else
     (void)out;
 #endif
@@ -635,13 +677,7 @@ class CallBoxes {
 #ifdef RAYCUT_TORCH_CUDA
   static std::vector<raycut::Box> watched(Work::CellWatch& watch, const at::Tensor& cell,
                                           const std::optional<at::Tensor>& pbc) {
-    const bool same_pbc = pbc ? watch.seen_pbc.defined() &&
-                                    watch.seen_pbc.sizes() == pbc->sizes() &&
-                                    at::equal(watch.seen_pbc, *pbc)
-                              : !watch.seen_pbc.defined();
-    if (!watch.changed.raised() && watch.seen.defined() && watch.seen.sizes() == cell.sizes() &&
-        watch.seen.scalar_type() == cell.scalar_type() && watch.seen.device() == cell.device() &&
-        same_pbc)
+    if (watch.holds(cell, pbc, c10::cuda::getCurrentCUDAStream(cell.device().index()).stream()))
       return watch.boxes;
     watch.boxes = boxes_of(cell, pbc);
     watch.seen = cell.contiguous().clone();
@@ -649,7 +685,7 @@ class CallBoxes {
     return watch.boxes;
   }
   Work::CellWatch* watch_ = nullptr;
-  at::Tensor cell_;
+  at::Tensor cell_, pbc_;
 #endif
 };
 
@@ -659,7 +695,7 @@ Pairs neighbor_list(const at::Tensor& positions, double cutoff,
                     std::optional<std::int64_t> max_pairs) {
 #ifdef RAYCUT_TORCH_CUDA
   check_points(positions, "positions");
-  if (takes_small_systems_pass(positions, cell, pbc)) {
+  if (takes_small_systems_pass(positions, cutoff, cell, pbc, batch, max_pairs.has_value())) {
     if (max_pairs)
       return small_systems_pairs(positions, cutoff, cell, pbc, batch, half, *max_pairs);
     return exact_small_systems_pairs(positions, cutoff, cell, pbc, batch, half);

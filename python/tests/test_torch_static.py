@@ -248,6 +248,46 @@ def test_a_device_cell_is_not_copied_while_unchanged_and_a_change_is_reported(mo
 
 
 @cuda
+def test_a_captured_call_runs_the_engine_that_reuses_its_plan(monkeypatch):
+    """With RAYCUT_REUSE_PLAN=1, a static call captured in a CUDA graph after eager calls of the
+    same systems runs the engine's grid (its recorded plan, the watched cell and CUDA pbc), not
+    the small pass: each replay over positions changed in place lists the CPU operator's pairs,
+    and a cell changed in place gives the count -6 at replay (the small pass would read it)."""
+    monkeypatch.setenv("RAYCUT_REUSE_PLAN", "1")
+    n, cutoff, max_pairs = 7000, 2.5, 600_000  # above the small systems
+    side = (n / 0.8442) ** (1 / 3)
+    x = torch.as_tensor(rng(12).random((n, 3)) * side, dtype=torch.float32)
+    cell = side * torch.eye(3)
+    on, cell_on = x.cuda(), cell.cuda()
+    flags = torch.ones(3, dtype=torch.bool, device="cuda")
+
+    def call():
+        return torch.ops.raycut.neighbor_list(on, cutoff, cell_on, flags, None, False, max_pairs)
+
+    warm = torch.cuda.Stream()
+    warm.wait_stream(torch.cuda.current_stream())
+    with torch.cuda.stream(warm):
+        for _ in range(3):  # plans and records, then reuses; the cell and pbc are watched
+            assert int(call()[3]) >= 0
+    torch.cuda.current_stream().wait_stream(warm)
+    graph = torch.cuda.CUDAGraph()
+    with torch.cuda.graph(graph):
+        out = call()
+    moves = rng(13)
+    for step in range(3):
+        moved = x + torch.as_tensor(moves.uniform(-0.05, 0.05, (n, 3)), dtype=torch.float32)
+        on.copy_(moved.cuda())
+        graph.replay()
+        torch.cuda.synchronize()
+        want = pair_set(*torch.ops.raycut.neighbor_list(moved, cutoff, cell, None, None, False,
+                                                        max_pairs))
+        assert pair_set(*out) == want, step
+    cell_on.mul_(1.02)
+    graph.replay()
+    assert int(out[3]) == -6
+
+
+@cuda
 def test_no_host_synchronisation():
     case = batched()
     x, cutoff, cell, pbc, batch = case.on("cuda", torch.float32)

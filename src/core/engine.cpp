@@ -323,6 +323,14 @@ void Engine::build_points(PositionsView positions, float cutoff, const Systems& 
   built_ = true;
 }
 
+bool Engine::reuses_plan_for(PositionsView positions, float cutoff, const Systems& systems) const {
+  if (!reuse_plan_ || !impl_ || !impl_->reuses_plans() || positions.space != MemorySpace::device ||
+      !plan_ || !images_ || !images_->recorded())
+    return false;
+  return plan_queries_ == systems.has_queries() && same_layout(systems, plan_key_) &&
+         positions.size == plan_sources_ && cutoff == plan_cutoff_;
+}
+
 void Engine::settle_reused_plan() {
   if (!reused_) return;
   reused_ = false;
