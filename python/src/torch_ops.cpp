@@ -265,19 +265,22 @@ struct Work {
   // compares the cell with a copy of it kept on the device (one kernel, after the list); a
   // different cell makes the count count_plan_outgrown and the next call copies the cell again.
   struct CellWatch {
-    at::Tensor seen;      // the cell the boxes were made from, on the device
-    at::Tensor seen_pbc;  // and its pbc (where it was given), or undefined
+    at::Tensor seen;        // the cell the boxes were made from, on the device
+    at::Tensor seen_pbc;    // its pbc on the device (a device pbc is compared with it), or none
+    at::Tensor pbc_values;  // the same on the host (a host pbc is compared with it)
     std::vector<raycut::Box> boxes;
     raycut_py::ChangeFlag changed;
     // Whether `boxes` are those of this cell and pbc as far as the host can tell without reading
-    // the device: the same shapes, dtypes and devices, a host pbc equal, and no comparison
-    // found a change (a change found is remembered: the cell is copied again).
+    // the device: the same shapes, dtypes and device, a host pbc equal, and no comparison found
+    // a change (a change found is remembered: the cell is copied again). The pbc may come on
+    // the host in one call and on the device in another (the Python wrapper sends it to the
+    // device under capture).
     bool holds(const at::Tensor& cell, const std::optional<at::Tensor>& pbc, void* stream) {
       if (changed.raised(stream)) seen = at::Tensor();
       const bool same_pbc = pbc ? seen_pbc.defined() && seen_pbc.sizes() == pbc->sizes() &&
                                       seen_pbc.scalar_type() == pbc->scalar_type() &&
-                                      seen_pbc.device() == pbc->device() &&
-                                      (pbc->is_cuda() || at::equal(seen_pbc, *pbc))
+                                      (pbc->is_cuda() ? pbc->device() == seen_pbc.device()
+                                                      : at::equal(pbc_values, *pbc))
                                 : !seen_pbc.defined();
       return seen.defined() && seen.sizes() == cell.sizes() &&
              seen.scalar_type() == cell.scalar_type() && seen.device() == cell.device() && same_pbc;
@@ -681,7 +684,8 @@ class CallBoxes {
       return watch.boxes;
     watch.boxes = boxes_of(cell, pbc);
     watch.seen = cell.contiguous().clone();
-    watch.seen_pbc = pbc ? pbc->clone() : at::Tensor();
+    watch.pbc_values = pbc ? pbc->to(at::kCPU).contiguous().clone() : at::Tensor();
+    watch.seen_pbc = pbc ? watch.pbc_values.to(cell.device()) : at::Tensor();
     return watch.boxes;
   }
   Work::CellWatch* watch_ = nullptr;
