@@ -44,9 +44,10 @@
 #                the small pass's kernels, a run per operation: ncu-*.csv, and roofline.csv/.png
 #                by bench/roofline_table.py (docs/benchmarks.md's roofline)
 #   reused-plans the grid's builds that reuse their plan (Engine::set_reuse_plan): their tests
-#                and memcheck, then the C++ engine rows and bench/python_latency.py at 10^4 and
-#                10^5 particles with RAYCUT_REUSE_PLAN=0 and =1, $ROUNDS alternated rounds
-#                (default 2), profiler tables in profiles-reuse{0,1}-K/ (docs/streams.md)
+#                (C++, memcheck, python/tests/test_torch_static.py), then the C++ engine rows
+#                and bench/python_latency.py at 10^4 and 10^5 particles with
+#                RAYCUT_REUSE_PLAN=0 and =1, $ROUNDS alternated rounds (default 2), profiler
+#                tables in profiles-reuse{0,1}-K/ (docs/streams.md)
 #   memcheck     compute-sanitizer on the functor, list, grid-variant and periodic GPU tests;
 #                racecheck on the small-system pass
 #   python       the Python package built with the device's Python (the PyTorch operators with
@@ -224,11 +225,12 @@ while [ $# -gt 0 ]; do
       grep -E "^lj-pbc|python_compiled" "$res/compiled-python.log" | head -20
       ;;
     reused-plans)
-      # Engine::set_reuse_plan on the GPU: its tests (memcheck too), the C++ engine rows at
-      # 10,000 and 100,000 particles, then bench/python_latency.py there with the operators
-      # planning (RAYCUT_REUSE_PLAN=0) and reusing (=1), alternated $ROUNDS times (default 2),
-      # each with the profiler's tables: reused-gtest.log, reused-memcheck.log,
-      # reused-cpp-K.csv, reused-python-{0,1}-K.csv, profiles-reuse{0,1}-K/
+      # Engine::set_reuse_plan on the GPU: its tests (memcheck too, and the PyTorch operator's
+      # static lists), the C++ engine rows at 10,000 and 100,000 particles, then
+      # bench/python_latency.py there with the operators planning (RAYCUT_REUSE_PLAN=0) and
+      # reusing (=1), alternated $ROUNDS times (default 2), each with the profiler's tables:
+      # reused-gtest.log, reused-memcheck.log, reused-pytest.log, reused-cpp-K.csv,
+      # reused-python-{0,1}-K.csv, profiles-reuse{0,1}-K/
       timeout 300 build/tests/raycut_tests --gtest_filter='*Reused*:*StaticLists*/grid' \
         > "$res/reused-gtest.log" 2>&1
       echo "reused-plans gtest exit $?: $(grep -E '^\[  PASSED  \]' "$res/reused-gtest.log")"
@@ -237,6 +239,10 @@ while [ $# -gt 0 ]; do
         --gtest_filter='*Reused*' > "$res/reused-memcheck.log" 2>&1
       echo "reused-plans memcheck exit $? ($(grep -E "ERROR SUMMARY" "$res/reused-memcheck.log"))"
       build_python
+      PYTHONPATH="$PWD/build/python" timeout 300 "$py" -m pytest -q \
+        python/tests/test_torch_static.py > "$res/reused-pytest.log" 2>&1
+      echo "reused-plans pytest exit $?: $(tail -1 "$res/reused-pytest.log")"
+      grep -E "^FAILED|^E " "$res/reused-pytest.log" | head -10
       for round in $(seq 1 "${ROUNDS:-2}"); do
         build/bench/raycut_latency_bench --sizes 10000,100000 --batches none \
           --output "$res/reused-cpp-$round.csv" > "$res/reused-cpp-$round.log" 2>&1
