@@ -260,10 +260,11 @@ struct Work {
   raycut::Engine engine;
 
 #ifdef RAYCUT_TORCH_CUDA
-  // A static list's device cell, so that a call need not copy it to the host while it is the
-  // one the last copy was made from: the boxes of that copy are taken again, and the device
-  // compares the cell with a copy of it kept on the device (one kernel, after the list); a
-  // different cell makes the count count_plan_outgrown and the next call copies the cell again.
+  // A static list's device cell (and pbc), so that a call need not copy it to the host while it
+  // is the one the last copy was made from: the boxes of that copy are taken again, and the
+  // device compares the cell (and a device pbc) with copies kept on the device (a kernel each,
+  // after the list); a different one makes the count count_plan_outgrown and the next call
+  // copies them again.
   struct CellWatch {
     at::Tensor seen;        // the cell the boxes were made from, on the device
     at::Tensor seen_pbc;    // its pbc on the device (a device pbc is compared with it), or none
