@@ -157,10 +157,11 @@ def workload(torch, systems: int, per_system: int, device: str, generator):
     return x.to(device), cell.to(device), batch
 
 
-def captured(torch, call: Callable[[], object]) -> Optional[Callable[[], object]]:
-    """`call` captured in a CUDA graph (after one warm-up call on a side stream, as PyTorch asks),
-    as a function that replays it; None when the capture fails: the call synchronises or
-    allocates outside the graph's pool (printed, so the missing row is explained)."""
+def captured(torch, call: Callable[[], object]) -> tuple[Optional[Callable[[], object]], object]:
+    """`call` captured in a CUDA graph (after one warm-up call on a side stream, as PyTorch asks):
+    a function that replays it, and the captured call's outputs (what each replay writes); None
+    when the capture fails: the call synchronises or allocates outside the graph's pool (printed,
+    so the missing row is explained)."""
     stream = torch.cuda.Stream()
     stream.wait_stream(torch.cuda.current_stream())
     with torch.cuda.stream(stream):
@@ -169,13 +170,13 @@ def captured(torch, call: Callable[[], object]) -> Optional[Callable[[], object]
     graph = torch.cuda.CUDAGraph()
     try:
         with torch.cuda.graph(graph):
-            call()
+            outputs = call()
     except Exception as e:  # noqa: BLE001 - any failure means no graph row, said why
         print(f"  no CUDA graph: the capture failed ({type(e).__name__}: {str(e)[:120]})",
               flush=True)
         torch.cuda.synchronize()
-        return None
-    return graph.replay
+        return None, None
+    return graph.replay, outputs
 
 
 def profile_counts(torch, call: Callable[[], object], sync: Callable[[], None],
@@ -345,7 +346,7 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
                  ("python-torch", "eager", "static-checked", static_checked),
                  ("python-torch", "eager", "exact", exact)]
         if cuda:
-            replay = captured(torch, static)
+            replay, replayed = captured(torch, static)
             if replay is not None:
                 calls.append(("python-torch", "graph", "static", replay))
         calls.append(("python-torch-verlet-update", "eager", "exact", verlet_update))
@@ -368,6 +369,13 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
                   f"{us:10.2f} us  "
                   f"kernels {kernels or '-':>5}  syncs {syncs or '-':>5}  ({count} pairs)",
                   flush=True)
+        # What the replays listed: the true count (a graph whose count says overflow, bad input
+        # or a plan that no longer fits timed nothing worth a row).
+        if cuda and replay is not None:
+            sync()
+            if int(replayed[-1]) != count:
+                raise SystemExit(f"python_latency: the CUDA graph of {systems} x {per_system} "
+                                 f"replays a count of {int(replayed[-1])}, not {count}")
     if args.output:
         write_rows(args.output, rows)
         print(f"wrote {len(rows)} rows to {args.output}")
