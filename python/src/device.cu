@@ -4,6 +4,7 @@
 #include <string>
 
 #include "cuda/device_buffer.cuh"  // raycut's pool
+#include "cuda/runtime.hpp"        // capturing()
 #include "device.hpp"
 #include "raycut/error.hpp"
 
@@ -169,11 +170,6 @@ __global__ void compare_bytes(const unsigned char* a, const unsigned char* b, st
     *raised = 1;
   }
 }
-bool capturing(cudaStream_t stream) {
-  cudaStreamCaptureStatus status = cudaStreamCaptureStatusNone;
-  check(cudaStreamIsCapturing(stream, &status), "cudaStreamIsCapturing");
-  return status != cudaStreamCaptureStatusNone;
-}
 }  // namespace
 
 // No CUDA call until the first compare(): a CPU caller never makes one.
@@ -198,7 +194,7 @@ void ChangeFlag::compare(const void* a, const void* b, std::size_t bytes, std::i
                                   static_cast<const unsigned char*>(b), bytes, count, code,
                                   device_);
   check(cudaGetLastError(), "compare_bytes launch");
-  if (capturing(s)) return;
+  if (raycut::detail::cuda::capturing(s)) return;
   if (!done_) {
     cudaEvent_t event = nullptr;
     check(cudaEventCreateWithFlags(&event, cudaEventDisableTiming), "cudaEventCreate");
@@ -209,7 +205,7 @@ void ChangeFlag::compare(const void* a, const void* b, std::size_t bytes, std::i
 }
 
 bool ChangeFlag::raised(void* stream) {
-  if (!pending_ || capturing(static_cast<cudaStream_t>(stream))) return false;
+  if (!pending_ || raycut::detail::cuda::capturing(stream)) return false;
   const cudaError_t status = cudaEventQuery(static_cast<cudaEvent_t>(done_));
   if (status == cudaErrorNotReady) return false;
   check(status, "cudaEventQuery");

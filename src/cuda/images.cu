@@ -12,6 +12,7 @@
 #include "core/validation.hpp"
 #include "cuda/device_buffer.cuh"
 #include "cuda/device_results.cuh"
+#include "cuda/runtime.hpp"
 #include "raycut/detail/cuda/visit.cuh"
 #include "raycut/static_pairs.hpp"
 
@@ -330,14 +331,8 @@ Out DeviceImagePoints::reserve(std::uint64_t points, std::uint64_t keep, bool sy
   return {xyz_.data(), image_.data(), systems ? system_.data() : nullptr};
 }
 
-// Whether `stream` is being captured into a CUDA graph: a captured build's verdict reaches the
-// caller as its list's count at each replay, not the host, which may not query events meanwhile.
-bool capturing(cudaStream_t stream) {
-  cudaStreamCaptureStatus status = cudaStreamCaptureStatusNone;
-  RAYCUT_CUDA_CHECK(cudaStreamIsCapturing(stream, &status));
-  return status != cudaStreamCaptureStatusNone;
-}
-
+// A captured build's verdict reaches the caller as its list's count at each replay, not the
+// host, which may not query events meanwhile.
 void DeviceImagePoints::finish_reusing(void* stream_ptr) {
   const auto stream = static_cast<cudaStream_t>(stream_ptr);
   if (capturing(stream)) return;
@@ -350,7 +345,7 @@ void DeviceImagePoints::finish_reusing(void* stream_ptr) {
 }
 
 bool DeviceImagePoints::reused_plan_outgrown(void* stream, bool wait) {
-  if (!misfit_pending_ || capturing(static_cast<cudaStream_t>(stream))) return false;
+  if (!misfit_pending_ || capturing(stream)) return false;
   if (wait) {
     RAYCUT_CUDA_CHECK(cudaEventSynchronize(misfit_seen_));
   } else {

@@ -244,6 +244,12 @@ bool moved_beyond(const float* now, const float* then, std::size_t n, float dist
   return *flag != 0;
 }
 
+bool capturing(void* stream) {
+  cudaStreamCaptureStatus status = cudaStreamCaptureStatusNone;
+  RAYCUT_CUDA_CHECK(cudaStreamIsCapturing(static_cast<cudaStream_t>(stream), &status));
+  return status != cudaStreamCaptureStatusNone;
+}
+
 std::string device_name() {
   int device = 0;
   RAYCUT_CUDA_CHECK(cudaGetDevice(&device));

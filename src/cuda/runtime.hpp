@@ -40,6 +40,11 @@ DeviceMemory copy_on_device(const void* device, std::size_t bytes, void* stream)
 // back.
 bool moved_beyond(const float* now, const float* then, std::size_t n, float distance, void* stream);
 
+// Whether `stream` (a cudaStream_t) is being captured into a CUDA graph: work that would tell
+// the host something (an event to query, a copy to read) is left out of a capture, whose replays
+// report through device memory alone.
+bool capturing(void* stream);
+
 // Name of the current device and the CUDA runtime version ("13.0").
 std::string device_name();
 std::string runtime_version();
