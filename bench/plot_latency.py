@@ -7,6 +7,9 @@ line per (interface, mode, capacity), single systems (circles) and batches (squa
 separate markers of the same line's colour.
 
     python bench/plot_latency.py latency-cpp.csv latency-python.csv --png latency.png
+
+--labels names each CSV's lines (one label per CSV, added to their names): the same calls
+measured two ways, side by side (e.g. --labels planned reused).
 """
 from __future__ import annotations
 
@@ -19,11 +22,12 @@ COLUMNS = ["workload", "systems", "n_per_system", "interface", "mode", "capacity
            "kernels", "syncs", "gpu", "driver", "cuda"]
 
 
-def read_rows(paths: list[str]) -> list[dict]:
-    """Every row of every CSV, with systems, n_per_system and us_per_call as numbers. Raises
-    ValueError naming the file for missing columns or values that are not numbers."""
+def read_rows(paths: list[str], labels: Optional[list[str]] = None) -> list[dict]:
+    """Every row of every CSV, with systems, n_per_system and us_per_call as numbers, and the
+    label of its CSV (empty without labels). Raises ValueError naming the file for missing
+    columns or values that are not numbers."""
     rows = []
-    for path in paths:
+    for k, path in enumerate(paths):
         with open(path, newline="") as f:
             reader = csv.DictReader(f)
             missing = [c for c in COLUMNS if c not in (reader.fieldnames or [])]
@@ -38,17 +42,19 @@ def read_rows(paths: list[str]) -> list[dict]:
                 except ValueError as e:
                     raise ValueError(f"{path}, line {line}: {e}") from None
                 row["particles"] = row["systems"] * row["n_per_system"]
+                row["label"] = labels[k] if labels else ""
                 rows.append(row)
     return rows
 
 
 def series(rows: list[dict]) -> dict:
-    """{(interface, mode, capacity): {"single": [(particles, us)], "batch": [...]}}, each list
-    sorted by particles."""
+    """{(interface, mode, capacity[, label]): {"single": [(particles, us)], "batch": [...]}},
+    each list sorted by particles."""
     lines: dict = defaultdict(lambda: {"single": [], "batch": []})
     for r in rows:
         kind = "single" if r["systems"] == 1 else "batch"
-        lines[(r["interface"], r["mode"], r["capacity"])][kind].append(
+        key = (r["interface"], r["mode"], r["capacity"]) + ((r["label"],) if r.get("label") else ())
+        lines[key][kind].append(
             (r["particles"], r["us_per_call"]))
     for points in lines.values():
         for kind in points:
@@ -100,9 +106,12 @@ def main(argv: Optional[list[str]] = None) -> list[dict]:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("csv", nargs="+", help="CSV files of latency rows")
     parser.add_argument("--png", required=True, help="the plot to write")
+    parser.add_argument("--labels", nargs="+", help="a label per CSV, added to its lines' names")
     args = parser.parse_args(argv)
+    if args.labels and len(args.labels) != len(args.csv):
+        raise SystemExit(f"plot_latency: {len(args.labels)} labels for {len(args.csv)} CSVs")
     try:
-        rows = read_rows(args.csv)
+        rows = read_rows(args.csv, args.labels)
     except (OSError, ValueError) as e:
         raise SystemExit(f"plot_latency: {e}") from None
     if not rows:

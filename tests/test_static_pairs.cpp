@@ -370,8 +370,17 @@ TEST(ReusedPlans, CapturedStepReplaysTheFreshPairs) {
   const std::size_t capacity = 200000;
   Liquid liquid(3000, 9.0, 3);
   raycut::DeviceArray x(liquid.xyz);
-  cudaStream_t stream = nullptr;
-  ASSERT_EQ(cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking), cudaSuccess);
+  // Declared first, so destroyed last: the buffer frees on it when it goes (raycut::Context).
+  struct OwnedStream {
+    cudaStream_t stream = nullptr;
+    OwnedStream() { cudaStreamCreateWithFlags(&stream, cudaStreamNonBlocking); }
+    ~OwnedStream() {
+      cudaStreamSynchronize(stream);
+      cudaStreamDestroy(stream);
+    }
+  } owned;
+  cudaStream_t stream = owned.stream;
+  ASSERT_NE(stream, nullptr);
   Engine fresh("grid"), reused("grid");
   reused.set_stream(stream);
   reused.set_timed(false);
@@ -411,7 +420,6 @@ TEST(ReusedPlans, CapturedStepReplaysTheFreshPairs) {
   EXPECT_EQ(replay().count, raycut::count_plan_outgrown);
   cudaGraphExecDestroy(exec);
   cudaGraphDestroy(graph);
-  cudaStreamDestroy(stream);
 }
 #endif
 

@@ -20,7 +20,8 @@ class MemoryResource {
 };
 
 struct Context {
-  // A cudaStream_t; null: the legacy default stream.
+  // A cudaStream_t; null: the legacy default stream. It must outlive what was allocated through
+  // the context (a StaticPairBuffer frees on it when it goes).
   void* stream = nullptr;
   // Null: stream-ordered allocations on `stream` from raycut's own pool of the device, which keeps
   // freed blocks for the next call (capturable in a CUDA graph as allocation nodes).

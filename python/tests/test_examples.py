@@ -181,6 +181,22 @@ def test_plot_latency_reads_groups_and_plots(tmp_path):
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_plot_latency_labels_each_csvs_lines(tmp_path):
+    """--labels: the same calls from two CSVs become two lines, named by their labels; a label
+    count that differs from the CSVs' is refused."""
+    plot = load_bench("plot_latency")
+    planned, reused = tmp_path / "planned.csv", tmp_path / "reused.csv"
+    planned.write_text(LATENCY_HEADER + "lj-pbc,1,10000,python-torch,eager,static,175.4,20,5,"
+                       "NVIDIA H100,580.1,13.0\n")
+    reused.write_text(LATENCY_HEADER + "lj-pbc,1,10000,python-torch,eager,static,135.8,22,1,"
+                      "NVIDIA H100,580.1,13.0\n")
+    lines = plot.series(plot.read_rows([str(planned), str(reused)], ["planned", "reused"]))
+    assert lines[("python-torch", "eager", "static", "planned")]["single"] == [(10000, 175.4)]
+    assert lines[("python-torch", "eager", "static", "reused")]["single"] == [(10000, 135.8)]
+    with pytest.raises(SystemExit, match="1 labels for 2 CSVs"):
+        plot.main([str(planned), str(reused), "--png", str(tmp_path / "x.png"), "--labels", "a"])
+
+
 def test_plot_latency_refuses_bad_csv(tmp_path):
     plot = load_bench("plot_latency")
     wrong = tmp_path / "wrong.csv"
