@@ -59,7 +59,7 @@ COLUMNS = ["workload", "systems", "n_per_system", "interface", "mode", "capacity
            "kernels", "syncs", "gpu", "driver", "cuda"]
 CROSSOVER_SIZES = (2000, 4000, 8000)
 # Runtime calls that make the host wait for the device.
-SYNC_CALLS = ("cudaDeviceSynchronize", "cudaStreamSynchronize")
+SYNC_CALLS = ("cudaDeviceSynchronize", "cudaStreamSynchronize", "cudaEventSynchronize")
 
 
 def parse_batches(text: str) -> list[tuple[int, int]]:
@@ -99,11 +99,13 @@ def positive(text: str) -> float:
 def count_profile(events: Iterable[tuple[str, bool]]) -> tuple[int, int]:
     """(kernels, syncs) among profiler events given as (name, on_device): device events that
     are neither copies nor memsets (nor CUPTI's synchronisation records) are kernels; the
-    runtime's synchronisation calls and device-to-host copies are synchronisations."""
+    runtime's waits (device, stream and event synchronisations) and device-to-host copies into
+    pageable memory, which block the host, are synchronisations. A copy into pinned memory is
+    not: the host goes on, and a wait for it, if any, is one of those calls."""
     kernels = syncs = 0
     for name, on_device in events:
         if on_device:
-            if name.startswith("Memcpy DtoH"):
+            if name.startswith("Memcpy DtoH") and "Pageable" in name:
                 syncs += 1
             elif not name.startswith(("Memcpy", "Memset")) and "Sync" not in name:
                 kernels += 1

@@ -211,14 +211,16 @@ def test_plot_latency_refuses_bad_csv(tmp_path):
 
 def test_python_latency_counts_kernels_and_syncs():
     """What the profiler's events count as: kernels on the device (not copies or memsets),
-    synchronisations (the runtime's waits and device-to-host copies)."""
+    synchronisations (the runtime's waits and copies into pageable host memory, not copies
+    into pinned memory, which do not block)."""
     bench = load_bench("python_latency")
     events = [("grid_count_kernel", True), ("Memcpy DtoH (Device -> Pageable)", True),
+              ("Memcpy DtoH (Device -> Pinned)", True),
               ("Memcpy HtoD (Pageable -> Device)", True), ("Memset (Device)", True),
               ("void cub::DeviceScanKernel<...>", True), ("cudaStreamSynchronize", False),
-              ("cudaDeviceSynchronize", False), ("cudaLaunchKernel", False),
-              ("cudaMemcpyAsync", False), ("aten::empty", False)]
-    assert bench.count_profile(events) == (2, 3)
+              ("cudaDeviceSynchronize", False), ("cudaEventSynchronize", False),
+              ("cudaLaunchKernel", False), ("cudaMemcpyAsync", False), ("aten::empty", False)]
+    assert bench.count_profile(events) == (2, 4)
     assert bench.count_profile([]) == (0, 0)
 
 
