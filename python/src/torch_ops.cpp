@@ -246,16 +246,16 @@ raycut::Systems systems_of(std::vector<raycut::Box> boxes, const at::Tensor& ind
 // raycut's stream-ordered pool, so that a copy of the last call's pairs still queued on another
 // stream never reads a refilled buffer.
 struct Work {
-  // Untimed: timing a GPU build waits for it, and an operator call never reads the times. With
-  // RAYCUT_REUSE_PLAN=1 its builds reuse the last plan (on CUDA, a build reads nothing back
-  // while the plan fits; a static list reports one that no longer does as
-  // count_plan_outgrown; every call's positions outlive the call's own results).
+  // Untimed: timing a GPU build waits for it, and an operator call never reads the times. Its
+  // builds reuse the last plan (on CUDA, a build reads nothing back while the plan fits; a
+  // static list reports one that no longer does as count_plan_outgrown; every call's positions
+  // outlive the call's own results).
   explicit Work(const char* method) : engine(method) { engine.set_timed(false); }
-  // RAYCUT_REUSE_PLAN=1 in the environment (read at each call): the engines reuse plans and
-  // static lists keep a device cell's boxes (CallBoxes). Off by default.
+  // The engines reuse plans and static lists keep a device cell's boxes (CallBoxes), unless the
+  // environment sets RAYCUT_REUSE_PLAN=0 (read at each call): then every build plans and waits.
   static bool reuse_plans() {
     const char* v = std::getenv("RAYCUT_REUSE_PLAN");
-    return v != nullptr && v[0] == '1' && v[1] == '\0';
+    return v == nullptr || !(v[0] == '0' && v[1] == '\0');
   }
   raycut::Engine engine;
 
@@ -477,9 +477,10 @@ class CachingAllocatorMemory final : public raycut::MemoryResource {
 };
 
 // Whether the engine's grid can be captured into a CUDA graph for this call: a static list with
-// RAYCUT_REUSE_PLAN=1, one device cell whose watched boxes still hold (so the cell is not copied),
-// no batch index (reading one waits), and an engine that would reuse the plan it recorded at an
-// earlier call of as many particles (Engine::reuses_plan_for: a build that plans waits).
+// plans reused (Work::reuse_plans), one device cell whose watched boxes still hold (so the cell is
+// not copied), no batch index (reading one waits), and an engine that would reuse the plan it
+// recorded at an earlier call of as many particles (Engine::reuses_plan_for: a build that plans
+// waits).
 bool engine_captures(const at::Tensor& positions, double cutoff,
                      const std::optional<at::Tensor>& cell, const std::optional<at::Tensor>& pbc,
                      const std::optional<at::Tensor>& batch, bool static_list) {
@@ -633,7 +634,7 @@ Pairs exact_small_systems_pairs(const at::Tensor& positions, double cutoff,
 }
 #endif
 
-// The boxes of a call's cell and pbc. With RAYCUT_REUSE_PLAN=1, a static list with a device cell
+// The boxes of a call's cell and pbc. Where plans are reused, a static list with a device cell
 // takes those of the thread's last copy of that cell and pbc while no comparison has found either
 // changed, and after() queues the comparisons behind the list (Work::CellWatch); every other call
 // copies the cell (boxes_of: one wait for a device cell, one more for a device pbc).

@@ -187,11 +187,12 @@ def pair_set(i, j, s, count):
 
 @cuda
 def test_the_engine_reuses_its_plan_and_says_when_it_no_longer_fits(monkeypatch):
-    """With RAYCUT_REUSE_PLAN=1, above the small systems the operator's grid reuses the last
-    call's plan (nothing read back): the same pairs as the CPU operator call after call; a plan
-    that no longer fits (every particle moved next to a face: far more periodic images) gives the
-    count -6, which check_pair_count raises as CapacityError, and the next call plans afresh;
-    without "c" the call itself calls once more."""
+    """Above the small systems the operator's grid reuses the last call's plan (the default;
+    RAYCUT_REUSE_PLAN=1 sets it here whatever the environment says), reading nothing back: the
+    same pairs as the CPU operator call after call; a plan that no longer fits (every particle
+    moved next to a face: far more periodic images) gives the count -6, which check_pair_count
+    raises as CapacityError, and the next call plans afresh; without "c" the call itself calls
+    once more."""
     monkeypatch.setenv("RAYCUT_REUSE_PLAN", "1")
     n, cutoff = 6000, 2.5
     side = (n / 0.8442) ** (1 / 3)
@@ -220,10 +221,30 @@ def test_the_engine_reuses_its_plan_and_says_when_it_no_longer_fits(monkeypatch)
 
 
 @cuda
+def test_reuse_plan_0_plans_every_call(monkeypatch):
+    """RAYCUT_REUSE_PLAN=0: every grid call plans afresh, so positions that no plan of an
+    earlier call would fit still give their pairs at once, never the count -6."""
+    monkeypatch.setenv("RAYCUT_REUSE_PLAN", "0")
+    n, cutoff = 6000, 2.5
+    side = (n / 0.8442) ** (1 / 3)
+    x = torch.as_tensor(rng(9).random((n, 3)) * side, dtype=torch.float32)
+    cell = side * torch.eye(3)
+    crowded = x.clone()
+    crowded[:, 0] *= 0.1
+    for step, host in enumerate((x, crowded, x)):
+        want = pair_set(*torch.ops.raycut.neighbor_list(host, cutoff, cell, None, None, False,
+                                                        4_000_000))
+        out = torch.ops.raycut.neighbor_list(host.cuda(), cutoff, cell, None, None, False,
+                                             4_000_000)
+        assert int(out[3]) >= 0, step
+        assert pair_set(*out) == want, step
+
+
+@cuda
 def test_a_device_cell_is_not_copied_while_unchanged_and_a_change_is_reported(monkeypatch):
-    """With RAYCUT_REUSE_PLAN=1, a static call with a CUDA cell takes the boxes of the last copy
-    of it while the device finds it unchanged; a cell changed in place gives the count -6, and
-    the next call copies the new one."""
+    """Where plans are reused (the default), a static call with a CUDA cell takes the boxes of
+    the last copy of it while the device finds it unchanged; a cell changed in place gives the
+    count -6, and the next call copies the new one."""
     monkeypatch.setenv("RAYCUT_REUSE_PLAN", "1")
     n, cutoff = 6000, 2.5
     side = (n / 0.8442) ** (1 / 3)
@@ -250,12 +271,12 @@ def test_a_device_cell_is_not_copied_while_unchanged_and_a_change_is_reported(mo
 @cuda
 @pytest.mark.parametrize("through", ["operator", "wrapper"])
 def test_a_captured_call_runs_the_engine_that_reuses_its_plan(monkeypatch, through):
-    """With RAYCUT_REUSE_PLAN=1, a static call captured in a CUDA graph after eager calls of the
-    same systems runs the engine's grid (its recorded plan, the watched cell and pbc: a CUDA
-    tensor given to the operator, pbc=True to the wrapper, which sends it to the device only
-    under capture), not the small pass: each replay over positions changed in place lists the
-    CPU operator's pairs, and a cell changed in place gives the count -6 at replay (the small
-    pass would read the new cell)."""
+    """Where plans are reused (the default), a static call captured in a CUDA graph after eager
+    calls of the same systems runs the engine's grid (its recorded plan, the watched cell and
+    pbc: a CUDA tensor given to the operator, pbc=True to the wrapper, which sends it to the
+    device only under capture), not the small pass: each replay over positions changed in place
+    lists the CPU operator's pairs, and a cell changed in place gives the count -6 at replay
+    (the small pass would read the new cell)."""
     monkeypatch.setenv("RAYCUT_REUSE_PLAN", "1")
     n, cutoff, max_pairs = 7000, 2.5, 600_000  # above the small systems
     side = (n / 0.8442) ** (1 / 3)
