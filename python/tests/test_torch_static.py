@@ -185,6 +185,18 @@ def pair_set(i, j, s, count):
     return set(map(tuple, rows.tolist()))
 
 
+def liquid_and_crowded():
+    """n, cutoff, a periodic liquid of n particles above the small systems (host positions), the
+    same squeezed against the face x = 0 (every particle within the cutoff of it: far more
+    periodic images than the liquid has), and the cubic cell."""
+    n, cutoff = 6000, 2.5
+    side = (n / 0.8442) ** (1 / 3)
+    x = torch.as_tensor(rng(9).random((n, 3)) * side, dtype=torch.float32)
+    crowded = x.clone()
+    crowded[:, 0] *= 0.1
+    return n, cutoff, x, crowded, side * torch.eye(3)
+
+
 @cuda
 def test_the_engine_reuses_its_plan_and_says_when_it_no_longer_fits(monkeypatch):
     """Above the small systems the operator's grid reuses the last call's plan (the default;
@@ -194,12 +206,7 @@ def test_the_engine_reuses_its_plan_and_says_when_it_no_longer_fits(monkeypatch)
     raises as CapacityError, and the next call plans afresh; without "c" the call itself calls
     once more."""
     monkeypatch.setenv("RAYCUT_REUSE_PLAN", "1")
-    n, cutoff = 6000, 2.5
-    side = (n / 0.8442) ** (1 / 3)
-    x = torch.as_tensor(rng(9).random((n, 3)) * side, dtype=torch.float32)
-    cell = side * torch.eye(3)
-    crowded = x.clone()
-    crowded[:, 0] *= 0.1  # every particle within the cutoff of the face x = 0
+    n, cutoff, x, crowded, cell = liquid_and_crowded()
     for step, host in enumerate((x, x + 0.05, crowded, crowded + 0.05, x)):
         want = pair_set(*torch.ops.raycut.neighbor_list(host, cutoff, cell, None, None, False,
                                                         4_000_000))
@@ -225,12 +232,7 @@ def test_reuse_plan_0_plans_every_call(monkeypatch):
     """RAYCUT_REUSE_PLAN=0: every grid call plans afresh, so positions that no plan of an
     earlier call would fit still give their pairs at once, never the count -6."""
     monkeypatch.setenv("RAYCUT_REUSE_PLAN", "0")
-    n, cutoff = 6000, 2.5
-    side = (n / 0.8442) ** (1 / 3)
-    x = torch.as_tensor(rng(9).random((n, 3)) * side, dtype=torch.float32)
-    cell = side * torch.eye(3)
-    crowded = x.clone()
-    crowded[:, 0] *= 0.1
+    _, cutoff, x, crowded, cell = liquid_and_crowded()
     for step, host in enumerate((x, crowded, x)):
         want = pair_set(*torch.ops.raycut.neighbor_list(host, cutoff, cell, None, None, False,
                                                         4_000_000))
