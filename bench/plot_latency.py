@@ -54,8 +54,7 @@ def series(rows: list[dict]) -> dict:
     for r in rows:
         kind = "single" if r["systems"] == 1 else "batch"
         key = (r["interface"], r["mode"], r["capacity"]) + ((r["label"],) if r.get("label") else ())
-        lines[key][kind].append(
-            (r["particles"], r["us_per_call"]))
+        lines[key][kind].append((r["particles"], r["us_per_call"]))
     for points in lines.values():
         for kind in points:
             points[kind].sort()
