@@ -1,13 +1,10 @@
-#include <thrust/iterator/counting_iterator.h>
-#include <thrust/iterator/transform_iterator.h>
-
-#include <cub/device/device_scan.cuh>
-
+#include <algorithm>
 #include <string>
 
 #include "core/validation.hpp"
 #include "cuda/device_results.cuh"
 #include "cuda/runtime.hpp"
+#include "cuda/scan.cuh"
 #include "raycut/host_memory.hpp"
 
 namespace raycut::detail::cuda {
@@ -135,26 +132,8 @@ std::uint32_t* DeviceListStorage::prepare_counts(std::size_t targets,
   return counts_.data();
 }
 
-namespace {
-// Scanning n+1 inputs, the last a zero, writes the total into offsets[n] too.
-struct CountOrZero {
-  const std::uint32_t* counts;
-  std::size_t n;
-  __host__ __device__ std::uint64_t operator()(std::size_t i) const {
-    return i < n ? counts[i] : 0;
-  }
-};
-}  // namespace
-
 void DeviceListStorage::scan(cudaStream_t stream) {
-  const auto input = thrust::make_transform_iterator(thrust::counting_iterator<std::size_t>(0),
-                                                     CountOrZero{counts_.data(), n});
-  std::size_t temp_bytes = 0;
-  RAYCUT_CUDA_CHECK(
-      cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, input, offsets_.data(), n + 1, stream));
-  scan_temp_.resize(std::max<std::size_t>(temp_bytes, 1));
-  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scan_temp_.data(), temp_bytes, input,
-                                                  offsets_.data(), n + 1, stream));
+  exclusive_sum(counts_.data(), n, offsets_.data(), scan_temp_, stream);
 }
 
 std::uint64_t DeviceListStorage::scan_counts(cudaStream_t stream) {

@@ -51,9 +51,12 @@ class Grid final : public CudaPairMethod<Grid> {
     cutoff_squared_ = squared_cutoff(cutoff);
     build_timer_.start(stream_);
     plan_misfit_ = points.reuse.misfit;
+    PlannedBox watch;
     if (points.reuse.misfit) {
-      // The recorded plan again (Engine::set_reuse_plan): its box checked on the device.
-      box_.check(points.xyz, n, planned_lo_, planned_hi_, points.reuse.misfit, stream_);
+      // The recorded plan again (Engine::set_reuse_plan): its box watched on the device, by the
+      // build's first kernel.
+      for (int a = 0; a < 3; ++a) watch.lo[a] = planned_lo_[a], watch.hi[a] = planned_hi_[a];
+      watch.misfit = points.reuse.misfit;
     } else {
       float lo[3], hi[3];
       box_.compute(points.xyz, n, lo, hi, stream_);
@@ -68,7 +71,7 @@ class Grid final : public CudaPairMethod<Grid> {
           lo, hi, reach);
     }
     plan_.geometry.system = points.systems > 1 ? points.system : nullptr;
-    tables_.build(points.xyz, static_cast<std::uint32_t>(n), plan_, stream_);
+    tables_.build(points.xyz, static_cast<std::uint32_t>(n), plan_, watch, stream_);
     if (points.targets < n)
       tables_.select_targets(static_cast<std::uint32_t>(points.targets), stream_);
     if (images_.active())  // the traversal indexes images by slot

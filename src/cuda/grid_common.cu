@@ -4,7 +4,6 @@
 #include <cstdint>
 
 #include "cuda/grid_common.cuh"
-#include "raycut/static_pairs.hpp"
 
 namespace raycut::detail::cuda {
 namespace {
@@ -44,7 +43,7 @@ __device__ __forceinline__ void block_reduce(const float lo[3], const float hi[3
 // load took 18; other pointers one float at a time.
 __global__ void __launch_bounds__(bbox_block)
     bounding_box_kernel(const float* xyz, std::size_t n, float* partials, unsigned* counter,
-                        BoxResult* result, unsigned sequence, BoxCheck check) {
+                        BoxResult* result, unsigned sequence) {
   __shared__ bool last;
   float lo[3] = {FLT_MAX, FLT_MAX, FLT_MAX}, hi[3] = {-FLT_MAX, -FLT_MAX, -FLT_MAX};
   const std::size_t thread = blockIdx.x * std::size_t{bbox_block} + threadIdx.x;
@@ -94,13 +93,6 @@ __global__ void __launch_bounds__(bbox_block)
     widen(l, h, __ldcg(p + 3), __ldcg(p + 4), __ldcg(p + 5));
   }
   block_reduce(l, h, v);
-  if (threadIdx.x == 0 && check.misfit) {
-    *counter = 0;
-    bool inside = true;
-    for (int a = 0; a < 3; ++a) inside = inside && v[a] >= check.lo[a] && v[3 + a] <= check.hi[a];
-    if (!inside) atomicCAS(check.misfit, 0, static_cast<int>(count_plan_outgrown));
-    return;
-  }
   if (threadIdx.x == 0) {
     for (int a = 0; a < 3; ++a) result->lo[a] = v[a], result->hi[a] = v[3 + a];
     *counter = 0;  // ready for the next call
@@ -116,17 +108,24 @@ BoundingBox::~BoundingBox() {
   if (result_) cudaFreeHost(result_);
 }
 
-void BoundingBox::check(const float* xyz, std::size_t n, const float lo[3], const float hi[3],
-                        int* misfit, cudaStream_t stream) {
-  BoxCheck check{};
-  for (int a = 0; a < 3; ++a) check.lo[a] = lo[a], check.hi[a] = hi[a];
-  check.misfit = misfit;
-  launch(xyz, n, stream, check);
-}
-
 void BoundingBox::compute(const float* xyz, std::size_t n, float lo[3], float hi[3],
                           cudaStream_t stream) {
-  const unsigned sequence = launch(xyz, n, stream, BoxCheck{});
+  if (!result_) {
+    RAYCUT_CUDA_CHECK(
+        cudaHostAlloc(reinterpret_cast<void**>(&result_), sizeof(BoxResult), cudaHostAllocMapped));
+    result_->sequence = sequence_;
+    counter_.resize(1);
+    RAYCUT_CUDA_CHECK(cudaMemset(counter_.data(), 0, sizeof(unsigned)));
+    partials_.resize(6 * bbox_max_blocks);
+    RAYCUT_CUDA_CHECK(
+        cudaHostGetDevicePointer(reinterpret_cast<void**>(&device_result_), result_, 0));
+  }
+  const unsigned sequence = ++sequence_;
+  const int blocks = static_cast<int>(std::max<std::size_t>(
+      1, std::min<std::size_t>((n / 4 + bbox_block - 1) / bbox_block, bbox_max_blocks)));
+  bounding_box_kernel<<<blocks, bbox_block, 0, stream>>>(xyz, n, partials_.data(), counter_.data(),
+                                                         device_result_, sequence);
+  RAYCUT_CUDA_CHECK_LAUNCH();
   // Poll the sequence number the kernel writes last; every few thousand polls ask the stream, so
   // that a failed kernel raises its error instead of leaving us spinning.
   const volatile unsigned* written = &result_->sequence;
@@ -143,27 +142,6 @@ void BoundingBox::compute(const float* xyz, std::size_t n, float lo[3], float hi
     lo[a] = result_->lo[a];
     hi[a] = result_->hi[a];
   }
-}
-
-unsigned BoundingBox::launch(const float* xyz, std::size_t n, cudaStream_t stream,
-                             const BoxCheck& check) {
-  if (!result_) {
-    RAYCUT_CUDA_CHECK(
-        cudaHostAlloc(reinterpret_cast<void**>(&result_), sizeof(BoxResult), cudaHostAllocMapped));
-    result_->sequence = sequence_;
-    counter_.resize(1);
-    RAYCUT_CUDA_CHECK(cudaMemset(counter_.data(), 0, sizeof(unsigned)));
-    partials_.resize(6 * bbox_max_blocks);
-    RAYCUT_CUDA_CHECK(
-        cudaHostGetDevicePointer(reinterpret_cast<void**>(&device_result_), result_, 0));
-  }
-  const unsigned sequence = ++sequence_;
-  const int blocks = static_cast<int>(std::max<std::size_t>(
-      1, std::min<std::size_t>((n / 4 + bbox_block - 1) / bbox_block, bbox_max_blocks)));
-  bounding_box_kernel<<<blocks, bbox_block, 0, stream>>>(xyz, n, partials_.data(), counter_.data(),
-                                                         device_result_, sequence, check);
-  RAYCUT_CUDA_CHECK_LAUNCH();
-  return sequence;
 }
 
 }  // namespace raycut::detail::cuda

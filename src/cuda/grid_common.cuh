@@ -17,13 +17,6 @@ struct BoxResult {
   unsigned sequence;
 };
 
-// `misfit` set: the box is not written back but compared with this one (a reused plan,
-// Engine::set_reuse_plan), a point outside it reported in that word.
-struct BoxCheck {
-  float lo[3], hi[3];
-  int* misfit;
-};
-
 // The axis-aligned bounding box of n >= 1 device positions, on the host. One kernel (the last
 // block finishes the reduction), awaited by polling its result in mapped memory (sooner than a
 // stream synchronisation); buffers are kept between calls.
@@ -36,13 +29,8 @@ class BoundingBox {
 
   void compute(const float* xyz, std::size_t n, float lo[3], float hi[3],
                cudaStream_t stream = nullptr);
-  // The same on the device only: a point outside [lo, hi] sets *misfit (if still 0) to
-  // count_plan_outgrown (a reused plan, Engine::set_reuse_plan). Nothing is read back.
-  void check(const float* xyz, std::size_t n, const float lo[3], const float hi[3], int* misfit,
-             cudaStream_t stream);
 
  private:
-  unsigned launch(const float* xyz, std::size_t n, cudaStream_t stream, const BoxCheck& check);
   DeviceBuffer<float> partials_;        // 6 per block
   DeviceBuffer<unsigned> counter_;      // blocks done; the last one resets it to 0
   BoxResult* result_ = nullptr;         // mapped pinned host memory

@@ -4,25 +4,41 @@
 #include <cub/device/device_scan.cuh>
 #include <cub/device/device_select.cuh>
 #include <cuda/functional>
-#include <cuda/std/functional>
 
 #include <algorithm>
 #include <cstdint>
 
 #include "cuda/grid_tables.cuh"
+#include "cuda/scan.cuh"
 #include "raycut/detail/cuda/grid_pass.cuh"
+#include "raycut/static_pairs.hpp"
 
 namespace raycut::detail::cuda {
 namespace {
 
 constexpr int one_block_threads = 1024;
 
+__device__ __forceinline__ void watch_point(const PlannedBox& watch, float x, float y, float z) {
+  if (watch.misfit && !(x >= watch.lo[0] && x <= watch.hi[0] && y >= watch.lo[1] &&
+                        y <= watch.hi[1] && z >= watch.lo[2] && z <= watch.hi[2]))
+    atomicCAS(watch.misfit, 0, static_cast<int>(count_plan_outgrown));
+}
+
+// Point i's cell key (and the planned box watched).
+__device__ __forceinline__ std::uint64_t watched_key(const float* __restrict__ xyz, Slot i,
+                                                     const GridGeometry& view,
+                                                     const PlannedBox& watch) {
+  const float x = xyz[3 * i], y = xyz[3 * i + 1], z = xyz[3 * i + 2];
+  watch_point(watch, x, y, z);
+  return cell_key(view, x, y, z, i);
+}
+
 template <class Key>
-__global__ void keys_kernel(const float* __restrict__ xyz, Slot n, GridGeometry view, Key* keys,
-                            Slot* index) {
+__global__ void keys_kernel(const float* __restrict__ xyz, Slot n, GridGeometry view,
+                            PlannedBox watch, Key* keys, Slot* index) {
   const Slot i = blockIdx.x * blockDim.x + threadIdx.x;
   if (i >= n) return;
-  keys[i] = static_cast<Key>(cell_key(view, xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2], i));
+  keys[i] = static_cast<Key>(watched_key(xyz, i, view, watch));
   index[i] = i;
 }
 
@@ -40,10 +56,9 @@ __device__ __forceinline__ void gather_one(const float* __restrict__ xyz, const 
 // Counting sort, pass 1 for particle i: its cell key, counted in start[] by an atomic whose
 // return value is a provisional rank within the cell (its order varies from run to run).
 __device__ __forceinline__ void count_one(const float* __restrict__ xyz, Slot i,
-                                          const GridGeometry& view, std::uint32_t* keys,
-                                          Slot* provisional, Slot* start) {
-  const auto key =
-      static_cast<std::uint32_t>(cell_key(view, xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2], i));
+                                          const GridGeometry& view, const PlannedBox& watch,
+                                          std::uint32_t* keys, Slot* provisional, Slot* start) {
+  const auto key = static_cast<std::uint32_t>(watched_key(xyz, i, view, watch));
   keys[i] = key;
   provisional[i] = atomicAdd(&start[key], 1u);
 }
@@ -73,9 +88,10 @@ __global__ void run_ends_kernel(const float* __restrict__ xyz, const std::uint32
 // Dense, counting sort. Pass 1: each particle's cell, counted in start[] (zeroed, cells + 1
 // entries); pass 4 removes the order of the atomics.
 __global__ void count_cells_kernel(const float* __restrict__ xyz, Slot n, GridGeometry view,
-                                   std::uint32_t* keys, Slot* provisional, Slot* start) {
+                                   PlannedBox watch, std::uint32_t* keys, Slot* provisional,
+                                   Slot* start) {
   const Slot i = blockIdx.x * blockDim.x + threadIdx.x;
-  if (i < n) count_one(xyz, i, view, keys, provisional, start);
+  if (i < n) count_one(xyz, i, view, watch, keys, provisional, start);
 }
 
 // Dense, small inputs: the counting sort of passes 1 to 4 (count_cells_kernel .. place_kernel) in
@@ -83,15 +99,15 @@ __global__ void count_cells_kernel(const float* __restrict__ xyz, Slot n, GridGe
 // (docs/grid.md). The scan gives each thread a run of consecutive cells.
 __global__ void __launch_bounds__(one_block_threads)
     small_dense_build_kernel(const float* __restrict__ xyz, Slot n, GridGeometry view,
-                             std::uint32_t cells, std::uint32_t* keys, Slot* provisional,
-                             Slot* members, Slot* start, float4* pos) {
+                             PlannedBox watch, std::uint32_t cells, std::uint32_t* keys,
+                             Slot* provisional, Slot* members, Slot* start, float4* pos) {
   using Scan = cub::BlockScan<Slot, one_block_threads>;
   __shared__ typename Scan::TempStorage scan_temp;
   const Slot entries = cells + 1;
   for (Slot c = threadIdx.x; c < entries; c += one_block_threads) start[c] = 0;
   __syncthreads();
   for (Slot i = threadIdx.x; i < n; i += one_block_threads)
-    count_one(xyz, i, view, keys, provisional, start);
+    count_one(xyz, i, view, watch, keys, provisional, start);
   __syncthreads();
   const Slot per_thread = (entries + one_block_threads - 1) / one_block_threads;
   const Slot first = threadIdx.x * per_thread, last = min(first + per_thread, entries);
@@ -231,12 +247,12 @@ int log2_of_power_of_two(std::uint64_t p) {
 }  // namespace
 
 void GridTables::build(const float* xyz, std::uint32_t n, const GridPlan& plan,
-                       cudaStream_t stream) {
+                       const PlannedBox& watch, cudaStream_t stream) {
   n_ = n;
   if (plan.dense)
-    build_dense(xyz, plan, stream);
+    build_dense(xyz, plan, watch, stream);
   else
-    build_compact(xyz, plan, stream);
+    build_compact(xyz, plan, watch, stream);
 }
 
 namespace {
@@ -342,28 +358,24 @@ void GridTables::sort(DeviceBuffer<Key>& keys, DeviceBuffer<Key>& keys_alt, int 
   order_ = v.Current();
 }
 
-// start_[0, count) scanned in place with op (inclusive, or exclusive from 0).
-template <class Op>
-void GridTables::scan(Op op, std::uint64_t count, bool exclusive, cudaStream_t stream) {
+// start_[0, count) replaced in place by its prefix maximum.
+void GridTables::prefix_maximum(std::uint64_t count, cudaStream_t stream) {
   const auto run = [&](void* temp, std::size_t& bytes) {
-    return exclusive ? cub::DeviceScan::ExclusiveScan(temp, bytes, start_.data(), start_.data(), op,
-                                                      std::uint32_t{0}, count, stream)
-                     : cub::DeviceScan::InclusiveScan(temp, bytes, start_.data(), start_.data(), op,
-                                                      count, stream);
+    return cub::DeviceScan::InclusiveScan(temp, bytes, start_.data(), start_.data(),
+                                          ::cuda::maximum<std::uint32_t>{}, count, stream);
   };
-  // The temporary size depends on the length and the kind of scan only: ask cub again only
-  // when they change.
-  const std::uint64_t shape = (count << 1) | (exclusive ? 1 : 0);
-  if (shape != scan_shape_) {
+  // The temporary size depends on the length only: ask cub again only when it changes.
+  if (count != scan_shape_) {
     RAYCUT_CUDA_CHECK(run(nullptr, scan_temp_bytes_));
-    scan_shape_ = shape;
+    scan_shape_ = count;
   }
   std::size_t temp_bytes = scan_temp_bytes_;
   temp_.resize(std::max<std::size_t>(temp_bytes, 1));
   RAYCUT_CUDA_CHECK(run(temp_.data(), temp_bytes));
 }
 
-void GridTables::build_dense(const float* xyz, const GridPlan& plan, cudaStream_t stream) {
+void GridTables::build_dense(const float* xyz, const GridPlan& plan, const PlannedBox& watch,
+                             cudaStream_t stream) {
   const std::uint64_t cells = plan.cells;
   const GridGeometry& view = plan.geometry;
   keys32_.resize(n_);
@@ -375,7 +387,7 @@ void GridTables::build_dense(const float* xyz, const GridPlan& plan, cudaStream_
   switch (plan.dense_build) {
     case DenseBuild::one_block:
       small_dense_build_kernel<<<1, one_block_threads, 0, stream>>>(
-          xyz, n_, view, static_cast<std::uint32_t>(cells), keys32_.data(), index_.data(),
+          xyz, n_, view, watch, static_cast<std::uint32_t>(cells), keys32_.data(), index_.data(),
           index_alt_.data(), start_.data(), pos_.data());
       RAYCUT_CUDA_CHECK_LAUNCH();
       order_ = index_.data();
@@ -384,14 +396,15 @@ void GridTables::build_dense(const float* xyz, const GridPlan& plan, cudaStream_
       RAYCUT_CUDA_CHECK(
           cudaMemsetAsync(start_.data(), 0, (cells + 1) * sizeof(std::uint32_t), stream));
       keys32_alt_.resize(n_);
-      keys_kernel<<<blocks(n_), 256, 0, stream>>>(xyz, n_, view, keys32_.data(), index_.data());
+      keys_kernel<<<blocks(n_), 256, 0, stream>>>(xyz, n_, view, watch, keys32_.data(),
+                                                  index_.data());
       RAYCUT_CUDA_CHECK_LAUNCH();
       std::uint32_t* sorted = nullptr;
       sort(keys32_, keys32_alt_, key_bits(cells), sorted, stream);
       run_ends_kernel<<<blocks(n_), 256, 0, stream>>>(xyz, sorted, order_, n_, start_.data(),
                                                       pos_.data());
       RAYCUT_CUDA_CHECK_LAUNCH();
-      scan(::cuda::maximum<std::uint32_t>{}, cells + 1, /*exclusive=*/false, stream);
+      prefix_maximum(cells + 1, stream);
       return;
     }
     default:
@@ -400,10 +413,10 @@ void GridTables::build_dense(const float* xyz, const GridPlan& plan, cudaStream_
   // Counting sort: no radix passes, no table search; its atomics lose to the sort's streaming
   // at large N.
   RAYCUT_CUDA_CHECK(cudaMemsetAsync(start_.data(), 0, (cells + 1) * sizeof(std::uint32_t), stream));
-  count_cells_kernel<<<blocks(n_), 256, 0, stream>>>(xyz, n_, view, keys32_.data(), index_.data(),
-                                                     start_.data());
+  count_cells_kernel<<<blocks(n_), 256, 0, stream>>>(xyz, n_, view, watch, keys32_.data(),
+                                                     index_.data(), start_.data());
   RAYCUT_CUDA_CHECK_LAUNCH();
-  scan(::cuda::std::plus<std::uint32_t>{}, cells + 1, /*exclusive=*/true, stream);
+  exclusive_sum(start_.data(), cells, start_.data(), temp_, stream);
   scatter_cells_kernel<<<blocks(n_), 256, 0, stream>>>(keys32_.data(), index_.data(), start_.data(),
                                                        n_, index_alt_.data());
   RAYCUT_CUDA_CHECK_LAUNCH();
@@ -420,7 +433,8 @@ void GridTables::build_dense(const float* xyz, const GridPlan& plan, cudaStream_
   order_ = index_.data();
 }
 
-void GridTables::build_compact(const float* xyz, const GridPlan& plan, cudaStream_t stream) {
+void GridTables::build_compact(const float* xyz, const GridPlan& plan, const PlannedBox& watch,
+                               cudaStream_t stream) {
   const GridGeometry& view = plan.geometry;
   keys64_.resize(n_);
   keys64_alt_.resize(n_);
@@ -428,7 +442,7 @@ void GridTables::build_compact(const float* xyz, const GridPlan& plan, cudaStrea
   index_alt_.resize(n_);
   pos_.resize(n_);
   run_start_.resize(n_);
-  keys_kernel<<<blocks_for(n_, 256), 256, 0, stream>>>(xyz, n_, view, keys64_.data(),
+  keys_kernel<<<blocks_for(n_, 256), 256, 0, stream>>>(xyz, n_, view, watch, keys64_.data(),
                                                        index_.data());
   RAYCUT_CUDA_CHECK_LAUNCH();
   std::uint64_t* sorted = nullptr;

@@ -46,11 +46,20 @@ class SlotImages final : public DeferredImages {
   mutable DeviceBuffer<PointImage> table_;
 };
 
+// A reused plan's box (Engine::set_reuse_plan): the first build kernel that reads a point outside
+// [lo, hi] sets *misfit, if still 0, to count_plan_outgrown. Where the build reads each point
+// anyway, one compare a coordinate instead of a bounding-box reduction of its own.
+struct PlannedBox {
+  float lo[3], hi[3];
+  int* misfit = nullptr;  // null: nothing to watch
+};
+
 class GridTables {
  public:
   // Builds what `plan` asks for over n device positions, queued on `stream` (the compact table
-  // reads its number of cells back).
-  void build(const float* xyz, std::uint32_t n, const GridPlan& plan, cudaStream_t stream);
+  // reads its number of cells back); with `watch`, the points are checked against its box.
+  void build(const float* xyz, std::uint32_t n, const GridPlan& plan, const PlannedBox& watch,
+             cudaStream_t stream);
   // The slots of points [0, targets) in slot order, for a pass over those targets only.
   void select_targets(std::uint32_t targets, cudaStream_t stream);
   // The traversal's images by slot, from `by_point` (images of the last build's points),
@@ -60,13 +69,14 @@ class GridTables {
   GridPass pass(const GridPlan& plan) const;
 
  private:
-  void build_dense(const float* xyz, const GridPlan& plan, cudaStream_t stream);
-  void build_compact(const float* xyz, const GridPlan& plan, cudaStream_t stream);
+  void build_dense(const float* xyz, const GridPlan& plan, const PlannedBox& watch,
+                   cudaStream_t stream);
+  void build_compact(const float* xyz, const GridPlan& plan, const PlannedBox& watch,
+                     cudaStream_t stream);
   template <class Key>
   void sort(DeviceBuffer<Key>& keys, DeviceBuffer<Key>& keys_alt, int bits, Key*& sorted_keys,
             cudaStream_t stream);
-  template <class Op>
-  void scan(Op op, std::uint64_t count, bool exclusive, cudaStream_t stream);
+  void prefix_maximum(std::uint64_t count, cudaStream_t stream);
 
   std::uint32_t n_ = 0;
   DeviceBuffer<std::uint32_t> keys32_, keys32_alt_;

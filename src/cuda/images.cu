@@ -1,9 +1,5 @@
 #include "cuda/images.hpp"
 
-#include <thrust/iterator/counting_iterator.h>
-#include <thrust/iterator/transform_iterator.h>
-#include <cub/device/device_scan.cuh>
-
 #include <cmath>
 #include <cstring>
 #include <string>
@@ -13,6 +9,7 @@
 #include "cuda/device_buffer.cuh"
 #include "cuda/device_results.cuh"
 #include "cuda/runtime.hpp"
+#include "cuda/scan.cuh"
 #include "raycut/detail/cuda/visit.cuh"
 #include "raycut/static_pairs.hpp"
 
@@ -236,14 +233,6 @@ __global__ void park_kernel(Plan plan, const std::uint64_t* images, const Findin
   }
 }
 
-struct CountOrZero {
-  const std::uint32_t* counts;
-  std::uint64_t n;
-  __host__ __device__ std::uint64_t operator()(std::uint64_t i) const {
-    return i < n ? counts[i] : 0;
-  }
-};
-
 class DeviceImagePoints final : public ImagePoints {
  public:
   ~DeviceImagePoints() override {
@@ -443,14 +432,7 @@ void DeviceImagePoints::expand_into(const ImagePlan& plan, const float* sources,
                                                                      found_.data());
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
-  const auto input = thrust::make_transform_iterator(thrust::counting_iterator<std::uint64_t>(0),
-                                                     CountOrZero{counts_.data(), n});
-  std::size_t temp_bytes = 0;
-  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, input, image_offset_.data(),
-                                                  n + 1, stream));
-  temp_.resize(std::max<std::size_t>(temp_bytes, 1));
-  RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(temp_.data(), temp_bytes, input,
-                                                  image_offset_.data(), n + 1, stream));
+  exclusive_sum(counts_.data(), n, image_offset_.data(), temp_, stream);
   std::uint64_t points = 0;
   float extent = 0;
   Points::PlanReuse reused;
