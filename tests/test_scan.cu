@@ -1,6 +1,6 @@
-// The shared exclusive prefix sum (src/cuda/scan.cuh) against a host sum, on both of its paths
-// (one block, tile by tile; CUB above one_block_scan_limit), at the tiles' edges, in place and
-// into another array, for 32- and 64-bit offsets. Skipped without a GPU.
+// The shared exclusive prefix sum (src/cuda/scan.cuh) against a host sum, from no counts to
+// several of CUB's tiles, in place and into another array, for 32- and 64-bit offsets. Skipped
+// without a GPU.
 #include <cuda_runtime.h>
 #include <gtest/gtest.h>
 
@@ -13,8 +13,6 @@
 namespace {
 
 using raycut::detail::cuda::exclusive_sum;
-using raycut::detail::cuda::one_block_scan_limit;
-using raycut::detail::cuda::one_block_scan_tile;
 
 bool have_gpu() {
   int devices = 0;
@@ -52,16 +50,7 @@ std::vector<Offset> host_sum(const std::vector<std::uint32_t>& counts) {
   return o;
 }
 
-const std::uint64_t sizes[] = {0,
-                               1,
-                               1000,
-                               one_block_scan_tile - 1,
-                               one_block_scan_tile,
-                               one_block_scan_tile + 1,
-                               3 * one_block_scan_tile + 17,
-                               one_block_scan_limit,
-                               one_block_scan_limit + 1,
-                               300000};
+const std::uint64_t sizes[] = {0, 1, 1000, 16383, 16384, 16385, 65553, 300000};
 
 TEST(ExclusiveSum, IntoAnotherArrayMatchesTheHostSum) {
   if (!have_gpu()) GTEST_SKIP() << "no CUDA device";

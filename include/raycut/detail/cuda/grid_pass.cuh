@@ -286,16 +286,6 @@ inline bool band_inline_requested() {
   return inline_band;
 }
 
-// RAYCUT_GRID_EMIT_PREFETCH=0: the list fill loads each candidate when it tests it, not one
-// chunk ahead (grid_emit_target), for measuring one against the other in one process.
-inline bool emit_prefetch_requested() {
-  static const bool prefetch = [] {
-    const char* v = std::getenv("RAYCUT_GRID_EMIT_PREFETCH");
-    return v == nullptr || v[0] != '0';
-  }();
-  return prefetch;
-}
-
 struct BandTargets {
   Slot* list;  // list[0]: how many; then their slots
   __device__ __forceinline__ void add(Slot t) const { list[1 + atomicAdd(list, 1u)] = t; }
@@ -496,11 +486,8 @@ __global__ void __launch_bounds__(grid_block_size)
 // entry per thread (docs/benchmarks.md, "Neighbour lists"). Entries within a row keep the
 // order of the candidates, the same on every run.
 // Target t of a warp (rows: the warp's shared row table; active is uniform over the warp).
-// False (nothing finished) when Defer found a candidate in the band. With Prefetch a lane loads
-// its next candidate before it tests this one: the warp walks its target's chunks one after
-// another, and where the targets are too few to fill the GPU (10^4 particles) that walk's
-// load latency is the pass's time.
-template <bool Defer, bool Prefetch, class F, class Table, class Images, class Stencil>
+// False (nothing finished) when Defer found a candidate in the band.
+template <bool Defer, class F, class Table, class Images, class Stencil>
 __device__ __forceinline__ bool grid_emit_target(const float4* __restrict__ pos, Slot t,
                                                  bool active, const GridGeometry& view,
                                                  const Table& table, float cutoff_squared,
@@ -518,28 +505,17 @@ __device__ __forceinline__ bool grid_emit_target(const float4* __restrict__ pos,
   bool band = false;
   int r = 0;
   uint2 row = rows[0];
-  Slot next_slot = t;  // the lane's next candidate: its slot and position
-  float4 next_q = p;
-  const auto fetch = [&](Slot fl) {  // fl only grows: the row walk moves forward
-    if (fl < total) {
-      while (fl >= row.y) row = rows[++r];
-      next_slot = row.x + fl;
-      next_q = pos[next_slot];
-    }
-  };
-  if constexpr (Prefetch) fetch(lane);
   for (Slot first = 0; first < total; first += G) {  // the same trip count on every lane
     const Slot fl = first + lane;
-    if constexpr (!Prefetch) fetch(fl);
-    const Slot s = next_slot;
-    const float4 q = next_q;
-    if constexpr (Prefetch) fetch(fl + G);
     bool take = false;
     std::uint32_t j = 0;
     Shift shift{};
     Vec3 d{0, 0, 0};
     float r2 = 0;
     if (fl < total) {
+      while (fl >= row.y) row = rows[++r];
+      const Slot s = row.x + fl;
+      const float4 q = pos[s];
       d = Vec3{q.x - p.x, q.y - p.y, q.z - p.z};
       r2 = squared_distance(d.x, d.y, d.z);
       const std::uint32_t k = original_index(q);
@@ -562,7 +538,7 @@ __device__ __forceinline__ bool grid_emit_target(const float4* __restrict__ pos,
   return true;
 }
 
-template <bool Defer, bool Prefetch, class F, class Table, class Images, class Stencil>
+template <bool Defer, class F, class Table, class Images, class Stencil>
 __global__ void __launch_bounds__(grid_block_size)
     grid_emit_kernel(const float4* __restrict__ pos, const Slot* targets, Slot n, GridGeometry view,
                      Table table, float cutoff_squared, F f, Images images, BandTargets band,
@@ -574,8 +550,8 @@ __global__ void __launch_bounds__(grid_block_size)
       static_cast<Slot>((blockIdx.x * std::uint64_t{grid_block_size} + threadIdx.x) / 32);
   const bool active = tid < n;  // the whole warp shares t: uniform
   const Slot t = active ? target_slot(targets, tid) : 0;
-  if (!grid_emit_target<Defer, Prefetch>(pos, t, active, view, table, cutoff_squared, f, images,
-                                         stencil, rows[group], lane) &&
+  if (!grid_emit_target<Defer>(pos, t, active, view, table, cutoff_squared, f, images, stencil,
+                               rows[group], lane) &&
       active && lane == 0)
     band.add(t);
 }
@@ -584,7 +560,7 @@ __global__ void __launch_bounds__(grid_block_size)
 // predicate. A warp per target, through the functor's warp-wide body where it has one: a
 // target walked by one thread took as long as the whole first launch (110-290 us on an H100,
 // docs/grid.md); a grid-stride loop, since only the device knows how many.
-template <bool Prefetch, class F, class Table, class Images, class Stencil>
+template <class F, class Table, class Images, class Stencil>
 __global__ void __launch_bounds__(grid_block_size)
     grid_band_kernel(const float4* __restrict__ pos, GridGeometry view, Table table,
                      float cutoff_squared, F f, Images images, BandTargets band, Stencil stencil) {
@@ -598,8 +574,8 @@ __global__ void __launch_bounds__(grid_block_size)
     const Slot t = band.list[1 + k];
     if constexpr (emits_entries<F>::value) {
       if (flat) {
-        grid_emit_target<false, Prefetch>(pos, t, true, view, table, cutoff_squared, f, images,
-                                          stencil, rows[group], lane);
+        grid_emit_target<false>(pos, t, true, view, table, cutoff_squared, f, images, stencil,
+                                rows[group], lane);
         continue;
       }
     }
@@ -629,13 +605,9 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
     constexpr bool Defer = decltype(defer)::value;
     if constexpr (emits_entries<F>::value) {
       if (g.geometry.grid.reach <= 3) {  // the flattened row table holds (2 * 3 + 1)^2 rows
-        const unsigned blocks = blocks_for(std::uint64_t{n} * 32, grid_block_size);
-        if (emit_prefetch_requested())
-          grid_emit_kernel<Defer, true><<<blocks, grid_block_size, 0, stream>>>(
-              pos, targets, n, g.geometry, table, c2, f, images, band, stencil);
-        else
-          grid_emit_kernel<Defer, false><<<blocks, grid_block_size, 0, stream>>>(
-              pos, targets, n, g.geometry, table, c2, f, images, band, stencil);
+        grid_emit_kernel<Defer>
+            <<<blocks_for(std::uint64_t{n} * 32, grid_block_size), grid_block_size, 0, stream>>>(
+                pos, targets, n, g.geometry, table, c2, f, images, band, stencil);
         return;
       }
     }
@@ -681,16 +653,9 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
     launch(table, images, stencil, std::true_type{});
     RAYCUT_CUDA_CHECK_LAUNCH();
     const unsigned blocks = std::min(blocks_for(std::uint64_t{n} * 32, grid_block_size), 2048u);
-    if (blocks == 0) return;
-    if constexpr (emits_entries<F>::value) {
-      if (emit_prefetch_requested()) {
-        grid_band_kernel<true><<<blocks, grid_block_size, 0, stream>>>(pos, g.geometry, table, c2,
-                                                                       f, images, band, stencil);
-        return;
-      }
-    }
-    grid_band_kernel<false><<<blocks, grid_block_size, 0, stream>>>(pos, g.geometry, table, c2, f,
-                                                                    images, band, stencil);
+    if (blocks > 0)
+      grid_band_kernel<<<blocks, grid_block_size, 0, stream>>>(pos, g.geometry, table, c2, f,
+                                                               images, band, stencil);
   };
   const auto run = [&](const auto& table, const auto& images, const auto& stencil) {
     using Images = std::decay_t<decltype(images)>;
