@@ -647,12 +647,14 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
         break;
     }
   };
-  // The band's targets: a second launch, as many blocks as a few waves need (it loops).
+  // The band's targets: a second launch that loops over them, a warp for every 16 targets of the
+  // pass (the band holds a few per thousand; an empty launch of a warp per target was 1,250
+  // blocks at 10^4 targets), at most 2,048 blocks.
   const auto launch_deferred = [&](const auto& table, const auto& images, const auto& stencil) {
     RAYCUT_CUDA_CHECK(cudaMemsetAsync(band.list, 0, sizeof(Slot), stream));
     launch(table, images, stencil, std::true_type{});
     RAYCUT_CUDA_CHECK_LAUNCH();
-    const unsigned blocks = std::min(blocks_for(std::uint64_t{n} * 32, grid_block_size), 2048u);
+    const unsigned blocks = std::min(blocks_for(std::uint64_t{n} * 2, grid_block_size), 2048u);
     if (blocks > 0)
       grid_band_kernel<<<blocks, grid_block_size, 0, stream>>>(pos, g.geometry, table, c2, f,
                                                                images, band, stencil);
