@@ -32,7 +32,8 @@ struct CountOrZero {
 //
 // One block instead of CUB's two launches (its tile states' initialisation, then the scan) was
 // measured and dropped: one multiprocessor reading and writing 16 consecutive counts a thread
-// took several microseconds per 16,384 counts (H100, docs/grid.md), more than the launch saved.
+// took several microseconds per 16,384 counts (H100: docs/benchmarks.md, "Fewer kernels in a
+// reused build"), more than the launch saved.
 template <class Count, class Offset, class Temp>
 void exclusive_sum(const Count* counts, std::uint64_t n, Offset* offsets, Temp& temp,
                    cudaStream_t stream) {
