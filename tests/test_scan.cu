@@ -6,6 +6,7 @@
 
 #include <cstdint>
 #include <random>
+#include <type_traits>
 #include <vector>
 
 #include "cuda/scan.cuh"
@@ -50,27 +51,39 @@ std::vector<Offset> host_sum(const std::vector<std::uint32_t>& counts) {
   return o;
 }
 
+// The device's sum of `counts` as Offset: into a second array, or in place (where Offset is the
+// counts' type). Empty where a CUDA call failed.
+template <class Offset>
+std::vector<Offset> device_sum(const std::vector<std::uint32_t>& counts, bool in_place) {
+  const std::uint64_t n = counts.size();
+  Buffer<std::uint32_t> in;  // n counts, and room for the total when summed in place
+  Buffer<Offset> out;
+  Buffer<unsigned char> temp;
+  in.resize(n + 1);
+  out.resize(n + 1);
+  if (!in.data() || !out.data() ||
+      cudaMemcpy(in.data(), counts.data(), n * sizeof(std::uint32_t), cudaMemcpyHostToDevice) !=
+          cudaSuccess)
+    return {};
+  Offset* result = out.data();
+  if constexpr (std::is_same_v<Offset, std::uint32_t>)
+    if (in_place) result = in.data();
+  exclusive_sum(in.data(), n, result, temp, nullptr);
+  std::vector<Offset> got(n + 1);
+  if (cudaMemcpy(got.data(), result, (n + 1) * sizeof(Offset), cudaMemcpyDeviceToHost) !=
+      cudaSuccess)
+    return {};
+  return got;
+}
+
 const std::uint64_t sizes[] = {0, 1, 1000, 16383, 16384, 16385, 65553, 300000};
 
 TEST(ExclusiveSum, IntoAnotherArrayMatchesTheHostSum) {
   if (!have_gpu()) GTEST_SKIP() << "no CUDA device";
   for (const std::uint64_t n : sizes) {
     const std::vector<std::uint32_t> counts = random_counts(n, static_cast<std::uint32_t>(n));
-    Buffer<std::uint32_t> in;
-    Buffer<std::uint64_t> out;
-    Buffer<unsigned char> temp;
-    in.resize(n + 1);
-    out.resize(n + 1);
-    ASSERT_NE(in.data(), nullptr);
-    ASSERT_EQ(
-        cudaMemcpy(in.data(), counts.data(), n * sizeof(std::uint32_t), cudaMemcpyHostToDevice),
-        cudaSuccess);
-    exclusive_sum(in.data(), n, out.data(), temp, nullptr);
-    std::vector<std::uint64_t> got(n + 1);
-    ASSERT_EQ(
-        cudaMemcpy(got.data(), out.data(), (n + 1) * sizeof(std::uint64_t), cudaMemcpyDeviceToHost),
-        cudaSuccess);
-    EXPECT_EQ(got, host_sum<std::uint64_t>(counts)) << "n = " << n;
+    EXPECT_EQ(device_sum<std::uint64_t>(counts, false), host_sum<std::uint64_t>(counts))
+        << "n = " << n;
   }
 }
 
@@ -78,19 +91,8 @@ TEST(ExclusiveSum, InPlaceMatchesTheHostSum) {
   if (!have_gpu()) GTEST_SKIP() << "no CUDA device";
   for (const std::uint64_t n : sizes) {
     const std::vector<std::uint32_t> counts = random_counts(n, static_cast<std::uint32_t>(n) + 7);
-    Buffer<std::uint32_t> table;  // n counts and one more entry, for the total
-    Buffer<unsigned char> temp;
-    table.resize(n + 1);
-    ASSERT_NE(table.data(), nullptr);
-    ASSERT_EQ(
-        cudaMemcpy(table.data(), counts.data(), n * sizeof(std::uint32_t), cudaMemcpyHostToDevice),
-        cudaSuccess);
-    exclusive_sum(table.data(), n, table.data(), temp, nullptr);
-    std::vector<std::uint32_t> got(n + 1);
-    ASSERT_EQ(cudaMemcpy(got.data(), table.data(), (n + 1) * sizeof(std::uint32_t),
-                         cudaMemcpyDeviceToHost),
-              cudaSuccess);
-    EXPECT_EQ(got, host_sum<std::uint32_t>(counts)) << "n = " << n;
+    EXPECT_EQ(device_sum<std::uint32_t>(counts, true), host_sum<std::uint32_t>(counts))
+        << "n = " << n;
   }
 }
 
