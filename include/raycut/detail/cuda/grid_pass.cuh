@@ -395,25 +395,6 @@ __device__ __forceinline__ Slot flatten_rows(const GridGeometry& view, const Tab
   return group_total;
 }
 
-// flatten_rows for a team: with Warps > 1 warp 0 flattens the rows (into the block's rows[]) and
-// every warp of the block gets their length through team[Warps]; every thread of the block calls
-// it.
-template <int G, int Warps, class Table>
-__device__ __forceinline__ Slot team_rows(const GridGeometry& view, const Table& table,
-                                          const TargetCell& c, bool active, bool half, Slot t,
-                                          int lane, int warp, uint2* rows, Slot* team) {
-  if constexpr (Warps == 1) {
-    return flatten_rows<G>(view, table, c, active, half, t, lane, rows);
-  } else {
-    if (warp == 0) {
-      const Slot total = flatten_rows<G>(view, table, c, active, half, t, lane, rows);
-      if (lane == 0) team[Warps] = total;
-    }
-    __syncthreads();
-    return team[Warps];
-  }
-}
-
 // G lanes per target over its flattened candidates: lane g takes candidates g, g + G, ... of the
 // whole list, so every lane does the same work whatever the lengths of the rows, and
 // neighbouring lanes read neighbouring sources. The lanes' states are combined in a fixed order
@@ -421,25 +402,17 @@ __device__ __forceinline__ Slot team_rows(const GridGeometry& view, const Table&
 // inputs, where a thread per target would not fill the GPU.
 // Target t of a group of G lanes (rows: the group's shared row table; an inactive group's
 // lanes take part in the shuffles and finish nothing). False (nothing finished) when Defer found
-// a candidate in the band. With Warps > 1 (G = 32), the block's Warps warps walk one target
-// together (grid_band_kernel): `warp` is this one's place, `team` Warps + 1 words and
-// `team_states` Warps states of shared memory, and the warps' states are combined in warp order.
-template <int G, bool Defer, int Warps = 1, class F, class Table, class Images, class Stencil>
+// a candidate in the band.
+template <int G, bool Defer, class F, class Table, class Images, class Stencil>
 __device__ __forceinline__ bool grid_group_target(const float4* __restrict__ pos, Slot t,
                                                   bool active, const GridGeometry& view,
                                                   const Table& table, float cutoff_squared,
                                                   const F& f, const Images& images,
-                                                  const Stencil& stencil, uint2* rows, int lane,
-                                                  int warp = 0, Slot* team = nullptr,
-                                                  unsigned char* team_states = nullptr) {
-  static_assert(Warps == 1 || (G == 32 && !Defer), "a team of warps takes band targets only");
-  constexpr int T = G * Warps;  // the lanes that share the target
-  const int team_lane = Warps > 1 ? warp * G + lane : lane;
+                                                  const Stencil& stencil, uint2* rows, int lane) {
   const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
   const std::uint32_t i = original_index(p);
-  const Slot group_total =
-      team_rows<G, Warps>(view, table, locate(view, p), active, active && stencil.half_rows(i), t,
-                          lane, warp, rows, team);
+  const Slot group_total = flatten_rows<G>(view, table, locate(view, p), active,
+                                           active && stencil.half_rows(i), t, lane, rows);
 
   // Unrolled by U: the slots of U candidates first (the row walk only moves forward), then U
   // independent loads in flight, then the U tests.
@@ -449,11 +422,11 @@ __device__ __forceinline__ bool grid_group_target(const float4* __restrict__ pos
   bool band = false;
   int r = 0;
   uint2 row = rows[0];
-  for (Slot first = team_lane; first < group_total; first += U * T) {
+  for (Slot first = lane; first < group_total; first += U * G) {
     Slot s[U];
 #pragma unroll
     for (int u = 0; u < U; ++u) {
-      const Slot fl = first + u * T;
+      const Slot fl = first + u * G;
       if (fl < group_total) {
         while (fl >= row.y) row = rows[++r];
         s[u] = row.x + fl;
@@ -480,19 +453,6 @@ __device__ __forceinline__ bool grid_group_target(const float4* __restrict__ pos
     const unsigned group_lanes =
         G == 32 ? 0xffffffffu : ((1u << G) - 1u) << ((threadIdx.x % 32) / G * G);
     if (lanes & group_lanes) return false;
-  }
-  if constexpr (Warps > 1) {  // the warps' states, combined by warp 0 in warp order
-    using A = typename F::Accumulator;
-    if (lane == 0) memcpy(team_states + warp * sizeof(A), &acc, sizeof(A));
-    __syncthreads();
-    if (warp == 0 && lane == 0)
-      for (int w = 1; w < Warps; ++w) {
-        A other;
-        memcpy(&other, team_states + w * sizeof(A), sizeof(A));
-        F::combine(acc, other);
-      }
-    __syncthreads();
-    if (warp != 0) return true;
   }
   if (active && lane == 0) {
     typename F::Accumulator total_state = initial_state(f, i);
@@ -526,24 +486,18 @@ __global__ void __launch_bounds__(grid_block_size)
 // entry per thread (docs/benchmarks.md, "Neighbour lists"). Entries within a row keep the
 // order of the candidates, the same on every run.
 // Target t of a warp (rows: the warp's shared row table; active is uniform over the warp).
-// False (nothing finished) when Defer found a candidate in the band. With Warps > 1 the block's
-// warps walk one target together (grid_band_kernel; `warp`, `team` as grid_group_target's), the
-// team's 32 x Warps consecutive candidates at a time, each warp's taken pairs placed after those
-// of the warps before it: the same entries in the same order as one warp writes.
-template <bool Defer, int Warps = 1, class F, class Table, class Images, class Stencil>
+// False (nothing finished) when Defer found a candidate in the band.
+template <bool Defer, class F, class Table, class Images, class Stencil>
 __device__ __forceinline__ bool grid_emit_target(const float4* __restrict__ pos, Slot t,
                                                  bool active, const GridGeometry& view,
                                                  const Table& table, float cutoff_squared,
                                                  const F& f, const Images& images,
-                                                 const Stencil& stencil, uint2* rows, int lane,
-                                                 int warp = 0, Slot* team = nullptr) {
-  static_assert(Warps == 1 || !Defer, "a team of warps takes band targets only");
-  constexpr int G = 32, T = G * Warps;
-  const int team_lane = Warps > 1 ? warp * G + lane : lane;
+                                                 const Stencil& stencil, uint2* rows, int lane) {
+  constexpr int G = 32;
   const float4 p = active ? pos[t] : make_float4(0, 0, 0, 0);
   const std::uint32_t i = original_index(p);
-  const Slot total = team_rows<G, Warps>(view, table, locate(view, p), active,
-                                         active && stencil.half_rows(i), t, lane, warp, rows, team);
+  const Slot total = flatten_rows<G>(view, table, locate(view, p), active,
+                                     active && stencil.half_rows(i), t, lane, rows);
   const typename Images::Target ti = images.target(t);
   typename F::Accumulator next{};
   if (active) next = initial_state(f, i);
@@ -551,8 +505,8 @@ __device__ __forceinline__ bool grid_emit_target(const float4* __restrict__ pos,
   bool band = false;
   int r = 0;
   uint2 row = rows[0];
-  for (Slot first = 0; first < total; first += T) {  // the same trip count on every lane
-    const Slot fl = first + team_lane;
+  for (Slot first = 0; first < total; first += G) {  // the same trip count on every lane
+    const Slot fl = first + lane;
     bool take = false;
     std::uint32_t j = 0;
     Shift shift{};
@@ -572,26 +526,15 @@ __device__ __forceinline__ bool grid_emit_target(const float4* __restrict__ pos,
              f.within(i, j, shift, r2);
     }
     const unsigned taken = __ballot_sync(0xffffffffu, take);
-    Slot before = 0, step = __popc(taken);  // taken by the warps before this one; by the team
-    if constexpr (Warps > 1) {
-      if (lane == 0) team[warp] = step;
-      __syncthreads();
-      step = 0;
-      for (int w = 0; w < Warps; ++w) {
-        if (w == warp) before = step;
-        step += team[w];
-      }
-      __syncthreads();  // team[] is written again by the next step
-    }
     if (take) {
-      typename F::Accumulator at = next + before + __popc(taken & lanes_below);
+      typename F::Accumulator at = next + __popc(taken & lanes_below);
       apply(f, at, i, j, d, r2, shift);
     }
-    next += step;
+    next += __popc(taken);
   }
   // The whole warp's target: its entries so far are written again.
   if (Defer && __any_sync(0xffffffffu, band)) return false;
-  if (active && lane == 0 && (Warps == 1 || warp == 0)) f.finish(i, next);
+  if (active && lane == 0) f.finish(i, next);
   return true;
 }
 
@@ -614,43 +557,37 @@ __global__ void __launch_bounds__(grid_block_size)
 }
 
 // The targets a deferring launch left (BandTargets), each computed whole with the exact
-// predicate, in a grid-stride loop, since only the device knows how many. They are few (a few per
-// thousand) and each is a walk through its cells, so a target takes the whole block, its warps
-// together (the emit or 32-lane body with a team of warps): with a warp per target the launch was
-// one warp's latency, 28-31 cycles between its instructions (Nsight Compute, docs/benchmarks.md,
-// "Fewer kernels in a reused build"); with a thread per target it took as long as the whole
-// first launch (110-290 us on an H100, docs/grid.md). Other functors (and reach > 3): a thread
-// per target, a warp's lane 0 each.
+// predicate. A warp per target, through the functor's warp-wide body where it has one: a
+// target walked by one thread took as long as the whole first launch (110-290 us on an H100,
+// docs/grid.md); a grid-stride loop, since only the device knows how many.
 template <class F, class Table, class Images, class Stencil>
 __global__ void __launch_bounds__(grid_block_size)
     grid_band_kernel(const float4* __restrict__ pos, GridGeometry view, Table table,
                      float cutoff_squared, F f, Images images, BandTargets band, Stencil stencil) {
-  constexpr int warps = grid_block_size / 32;
-  constexpr bool teams = emits_entries<F>::value || has_combine<F>::value;
-  __shared__ uint2 rows[warps][grid_max_rows];
-  __shared__ Slot team[warps + 1];
-  __shared__ alignas(
-      16) unsigned char team_states[teams ? warps * sizeof(typename F::Accumulator) : 1];
-  const int warp = threadIdx.x / 32, lane = threadIdx.x % 32;
+  constexpr int groups = grid_block_size / 32;
+  __shared__ uint2 rows[groups][grid_max_rows];
+  const int group = threadIdx.x / 32, lane = threadIdx.x % 32;
   const Slot count = band.list[0];
-  if (teams && view.grid.reach <= 3) {  // the flattened row table holds (2 * 3 + 1)^2 rows
-    for (Slot k = blockIdx.x; k < count; k += gridDim.x) {  // k is uniform over the block
-      const Slot t = band.list[1 + k];
-      if constexpr (emits_entries<F>::value)
-        grid_emit_target<false, warps>(pos, t, true, view, table, cutoff_squared, f, images,
-                                       stencil, rows[0], lane, warp, team);
-      else if constexpr (has_combine<F>::value)
-        grid_group_target<32, false, warps>(pos, t, true, view, table, cutoff_squared, f, images,
-                                            stencil, rows[0], lane, warp, team, team_states);
-      __syncthreads();  // rows[] and team[] serve the next target
-    }
-    return;
-  }
+  const bool flat = view.grid.reach <= 3;  // the row table holds (2 * 3 + 1)^2 rows
   for (Slot k = (blockIdx.x * grid_block_size + threadIdx.x) / 32; k < count;
-       k += gridDim.x * warps) {  // k is uniform over the warp
+       k += gridDim.x * groups) {  // k is uniform over the warp
+    const Slot t = band.list[1 + k];
+    if constexpr (emits_entries<F>::value) {
+      if (flat) {
+        grid_emit_target<false>(pos, t, true, view, table, cutoff_squared, f, images, stencil,
+                                rows[group], lane);
+        continue;
+      }
+    }
+    if constexpr (has_combine<F>::value) {
+      if (flat) {
+        grid_group_target<32, false>(pos, t, true, view, table, cutoff_squared, f, images, stencil,
+                                     rows[group], lane);
+        continue;
+      }
+    }
     if (lane == 0)
-      grid_thread_target<false>(pos, band.list[1 + k], view, table, cutoff_squared, f, images,
-                                stencil);
+      grid_thread_target<false>(pos, t, view, table, cutoff_squared, f, images, stencil);
     __syncwarp();
   }
 }
@@ -710,14 +647,14 @@ void run_grid(const PairPass& pass, const F& f, cudaStream_t stream) {
         break;
     }
   };
-  // The band's targets: a second launch that loops over them, a block for every 64 targets of
-  // the pass (the band holds a few per thousand; an empty launch of a warp per target was 1,250
+  // The band's targets: a second launch that loops over them, a warp for every 16 targets of the
+  // pass (the band holds a few per thousand; an empty launch of a warp per target was 1,250
   // blocks at 10^4 targets), at most 2,048 blocks.
   const auto launch_deferred = [&](const auto& table, const auto& images, const auto& stencil) {
     RAYCUT_CUDA_CHECK(cudaMemsetAsync(band.list, 0, sizeof(Slot), stream));
     launch(table, images, stencil, std::true_type{});
     RAYCUT_CUDA_CHECK_LAUNCH();
-    const unsigned blocks = std::min(blocks_for(n, 64), 2048u);
+    const unsigned blocks = std::min(blocks_for(std::uint64_t{n} * 2, grid_block_size), 2048u);
     if (blocks > 0)
       grid_band_kernel<<<blocks, grid_block_size, 0, stream>>>(pos, g.geometry, table, c2, f,
                                                                images, band, stencil);
