@@ -73,10 +73,13 @@
 set -uo pipefail
 cd "$(dirname "$0")/.." || exit 1
 out="${OUT:-/tmp/raycut-out}"
-# RAYCUT_RESULTS_DIR: write the results there directly (the device tool's $OUT/...), so that a
-# run stopped by a time limit still hands back what it measured.
+# The results are packed into $out/results.tgz after every step, so that a run stopped by a time
+# limit still hands back what it measured, in one file (the device tool hands back a limited
+# number of files). RAYCUT_RESULTS_DIR: also keep them there as loose files.
 res="${RAYCUT_RESULTS_DIR:-$(mktemp -d)}"
 mkdir -p "$out" "$res"
+pack() { tar czf "$out/results.tgz.part" -C "$res" --exclude cudaLJ --exclude 'results.tgz*' . &&
+  mv "$out/results.tgz.part" "$out/results.tgz"; }
 export PATH="/usr/local/cuda/bin:$PATH"
 start=$(date +%s)
 step() { echo "[$(($(date +%s) - start)) s] $*"; }
@@ -505,7 +508,8 @@ while [ $# -gt 0 ]; do
       ;;
   esac
   step "$1 done"
+  pack
   shift
 done
-tar czf "$out/results.tgz" -C "$res" --exclude cudaLJ .
+pack
 step "results: $out/results.tgz"
