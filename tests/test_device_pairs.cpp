@@ -502,6 +502,121 @@ TEST_P(DevicePairsOn, AListPerSystemEqualsAPassPerSystem) {
   }
 }
 
+// A batch of `systems` small systems of 0 to 110 particles each (mean 55), each in its own box
+// 3.6 to 6.5 wide: cubes, triclinic cells and slabs (pbc T T F), several images per pair in the
+// thinner ones at the cutoff used below.
+struct ManySystems {
+  std::vector<float> xyz;
+  std::vector<std::int64_t> batch;
+  std::vector<Box> boxes;
+};
+ManySystems many_small_systems(std::size_t systems, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> size(0, 110);
+  std::uniform_real_distribution<double> width(3.6, 6.5);
+  ManySystems out;
+  for (std::size_t s = 0; s < systems; ++s) {
+    const double l = width(rng);
+    Box b = s % 3 == 1 ? triclinic(l, 0.3 * l, 0.9 * l, -0.2 * l, 0.1 * l, l) : cubic(l);
+    if (s % 3 == 2) b.pbc[2] = false;
+    out.boxes.push_back(b);
+    const auto n = static_cast<std::size_t>(size(rng));
+    const std::vector<float> part = uniform(n, 0, l, seed + 1 + unsigned(s));
+    out.xyz.insert(out.xyz.end(), part.begin(), part.end());
+    out.batch.insert(out.batch.end(), n, std::int64_t(s));
+  }
+  return out;
+}
+
+// Batches with more rows than a block per row takes, where the one-launch pass gives each row a
+// warp (about 3,900 rows), 16 lanes (18,700) or 8 (37,400), and its tiles of 1, 2 or 4 rows find
+// their offsets by the look-back: every system against the oracle, full and half; the capacity
+// short by one; and a list per system equal to the one list cut by system.
+TEST_P(DevicePairsOn, ManySmallSystemsAgainstTheDoubleOracle) {
+  const Where where = GetParam();
+  if (!available(where)) GTEST_SKIP() << "no CUDA device";
+  const double cutoff = 1.8;
+  for (std::size_t systems : {70, 340, 680}) {
+    SCOPED_TRACE(std::to_string(systems) + " systems");
+    const ManySystems b = many_small_systems(systems, 100 + unsigned(systems));
+    const std::size_t n = b.batch.size();
+    for (bool half : {false, true})
+      expect_exact(b.xyz, b.boxes, b.batch, cutoff, half, "many small systems", where);
+    const HostPairs exact = run_pass(b.xyz, b.boxes, b.batch, cutoff, false, 1 << 20, where);
+    ASSERT_GT(exact.count, 1);
+    const auto short_by_one = std::size_t(exact.count - 1);
+    const HostPairs cut = run_pass(b.xyz, b.boxes, b.batch, cutoff, false, short_by_one, where);
+    EXPECT_EQ(cut.count, exact.count) << "the true count, above the capacity";
+    for (std::size_t p = 0; p < std::min(short_by_one, cut.i.size()); ++p) {
+      ASSERT_EQ(cut.i[p], exact.i[p]) << p;
+      ASSERT_EQ(cut.j[p], exact.j[p]) << p;
+    }
+    // A list per system of k slots, k the median system's count: half the systems overflow.
+    std::vector<std::int64_t> per_system(systems, 0);
+    for (std::int64_t p = 0; p < exact.count; ++p) ++per_system[std::size_t(b.batch[exact.i[p]])];
+    std::vector<std::int64_t> sorted_counts = per_system;
+    std::nth_element(sorted_counts.begin(), sorted_counts.begin() + systems / 2,
+                     sorted_counts.end());
+    const auto k = static_cast<std::size_t>(sorted_counts[systems / 2]);
+    ASSERT_GT(k, 0u);
+    std::vector<float> cells;
+    std::vector<std::uint8_t> pbc;
+    for (const Box& box : b.boxes)
+      for (int r = 0; r < 3; ++r) {
+        pbc.push_back(box.pbc[r]);
+        for (int c = 0; c < 3; ++c) cells.push_back(static_cast<float>(box.cell[r][c]));
+      }
+    std::vector<std::int64_t> i(systems * k, -9), j(systems * k, -9), count(systems, -9);
+    std::vector<std::int32_t> shifts(3 * systems * k, -9);
+    raycut::DeviceSystems sys;
+    sys.size = n;
+    sys.cell_count = sys.pbc_count = systems;
+    const raycut::PairOptions options{false, where.search};
+    raycut::StaticPairs out{i.data(), j.data(), shifts.data(), count.data(), k, std::int64_t(n)};
+    out.systems = systems;
+    if (where.place == Place::host) {
+      sys.positions = b.xyz.data();
+      sys.cells = cells.data();
+      sys.pbc = reinterpret_cast<const bool*>(pbc.data());
+      sys.batch = b.batch.data();
+      raycut::detail::list_pairs_small_systems_on_host(sys, cutoff, options, out);
+    } else {
+      DeviceVector d_xyz(b.xyz), d_cells(cells), d_pbc(pbc), d_batch(b.batch), d_i(i), d_j(j),
+          d_count(count), d_shifts(shifts);
+      sys.positions = d_xyz.p;
+      sys.cells = d_cells.p;
+      sys.pbc = static_cast<const bool*>(d_pbc.p);
+      sys.batch = static_cast<const std::int64_t*>(d_batch.p);
+      out.i = static_cast<std::int64_t*>(d_i.p);
+      out.j = static_cast<std::int64_t*>(d_j.p);
+      out.shifts = static_cast<std::int32_t*>(d_shifts.p);
+      out.count = static_cast<std::int64_t*>(d_count.p);
+      raycut::list_pairs_small_systems(raycut::Context{}, sys, cutoff, options, out);
+      CUDA_OK(cudaDeviceSynchronize());
+      i = to_host(out.i, systems * k);
+      j = to_host(out.j, systems * k);
+      shifts = to_host(out.shifts, 3 * systems * k);
+      count = to_host(out.count, systems);
+    }
+    std::vector<std::size_t> next(systems, 0);  // the next slot of each system
+    for (std::int64_t p = 0; p < exact.count; ++p) {
+      const auto s = std::size_t(b.batch[exact.i[p]]);
+      const std::size_t e = next[s]++;
+      if (e >= k) continue;
+      const std::size_t at = s * k + e;
+      ASSERT_EQ(i[at], exact.i[p]) << "system " << s << ", slot " << e;
+      ASSERT_EQ(j[at], exact.j[p]) << "system " << s << ", slot " << e;
+      for (int c = 0; c < 3; ++c)
+        ASSERT_EQ(shifts[3 * at + c], exact.shifts[3 * p + c]) << "system " << s << ", slot " << e;
+    }
+    for (std::size_t s = 0; s < systems; ++s) {
+      EXPECT_EQ(count[s], per_system[s]) << "system " << s;
+      for (std::size_t e = std::min<std::size_t>(k, next[s]); e < k; ++e)
+        ASSERT_EQ(i[s * k + e], std::int64_t(n)) << "padding of system " << s << ", slot " << e;
+    }
+  }
+}
+
 TEST_P(DevicePairsOn, BadDataGivesItsCountCodeAndOnlyPadding) {
   const Where where = GetParam();
   if (!available(where)) GTEST_SKIP() << "no CUDA device";

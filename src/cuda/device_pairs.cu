@@ -1,10 +1,10 @@
 // The stream-ordered small-system pair list (raycut/device_pairs.hpp): brute force within each
-// system, a block per particle up to 2,048 particles and a warp per particle above, every
-// distance in double. Three launches and a memset per call without cells, all on the context's
-// stream: the lattices (one per cell), the rows (count, offset and fill in one, list_rows), pad.
-// No host synchronisation and no allocation outside the context's memory resource, so a CUDA
-// graph captures it. Compiled with --fmad=false (CMakeLists.txt): the device rounds every double
-// as the host mirror below does.
+// system, a block per particle up to 2,048 particles and 8 to 32 lanes per particle above
+// (row_team_threads), every distance in double. Three launches and a memset per call without cells,
+// all on the context's stream: the lattices (one per cell), the rows (count, offset and fill in
+// one, list_rows), pad. No host synchronisation and no allocation outside the context's memory
+// resource, so a CUDA graph captures it. Compiled with --fmad=false (CMakeLists.txt): the device
+// rounds every double as the host mirror below does.
 #include <cuda_runtime.h>
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
@@ -42,6 +42,21 @@ constexpr std::size_t rows_for_block_teams = 2048;
 // block each run in one wave on an H100 (132 x 8 blocks): 0.86x the time at 1,000 particles.
 // The cells path's count (95 registers) bounded to 80 was 3 % slower on single systems: unbounded.
 constexpr int list_rows_blocks_per_multiprocessor = 8;
+// Above rows_for_block_teams rows, each row gets the fewest lanes (8, 16 or 32) that still make
+// this many threads, an H100's or H200's 132 multiprocessors x 2,048: the GPU stays full, a row
+// of a small system fills its lanes (100 sources: 7 rounds of 16 lanes, against 4 of 32 with
+// the last an eighth full), and fewer lanes share its frame and its tile's look-back. Measured
+// on an H100 (docs/benchmarks.md), all pairs from a graph: 256 x 100 188 -> 159 us (16 lanes;
+// 8: 171), 512 x 128 322 -> 239 (8 lanes; 16: 243), 32 x 100 unchanged at 32 lanes (16: 43
+// against 41); cells at 512 x 128 564 -> 411 (8 lanes). At 4,000 particles with cells 16 lanes
+// were faster than the 32 chosen (102 against 112 us): the rule leaves that.
+constexpr std::size_t threads_to_fill = std::size_t(132) * 2048;
+int row_team_threads(std::size_t rows) {
+  if (rows <= rows_for_block_teams) return block_threads;
+  for (int lanes : {8, 16})
+    if (rows * lanes >= threads_to_fill) return lanes;
+  return warp_size;
+}
 constexpr unsigned all_lanes = 0xffffffffu;
 // How far below 1/2 an axis's reach must stay for the single image (Lattice::single_image), and
 // the largest |f_a| it takes: f_a's rounding, ~1e-16 |f_a| per term, stays far below the slack.
@@ -749,42 +764,54 @@ __global__ void cell_starts_kernel(const Input in, const std::uint32_t* sorted_k
   for (int k = 0; k < 3; ++k) sorted_xyz[3 * b + k] = xyz[3 * std::int64_t(sorted[b]) + k];
 }
 
-// A row's team: one warp (Warps = 1, block_threads / 32 rows per block) or the whole block
-// (Warps = block_threads / 32, one row per block). Few rows get a block each, so that the GPU
-// has enough warps to hide the latency of the pair tests (rows_for_block_teams).
-template <int Warps>
+// A row's team: `Threads` lanes of one warp (a power of two up to 32; a warp holds 32 / Threads
+// teams side by side) or the whole block (Threads = block_threads, one row per block). Few rows
+// get a block each, so that the GPU has enough warps to hide the latency of the pair tests
+// (rows_for_block_teams); many rows of small systems get a few lanes each (row_team_threads), so
+// that a row's sources fill its lanes and its fixed costs are shared by fewer lanes.
+template <int Threads>
 struct Team {
-  static constexpr int threads = Warps * warp_size;
-  static_assert(Warps == 1 || threads == block_threads, "a team is a warp or the whole block");
+  static constexpr int threads = Threads;
+  static constexpr bool whole_block = Threads == block_threads;
+  static_assert(whole_block || (Threads <= warp_size && warp_size % Threads == 0),
+                "a team is a power of two of a warp's lanes, or the whole block");
+  static constexpr int width = whole_block ? warp_size : Threads;  // of its shuffles
   __device__ static std::int64_t row() {
     return (std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x) / threads;
   }
   __device__ static int rank() { return threadIdx.x % threads; }
+  // The team's lanes of its warp: teams that share a warp shuffle and wait apart.
+  __device__ static unsigned lanes() {
+    if constexpr (width == warp_size)
+      return all_lanes;
+    else
+      return ((1u << width) - 1) << (threadIdx.x % warp_size / width * width);
+  }
   // The team's sum of v, in every thread.
   __device__ static unsigned long long sum(unsigned long long v) {
-    for (int offset = warp_size / 2; offset > 0; offset /= 2)
-      v += __shfl_xor_sync(all_lanes, v, offset);
-    if constexpr (Warps > 1) {
-      __shared__ unsigned long long warp_sums[Warps];
+    for (int offset = width / 2; offset > 0; offset /= 2)
+      v += __shfl_xor_sync(lanes(), v, offset, width);
+    if constexpr (whole_block) {
+      __shared__ unsigned long long warp_sums[block_warps];
       __syncthreads();  // the last call's sums are read
       if (threadIdx.x % warp_size == 0) warp_sums[threadIdx.x / warp_size] = v;
       __syncthreads();
       v = 0;
 #pragma unroll
-      for (int w = 0; w < Warps; ++w) v += warp_sums[w];
+      for (int w = 0; w < block_warps; ++w) v += warp_sums[w];
     }
     return v;
   }
   // The team's inclusive scan of v in rank order, and its total.
   __device__ static std::uint32_t scan(std::uint32_t v, std::uint32_t& total) {
-    const int lane = threadIdx.x % warp_size;
-    for (int offset = 1; offset < warp_size; offset *= 2) {
-      const std::uint32_t other = __shfl_up_sync(all_lanes, v, offset);
+    const int lane = threadIdx.x % width;
+    for (int offset = 1; offset < width; offset *= 2) {
+      const std::uint32_t other = __shfl_up_sync(lanes(), v, offset, width);
       if (lane >= offset) v += other;
     }
-    total = __shfl_sync(all_lanes, v, warp_size - 1);
-    if constexpr (Warps > 1) {
-      __shared__ std::uint32_t warp_totals[Warps];
+    total = __shfl_sync(lanes(), v, width - 1, width);
+    if constexpr (whole_block) {
+      __shared__ std::uint32_t warp_totals[block_warps];
       __syncthreads();  // the last call's totals are read
       if (lane == warp_size - 1) warp_totals[threadIdx.x / warp_size] = v;
       __syncthreads();
@@ -792,7 +819,7 @@ struct Team {
       std::uint32_t before = 0;
       total = 0;
 #pragma unroll
-      for (int w = 0; w < Warps; ++w) {
+      for (int w = 0; w < block_warps; ++w) {
         if (w < warp) before += warp_totals[w];
         total += warp_totals[w];
       }
@@ -800,36 +827,38 @@ struct Team {
     }
     return v;
   }
+  __device__ static void sync() {
+    if constexpr (whole_block)
+      __syncthreads();
+    else
+      __syncwarp(lanes());
+  }
 };
 
-template <int Warps>
-__device__ inline void team_sync() {
-  if constexpr (Warps > 1)
-    __syncthreads();
-  else
-    __syncwarp();
-}
+// What a team without a row (past the last, in the last tile of list_rows) gets as its code.
+constexpr int no_row = 1;
 
 // Row `row`'s frame, made once by its team's first thread into shared memory (code: make_frame's,
-// with bad rows reported to status), for every thread of the team to read: held in registers,
-// the frame took about 60 of the ~126 registers a thread had, which left a quarter of the warps
-// a multiprocessor can run. Every thread of the team calls it.
-template <class Real, int Warps>
+// with bad rows reported to status; no_row past the last row), for every thread of the team to
+// read: held in registers, the frame took about 60 of the ~126 registers a thread had, which
+// left a quarter of the warps a multiprocessor can run. Every thread of the team calls it.
+template <class Real, int Threads>
 __device__ const Frame& team_frame(const Input& in, std::int64_t row, const Lattice* lattices,
                                    int* status, int& code) {
-  constexpr int teams = block_threads / Team<Warps>::threads;
+  using T = Team<Threads>;
+  constexpr int teams = block_threads / T::threads;
   // Raw storage: a __shared__ array cannot have Frame's default member initializers.
   __shared__ alignas(Frame) unsigned char frames[teams * sizeof(Frame)];
   __shared__ int codes[teams];
-  const int team = threadIdx.x / Team<Warps>::threads;
+  const int team = threadIdx.x / T::threads;
   Frame* const frame = reinterpret_cast<Frame*>(frames) + team;
-  if (Team<Warps>::rank() == 0) {
+  if (T::rank() == 0) {
     Frame made;
-    codes[team] = make_frame<Real>(in, row, lattices, made);
+    codes[team] = row < in.n ? make_frame<Real>(in, row, lattices, made) : no_row;
     new (frame) Frame(made);
-    if (codes[team] && status) atomicMin(status, codes[team]);
+    if (codes[team] < 0 && status) atomicMin(status, codes[team]);
   }
-  team_sync<Warps>();
+  T::sync();
   code = codes[team];
   return *frame;
 }
@@ -844,10 +873,10 @@ __device__ std::int64_t team_row(std::int64_t k, const Input& in, const CellTabl
 }
 
 // Row `row`'s pairs, from its frame f, in every thread of its team.
-template <class Real, int Warps, bool Cells>
+template <class Real, int Threads, bool Cells>
 __device__ unsigned long long count_row(const Input& in, const Frame& f, std::int64_t row,
                                         const CellTable& cells) {
-  using T = Team<Warps>;
+  using T = Team<Threads>;
   unsigned long long c = 0;
   with_sources<Real, Cells>(in, f, row, cells, [&](const auto& sources) {
     auto at = sources.cursor(T::rank());
@@ -860,19 +889,19 @@ __device__ unsigned long long count_row(const Input& in, const Frame& f, std::in
   return T::sum(c);
 }
 
-template <class Real, int Warps, bool Cells>
+template <class Real, int Threads, bool Cells>
 __global__ __launch_bounds__(block_threads) void count_rows(Input in, const Lattice* lattices,
                                                             CellTable cells,
                                                             unsigned long long* counts,
                                                             int* status) {
-  using T = Team<Warps>;
+  using T = Team<Threads>;
   const std::int64_t row = team_row<Cells>(T::row(), in, cells);
   // Whole teams leave together: their bounds are the row's.
   if (row >= in.n || (in.run_if && *in.run_if == 0)) return;
   int bad;
-  const Frame& f = team_frame<Real, Warps>(in, row, lattices, status, bad);
+  const Frame& f = team_frame<Real, Threads>(in, row, lattices, status, bad);
   if (bad) return;
-  const unsigned long long c = count_row<Real, Warps, Cells>(in, f, row, cells);
+  const unsigned long long c = count_row<Real, Threads, Cells>(in, f, row, cells);
   if (T::rank() == 0) counts[row] = c;
 }
 
@@ -892,10 +921,10 @@ __host__ __device__ ListSlots list_slots(const Input& in, std::int64_t row,
 
 // Writes row `row`'s pairs from entry first + start on (start counted within its list), up to the
 // capacity.
-template <class Real, int Warps, bool Cells>
+template <class Real, int Threads, bool Cells>
 __device__ void fill_row(const Input& in, const Frame& f, std::int64_t row, const CellTable& cells,
                          std::uint64_t first, unsigned long long start, const StaticPairs& out) {
-  using T = Team<Warps>;
+  using T = Team<Threads>;
   const int rank = T::rank();
   unsigned long long written = start;
   // Chunks of one source per thread in lockstep: each thread's hits go after the lower ranks'
@@ -940,35 +969,36 @@ __device__ void fill_row(const Input& in, const Frame& f, std::int64_t row, cons
   });
 }
 
-template <class Real, int Warps, bool Cells>
+template <class Real, int Threads, bool Cells>
 __global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Lattice* lattices,
                                                            CellTable cells,
                                                            const unsigned long long* offsets,
                                                            StaticPairs out) {
-  using T = Team<Warps>;
+  using T = Team<Threads>;
   const std::int64_t row = team_row<Cells>(T::row(), in, cells);
   if (row >= in.n || (in.run_if && *in.run_if == 0)) return;
   int bad;
-  const Frame& f = team_frame<Real, Warps>(in, row, lattices, nullptr, bad);
+  const Frame& f = team_frame<Real, Threads>(in, row, lattices, nullptr, bad);
   if (bad) return;  // the count reported it
   // A list per system: this system's entries from s * capacity, counted from its first row.
   const ListSlots slots = list_slots(in, row, in.systems ? offsets[f.lo] : 0, out);
   const unsigned long long start = offsets[row] - slots.origin;
   if (start >= static_cast<unsigned long long>(out.capacity) || offsets[row + 1] == offsets[row])
     return;
-  fill_row<Real, Warps, Cells>(in, f, row, cells, slots.first, start, out);
+  fill_row<Real, Threads, Cells>(in, f, row, cells, slots.first, start, out);
 }
 
 // ---- All pairs in one launch: count, offset, fill ----------------------------------------------
 // Without cells the rows run in index order, so one launch can count a row, find where its pairs
-// start, and write them: each team takes the next row from a ticket counter (so every earlier
-// row's team is running or done) and finds its offset by a decoupled look-back (Merrill and
-// Garland, "Single-pass Parallel Prefix Scan with Decoupled Look-back", 2016): a word per row,
-// first its count, then its inclusive prefix. That replaces a count launch and a two-launch scan,
-// which at a thousand particles were more of the call than the pair tests; the fill tests the
-// sources again, from L1.
-constexpr unsigned long long row_counted = 1ull << 62, row_prefixed = 1ull << 63;
-constexpr unsigned long long row_value = row_counted - 1;
+// start, and write them. The rows go in tiles: a warp's teams' rows (32 / Threads consecutive
+// rows), or a block's one row. Each tile takes the next tile number from a ticket counter (so
+// every earlier tile is running or done) and finds its offset by a decoupled look-back (Merrill
+// and Garland, "Single-pass Parallel Prefix Scan with Decoupled Look-back", 2016): a word per
+// tile, first its count, then its inclusive prefix. That replaces a count launch and a two-launch
+// scan, which at a thousand particles were more of the call than the pair tests; the fill tests
+// the sources again, from L1.
+constexpr unsigned long long tile_counted = 1ull << 62, tile_prefixed = 1ull << 63;
+constexpr unsigned long long tile_value = tile_counted - 1;
 
 __device__ inline unsigned long long load_volatile(const unsigned long long* p) {
   return *static_cast<const volatile unsigned long long*>(p);
@@ -977,23 +1007,23 @@ __device__ inline void store_volatile(unsigned long long* p, unsigned long long 
   *static_cast<volatile unsigned long long*>(p) = v;
 }
 
-// The pairs before `row` (whose own are `count`), in every lane of the calling warp, which
-// publishes the row's count first: the warp reads 32 earlier words at a time, nearest first,
-// until one holds a prefix (before row 0, a prefix of 0).
-__device__ unsigned long long look_back(unsigned long long* words, std::int64_t row,
+// The pairs before `tile` (whose own are `count`), in every lane of the calling warp, which
+// publishes the tile's count first: the warp reads 32 earlier words at a time, nearest first,
+// until one holds a prefix (before tile 0, a prefix of 0).
+__device__ unsigned long long look_back(unsigned long long* words, std::int64_t tile,
                                         unsigned long long count) {
   const int lane = threadIdx.x % warp_size;
-  if (lane == 0) store_volatile(words + row, row_counted | count);
+  if (lane == 0) store_volatile(words + tile, tile_counted | count);
   unsigned long long before = 0;
-  for (std::int64_t end = row;; end -= warp_size) {
+  for (std::int64_t end = tile;; end -= warp_size) {
     const std::int64_t k = end - 1 - lane;
-    unsigned long long word = row_prefixed;
+    unsigned long long word = tile_prefixed;
     if (k >= 0) do {
         word = load_volatile(words + k);
-      } while ((word & ~row_value) == 0);
-    const unsigned prefixed = __ballot_sync(all_lanes, (word & row_prefixed) != 0);
+      } while ((word & ~tile_value) == 0);
+    const unsigned prefixed = __ballot_sync(all_lanes, (word & tile_prefixed) != 0);
     const int nearest = prefixed ? __ffs(static_cast<int>(prefixed)) - 1 : warp_size;
-    unsigned long long v = lane <= nearest ? word & row_value : 0;
+    unsigned long long v = lane <= nearest ? word & tile_value : 0;
     for (int offset = warp_size / 2; offset > 0; offset /= 2)
       v += __shfl_xor_sync(all_lanes, v, offset);
     before += v;
@@ -1001,42 +1031,70 @@ __device__ unsigned long long look_back(unsigned long long* words, std::int64_t 
   }
 }
 
-template <class Real, int Warps>
+// The tile's rows, their pairs and where they go. Teams past the last row count none and write
+// nothing, but take part in their warp's scan and look-back.
+template <class Real, int Threads>
 __global__ __launch_bounds__(block_threads, list_rows_blocks_per_multiprocessor) void list_rows(
     Input in, const Lattice* lattices, unsigned long long* words, unsigned long long* offsets,
     int* status, StaticPairs out) {
-  using T = Team<Warps>;
+  using T = Team<Threads>;
   if (in.run_if && *in.run_if == 0) return;  // the whole grid alike
-  constexpr int teams = block_threads / T::threads;
-  __shared__ std::int64_t team_rows[teams];
-  __shared__ unsigned long long team_before[teams];
-  const int team = threadIdx.x / T::threads;
-  if (T::rank() == 0) team_rows[team] = static_cast<std::int64_t>(atomicAdd(words + in.n, 1ull));
-  team_sync<Warps>();
-  const std::int64_t row = team_rows[team];
-  if (row >= in.n) return;  // whole teams
+  constexpr int tile_threads = T::whole_block ? block_threads : warp_size;
+  constexpr int tile_rows = T::whole_block ? 1 : warp_size / Threads;
+  constexpr int tiles = block_threads / tile_threads;
+  __shared__ std::int64_t tile_numbers[tiles];
+  __shared__ unsigned long long block_before;  // whole-block teams: the row's offset
+  const int tile_in_block = threadIdx.x / tile_threads;
+  const int lane = threadIdx.x % warp_size;
+  if (threadIdx.x % tile_threads == 0)
+    tile_numbers[tile_in_block] = static_cast<std::int64_t>(atomicAdd(words + in.n, 1ull));
+  if constexpr (T::whole_block)
+    __syncthreads();
+  else
+    __syncwarp();
+  const std::int64_t tile = tile_numbers[tile_in_block];
+  const std::int64_t row = tile * tile_rows + (threadIdx.x % tile_threads) / Threads;
+  if (tile * tile_rows >= in.n) return;  // whole tiles
   int bad;
-  const Frame& f = team_frame<Real, Warps>(in, row, lattices, status, bad);
+  const Frame& f = team_frame<Real, Threads>(in, row, lattices, status, bad);
   const unsigned long long count =
-      bad ? T::sum(0ull) : count_row<Real, Warps, false>(in, f, row, CellTable{});
-  if (T::rank() < warp_size) {  // the team's first warp
-    const unsigned long long before = look_back(words, row, count);
-    if (T::rank() == 0) {
+      bad ? 0ull : count_row<Real, Threads, false>(in, f, row, CellTable{});
+  // The teams' counts before this one in the tile (every lane of a team holds its count), and
+  // the tile's total.
+  unsigned long long in_tile = count;
+  for (int offset = T::width; offset < warp_size; offset *= 2) {
+    const unsigned long long other = __shfl_up_sync(all_lanes, in_tile, offset);
+    if (lane >= offset) in_tile += other;
+  }
+  const unsigned long long tile_count = __shfl_sync(all_lanes, in_tile, warp_size - 1);
+  in_tile -= count;
+  unsigned long long before = 0;
+  if (threadIdx.x % tile_threads < warp_size) {  // the tile's first warp
+    const unsigned long long tile_before = look_back(words, tile, tile_count);
+    before = tile_before + in_tile;
+    if (T::rank() == 0 && row < in.n) {  // bad rows too: their systems' counts need them
       offsets[row] = before;
       if (row + 1 == in.n) offsets[in.n] = before + count;
-      __threadfence();  // the offset before the prefix that announces it
-      store_volatile(words + row, row_prefixed | (before + count));
-      team_before[team] = before;
     }
+    if constexpr (T::whole_block) block_before = before;
+    __syncwarp();
+    if (lane == 0) {
+      __threadfence();  // the tile's offsets before the prefix that announces them
+      store_volatile(words + tile, tile_prefixed | (tile_before + tile_count));
+    }
+    __syncwarp();
   }
-  team_sync<Warps>();
-  const unsigned long long before = team_before[team];
+  if constexpr (T::whole_block) {
+    __syncthreads();
+    before = block_before;
+  }
   if (bad || count == 0 || out.capacity == 0) return;
   // A list per system: its entries from s * capacity, counted from its first row's offset, which
-  // that row (earlier, so running or done) publishes before its prefix.
+  // that row's tile (this one, or an earlier one, so running or done) publishes before its
+  // prefix.
   unsigned long long origin = before;
   if (in.systems && f.lo != row) {
-    while ((load_volatile(words + f.lo) & row_prefixed) == 0) {
+    while ((load_volatile(words + f.lo / tile_rows) & tile_prefixed) == 0) {
     }
     __threadfence();
     origin = load_volatile(offsets + f.lo);
@@ -1044,7 +1102,7 @@ __global__ __launch_bounds__(block_threads, list_rows_blocks_per_multiprocessor)
   const ListSlots slots = list_slots(in, row, origin, out);
   const unsigned long long start = before - slots.origin;
   if (start >= static_cast<unsigned long long>(out.capacity)) return;
-  fill_row<Real, Warps, false>(in, f, row, CellTable{}, slots.first, start, out);
+  fill_row<Real, Threads, false>(in, f, row, CellTable{}, slots.first, start, out);
 }
 
 // The count (or the first error code), and padding from the count to the capacity.
@@ -1271,41 +1329,58 @@ void host_pass(const Input& in, const StaticPairs& out) {
 
 namespace {
 
-// The row passes of one instantiation: without cells one launch (list_rows); with cells, count
+// The row passes with teams of Threads: without cells one launch (list_rows); with cells, count
 // per row, the scan into offsets, fill (the rows run in cell order, for the cache, so no row
-// can wait for the one before it).
-template <class Real, bool Cells>
-void row_passes(const Input& in, const Lattice* lattices, const CellTable& cells,
-                unsigned long long* counts, int* status, unsigned long long* offsets,
-                void* scan_storage, std::size_t scan_bytes, const StaticPairs& out,
-                cudaStream_t stream) {
+// can wait for the one before it). Many rows of all pairs in three launches instead (count_rows
+// and fill_rows serve both) measured no faster at 256 x 100 (159 us either way) and slower at
+// 512 x 128 (266 against 239): a scan and a launch cost what the look-back's waits did.
+template <class Real, bool Cells, int Threads>
+void row_passes_of(const Input& in, const Lattice* lattices, const CellTable& cells,
+                   unsigned long long* counts, int* status, unsigned long long* offsets,
+                   void* scan_storage, std::size_t scan_bytes, const StaticPairs& out,
+                   cudaStream_t stream) {
   const auto n = static_cast<std::size_t>(in.n);
-  // A block per row while rows are few: a warp each would leave most of the GPU idle (1,000
-  // rows are 8 warps per multiprocessor of an H100), every warp walking all its sources.
-  const bool block_per_row = n <= rows_for_block_teams;
-  const unsigned rows_blocks = static_cast<unsigned>(
-      block_per_row ? n : (n * warp_size + block_threads - 1) / block_threads);
+  const auto blocks = static_cast<unsigned>((n * Threads + block_threads - 1) / block_threads);
   if constexpr (!Cells) {
     if (n > 0) {
-      const auto list = block_per_row ? list_rows<Real, block_warps> : list_rows<Real, 1>;
-      list<<<rows_blocks, block_threads, 0, stream>>>(in, lattices, counts, offsets, status, out);
+      list_rows<Real, Threads>
+          <<<blocks, block_threads, 0, stream>>>(in, lattices, counts, offsets, status, out);
       RAYCUT_CUDA_CHECK_LAUNCH();
     }
     return;
   }
   if (n > 0) {
-    const auto count =
-        block_per_row ? count_rows<Real, block_warps, Cells> : count_rows<Real, 1, Cells>;
-    count<<<rows_blocks, block_threads, 0, stream>>>(in, lattices, cells, counts, status);
+    count_rows<Real, Threads, Cells>
+        <<<blocks, block_threads, 0, stream>>>(in, lattices, cells, counts, status);
     RAYCUT_CUDA_CHECK_LAUNCH();
   }
   RAYCUT_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(scan_storage, scan_bytes, counts, offsets,
                                                   static_cast<std::int64_t>(n + 1), stream));
   if (n > 0 && out.capacity > 0) {
-    const auto fill =
-        block_per_row ? fill_rows<Real, block_warps, Cells> : fill_rows<Real, 1, Cells>;
-    fill<<<rows_blocks, block_threads, 0, stream>>>(in, lattices, cells, offsets, out);
+    fill_rows<Real, Threads, Cells>
+        <<<blocks, block_threads, 0, stream>>>(in, lattices, cells, offsets, out);
     RAYCUT_CUDA_CHECK_LAUNCH();
+  }
+}
+
+template <class Real, bool Cells>
+void row_passes(const Input& in, const Lattice* lattices, const CellTable& cells,
+                unsigned long long* counts, int* status, unsigned long long* offsets,
+                void* scan_storage, std::size_t scan_bytes, const StaticPairs& out,
+                cudaStream_t stream) {
+  switch (row_team_threads(static_cast<std::size_t>(in.n))) {
+    case block_threads:
+      return row_passes_of<Real, Cells, block_threads>(in, lattices, cells, counts, status, offsets,
+                                                       scan_storage, scan_bytes, out, stream);
+    case warp_size:
+      return row_passes_of<Real, Cells, warp_size>(in, lattices, cells, counts, status, offsets,
+                                                   scan_storage, scan_bytes, out, stream);
+    case 16:
+      return row_passes_of<Real, Cells, 16>(in, lattices, cells, counts, status, offsets,
+                                            scan_storage, scan_bytes, out, stream);
+    default:
+      return row_passes_of<Real, Cells, 8>(in, lattices, cells, counts, status, offsets,
+                                           scan_storage, scan_bytes, out, stream);
   }
 }
 
