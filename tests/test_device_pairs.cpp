@@ -92,6 +92,17 @@ const auto every_where = ::testing::Values(Where{Place::host, raycut::SourceSear
                                            Where{Place::device, raycut::SourceSearch::all_pairs},
                                            Where{Place::device, raycut::SourceSearch::cells});
 
+// The boxes as the pass takes them: (B, 3, 3) cells in Real and (B, 3) pbc flags.
+template <class Real>
+void flatten_boxes(const std::vector<Box>& boxes, std::vector<Real>& cells,
+                   std::vector<std::uint8_t>& pbc) {
+  for (const Box& b : boxes)
+    for (int r = 0; r < 3; ++r) {
+      pbc.push_back(b.pbc[r]);
+      for (int k = 0; k < 3; ++k) cells.push_back(static_cast<Real>(b.cell[r][k]));
+    }
+}
+
 // The pass over one batch: positions (Real), per-system boxes, batch values. The count as
 // written (negative codes included), the pairs and a few padding entries past them.
 template <class Real>
@@ -101,11 +112,7 @@ HostPairs run_pass(const std::vector<Real>& xyz, const std::vector<Box>& boxes,
   const std::size_t n = xyz.size() / 3;
   std::vector<Real> cells;
   std::vector<std::uint8_t> pbc;
-  for (const Box& b : boxes)
-    for (int r = 0; r < 3; ++r) {
-      pbc.push_back(b.pbc[r]);
-      for (int k = 0; k < 3; ++k) cells.push_back(static_cast<Real>(b.cell[r][k]));
-    }
+  flatten_boxes(boxes, cells, pbc);
   raycut::DeviceSystems s;
   s.scalar = sizeof(Real) == 8 ? raycut::Scalar::float64 : raycut::Scalar::float32;
   s.size = n;
@@ -413,6 +420,56 @@ TEST_P(DevicePairsOn, CapacityShortByOneIsReportedAndTheRestIsExact) {
             std::vector<std::int64_t>(exact.j.begin(), exact.j.begin() + exact.count));
 }
 
+// The pass with a list of k slots per system (StaticPairs::systems), on the host or the GPU:
+// every slot and each system's count.
+struct PerSystemLists {
+  std::vector<std::int64_t> i, j, count;
+  std::vector<std::int32_t> shifts;
+};
+PerSystemLists run_per_system(const std::vector<float>& xyz, const std::vector<Box>& boxes,
+                              const std::vector<std::int64_t>& batch, double cutoff, std::size_t k,
+                              const Where& where) {
+  const std::size_t systems = boxes.size(), n = batch.size();
+  std::vector<float> cells;
+  std::vector<std::uint8_t> pbc;
+  flatten_boxes(boxes, cells, pbc);
+  PerSystemLists got{
+      std::vector<std::int64_t>(systems * k, -9), std::vector<std::int64_t>(systems * k, -9),
+      std::vector<std::int64_t>(systems, -9), std::vector<std::int32_t>(3 * systems * k, -9)};
+  raycut::DeviceSystems sys;
+  sys.size = n;
+  sys.cell_count = sys.pbc_count = systems;
+  const raycut::PairOptions options{false, where.search};
+  raycut::StaticPairs out{got.i.data(),   got.j.data(), got.shifts.data(), got.count.data(), k,
+                          std::int64_t(n)};
+  out.systems = systems;
+  if (where.place == Place::host) {
+    sys.positions = xyz.data();
+    sys.cells = cells.data();
+    sys.pbc = reinterpret_cast<const bool*>(pbc.data());
+    sys.batch = batch.data();
+    raycut::detail::list_pairs_small_systems_on_host(sys, cutoff, options, out);
+    return got;
+  }
+  DeviceVector d_xyz(xyz), d_cells(cells), d_pbc(pbc), d_batch(batch), d_i(got.i), d_j(got.j),
+      d_count(got.count), d_shifts(got.shifts);
+  sys.positions = d_xyz.p;
+  sys.cells = d_cells.p;
+  sys.pbc = static_cast<const bool*>(d_pbc.p);
+  sys.batch = static_cast<const std::int64_t*>(d_batch.p);
+  out.i = static_cast<std::int64_t*>(d_i.p);
+  out.j = static_cast<std::int64_t*>(d_j.p);
+  out.shifts = static_cast<std::int32_t*>(d_shifts.p);
+  out.count = static_cast<std::int64_t*>(d_count.p);
+  raycut::list_pairs_small_systems(raycut::Context{}, sys, cutoff, options, out);
+  EXPECT_EQ(cudaDeviceSynchronize(), cudaSuccess);
+  got.i = to_host(out.i, systems * k);
+  got.j = to_host(out.j, systems * k);
+  got.shifts = to_host(out.shifts, 3 * systems * k);
+  got.count = to_host(out.count, systems);
+  return got;
+}
+
 // A list per system (StaticPairs::systems, what jax.vmap maps onto): each system's K slots hold
 // exactly what a pass over that system alone gives (global indices), with its own count, also
 // when another system overflows its slots; an empty system is all padding.
@@ -443,60 +500,18 @@ TEST_P(DevicePairsOn, AListPerSystemEqualsAPassPerSystem) {
   }
   ASSERT_GT(alone[2].count, std::int64_t(k)) << "system 2 overflows its slots";
   ASSERT_LT(alone[0].count, std::int64_t(k));
-  // The pass with a list per system.
-  std::vector<float> cells;
-  std::vector<std::uint8_t> pbc;
-  for (const Box& b : boxes)
-    for (int r = 0; r < 3; ++r) {
-      pbc.push_back(1);
-      for (int c = 0; c < 3; ++c) cells.push_back(static_cast<float>(b.cell[r][c]));
-    }
-  std::vector<std::int64_t> i(systems * k, -9), j(systems * k, -9), count(systems, -9);
-  std::vector<std::int32_t> shifts(3 * systems * k, -9);
-  raycut::DeviceSystems sys;
-  sys.size = n;
-  sys.cell_count = sys.pbc_count = systems;
-  const raycut::PairOptions options{false, where.search};
-  if (where.place == Place::host) {
-    sys.positions = xyz.data();
-    sys.cells = cells.data();
-    sys.pbc = reinterpret_cast<const bool*>(pbc.data());
-    sys.batch = batch.data();
-    raycut::StaticPairs out{i.data(), j.data(), shifts.data(), count.data(), k, std::int64_t(n)};
-    out.systems = systems;
-    raycut::detail::list_pairs_small_systems_on_host(sys, cutoff, options, out);
-  } else {
-    DeviceVector d_xyz(xyz), d_cells(cells), d_pbc(pbc), d_batch(batch), d_i(i), d_j(j),
-        d_count(count), d_shifts(shifts);
-    sys.positions = d_xyz.p;
-    sys.cells = d_cells.p;
-    sys.pbc = static_cast<const bool*>(d_pbc.p);
-    sys.batch = static_cast<const std::int64_t*>(d_batch.p);
-    raycut::StaticPairs out{static_cast<std::int64_t*>(d_i.p),
-                            static_cast<std::int64_t*>(d_j.p),
-                            static_cast<std::int32_t*>(d_shifts.p),
-                            static_cast<std::int64_t*>(d_count.p),
-                            k,
-                            std::int64_t(n)};
-    out.systems = systems;
-    raycut::list_pairs_small_systems(raycut::Context{}, sys, cutoff, options, out);
-    CUDA_OK(cudaDeviceSynchronize());
-    i = to_host(out.i, systems * k);
-    j = to_host(out.j, systems * k);
-    shifts = to_host(out.shifts, 3 * systems * k);
-    count = to_host(out.count, systems);
-  }
+  const PerSystemLists got = run_per_system(xyz, boxes, batch, cutoff, k, where);
   for (std::size_t s = 0; s < systems; ++s) {
-    EXPECT_EQ(count[s], alone[s].count) << "system " << s;
+    EXPECT_EQ(got.count[s], alone[s].count) << "system " << s;
     const std::size_t kept = std::min<std::size_t>(k, std::size_t(alone[s].count));
     for (std::size_t e = 0; e < k; ++e) {
       const std::size_t at = s * k + e;
       const std::int64_t want_i = e < kept ? alone[s].i[e] : std::int64_t(n);
       const std::int64_t want_j = e < kept ? alone[s].j[e] : std::int64_t(n);
-      ASSERT_EQ(i[at], want_i) << "system " << s << ", slot " << e;
-      ASSERT_EQ(j[at], want_j) << "system " << s << ", slot " << e;
+      ASSERT_EQ(got.i[at], want_i) << "system " << s << ", slot " << e;
+      ASSERT_EQ(got.j[at], want_j) << "system " << s << ", slot " << e;
       for (int c = 0; c < 3; ++c)
-        ASSERT_EQ(shifts[3 * at + c], e < kept ? alone[s].shifts[3 * e + c] : 0)
+        ASSERT_EQ(got.shifts[3 * at + c], e < kept ? alone[s].shifts[3 * e + c] : 0)
             << "system " << s << ", slot " << e;
     }
   }
@@ -559,60 +574,23 @@ TEST_P(DevicePairsOn, ManySmallSystemsAgainstTheDoubleOracle) {
                      sorted_counts.end());
     const auto k = static_cast<std::size_t>(sorted_counts[systems / 2]);
     ASSERT_GT(k, 0u);
-    std::vector<float> cells;
-    std::vector<std::uint8_t> pbc;
-    for (const Box& box : b.boxes)
-      for (int r = 0; r < 3; ++r) {
-        pbc.push_back(box.pbc[r]);
-        for (int c = 0; c < 3; ++c) cells.push_back(static_cast<float>(box.cell[r][c]));
-      }
-    std::vector<std::int64_t> i(systems * k, -9), j(systems * k, -9), count(systems, -9);
-    std::vector<std::int32_t> shifts(3 * systems * k, -9);
-    raycut::DeviceSystems sys;
-    sys.size = n;
-    sys.cell_count = sys.pbc_count = systems;
-    const raycut::PairOptions options{false, where.search};
-    raycut::StaticPairs out{i.data(), j.data(), shifts.data(), count.data(), k, std::int64_t(n)};
-    out.systems = systems;
-    if (where.place == Place::host) {
-      sys.positions = b.xyz.data();
-      sys.cells = cells.data();
-      sys.pbc = reinterpret_cast<const bool*>(pbc.data());
-      sys.batch = b.batch.data();
-      raycut::detail::list_pairs_small_systems_on_host(sys, cutoff, options, out);
-    } else {
-      DeviceVector d_xyz(b.xyz), d_cells(cells), d_pbc(pbc), d_batch(b.batch), d_i(i), d_j(j),
-          d_count(count), d_shifts(shifts);
-      sys.positions = d_xyz.p;
-      sys.cells = d_cells.p;
-      sys.pbc = static_cast<const bool*>(d_pbc.p);
-      sys.batch = static_cast<const std::int64_t*>(d_batch.p);
-      out.i = static_cast<std::int64_t*>(d_i.p);
-      out.j = static_cast<std::int64_t*>(d_j.p);
-      out.shifts = static_cast<std::int32_t*>(d_shifts.p);
-      out.count = static_cast<std::int64_t*>(d_count.p);
-      raycut::list_pairs_small_systems(raycut::Context{}, sys, cutoff, options, out);
-      CUDA_OK(cudaDeviceSynchronize());
-      i = to_host(out.i, systems * k);
-      j = to_host(out.j, systems * k);
-      shifts = to_host(out.shifts, 3 * systems * k);
-      count = to_host(out.count, systems);
-    }
+    const PerSystemLists got = run_per_system(b.xyz, b.boxes, b.batch, cutoff, k, where);
     std::vector<std::size_t> next(systems, 0);  // the next slot of each system
     for (std::int64_t p = 0; p < exact.count; ++p) {
       const auto s = std::size_t(b.batch[exact.i[p]]);
       const std::size_t e = next[s]++;
       if (e >= k) continue;
       const std::size_t at = s * k + e;
-      ASSERT_EQ(i[at], exact.i[p]) << "system " << s << ", slot " << e;
-      ASSERT_EQ(j[at], exact.j[p]) << "system " << s << ", slot " << e;
+      ASSERT_EQ(got.i[at], exact.i[p]) << "system " << s << ", slot " << e;
+      ASSERT_EQ(got.j[at], exact.j[p]) << "system " << s << ", slot " << e;
       for (int c = 0; c < 3; ++c)
-        ASSERT_EQ(shifts[3 * at + c], exact.shifts[3 * p + c]) << "system " << s << ", slot " << e;
+        ASSERT_EQ(got.shifts[3 * at + c], exact.shifts[3 * p + c])
+            << "system " << s << ", slot " << e;
     }
     for (std::size_t s = 0; s < systems; ++s) {
-      EXPECT_EQ(count[s], per_system[s]) << "system " << s;
+      EXPECT_EQ(got.count[s], per_system[s]) << "system " << s;
       for (std::size_t e = std::min<std::size_t>(k, next[s]); e < k; ++e)
-        ASSERT_EQ(i[s * k + e], std::int64_t(n)) << "padding of system " << s << ", slot " << e;
+        ASSERT_EQ(got.i[s * k + e], std::int64_t(n)) << "padding of system " << s << ", slot " << e;
     }
   }
 }
