@@ -300,6 +300,11 @@ TEST_P(DevicePairsOn, LargerSystemsAgainstTheDoubleOracle) {
     for (std::size_t k = 2; k < slab_xyz.size(); k += 3) slab_xyz[k] *= 6.0f / 14.0f;
     expect_exact(slab_xyz, {slab}, {}, 2.0, half, "slab", where);
     expect_exact(uniform(1000, -6, 6, 43), {}, {}, 1.5, half, "open cloud", where);
+    // Past 2,048 rows a row gets a warp's lanes: 69 rounds of 32 sources, past the 32 that the
+    // one launch's hit masks hold; a box thinner than twice the cutoff along x, so that some
+    // sources have two images, and positions unwrapped past it.
+    expect_exact(uniform(2200, 0, 9, 48), {triclinic(4.6, 0, 8, 0, 0, 9)}, {}, 2.3, half,
+                 "2,200 rows, 69 rounds a row", where);
     std::vector<float> batch_xyz;
     std::vector<std::int64_t> batch;
     std::vector<Box> boxes;

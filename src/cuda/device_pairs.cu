@@ -8,6 +8,7 @@
 #include <cuda_runtime.h>
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
+#include <cuda/atomic>
 
 #include <algorithm>
 #include <cmath>
@@ -872,18 +873,30 @@ __device__ std::int64_t team_row(std::int64_t k, const Input& in, const CellTabl
   return k;
 }
 
-// Row `row`'s pairs, from its frame f, in every thread of its team.
+// The rounds of a row's walk (a source per thread each) whose source a thread found within the
+// cutoff, as bits: the fill that follows the count in one launch tests only those again. Rounds
+// past the 32nd have no bit and are always tested.
+constexpr std::uint32_t every_round = ~0u;
+__device__ inline bool round_hit(std::uint32_t hit_rounds, std::uint32_t round) {
+  return round >= 32 || (hit_rounds >> round & 1u);
+}
+
+// Row `row`'s pairs, from its frame f, in every thread of its team; hit_rounds: this thread's.
 template <class Real, int Threads, bool Cells>
 __device__ unsigned long long count_row(const Input& in, const Frame& f, std::int64_t row,
-                                        const CellTable& cells) {
+                                        const CellTable& cells, std::uint32_t& hit_rounds) {
   using T = Team<Threads>;
   unsigned long long c = 0;
+  hit_rounds = 0;
   with_sources<Real, Cells>(in, f, row, cells, [&](const auto& sources) {
     auto at = sources.cursor(T::rank());
+    std::uint32_t round = 0;
     for (std::uint32_t k = T::rank(); k < sources.total;
-         k += T::threads, sources.advance(at, T::threads)) {
+         k += T::threads, sources.advance(at, T::threads), ++round) {
       const Source source = sources.at(at);
-      if (source.j >= 0) c += for_each_image(in, f, row, source, NoVisit{});
+      const std::uint32_t hits = source.j >= 0 ? for_each_image(in, f, row, source, NoVisit{}) : 0;
+      c += hits;
+      if (hits && round < 32) hit_rounds |= 1u << round;
     }
   });
   return T::sum(c);
@@ -901,7 +914,8 @@ __global__ __launch_bounds__(block_threads) void count_rows(Input in, const Latt
   int bad;
   const Frame& f = team_frame<Real, Threads>(in, row, lattices, status, bad);
   if (bad) return;
-  const unsigned long long c = count_row<Real, Threads, Cells>(in, f, row, cells);
+  std::uint32_t hit_rounds;  // unused: the fill is another launch
+  const unsigned long long c = count_row<Real, Threads, Cells>(in, f, row, cells, hit_rounds);
   if (T::rank() == 0) counts[row] = c;
 }
 
@@ -920,10 +934,11 @@ __host__ __device__ ListSlots list_slots(const Input& in, std::int64_t row,
 }
 
 // Writes row `row`'s pairs from entry first + start on (start counted within its list), up to the
-// capacity.
+// capacity; a thread tests only the rounds of hit_rounds (count_row's, or every_round).
 template <class Real, int Threads, bool Cells>
 __device__ void fill_row(const Input& in, const Frame& f, std::int64_t row, const CellTable& cells,
-                         std::uint64_t first, unsigned long long start, const StaticPairs& out) {
+                         std::uint64_t first, unsigned long long start, const StaticPairs& out,
+                         std::uint32_t hit_rounds) {
   using T = Team<Threads>;
   const int rank = T::rank();
   unsigned long long written = start;
@@ -932,9 +947,12 @@ __device__ void fill_row(const Input& in, const Frame& f, std::int64_t row, cons
   // team takes every chunk (the scan waits for all of them).
   with_sources<Real, Cells>(in, f, row, cells, [&](const auto& sources) {
     auto cursor = sources.cursor(rank);
+    std::uint32_t round = 0;
     for (std::uint32_t base = 0; base < sources.total;
-         base += T::threads, sources.advance(cursor, T::threads)) {
-      const Source source = base + rank < sources.total ? sources.at(cursor) : Source{};
+         base += T::threads, sources.advance(cursor, T::threads), ++round) {
+      const Source source = base + rank < sources.total && round_hit(hit_rounds, round)
+                                ? sources.at(cursor)
+                                : Source{};
       const std::int64_t j = source.j;
       // The first image is kept from the counting test: most sources have at most one, and only
       // those with more are tested again.
@@ -985,7 +1003,7 @@ __global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Latti
   const unsigned long long start = offsets[row] - slots.origin;
   if (start >= static_cast<unsigned long long>(out.capacity) || offsets[row + 1] == offsets[row])
     return;
-  fill_row<Real, Threads, Cells>(in, f, row, cells, slots.first, start, out);
+  fill_row<Real, Threads, Cells>(in, f, row, cells, slots.first, start, out, every_round);
 }
 
 // ---- All pairs in one launch: count, offset, fill ----------------------------------------------
@@ -996,7 +1014,7 @@ __global__ __launch_bounds__(block_threads) void fill_rows(Input in, const Latti
 // and Garland, "Single-pass Parallel Prefix Scan with Decoupled Look-back", 2016): a word per
 // tile, first its count, then its inclusive prefix. That replaces a count launch and a two-launch
 // scan, which at a thousand particles were more of the call than the pair tests; the fill tests
-// the sources again, from L1.
+// again, from L1, only the sources that the count found within the cutoff (round_hit).
 constexpr unsigned long long tile_counted = 1ull << 62, tile_prefixed = 1ull << 63;
 constexpr unsigned long long tile_value = tile_counted - 1;
 
@@ -1006,6 +1024,24 @@ __device__ inline unsigned long long load_volatile(const unsigned long long* p) 
 __device__ inline void store_volatile(unsigned long long* p, unsigned long long v) {
   *static_cast<volatile unsigned long long*>(p) = v;
 }
+// A tile's prefix, published after its offsets (release), and read before them (acquire): a
+// fence of its own, lighter than __threadfence's sequentially consistent one.
+using DeviceWord = cuda::atomic_ref<unsigned long long, cuda::thread_scope_device>;
+__device__ inline void store_release(unsigned long long* p, unsigned long long v) {
+  DeviceWord(*p).store(v, cuda::memory_order_release);
+}
+__device__ inline unsigned long long load_acquire(unsigned long long* p) {
+  return DeviceWord(*p).load(cuda::memory_order_acquire);
+}
+// Between polls of a word that another tile has yet to write: a pause, growing, that leaves the
+// issue slots to the warps still counting (a fifth of the samples were this spin without it).
+struct Backoff {
+  unsigned ns = 32;
+  __device__ void pause() {
+    __nanosleep(ns);
+    if (ns < 512) ns *= 2;
+  }
+};
 
 // The pairs before `tile` (whose own are `count`), in every lane of the calling warp, which
 // publishes the tile's count first: the warp reads 32 earlier words at a time, nearest first,
@@ -1018,9 +1054,10 @@ __device__ unsigned long long look_back(unsigned long long* words, std::int64_t 
   for (std::int64_t end = tile;; end -= warp_size) {
     const std::int64_t k = end - 1 - lane;
     unsigned long long word = tile_prefixed;
-    if (k >= 0) do {
-        word = load_volatile(words + k);
-      } while ((word & ~tile_value) == 0);
+    if (k >= 0) {
+      Backoff backoff;
+      while (((word = load_volatile(words + k)) & ~tile_value) == 0) backoff.pause();
+    }
     const unsigned prefixed = __ballot_sync(all_lanes, (word & tile_prefixed) != 0);
     const int nearest = prefixed ? __ffs(static_cast<int>(prefixed)) - 1 : warp_size;
     unsigned long long v = lane <= nearest ? word & tile_value : 0;
@@ -1057,8 +1094,9 @@ __global__ __launch_bounds__(block_threads, list_rows_blocks_per_multiprocessor)
   if (tile * tile_rows >= in.n) return;  // whole tiles
   int bad;
   const Frame& f = team_frame<Real, Threads>(in, row, lattices, status, bad);
+  std::uint32_t hit_rounds = 0;
   const unsigned long long count =
-      bad ? 0ull : count_row<Real, Threads, false>(in, f, row, CellTable{});
+      bad ? 0ull : count_row<Real, Threads, false>(in, f, row, CellTable{}, hit_rounds);
   // The teams' counts before this one in the tile (every lane of a team holds its count), and
   // the tile's total.
   unsigned long long in_tile = count;
@@ -1078,10 +1116,8 @@ __global__ __launch_bounds__(block_threads, list_rows_blocks_per_multiprocessor)
     }
     if constexpr (T::whole_block) block_before = before;
     __syncwarp();
-    if (lane == 0) {
-      __threadfence();  // the tile's offsets before the prefix that announces them
-      store_volatile(words + tile, tile_prefixed | (tile_before + tile_count));
-    }
+    if (lane == 0)  // after the tile's offsets (the warp's, ordered by __syncwarp)
+      store_release(words + tile, tile_prefixed | (tile_before + tile_count));
     __syncwarp();
   }
   if constexpr (T::whole_block) {
@@ -1094,15 +1130,14 @@ __global__ __launch_bounds__(block_threads, list_rows_blocks_per_multiprocessor)
   // prefix.
   unsigned long long origin = before;
   if (in.systems && f.lo != row) {
-    while ((load_volatile(words + f.lo / tile_rows) & tile_prefixed) == 0) {
-    }
-    __threadfence();
+    Backoff backoff;
+    while ((load_acquire(words + f.lo / tile_rows) & tile_prefixed) == 0) backoff.pause();
     origin = load_volatile(offsets + f.lo);
   }
   const ListSlots slots = list_slots(in, row, origin, out);
   const unsigned long long start = before - slots.origin;
   if (start >= static_cast<unsigned long long>(out.capacity)) return;
-  fill_row<Real, Threads, false>(in, f, row, CellTable{}, slots.first, start, out);
+  fill_row<Real, Threads, false>(in, f, row, CellTable{}, slots.first, start, out, hit_rounds);
 }
 
 // The count (or the first error code), and padding from the count to the capacity.
