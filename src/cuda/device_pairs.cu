@@ -60,9 +60,10 @@ int row_team_threads(std::size_t rows) {
 }
 constexpr unsigned all_lanes = 0xffffffffu;
 // How far below 1/2 an axis's reach must stay for the single image (Lattice::single_image), and
-// the largest |f_a| it takes: f_a's rounding, ~1e-16 |f_a| per term, stays far below the slack.
+// the largest |f_a| that for_each_image takes without checks: f_a's rounding, ~1e-16 |f_a| per
+// term, stays far below the slack, and f_a + reach (below 2^23, max_images_per_pair) fits an int.
 constexpr double single_image_slack = 1e-6;
-constexpr double single_image_largest_f = 1e8;
+constexpr double largest_plain_f = 1e8;
 
 struct Input {
   const void* xyz = nullptr;
@@ -360,52 +361,21 @@ __host__ __device__ inline void image_vector(const Frame& f, const double* d, in
   }
 }
 
-// Calls visit(S) for every in-range image (i, j, S) of row i, in lexicographic order of S;
-// returns how many.
+// The shifts along periodic axis a that can hold an image within the cutoff, as doubles: a
+// margin far above the rounding of f_a and reach, so extra images are decided exactly later.
+__host__ __device__ inline void shift_bounds(const Frame& f, const double* fa, int a, double& low,
+                                             double& high) {
+  const double margin = 1e-9 * (1 + fabs(fa[a]) + f.reach[a]);
+  low = ceil(-fa[a] - f.reach[a] - margin);
+  high = floor(-fa[a] + f.reach[a] + margin);
+}
+
+// Calls visit(S) for every S in [first, last] (lexicographic order) whose image (i, j, S) is
+// within the cutoff; returns how many.
 template <class Visit>
-__host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f, std::int64_t i,
-                                                 const Source& source, Visit&& visit) {
-  const std::int64_t j = source.j;
-  double d[3];
-#pragma unroll
-  for (int k = 0; k < 3; ++k) d[k] = source.x[k] - f.xi[k];
-  if (!f.any_periodic) {
-    if (i == j || !(dot(d, d) < in.cutoff2)) return 0;
-    const int zero[3] = {0, 0, 0};
-    visit(zero);
-    return 1;
-  }
-  double fa[3];
-#pragma unroll
-  for (int a = 0; a < 3; ++a) fa[a] = f.periodic[a] ? dot(d, f.g[a]) : 0.0;
-  if (f.single_image && fabs(fa[0]) < single_image_largest_f &&
-      fabs(fa[1]) < single_image_largest_f && fabs(fa[2]) < single_image_largest_f) {
-    // An image within the cutoff has |f_a + S_a| <= reach < 1/2 on every periodic axis, so it
-    // is the nearest one: one test, where the general path below enumerates a range (the same
-    // pairs: the range holds at most this S, and any other S is farther than the cutoff).
-    // i == j has only S = 0 here (its other images are more than twice the cutoff away).
-    if (i == j) return 0;
-    const int s[3] = {static_cast<int>(rint(-fa[0])), static_cast<int>(rint(-fa[1])),
-                      static_cast<int>(rint(-fa[2]))};
-    double r[3];
-    image_vector(f, d, s[0], s[1], s[2], r);
-    if (!(dot(r, r) < in.cutoff2)) return 0;
-    visit(s);
-    return 1;
-  }
-  int first[3], last[3];
-#pragma unroll
-  for (int a = 0; a < 3; ++a) {
-    if (!f.periodic[a]) {
-      first[a] = last[a] = 0;
-      continue;
-    }
-    // A margin far above the rounding of fa and reach; extra images are decided exactly below.
-    const double margin = 1e-9 * (1 + fabs(fa[a]) + f.reach[a]);
-    if (!shift_range(ceil(-fa[a] - f.reach[a] - margin), floor(-fa[a] + f.reach[a] + margin),
-                     first[a], last[a]))
-      return 0;
-  }
+__host__ __device__ std::uint32_t visit_shifts(const Input& in, const Frame& f, std::int64_t i,
+                                               std::int64_t j, const double* d, const int* first,
+                                               const int* last, Visit&& visit) {
   std::uint32_t hits = 0;
   for (int sx = first[0]; sx <= last[0]; ++sx)
     for (int sy = first[1]; sy <= last[1]; ++sy)
@@ -424,6 +394,64 @@ __host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f
         }
       }
   return hits;
+}
+
+// Calls visit(S) for every in-range image (i, j, S) of row i, in lexicographic order of S;
+// returns how many.
+template <class Visit>
+__host__ __device__ std::uint32_t for_each_image(const Input& in, const Frame& f, std::int64_t i,
+                                                 const Source& source, Visit&& visit) {
+  const std::int64_t j = source.j;
+  double d[3];
+#pragma unroll
+  for (int k = 0; k < 3; ++k) d[k] = source.x[k] - f.xi[k];
+  if (!f.any_periodic) {
+    if (i == j || !(dot(d, d) < in.cutoff2)) return 0;
+    const int zero[3] = {0, 0, 0};
+    visit(zero);
+    return 1;
+  }
+  double fa[3];
+#pragma unroll
+  for (int a = 0; a < 3; ++a) fa[a] = f.periodic[a] ? dot(d, f.g[a]) : 0.0;
+  int first[3] = {0, 0, 0}, last[3] = {0, 0, 0};
+  if (fabs(fa[0]) < largest_plain_f && fabs(fa[1]) < largest_plain_f &&
+      fabs(fa[2]) < largest_plain_f) {
+    if (f.single_image) {
+      // An image within the cutoff has |f_a + S_a| <= reach < 1/2 on every periodic axis, so
+      // it is the nearest one: one test, where the range below would enumerate (the same
+      // pairs: the range holds at most this S, and any other S is farther than the cutoff).
+      // i == j has only S = 0 here (its other images are more than twice the cutoff away).
+      if (i == j) return 0;
+      const int s[3] = {static_cast<int>(rint(-fa[0])), static_cast<int>(rint(-fa[1])),
+                        static_cast<int>(rint(-fa[2]))};
+      double r[3];
+      image_vector(f, d, s[0], s[1], s[2], r);
+      if (!(dot(r, r) < in.cutoff2)) return 0;
+      visit(s);
+      return 1;
+    }
+    // The bounds fit an int: no checks, and a loop of its own, since a branch inside the loop
+    // below is compiled as both sides computed and one selected.
+#pragma unroll
+    for (int a = 0; a < 3; ++a) {
+      if (!f.periodic[a]) continue;
+      double low, high;
+      shift_bounds(f, fa, a, low, high);
+      first[a] = static_cast<int>(low);
+      last[a] = static_cast<int>(high);
+    }
+    return visit_shifts(in, f, i, j, d, first, last, visit);
+  }
+  // Positions unwrapped past 10^8 boxes, or not finite (which their own rows report).
+#pragma unroll
+  for (int a = 0; a < 3; ++a) {
+    if (!f.periodic[a]) continue;
+    double low, high;
+    shift_bounds(f, fa, a, low, high);
+    if (!shift_range(low, high, first[a], last[a])) return 0;
+  }
+  return visit_shifts(in, f, i, j, d, first, last, visit);
 }
 
 struct NoVisit {
