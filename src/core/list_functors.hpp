@@ -198,23 +198,6 @@ struct IndexFill : PlainListFill {
   }
 };
 
-// Runs run(f), or run(f) as its Plain functor above where f has no per-pair cutoffs (and as an
-// IndexFill where a list asks for no more than j and S).
-template <class F, class Run>
-void run_without_idle_cutoffs(const F& f, Run&& run) {
-  if constexpr (std::is_same_v<F, ListFill>) {
-    if (!f.cutoffs.active() && !f.columns && !f.distances && !f.vectors &&
-        f.capacity == ~std::uint64_t{0}) {
-      if (f.shifts) return run(IndexFill<true>{PlainListFill{f}});
-      return run(IndexFill<false>{PlainListFill{f}});
-    }
-    if (!f.cutoffs.active()) return run(PlainListFill{f});
-  } else if constexpr (std::is_same_v<F, FilteredListCount>) {
-    if (!f.cutoffs.active()) return run(PlainFilteredListCount{f});
-  }
-  run(f);
-}
-
 // What a padded pass reports, in the method's memory: rows over K, the largest count.
 struct PaddedOverflow {
   unsigned long long rows;
@@ -235,10 +218,18 @@ struct PaddedFill : ListFilter {
   RAYCUT_HD void operator()(Accumulator& count, std::uint32_t i, std::uint32_t j, Vec3, float r2,
                             const Shift& s) const {
     if (!within(i, j, s, r2)) return;
+    if (shifts)
+      write<true>(count, i, j, s);
+    else
+      write<false>(count, i, j, s);
+  }
+  // The row's next entry, the pair already kept; S written when Shifts (then `shifts` is set).
+  template <bool Shifts>
+  RAYCUT_HD void write(Accumulator& count, std::uint32_t i, std::uint32_t j, const Shift& s) const {
     if (count < k) {
       const std::uint64_t e = std::uint64_t{i} * k + count;
       indices[e] = j;
-      if (shifts) {
+      if constexpr (Shifts) {
         shifts[3 * e] = s.a;
         shifts[3 * e + 1] = s.b;
         shifts[3 * e + 2] = s.c;
@@ -267,6 +258,42 @@ struct PaddedFill : ListFilter {
     }
   }
 };
+
+// The padded fill without per-pair cutoffs, for a GPU traversal (as PlainListFill and
+// IndexFill): within() constant, and S written or not as the type says, so that neither
+// PairCutoffFilter's double arithmetic nor a test of `shifts` is in the pair's loop. With both
+// in, the grid's padded matrix took 1.42x the time of the revision before per-pair cutoffs (H200,
+// uniform beta 32 p 32: docs/benchmarks.md, "The padded fill without idle cutoffs").
+template <bool Shifts>
+struct PlainPaddedFill : PaddedFill {
+  RAYCUT_HD bool within(std::uint32_t, std::uint32_t, const Shift&, float) const { return true; }
+  RAYCUT_HD void operator()(Accumulator& count, std::uint32_t i, std::uint32_t j, Vec3, float,
+                            const Shift& s) const {
+    write<Shifts>(count, i, j, s);
+  }
+};
+
+// Runs run(f), or run(f) as its Plain functor above where f has no per-pair cutoffs (and as an
+// IndexFill where a list asks for no more than j and S). GPU traversals run their functors so.
+template <class F, class Run>
+void run_without_idle_cutoffs(const F& f, Run&& run) {
+  if constexpr (std::is_same_v<F, ListFill>) {
+    if (!f.cutoffs.active() && !f.columns && !f.distances && !f.vectors &&
+        f.capacity == ~std::uint64_t{0}) {
+      if (f.shifts) return run(IndexFill<true>{PlainListFill{f}});
+      return run(IndexFill<false>{PlainListFill{f}});
+    }
+    if (!f.cutoffs.active()) return run(PlainListFill{f});
+  } else if constexpr (std::is_same_v<F, FilteredListCount>) {
+    if (!f.cutoffs.active()) return run(PlainFilteredListCount{f});
+  } else if constexpr (std::is_same_v<F, PaddedFill>) {
+    if (!f.cutoffs.active()) {
+      if (f.shifts) return run(PlainPaddedFill<true>{f});
+      return run(PlainPaddedFill<false>{f});
+    }
+  }
+  run(f);
+}
 
 // One of a row's K nearest (PaddedOptions::nearest), in the order of raycut.torch.knn: |r|^2,
 // then j, then S.

@@ -48,7 +48,7 @@ class BruteForceGpu final : public CudaPairMethod<BruteForceGpu> {
   }
   template <class F>
   void run(const F& f) const {
-    run_brute_force(pair_pass(), f, stream_);
+    run_without_idle_cutoffs(f, [&](const auto& g) { run_brute_force(pair_pass(), g, stream_); });
   }
 
  private:

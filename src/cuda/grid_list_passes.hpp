@@ -19,7 +19,9 @@
   X(::raycut::detail::PlainListFill)          \
   X(::raycut::detail::IndexFill<true>)        \
   X(::raycut::detail::IndexFill<false>)       \
-  X(::raycut::detail::PaddedFill)
+  X(::raycut::detail::PaddedFill)             \
+  X(::raycut::detail::PlainPaddedFill<true>)  \
+  X(::raycut::detail::PlainPaddedFill<false>)
 // clang-format on
 
 // extern (grid.cu) or an explicit instantiation (grid_list_passes.cu) of run_grid<F>.
