@@ -919,9 +919,20 @@ __device__ unsigned long long count_row(const Input& in, const Frame& f, std::in
   with_sources<Real, Cells>(in, f, row, cells, [&](const auto& sources) {
     auto at = sources.cursor(T::rank());
     std::uint32_t round = 0;
-    for (std::uint32_t k = T::rank(); k < sources.total;
-         k += T::threads, sources.advance(at, T::threads), ++round) {
-      const Source source = sources.at(at);
+    // With cells, the next round's source is loaded before this round's is tested, so that its
+    // load's latency is spent on the test: 0.93x the time at 4,000 particles on an H100. The
+    // one-launch pass (all pairs), held to 64 registers, lost 1 % with it at 256 x 100.
+    Source next = Cells && T::rank() < sources.total ? sources.at(at) : Source{};
+    for (std::uint32_t k = T::rank(); k < sources.total; k += T::threads, ++round) {
+      Source source;
+      if constexpr (Cells) {
+        source = next;
+        sources.advance(at, T::threads);
+        if (k + T::threads < sources.total) next = sources.at(at);
+      } else {
+        source = sources.at(at);
+        sources.advance(at, T::threads);
+      }
       const std::uint32_t hits = source.j >= 0 ? for_each_image(in, f, row, source, NoVisit{}) : 0;
       c += hits;
       if (hits && round < 32) hit_rounds |= 1u << round;
