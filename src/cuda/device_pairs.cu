@@ -286,9 +286,15 @@ __host__ __device__ void make_lattice(const Input& in, std::int64_t s, Lattice& 
   if (!(images <= max_images_per_pair)) f.code = int(count_too_many_images);
 }
 
+// The pass's first launch: it zeroes the pass's counters (`words`, in place of a memset: one
+// operation fewer a call, on the host and in a graph) and makes the systems' lattices.
 template <class Real>
-__global__ void lattices_kernel(Input in, Lattice* lattices, std::int64_t count) {
+__global__ void lattices_kernel(Input in, Lattice* lattices, std::int64_t count,
+                                unsigned long long* words, std::size_t word_count) {
   const std::int64_t s = std::int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+  for (std::size_t w = static_cast<std::size_t>(s); w < word_count;
+       w += std::size_t(gridDim.x) * blockDim.x)
+    words[w] = 0;
   if (s >= count || (in.run_if && *in.run_if == 0)) return;
   Lattice f;
   make_lattice<Real>(in, s, f);
@@ -1538,13 +1544,18 @@ void list_pairs_small_systems(const Context& ctx, const DeviceSystems& systems, 
   void* scan_storage = take(align_up(scan_bytes));
   void* sort_storage = take(align_up(sort_bytes));
   try {
-    RAYCUT_CUDA_CHECK(
-        cudaMemsetAsync(counts, 0, counts_bytes + extents_bytes + offsets_bytes, stream));
+    // counts, status, extents and offsets: zeroed together, by the lattices' launch if any
+    const std::size_t zeroed_bytes = counts_bytes + extents_bytes + offsets_bytes;
     if (n > 0 && lattices_wanted > 0) {
+      const std::size_t words = zeroed_bytes / sizeof(unsigned long long);
+      const std::size_t blocks =
+          std::max((lattices_wanted + 63) / 64, std::min<std::size_t>((words + 63) / 64, 1024));
       const auto lattice = wide ? lattices_kernel<double> : lattices_kernel<float>;
-      lattice<<<static_cast<unsigned>((lattices_wanted + 63) / 64), 64, 0, stream>>>(
-          in, lattices, static_cast<std::int64_t>(lattices_wanted));
+      lattice<<<static_cast<unsigned>(blocks), 64, 0, stream>>>(
+          in, lattices, static_cast<std::int64_t>(lattices_wanted), counts, words);
       RAYCUT_CUDA_CHECK_LAUNCH();
+    } else {
+      RAYCUT_CUDA_CHECK(cudaMemsetAsync(counts, 0, zeroed_bytes, stream));
     }
     const CellTable cells{extents, sorted, starts, sorted_xyz};
     if (by_cells) {
