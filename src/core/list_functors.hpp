@@ -238,11 +238,19 @@ struct PaddedFill : ListFilter {
     ++count;
   }
   RAYCUT_HD void finish(std::uint32_t i, Accumulator& count) const {
+    if (shifts)
+      finish<true>(i, count);
+    else
+      finish<false>(i, count);
+  }
+  // The row's count, its padding (S = 0 when Shifts) and the overflow.
+  template <bool Shifts>
+  RAYCUT_HD void finish(std::uint32_t i, Accumulator& count) const {
     counts[i] = count;
     for (std::uint32_t c = count; c < k; ++c) {
       const std::uint64_t e = std::uint64_t{i} * k + c;
       indices[e] = n;
-      if (shifts) shifts[3 * e] = shifts[3 * e + 1] = shifts[3 * e + 2] = 0;
+      if constexpr (Shifts) shifts[3 * e] = shifts[3 * e + 1] = shifts[3 * e + 2] = 0;
     }
     if (count > k) {
 #if defined(__CUDA_ARCH__)
@@ -270,6 +278,9 @@ struct PlainPaddedFill : PaddedFill {
   RAYCUT_HD void operator()(Accumulator& count, std::uint32_t i, std::uint32_t j, Vec3, float,
                             const Shift& s) const {
     write<Shifts>(count, i, j, s);
+  }
+  RAYCUT_HD void finish(std::uint32_t i, Accumulator& count) const {
+    PaddedFill::finish<Shifts>(i, count);
   }
 };
 
