@@ -915,10 +915,42 @@ __device__ inline bool round_hit(std::uint32_t hit_rounds, std::uint32_t round) 
   return round >= 32 || (hit_rounds >> round & 1u);
 }
 
+// The one image of a source that has one, as the count of the one-launch pass found it, kept for
+// that launch's write: a word per thread and round in shared memory for the first `rounds`
+// rounds, S_a + 512 in 10 bits each and a bit that says it is there. The write then neither loads
+// that source nor tests it again (the same test, so the same pairs); a source with several
+// images, or a shift past 511, is tested again as before. Null words: nothing is kept.
+struct StagedImages {
+  static constexpr std::uint32_t rounds = 8;
+  static constexpr std::uint32_t kept = 1u << 31;
+  std::uint32_t* words = nullptr;  // [rounds][block_threads]
+  __device__ static std::uint32_t pack(const int* s) {
+    std::uint32_t word = kept;
+#pragma unroll
+    for (int a = 0; a < 3; ++a) {
+      if (s[a] < -512 || s[a] > 511) return 0;
+      word |= static_cast<std::uint32_t>(s[a] + 512) << (10 * a);
+    }
+    return word;
+  }
+  __device__ void put(std::uint32_t round, std::uint32_t word) const {
+    if (words && round < rounds) words[round * block_threads + threadIdx.x] = word;
+  }
+  // This thread's image of round `round` into s, if it was kept.
+  __device__ bool take(std::uint32_t round, int* s) const {
+    if (!words || round >= rounds) return false;
+    const std::uint32_t word = words[round * block_threads + threadIdx.x];
+#pragma unroll
+    for (int a = 0; a < 3; ++a) s[a] = static_cast<int>(word >> (10 * a) & 1023u) - 512;
+    return (word & kept) != 0;
+  }
+};
+
 // Row `row`'s pairs, from its frame f, in every thread of its team; hit_rounds: this thread's.
 template <class Real, int Threads, bool Cells>
 __device__ unsigned long long count_row(const Input& in, const Frame& f, std::int64_t row,
-                                        const CellTable& cells, std::uint32_t& hit_rounds) {
+                                        const CellTable& cells, std::uint32_t& hit_rounds,
+                                        StagedImages staged = {}) {
   using T = Team<Threads>;
   unsigned long long c = 0;
   hit_rounds = 0;
@@ -939,7 +971,16 @@ __device__ unsigned long long count_row(const Input& in, const Frame& f, std::in
         source = sources.at(at);
         sources.advance(at, T::threads);
       }
-      const std::uint32_t hits = source.j >= 0 ? for_each_image(in, f, row, source, NoVisit{}) : 0;
+      std::uint32_t hits = 0;
+      if constexpr (Cells) {
+        hits = source.j >= 0 ? for_each_image(in, f, row, source, NoVisit{}) : 0;
+      } else {
+        std::uint32_t image = 0;
+        if (source.j >= 0)
+          hits = for_each_image(in, f, row, source,
+                                [&](const int* s) { image = StagedImages::pack(s); });
+        staged.put(round, hits == 1 ? image : 0);
+      }
       c += hits;
       if (hits && round < 32) hit_rounds |= 1u << round;
     }
@@ -983,7 +1024,7 @@ __host__ __device__ ListSlots list_slots(const Input& in, std::int64_t row,
 template <class Real, int Threads, bool Cells>
 __device__ void fill_row(const Input& in, const Frame& f, std::int64_t row, const CellTable& cells,
                          std::uint64_t first, unsigned long long start, const StaticPairs& out,
-                         std::uint32_t hit_rounds) {
+                         std::uint32_t hit_rounds, StagedImages staged = {}) {
   using T = Team<Threads>;
   const int rank = T::rank();
   unsigned long long written = start;
@@ -995,20 +1036,28 @@ __device__ void fill_row(const Input& in, const Frame& f, std::int64_t row, cons
     std::uint32_t round = 0;
     for (std::uint32_t base = 0; base < sources.total;
          base += T::threads, sources.advance(cursor, T::threads), ++round) {
-      const Source source = base + rank < sources.total && round_hit(hit_rounds, round)
-                                ? sources.at(cursor)
-                                : Source{};
-      const std::int64_t j = source.j;
+      const bool tested = base + rank < sources.total && round_hit(hit_rounds, round);
       // The first image is kept from the counting test: most sources have at most one, and only
       // those with more are tested again.
       int image[3] = {0, 0, 0};
-      const std::uint32_t hits = j >= 0 ? for_each_image(in, f, row, source,
-                                                         [&](const int* s) {
-                                                           image[0] = s[0];
-                                                           image[1] = s[1];
-                                                           image[2] = s[2];
-                                                         })
-                                        : 0;
+      Source source;
+      std::uint32_t hits = 0;
+      if constexpr (!Cells) {
+        if (tested && staged.take(round, image)) {  // the count's one image, j the cursor
+          source.j = cursor;
+          hits = 1;
+        }
+      }
+      if (tested && hits == 0) {
+        source = sources.at(cursor);
+        if (source.j >= 0)
+          hits = for_each_image(in, f, row, source, [&](const int* s) {
+            image[0] = s[0];
+            image[1] = s[1];
+            image[2] = s[2];
+          });
+      }
+      const std::int64_t j = source.j;
       std::uint32_t chunk = 0;
       const std::uint32_t before = T::scan(hits, chunk) - hits;
       unsigned long long at = written + before;
@@ -1139,9 +1188,11 @@ __global__ __launch_bounds__(block_threads, list_rows_blocks_per_multiprocessor)
   if (tile * tile_rows >= in.n) return;  // whole tiles
   int bad;
   const Frame& f = team_frame<Real, Threads>(in, row, lattices, status, bad);
+  __shared__ std::uint32_t staged_words[StagedImages::rounds * block_threads];
+  const StagedImages staged{staged_words};
   std::uint32_t hit_rounds = 0;
   const unsigned long long count =
-      bad ? 0ull : count_row<Real, Threads, false>(in, f, row, CellTable{}, hit_rounds);
+      bad ? 0ull : count_row<Real, Threads, false>(in, f, row, CellTable{}, hit_rounds, staged);
   // The teams' counts before this one in the tile (every lane of a team holds its count), and
   // the tile's total.
   unsigned long long in_tile = count;
@@ -1182,7 +1233,8 @@ __global__ __launch_bounds__(block_threads, list_rows_blocks_per_multiprocessor)
   const ListSlots slots = list_slots(in, row, origin, out);
   const unsigned long long start = before - slots.origin;
   if (start >= static_cast<unsigned long long>(out.capacity)) return;
-  fill_row<Real, Threads, false>(in, f, row, CellTable{}, slots.first, start, out, hit_rounds);
+  fill_row<Real, Threads, false>(in, f, row, CellTable{}, slots.first, start, out, hit_rounds,
+                                 staged);
 }
 
 // The count (or the first error code), and padding from the count to the capacity.
