@@ -173,14 +173,20 @@ void run_host(std::size_t n, const float* xyz, float cutoff_squared, const RunsO
         stencil ? 0 : lowest_source_of(f, i), half_rows ? t + 1 : 0);
     f.finish(i, acc);
   };
-  if (order) {
-#pragma omp parallel for schedule(dynamic, 256) if (n >= parallel_targets)
+  const auto target_xyz = [&](std::size_t t) {
+    return order ? (order_xyz ? order_xyz + 3 * t : xyz + 3 * std::size_t{order[t]}) : xyz + 3 * t;
+  };
+  // Below parallel_targets no OpenMP region at all (host_threads.hpp says why). Not through its
+  // for_each_index: GCC then stopped inlining into a list pass's candidate loop (a 256-atom
+  // cell's list 1.18x slower: docs/benchmarks.md, "No OpenMP region in a small call").
+  if (n < parallel_targets) {
     for (std::size_t t = 0; t < n; ++t)
-      visit(order[t], order_xyz ? order_xyz + 3 * t : xyz + 3 * std::size_t{order[t]});
-  } else {
-#pragma omp parallel for schedule(dynamic, 256) if (n >= parallel_targets)
-    for (std::size_t t = 0; t < n; ++t) visit(static_cast<std::uint32_t>(t), xyz + 3 * t);
+      visit(order ? order[t] : static_cast<std::uint32_t>(t), target_xyz(t));
+    return;
   }
+#pragma omp parallel for schedule(dynamic, 256)
+  for (std::size_t t = 0; t < n; ++t)
+    visit(order ? order[t] : static_cast<std::uint32_t>(t), target_xyz(t));
 }
 
 // run_host for a functor with option::mirror over a traversal in slot order: each pair once, by
@@ -208,49 +214,58 @@ bool run_host_pair_once(std::size_t n, const RunsOf& runs_of, const F& f, const 
   const double bytes = static_cast<double>(threads) * slot_count * sizeof(Accumulator);
   if (host_memory_checked(bytes) && 2 * bytes > host_memory_budget().bytes) return false;
   std::vector<Accumulator> sums(static_cast<std::size_t>(threads) * slot_count);
-#pragma omp parallel num_threads(threads) if (threads > 1)
-  {
-    int thread = 0;
-#if defined(_OPENMP)
-    thread = omp_get_thread_num();
-#endif
+  // Thread `thread` of `team`: chunks of 256 targets dealt to the threads in turn (as
+  // schedule(static, 256) deals them), so the sums are the same on every run. One thread runs
+  // outside any team (host_threads.hpp says why), which an orphaned `omp for` could not: called
+  // from a caller's own parallel region it would share the caller's team.
+  const auto accumulate = [&](int thread, int team) {
     Accumulator* const mine = sums.data() + static_cast<std::size_t>(thread) * slot_count;
-#pragma omp for schedule(static, 256)
-    for (std::size_t v = 0; v < n; ++v) {
-      const std::uint32_t i = order[v];
-      const std::uint32_t t = slots[i];
-      const typename Images::Target ti = images.target(i);
-      const bool half_rows = !(Images::banded && image_counts[i] > 0);
-      Accumulator acc{};
-      for_each_in_range(
-          images, i, order_xyz + 3 * v, cutoff_squared, runs_of,
-          [&](std::size_t point, Vec3 r, float r2, const PointImage* entry, std::uint32_t slot) {
-            const auto k = static_cast<std::uint32_t>(point);
-            std::uint32_t j = k;  // a home point is its own particle
-            if (k < n) {
-              if (slot <= t) return;  // met from its lower slot
-            } else {
-              Shift s{};
-              if (!resolve(f, images, ti, true, i, k, k, j, s, entry)) return;
-              if (!half_keeps(i, j, s)) return;  // met from j as well
-            }
-            Accumulator term{};
-            apply(f, term, i, j, r, r2);
-            F::combine(acc, term);
-            F::mirror(term);
-            F::combine(mine[slots[j]], term);
-          },
-          0, half_rows ? t + 1 : 0);
-      F::combine(mine[t], acc);
-    }
-#pragma omp for schedule(static)
-    for (std::size_t i = 0; i < n; ++i) {
-      Accumulator total = sums[slots[i]];
-      for (int other = 1; other < threads; ++other)
-        F::combine(total, sums[static_cast<std::size_t>(other) * slot_count + slots[i]]);
-      f.finish(static_cast<std::uint32_t>(i), total);
-    }
+    constexpr std::size_t chunk = 256;
+    for (std::size_t first = chunk * thread; first < n; first += chunk * team)
+      for (std::size_t v = first; v < std::min(n, first + chunk); ++v) {
+        const std::uint32_t i = order[v];
+        const std::uint32_t t = slots[i];
+        const typename Images::Target ti = images.target(i);
+        const bool half_rows = !(Images::banded && image_counts[i] > 0);
+        Accumulator acc{};
+        for_each_in_range(
+            images, i, order_xyz + 3 * v, cutoff_squared, runs_of,
+            [&](std::size_t point, Vec3 r, float r2, const PointImage* entry, std::uint32_t slot) {
+              const auto k = static_cast<std::uint32_t>(point);
+              std::uint32_t j = k;  // a home point is its own particle
+              if (k < n) {
+                if (slot <= t) return;  // met from its lower slot
+              } else {
+                Shift s{};
+                if (!resolve(f, images, ti, true, i, k, k, j, s, entry)) return;
+                if (!half_keeps(i, j, s)) return;  // met from j as well
+              }
+              Accumulator term{};
+              apply(f, term, i, j, r, r2);
+              F::combine(acc, term);
+              F::mirror(term);
+              F::combine(mine[slots[j]], term);
+            },
+            0, half_rows ? t + 1 : 0);
+        F::combine(mine[t], acc);
+      }
+  };
+#if defined(_OPENMP)
+  if (threads > 1) {
+#pragma omp parallel num_threads(threads)
+    accumulate(omp_get_thread_num(), omp_get_num_threads());
+  } else {
+    accumulate(0, 1);
   }
+#else
+  accumulate(0, 1);
+#endif
+  for_each_index(n, parallel_targets, 0, [&](std::size_t i) {
+    Accumulator total = sums[slots[i]];
+    for (int other = 1; other < threads; ++other)
+      F::combine(total, sums[static_cast<std::size_t>(other) * slot_count + slots[i]]);
+    f.finish(static_cast<std::uint32_t>(i), total);
+  });
   return true;
 }
 

@@ -92,14 +92,21 @@ void validate_pair_cutoffs(const PairCutoffs& cutoffs, std::size_t n, double sea
 }
 
 std::size_t first_non_finite_host(const float* xyz, std::size_t n) {
+  const auto bad = [xyz](std::size_t i) {
+    return !std::isfinite(xyz[3 * i]) || !std::isfinite(xyz[3 * i + 1]) ||
+           !std::isfinite(xyz[3 * i + 2]);
+  };
+  // Below parallel_items no OpenMP region at all (host_threads.hpp, for_each_index says why).
+  if (n < parallel_items) {
+    for (std::size_t i = 0; i < n; ++i)
+      if (bad(i)) return i;
+    return n;
+  }
   std::size_t first = n;
   // Parallel scan; the minimum bad index keeps the message deterministic.
-#pragma omp parallel for reduction(min : first) schedule(static) if (n >= parallel_items)
-  for (std::size_t i = 0; i < n; ++i) {
-    if (!std::isfinite(xyz[3 * i]) || !std::isfinite(xyz[3 * i + 1]) ||
-        !std::isfinite(xyz[3 * i + 2]))
-      first = i < first ? i : first;
-  }
+#pragma omp parallel for reduction(min : first) schedule(static)
+  for (std::size_t i = 0; i < n; ++i)
+    if (bad(i)) first = i < first ? i : first;
   return first;
 }
 

@@ -179,13 +179,13 @@ class CellListCpu final : public HostMethod<CellListCpu> {
     // cell.
     const PointImage* image = points.images.image;  // by point: its source, or a query
     std::vector<Entry> entries(n);
-#pragma omp parallel for schedule(static) if (n >= parallel_items)
-    for (std::size_t i = 0; i < n; ++i)
+    for_each_index(n, parallel_items, 0, [&](std::size_t i) {
       entries[i] = {
           image && image[i].source == not_a_source ? 1u : 0u,
           {system ? system[i] : 0u, axis_label(xyz[3 * i + 2], inverse_width_),
            axis_label(xyz[3 * i + 1], inverse_width_), axis_label(xyz[3 * i], inverse_width_)},
           static_cast<std::uint32_t>(i)};
+    });
     sort_entries(entries);
     order_.resize(n);
     for (std::size_t s = 0; s < n; ++s) order_[s] = entries[s].index;
@@ -252,9 +252,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   }
 
  private:
-  std::size_t size() const {
-    return order_.size();
-  }
+  std::size_t size() const { return order_.size(); }
 
   // Each target cell's candidates as slot ranges (runs_), from the non-empty cells within one cell
   // of it (itself included), in key order. A far label has no neighbours along its axis. For each
@@ -295,11 +293,10 @@ class CellListCpu final : public HostMethod<CellListCpu> {
       run_offsets_[c + 1] = run_offsets_[c] + runs;
     }
     runs_.resize(run_offsets_[cells]);
-#pragma omp parallel for schedule(static) if (cells > 4096)
-    for (std::size_t c = 0; c < cells; ++c) {
+    for_each_index(cells, 4097, 0, [&](std::size_t c) {
       std::uint64_t at = run_offsets_[c];
       for_each_range(c, [&](SlotRange range) { runs_[at++] = range; });
-    }
+    });
   }
 
   // emit(c, nc) for every neighbour nc of every cell c holding a target, in ascending nc per cell.
@@ -307,8 +304,9 @@ class CellListCpu final : public HostMethod<CellListCpu> {
   void walk_neighbour_cells(Emit&& emit) const {
     const std::size_t cells = cell_keys_.size();
     constexpr std::size_t chunk = 4096;
-#pragma omp parallel for schedule(dynamic, 1) if (cells > chunk)
-    for (std::size_t begin = 0; begin < cells; begin += chunk) {
+    // Blocks of `chunk` cells, on a team from two blocks.
+    for_each_index((cells + chunk - 1) / chunk, 2, 1, [&](std::size_t block) {
+      const std::size_t begin = block * chunk;
       std::size_t cursor[3][3];
       bool started[3][3] = {};
       for (std::size_t c = begin; c < std::min(cells, begin + chunk); ++c) {
@@ -336,7 +334,7 @@ class CellListCpu final : public HostMethod<CellListCpu> {
             }
           }
       }
-    }
+    });
   }
 
   std::vector<float> xyz_;

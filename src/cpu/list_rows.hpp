@@ -78,11 +78,9 @@ class ListRows {
   // The rows into the arrays of `fill` (the list's), each from fill.offsets[i]; entries at or
   // past fill.capacity are left out (a static-capacity list), as the fill pass leaves them.
   void copy_into(const ListFill& fill) const {
-    const std::size_t n = counts_.size();
-#pragma omp parallel for schedule(static) if (n >= parallel_targets)
-    for (std::size_t i = 0; i < n; ++i) {
+    for_each_index(counts_.size(), parallel_targets, 0, [&](std::size_t i) {
       const std::uint64_t first = fill.offsets[i];
-      if (first >= fill.capacity) continue;
+      if (first >= fill.capacity) return;
       const std::uint64_t count = std::min<std::uint64_t>(counts_[i], fill.capacity - first);
       const Buffers& b = threads_[thread_[i]];
       const std::uint64_t from = begin_[i];
@@ -97,7 +95,7 @@ class ListRows {
       if (fill.shifts) std::memcpy(fill.shifts + 3 * first, b.s.get() + 3 * from, 12 * count);
       if (fill.distances) std::memcpy(fill.distances + first, b.d.get() + from, 4 * count);
       if (fill.vectors) std::memcpy(fill.vectors + 3 * first, b.v.get() + 3 * from, 12 * count);
-    }
+    });
   }
 
   void release() {

@@ -48,29 +48,24 @@ namespace host {
 // neighbour_density may be null (no neighbours: N = 0).
 inline void density_and_pressure(const float* neighbour_density, float* rho, float* p,
                                  std::size_t n, const StepConstants& c) {
-  const long long count = static_cast<long long>(n);
-#pragma omp parallel for schedule(static) if (n >= raycut::detail::parallel_items)
-  for (long long i = 0; i < count; ++i) {
+  raycut::detail::for_each_index(n, raycut::detail::parallel_items, 0, [&](std::size_t i) {
     rho[i] = density_with_self(neighbour_density ? neighbour_density[i] : 0.0f, c);
     p[i] = pressure_of(rho[i], c);
-  }
+  });
 }
 
 // integrate_particle for every particle (integrate_or_hold where `fixed`, n values, marks the
 // weakly compressible mode's boundary particles; null: none). force may be null (no force).
 inline void integrate(float* x, float* v, const float* force, const float* rho, const float* fixed,
                       std::size_t n, const StepConstants& c) {
-  const long long count = static_cast<long long>(n);
   const float zero[3] = {0.0f, 0.0f, 0.0f};
-  if (fixed) {
-#pragma omp parallel for schedule(static) if (n >= raycut::detail::parallel_items)
-    for (long long i = 0; i < count; ++i)
-      integrate_or_hold(&x[3 * i], &v[3 * i], force ? &force[3 * i] : zero, rho[i], fixed[i], c);
-    return;
-  }
-#pragma omp parallel for schedule(static) if (n >= raycut::detail::parallel_items)
-  for (long long i = 0; i < count; ++i)
-    integrate_particle(&x[3 * i], &v[3 * i], force ? &force[3 * i] : zero, rho[i], c);
+  raycut::detail::for_each_index(n, raycut::detail::parallel_items, 0, [&](std::size_t i) {
+    const float* f = force ? &force[3 * i] : zero;
+    if (fixed)
+      integrate_or_hold(&x[3 * i], &v[3 * i], f, rho[i], fixed[i], c);
+    else
+      integrate_particle(&x[3 * i], &v[3 * i], f, rho[i], c);
+  });
 }
 
 }  // namespace host
