@@ -168,7 +168,7 @@ def neighbor_list(quantities: str, atoms: Any, cutoff: Any, self_interaction: bo
     positions, cell, pbc = _system(atoms)
     varying = _cutoffs.is_varying(cutoff)
     numbers = getattr(atoms, "numbers", None)
-    periodic = bool(pbc.any())
+    periodic = True in pbc.tolist()  # pbc.any() took 1.2 us, 7 % of a 1-atom cell's call
     # Decided by the list pass in double from the float64 positions as given (S then refers to
     # them, as ASE's does), per-atom and per-pair cutoffs too.
     i, j, S = _pairs(positions, cutoff, cell, pbc, periodic, method, numbers)
