@@ -293,7 +293,8 @@ class CellListCpu final : public HostMethod<CellListCpu> {
       run_offsets_[c + 1] = run_offsets_[c] + runs;
     }
     runs_.resize(run_offsets_[cells]);
-    for_each_index(cells, 4097, 0, [&](std::size_t c) {
+    constexpr std::size_t team_above = 4096;  // cells: below, filling runs costs less than a team
+    for_each_index(cells, team_above + 1, 0, [&](std::size_t c) {
       std::uint64_t at = run_offsets_[c];
       for_each_range(c, [&](SlotRange range) { runs_[at++] = range; });
     });
